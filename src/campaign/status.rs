@@ -1,0 +1,122 @@
+//! Campaign status across all shards: done / failed / running / pending, per point. Reads the
+//! commit records and the live shards' heartbeats, never the tables.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::ledger::{self, RunStatus};
+use super::Campaign;
+use crate::fsutil;
+
+#[derive(Serialize, Deserialize, Clone, Debug, Default, PartialEq)]
+pub struct Counts {
+    pub done: u64,
+    pub failed: u64,
+    pub running: u64,
+    pub pending: u64,
+    /// Pending or running runs that have a checkpoint to resume from.
+    pub checkpointed: u64,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct PointStatus {
+    pub point_id: u32,
+    /// The swept values of the point, `key=value`.
+    pub point: String,
+    #[serde(flatten)]
+    pub counts: Counts,
+}
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct CampaignStatus {
+    pub name: String,
+    pub runs: u64,
+    #[serde(flatten)]
+    pub counts: Counts,
+    pub live_shards: Vec<String>,
+    pub points: Vec<PointStatus>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Heartbeat {
+    running: Vec<u64>,
+}
+
+pub fn write_heartbeat(root: &Path, tag: &str, running: &BTreeSet<u64>) -> std::io::Result<()> {
+    let hb = Heartbeat { running: running.iter().copied().collect() };
+    fsutil::write_atomic(&root.join("locks").join(format!("{tag}.running.json")), &serde_json::to_vec(&hb).expect("heartbeat"))
+}
+
+pub fn remove_heartbeat(root: &Path, tag: &str) {
+    let _ = std::fs::remove_file(root.join("locks").join(format!("{tag}.running.json")));
+}
+
+pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
+    let commits = ledger::read_commits(&c.root)?;
+    let finished = ledger::finished_runs(&commits);
+    let live = ledger::live_locks(&c.root);
+    let mut running = BTreeSet::new();
+    for l in &live {
+        let p = c.root.join("locks").join(format!("{}.running.json", l.shard_tag));
+        if let Some(hb) = std::fs::read_to_string(p).ok().and_then(|s| serde_json::from_str::<Heartbeat>(&s).ok()) {
+            running.extend(hb.running);
+        }
+    }
+    let ckpts: BTreeSet<u64> = std::fs::read_dir(c.checkpoint_dir())
+        .map(|it| {
+            it.filter_map(|e| e.ok())
+                .filter_map(|e| {
+                    let n = e.file_name().to_string_lossy().into_owned();
+                    n.strip_prefix("run-")?.strip_suffix(".ckpt")?.parse::<u64>().ok()
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut points: Vec<PointStatus> = c
+        .plan
+        .points
+        .iter()
+        .map(|p| PointStatus {
+            point_id: p.point_id,
+            point: c.plan.sweep_keys.iter().zip(&p.values).map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(" "),
+            counts: Counts::default(),
+        })
+        .collect();
+    let mut total = Counts::default();
+    for run_id in 0..c.plan.n_runs() {
+        let point = (run_id / c.plan.replicas as u64) as usize;
+        let pc = &mut points[point].counts;
+        match finished.get(&run_id) {
+            Some(RunStatus::Done) => {
+                pc.done += 1;
+                total.done += 1
+            }
+            Some(RunStatus::Failed) => {
+                pc.failed += 1;
+                total.failed += 1
+            }
+            None => {
+                if running.contains(&run_id) {
+                    pc.running += 1;
+                    total.running += 1;
+                } else {
+                    pc.pending += 1;
+                    total.pending += 1;
+                }
+                if ckpts.contains(&run_id) {
+                    pc.checkpointed += 1;
+                    total.checkpointed += 1;
+                }
+            }
+        }
+    }
+    Ok(CampaignStatus {
+        name: c.manifest.name.clone(),
+        runs: c.plan.n_runs(),
+        counts: total,
+        live_shards: live.iter().map(|l| format!("{} (pid {} on {})", l.shard, l.pid, l.host)).collect(),
+        points,
+    })
+}

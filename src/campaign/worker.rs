@@ -1,0 +1,138 @@
+//! One run on a worker thread: start or restore from its checkpoint, advance in bounded
+//! chunks, checkpoint every `checkpoint_every` and on interruption, report by events.
+
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::Sender;
+use std::time::Instant;
+
+use super::ledger::RunStatus;
+use super::{Campaign, Event, RunOptions};
+use crate::engine::{Engine, RunOutput, WORK_CHUNK};
+use crate::plan::RunSpec;
+use crate::store::checkpoint::{self, CheckpointHeader};
+use crate::CODE_VERSION;
+
+#[derive(Debug)]
+pub enum RunEnd {
+    Done(RunOutput),
+    /// A deterministic physics failure.
+    Failed { reason: String, t: f64 },
+    Interrupted,
+}
+
+#[derive(Debug)]
+pub struct RunResult {
+    pub spec: RunSpec,
+    pub end: RunEnd,
+    pub wall_seconds: f64,
+}
+
+type Tx = Sender<(Event, Option<RunResult>)>;
+
+pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
+    if opts.interrupt.load(Ordering::Relaxed) > 0 {
+        return;
+    }
+    let started = Instant::now();
+    let params = &c.plan.point(spec.point_id).params;
+    let dir = c.checkpoint_dir();
+    let mut wall_before = 0.0;
+    let mut resumed_from = None;
+    let mut engine = None;
+    match checkpoint::load(&dir, spec.run_id, spec.seed) {
+        Ok(Some(loaded)) => {
+            for s in loaded.skipped {
+                let _ = tx.send((Event::Warning { message: format!("run {}: skipped a bad checkpoint: {s}", spec.run_id) }, None));
+            }
+            match Engine::restore(params, &loaded.payload) {
+                Ok(e) => {
+                    wall_before = loaded.header.wall_seconds;
+                    resumed_from = Some(loaded.header.t);
+                    engine = Some(e);
+                }
+                Err(e) => {
+                    let _ = tx.send((Event::Warning { message: format!("run {}: checkpoint unusable ({e}); restarting from t = 0", spec.run_id) }, None));
+                }
+            }
+        }
+        Ok(None) => {}
+        Err(problems) => {
+            let _ = tx.send((
+                Event::Warning { message: format!("run {}: no usable checkpoint ({}); restarting from t = 0", spec.run_id, problems.join("; ")) },
+                None,
+            ));
+        }
+    }
+    let mut engine = match engine {
+        Some(e) => e,
+        None => match Engine::start(params, spec.seed) {
+            Ok(e) => e,
+            Err(reason) => return finish(tx, spec, RunEnd::Failed { reason, t: 0.0 }, 0.0, None),
+        },
+    };
+    let _ = tx.send((Event::Started { run_id: spec.run_id, resumed_from }, None));
+    let mut last_ckpt = Instant::now();
+    let mut last_ckpt_t = resumed_from;
+    let mut last_progress = Instant::now();
+    let wall = |started: &Instant| wall_before + started.elapsed().as_secs_f64();
+    let save = |engine: &mut Engine, last_ckpt_t: &mut Option<f64>| -> Result<(), String> {
+        let header = CheckpointHeader {
+            run_id: spec.run_id,
+            seed: spec.seed,
+            code_version: CODE_VERSION.into(),
+            wall_seconds: wall(&started),
+            t: engine.time(),
+        };
+        let payload = engine.state_bytes();
+        checkpoint::write(&dir, &header, &payload).map_err(|e| e.to_string())?;
+        *last_ckpt_t = Some(header.t);
+        Ok(())
+    };
+    loop {
+        if opts.interrupt.load(Ordering::Relaxed) > 0 {
+            if let Err(e) = save(&mut engine, &mut last_ckpt_t) {
+                let _ = tx.send((Event::Warning { message: format!("run {}: checkpoint failed: {e}", spec.run_id) }, None));
+            }
+            let _ = tx.send((Event::Interrupted { run_id: spec.run_id }, None));
+            return;
+        }
+        match engine.advance(WORK_CHUNK) {
+            Ok(true) => break,
+            Ok(false) => {}
+            Err(pe) => {
+                let reason = format!(
+                    "{} (run {}, seed {}, last checkpoint at t = {})",
+                    pe.reason,
+                    spec.run_id,
+                    spec.seed,
+                    last_ckpt_t.map(|t| t.to_string()).unwrap_or_else(|| "none".into())
+                );
+                return finish(tx, spec, RunEnd::Failed { reason, t: pe.t }, wall(&started), None);
+            }
+        }
+        if last_ckpt.elapsed() >= opts.checkpoint_every {
+            if let Err(e) = save(&mut engine, &mut last_ckpt_t) {
+                let _ = tx.send((Event::Warning { message: format!("run {}: checkpoint failed: {e}", spec.run_id) }, None));
+            } else {
+                let _ = tx.send((Event::Checkpointed { run_id: spec.run_id, t: engine.time() }, None));
+            }
+            last_ckpt = Instant::now();
+        }
+        if last_progress.elapsed().as_millis() >= 250 {
+            last_progress = Instant::now();
+            let _ = tx.send((Event::Progress { run_id: spec.run_id, fraction: engine.progress() }, None));
+        }
+    }
+    let t = engine.time();
+    finish(tx, spec, RunEnd::Done(engine.finish()), wall(&started), Some(t))
+}
+
+fn finish(tx: &mut Tx, spec: &RunSpec, end: RunEnd, wall_seconds: f64, t: Option<f64>) {
+    let (status, reason, t) = match &end {
+        RunEnd::Done(_) => (RunStatus::Done, None, t.unwrap_or(0.0)),
+        RunEnd::Failed { reason, t } => (RunStatus::Failed, Some(reason.clone()), *t),
+        RunEnd::Interrupted => unreachable!("interrupted runs are not finished"),
+    };
+    let event = Event::Finished { run_id: spec.run_id, seed: spec.seed, status, reason, t, wall_seconds };
+    let _ = tx.send((event, Some(RunResult { spec: *spec, end, wall_seconds })));
+}

@@ -1,0 +1,106 @@
+//! Bird's method (paper section III.B, spec section 3), the baseline.
+//!
+//! Ordered pairs of distinct particles are drawn uniformly from all N, e uniformly on the
+//! sphere, and the trial is accepted with sigma_ab^2 |g.e| / C_max, where
+//! C_max = 2 max_j ((sigma_j + sigma_M)/2)^2 |v_j| (48-49). Trials are a Poisson process of
+//! rate N^2 C_max pi / V (50).
+
+use super::collision::{collide, uniform_direction};
+use super::{prefetch, Candidate, DsmcSim, PhysicsError, PIPELINE_DEPTH, RAISE_SLACK};
+
+impl DsmcSim {
+    #[inline(always)]
+    fn species_of(&self, p: usize) -> usize {
+        self.off.partition_point(|&o| o <= p) - 1
+    }
+
+    pub(super) fn advance_bird(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
+        let eps = self.sys.eps;
+        let msd = self.sys.msd;
+        let n = self.sys.n_particles();
+        let sig_max = self.sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
+        let mut trials = 0u64;
+        let result = loop {
+            if trials >= max_trials {
+                break Ok(false);
+            }
+            let t_next = if self.rate > 0.0 { self.st.t + self.rng.exp1() / self.rate } else { f64::INFINITY };
+            if self.sys.output_times[self.st.next_output] <= t_next {
+                if self.outputs_before(t_next)? {
+                    break Ok(true);
+                }
+            }
+            self.st.t = t_next;
+            trials += 1;
+            while self.ring.len() < PIPELINE_DEPTH {
+                let a = self.rng.below(n);
+                let b = self.rng.below(n);
+                prefetch(self.st.vel.as_ptr().wrapping_add(a));
+                prefetch(self.st.vel.as_ptr().wrapping_add(b));
+                self.ring.push(Candidate { i: 0, k: 0, a: a as u32, b: b as u32 });
+            }
+            let c = self.ring.pop();
+            let (a, b) = (c.a as usize, c.b as usize);
+            let e = uniform_direction(&mut self.rng);
+            let u = self.rng.f64();
+            if a == b {
+                continue;
+            }
+            let va = self.st.vel[a];
+            let vb = self.st.vel[b];
+            let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
+            let mut gne = g[0] * e[0] + g[1] * e[1] + g[2] * e[2];
+            let (i, k) = (self.species_of(a), self.species_of(b));
+            let (si, sk) = (self.sys.species[i].diameter, self.sys.species[k].diameter);
+            let sig2 = 0.25 * (si + sk) * (si + sk);
+            if u * 2.0 * self.st.bird_bound >= sig2 * gne.abs() {
+                continue;
+            }
+            // (41) is invariant under e -> -e: use the orientation with g.e > 0.
+            let e = if gne < 0.0 {
+                gne = -gne;
+                [-e[0], -e[1], -e[2]]
+            } else {
+                e
+            };
+            let t = self.st.t;
+            if msd {
+                for (p, v) in [(a, va), (b, vb)] {
+                    let d = &mut self.st.disp[p];
+                    let dt = t - d[3];
+                    d[0] += v[0] * dt;
+                    d[1] += v[1] * dt;
+                    d[2] += v[2] * dt;
+                    d[3] = t;
+                }
+            }
+            let (ma, mb) = (self.sys.species[i].mass, self.sys.species[k].mass);
+            let (mut na, mut nb) = (va, vb);
+            collide(&mut na, &mut nb, ma, mb, eps, e, gne);
+            self.st.vel[a] = na;
+            self.st.vel[b] = nb;
+            self.st.collisions += 1;
+            self.st.species_collisions[i] += 1;
+            self.st.species_collisions[k] += 1;
+            let mut raised = false;
+            for (s, v) in [(si, na), (sk, nb)] {
+                let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                let c = 0.25 * (s + sig_max) * (s + sig_max) * speed;
+                if c > self.st.bird_bound {
+                    self.st.bird_bound = c * RAISE_SLACK;
+                    raised = true;
+                }
+            }
+            if raised {
+                // Candidates do not depend on the bound: keep the pipeline.
+                self.st.bound_raises += 1;
+                self.rebuild_rates();
+            }
+            if self.refresh_due() {
+                self.refresh_bounds();
+            }
+        };
+        self.st.trials += trials;
+        result
+    }
+}

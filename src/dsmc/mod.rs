@@ -1,0 +1,379 @@
+//! DSMC of polydisperse granular gases in the homogeneous cooling state (spec `dsmc.md`).
+//!
+//! - [`system`]: species, volume and output schedule resolved from the manifest.
+//! - [`collision`]: the binary inelastic collision (41) and the choice of the inter-centre
+//!   vector.
+//! - [`low_rank`]: the paper's low-rank pair selection (section III.A).
+//! - [`bird`]: Bird's method (section III.B), the baseline.
+//! - [`alias`]: O(1) discrete sampling used by the low-rank selection.
+//!
+//! Both methods simulate the same stochastic process (spec section 4): trials form a Poisson
+//! process whose rate majorises the true collision rate; a trial is accepted with the ratio of
+//! the true rate to the majorant. Particles of one species are stored contiguously.
+
+pub mod alias;
+pub mod bird;
+pub mod collision;
+pub mod low_rank;
+pub mod system;
+
+use serde::{Deserialize, Serialize};
+
+use crate::manifest::dsmc::DsmcMethod;
+use crate::rng::{RngPosition, RunRng};
+use alias::Alias;
+pub use system::{DsmcSystem, SpeciesInfo};
+
+/// One row of the `dsmc_species` table (without the run's ids).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct SpeciesRow {
+    pub t: f64,
+    /// Species index k, from 1.
+    pub species: u32,
+    pub mass: f64,
+    pub diameter: f64,
+    pub count: u64,
+    /// T_k = m_k <v^2>_k / 3.
+    pub temperature: f64,
+    /// <R_k^2(t)>, when displacements are recorded.
+    pub msd: Option<f64>,
+    /// Collisions that species-k particles took part in up to t (a k-k collision counts twice).
+    pub collisions: u64,
+}
+
+/// A deterministic physics failure (the same seed fails the same way).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{reason} at t = {t}")]
+pub struct PhysicsError {
+    pub t: f64,
+    pub reason: String,
+}
+
+/// A pre-drawn trial candidate: species pair and particle indices (global).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, Default, PartialEq)]
+pub struct Candidate {
+    pub i: u32,
+    pub k: u32,
+    pub a: u32,
+    pub b: u32,
+}
+
+/// How many trials ahead candidates are drawn, so their velocities can be prefetched.
+pub const PIPELINE_DEPTH: usize = 16;
+/// A raised speed bound gets this much head-room, so that it is not raised again at once.
+pub const RAISE_SLACK: f64 = 1.05;
+
+/// The complete dynamical state of a run (what a checkpoint holds).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct DsmcState {
+    pub t: f64,
+    /// (vx, vy, vz, unused): 32 bytes, so a particle never straddles two cache lines.
+    pub vel: Vec<[f64; 4]>,
+    /// (Rx, Ry, Rz, t_last) per particle; empty unless MSD is recorded.
+    pub disp: Vec<[f64; 4]>,
+    /// Low-rank: per-species speed bounds.
+    pub vmax: Vec<f64>,
+    /// Bird: bound on ((sigma_j + sigma_M)/2)^2 |v_j|.
+    pub bird_bound: f64,
+    pub rng: RngPosition,
+    pub trials: u64,
+    pub collisions: u64,
+    pub species_collisions: Vec<u64>,
+    pub bound_raises: u64,
+    pub next_output: usize,
+    pub collisions_at_refresh: u64,
+    pub pipeline: Vec<Candidate>,
+    pub rows: Vec<SpeciesRow>,
+    pub last_energy: f64,
+    pub done: bool,
+}
+
+/// A running DSMC simulation.
+pub struct DsmcSim {
+    pub sys: DsmcSystem,
+    pub st: DsmcState,
+    rng: RunRng,
+    /// Low-rank: alias over (term r, species i) with weights W_r u_i^(r).
+    pair_i: Alias,
+    /// Low-rank: static alias over species k for each term r.
+    pair_k: [Alias; 3],
+    /// Species offsets into the particle arrays (M + 1 entries).
+    off: Vec<usize>,
+    /// Total trial rate.
+    rate: f64,
+    /// Candidates drawn ahead (saved in `st.pipeline` at checkpoints).
+    ring: Ring,
+}
+
+/// A fixed ring of pre-drawn candidates.
+#[derive(Clone, Debug, Default)]
+pub struct Ring {
+    buf: [Candidate; PIPELINE_DEPTH],
+    head: usize,
+    len: usize,
+}
+
+impl Ring {
+    #[inline(always)]
+    pub fn push(&mut self, c: Candidate) {
+        self.buf[(self.head + self.len) % PIPELINE_DEPTH] = c;
+        self.len += 1;
+    }
+    #[inline(always)]
+    pub fn pop(&mut self) -> Candidate {
+        let c = self.buf[self.head];
+        self.head = (self.head + 1) % PIPELINE_DEPTH;
+        self.len -= 1;
+        c
+    }
+    #[inline(always)]
+    pub fn len(&self) -> usize {
+        self.len
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+    pub fn to_vec(&self) -> Vec<Candidate> {
+        (0..self.len).map(|j| self.buf[(self.head + j) % PIPELINE_DEPTH]).collect()
+    }
+    pub fn from_slice(cs: &[Candidate]) -> Ring {
+        let mut r = Ring::default();
+        for c in cs.iter().take(PIPELINE_DEPTH) {
+            r.push(*c);
+        }
+        r
+    }
+}
+
+impl DsmcSim {
+    /// A fresh run: Maxwell velocities, zero total momentum, each species at its initial
+    /// temperature; the t = 0 state is recorded.
+    pub fn new(sys: DsmcSystem, seed: u64) -> Self {
+        let mut rng = RunRng::new(seed);
+        let vel = system::initial_velocities(&sys, &mut rng);
+        let n = vel.len();
+        let m = sys.species.len();
+        let st = DsmcState {
+            t: 0.0,
+            vel,
+            disp: if sys.msd { vec![[0.0; 4]; n] } else { Vec::new() },
+            vmax: vec![0.0; m],
+            bird_bound: 0.0,
+            rng: rng.position(),
+            trials: 0,
+            collisions: 0,
+            species_collisions: vec![0; m],
+            bound_raises: 0,
+            next_output: 0,
+            collisions_at_refresh: 0,
+            pipeline: Vec::new(),
+            rows: Vec::new(),
+            last_energy: f64::INFINITY,
+            done: false,
+        };
+        let mut sim = Self::assemble(sys, st, rng);
+        sim.refresh_bounds();
+        sim
+    }
+
+    fn assemble(sys: DsmcSystem, st: DsmcState, rng: RunRng) -> Self {
+        let mut off = Vec::with_capacity(sys.species.len() + 1);
+        off.push(0);
+        for s in &sys.species {
+            off.push(off.last().unwrap() + s.count as usize);
+        }
+        let pair_k = low_rank::static_tables(&sys);
+        let ring = Ring::from_slice(&st.pipeline);
+        let mut sim = DsmcSim { sys, st, rng, pair_i: Alias::default(), pair_k, off, rate: 0.0, ring };
+        sim.rebuild_rates();
+        sim
+    }
+
+    /// Serialise the state (the run's checkpoint payload).
+    pub fn state_bytes(&mut self) -> Vec<u8> {
+        self.st.rng = self.rng.position();
+        self.st.pipeline = self.ring.to_vec();
+        postcard::to_stdvec(&self.st).expect("state serialises")
+    }
+
+    /// Rebuild a simulation from a checkpoint payload.
+    pub fn from_state_bytes(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
+        let st: DsmcState = postcard::from_bytes(bytes).map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
+        if st.vel.len() != sys.n_particles() || st.vmax.len() != sys.species.len() {
+            return Err("checkpoint does not match the run's species".into());
+        }
+        let rng = RunRng::restore(&st.rng);
+        Ok(Self::assemble(sys, st, rng))
+    }
+
+    pub fn is_done(&self) -> bool {
+        self.st.done
+    }
+
+    /// Fraction of the run done, on a log scale of time (collisions per particle grow ~ ln t).
+    pub fn progress(&self) -> f64 {
+        if self.st.done {
+            return 1.0;
+        }
+        ((1.0 + self.st.t).ln() / (1.0 + self.sys.t_end).ln()).clamp(0.0, 1.0)
+    }
+
+    /// Run at most `max_trials` trials; `Ok(true)` once t_end is reached.
+    pub fn advance(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
+        if self.st.done {
+            return Ok(true);
+        }
+        match self.sys.method {
+            DsmcMethod::LowRank => self.advance_low_rank(max_trials),
+            DsmcMethod::Bird => self.advance_bird(max_trials),
+        }
+    }
+
+    /// Take the recorded rows (the run's output so far).
+    pub fn take_rows(&mut self) -> Vec<SpeciesRow> {
+        std::mem::take(&mut self.st.rows)
+    }
+
+    /// Total trial rate for the current bounds.
+    fn rebuild_rates(&mut self) {
+        match self.sys.method {
+            DsmcMethod::LowRank => {
+                let w = low_rank::dynamic_weights(&self.sys, &self.st.vmax, &self.pair_k);
+                self.pair_i.rebuild(&w);
+                self.rate = self.sys.rate_scale * self.pair_i.total();
+            }
+            DsmcMethod::Bird => {
+                let n = self.sys.n_particles() as f64;
+                self.rate = n * n * 2.0 * self.st.bird_bound * std::f64::consts::PI / self.sys.volume;
+            }
+        }
+    }
+
+    /// Recompute exact speed bounds (they shrink as the gas cools) and the rates.
+    fn refresh_bounds(&mut self) {
+        let sig_max = self.sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
+        let mut bound: f64 = 0.0;
+        for (s, sp) in self.sys.species.iter().enumerate() {
+            let mut v2max: f64 = 0.0;
+            for v in &self.st.vel[self.off[s]..self.off[s + 1]] {
+                v2max = v2max.max(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+            }
+            let vmax = v2max.sqrt();
+            self.st.vmax[s] = vmax;
+            let c = 0.25 * (sp.diameter + sig_max) * (sp.diameter + sig_max);
+            bound = bound.max(c * vmax);
+        }
+        self.st.bird_bound = bound;
+        self.st.collisions_at_refresh = self.st.collisions;
+        self.rebuild_rates();
+        if self.sys.method == DsmcMethod::LowRank {
+            // Candidates drawn from the old tables are void.
+            self.ring.clear();
+        }
+    }
+
+    fn refresh_due(&self) -> bool {
+        (self.st.collisions - self.st.collisions_at_refresh) as f64 >= self.sys.refresh_every * self.sys.n_particles() as f64
+    }
+
+    /// Record the state at output time `t` (velocities are constant between collisions;
+    /// displacements are extrapolated without modifying the stored ones).
+    fn record(&mut self, t: f64) -> Result<(), PhysicsError> {
+        let mut energy = 0.0;
+        for (s, sp) in self.sys.species.iter().enumerate() {
+            let range = self.off[s]..self.off[s + 1];
+            let mut v2 = 0.0;
+            for v in &self.st.vel[range.clone()] {
+                v2 += v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            }
+            let msd = if self.sys.msd {
+                let mut r2 = 0.0;
+                for (v, d) in self.st.vel[range.clone()].iter().zip(&self.st.disp[range.clone()]) {
+                    let dt = t - d[3];
+                    let (x, y, z) = (d[0] + v[0] * dt, d[1] + v[1] * dt, d[2] + v[2] * dt);
+                    r2 += x * x + y * y + z * z;
+                }
+                Some(r2 / sp.count as f64)
+            } else {
+                None
+            };
+            energy += 0.5 * sp.mass * v2;
+            let temperature = sp.mass * v2 / (3.0 * sp.count as f64);
+            if !temperature.is_finite() || msd.is_some_and(|m| !m.is_finite()) {
+                return Err(PhysicsError { t, reason: format!("non-finite temperature or MSD in species {}", s + 1) });
+            }
+            self.st.rows.push(SpeciesRow {
+                t,
+                species: s as u32 + 1,
+                mass: sp.mass,
+                diameter: sp.diameter,
+                count: sp.count,
+                temperature,
+                msd,
+                collisions: self.st.species_collisions[s],
+            });
+        }
+        // Inelastic collisions never add energy; allow rounding only.
+        if energy > self.st.last_energy * (1.0 + 1e-9) {
+            return Err(PhysicsError { t, reason: format!("kinetic energy increased from {} to {energy}", self.st.last_energy) });
+        }
+        self.st.last_energy = energy;
+        Ok(())
+    }
+
+    /// Emit every output time before `t_next`; mark the run done if `t_next` is past t_end.
+    #[inline]
+    fn outputs_before(&mut self, t_next: f64) -> Result<bool, PhysicsError> {
+        while self.st.next_output < self.sys.output_times.len() && self.sys.output_times[self.st.next_output] <= t_next {
+            let t = self.sys.output_times[self.st.next_output];
+            self.record(t)?;
+            self.st.next_output += 1;
+        }
+        if t_next > self.sys.t_end || self.st.next_output == self.sys.output_times.len() {
+            self.st.t = self.sys.t_end;
+            self.st.done = true;
+            return Ok(true);
+        }
+        Ok(false)
+    }
+
+    /// Total momentum sum m v (for conservation checks).
+    pub fn momentum(&self) -> [f64; 3] {
+        let mut p = [0.0; 3];
+        for (s, sp) in self.sys.species.iter().enumerate() {
+            for v in &self.st.vel[self.off[s]..self.off[s + 1]] {
+                for d in 0..3 {
+                    p[d] += sp.mass * v[d];
+                }
+            }
+        }
+        p
+    }
+
+    /// Sum of m v^2 over all particles.
+    pub fn sum_mv2(&self) -> f64 {
+        let mut e = 0.0;
+        for (s, sp) in self.sys.species.iter().enumerate() {
+            let mut v2 = 0.0;
+            for v in &self.st.vel[self.off[s]..self.off[s + 1]] {
+                v2 += v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            }
+            e += sp.mass * v2;
+        }
+        e
+    }
+}
+
+#[inline(always)]
+fn prefetch<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    #[allow(unused_unsafe)]
+    unsafe {
+        core::arch::x86_64::_mm_prefetch(p as *const i8, core::arch::x86_64::_MM_HINT_T0);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}

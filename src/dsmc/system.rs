@@ -1,0 +1,194 @@
+//! The physical system of a DSMC run, resolved from the manifest: species (mass, diameter,
+//! count, initial temperature), volume, restitution, output schedule.
+
+use crate::manifest::dsmc::{DsmcMethod, DsmcParams, Restitution, SpeciesSpec};
+use crate::rng::RunRng;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpeciesInfo {
+    pub mass: f64,
+    pub diameter: f64,
+    pub count: u64,
+    pub initial_temperature: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct DsmcSystem {
+    pub method: DsmcMethod,
+    pub species: Vec<SpeciesInfo>,
+    pub volume: f64,
+    /// Constant restitution coefficient.
+    pub eps: f64,
+    pub t_end: f64,
+    /// Sorted output times, 0 and t_end included.
+    pub output_times: Vec<f64>,
+    pub msd: bool,
+    /// Refresh bounds every `refresh_every * N` collisions.
+    pub refresh_every: f64,
+    /// pi / (4 V): the low-rank rate constant of (43).
+    pub rate_scale: f64,
+}
+
+/// Largest particle count a run may have (particle indices are 32-bit).
+pub const MAX_PARTICLES: u64 = u32::MAX as u64 - 1;
+
+impl DsmcSystem {
+    pub fn from_params(p: &DsmcParams) -> Result<Self, String> {
+        let (species, volume) = match &p.species {
+            SpeciesSpec::PowerLaw(pl) => {
+                let mut species = Vec::new();
+                for k in 1u64.. {
+                    let count = (pl.n1_count as f64 * (k as f64).powf(-pl.theta)).round();
+                    if count < 1.0 {
+                        break;
+                    }
+                    species.push(SpeciesInfo {
+                        mass: k as f64,
+                        diameter: (k as f64).cbrt(),
+                        count: count as u64,
+                        initial_temperature: p.initial_temperature,
+                    });
+                    if species.len() > 1_000_000 {
+                        return Err("power_law gives more than 1e6 species".into());
+                    }
+                }
+                (species, pl.n1_count as f64 / pl.n1)
+            }
+            SpeciesSpec::List(list) => {
+                let species: Vec<SpeciesInfo> = list
+                    .iter()
+                    .map(|s| SpeciesInfo {
+                        mass: s.mass,
+                        diameter: s.diameter,
+                        count: s.count,
+                        initial_temperature: s.temperature.unwrap_or(p.initial_temperature),
+                    })
+                    .collect();
+                let n: u64 = species.iter().map(|s| s.count).sum();
+                let volume = match (p.volume, p.number_density) {
+                    (Some(v), _) => v,
+                    (None, Some(d)) => n as f64 / d,
+                    (None, None) => return Err("species.list needs volume or number_density".into()),
+                };
+                (species, volume)
+            }
+        };
+        let n: u64 = species.iter().map(|s| s.count).sum();
+        if n > MAX_PARTICLES {
+            return Err(format!("{n} particles is more than the supported {MAX_PARTICLES}"));
+        }
+        let eps = match p.restitution {
+            Restitution::Constant(e) => e,
+        };
+        Ok(DsmcSystem {
+            method: p.method,
+            species,
+            volume,
+            eps,
+            t_end: p.t_end,
+            output_times: p.output_times.resolve(p.t_end),
+            msd: p.wants_msd(),
+            refresh_every: p.refresh_every,
+            rate_scale: std::f64::consts::PI / (4.0 * volume),
+        })
+    }
+
+    pub fn n_particles(&self) -> usize {
+        self.species.iter().map(|s| s.count as usize).sum()
+    }
+
+    /// Number density n_k = N_k / V.
+    pub fn density(&self, k: usize) -> f64 {
+        self.species[k].count as f64 / self.volume
+    }
+}
+
+/// Maxwell velocities; each species with two or more particles has zero momentum and exactly
+/// its initial temperature. Single-particle species cannot have zero momentum: their momentum
+/// is taken up by the most massive species with two or more particles (which is then rescaled
+/// about its mean to keep its temperature), so the total momentum is zero.
+pub fn initial_velocities(sys: &DsmcSystem, rng: &mut RunRng) -> Vec<[f64; 4]> {
+    let n = sys.n_particles();
+    let mut vel = vec![[0.0; 4]; n];
+    let mut start = 0;
+    let mut singles_p = [0.0; 3];
+    let mut ranges = Vec::with_capacity(sys.species.len());
+    for sp in &sys.species {
+        let range = start..start + sp.count as usize;
+        start = range.end;
+        let sd = (sp.initial_temperature / sp.mass).sqrt();
+        for v in &mut vel[range.clone()] {
+            for c in v.iter_mut().take(3) {
+                *c = sd * rng.normal();
+            }
+        }
+        let vs = &mut vel[range.clone()];
+        if vs.len() >= 2 {
+            let mut mean = [0.0; 3];
+            for v in vs.iter() {
+                for d in 0..3 {
+                    mean[d] += v[d];
+                }
+            }
+            for m in &mut mean {
+                *m /= vs.len() as f64;
+            }
+            for v in vs.iter_mut() {
+                for d in 0..3 {
+                    v[d] -= mean[d];
+                }
+            }
+        }
+        rescale(vs, [0.0; 3], sp.initial_temperature, sp.mass);
+        if vs.len() == 1 {
+            for d in 0..3 {
+                singles_p[d] += sp.mass * vs[0][d];
+            }
+        }
+        ranges.push(range);
+    }
+    if singles_p != [0.0; 3] {
+        // The most massive species with >= 2 particles absorbs the singles' momentum.
+        let target = (0..sys.species.len())
+            .filter(|&s| sys.species[s].count >= 2)
+            .max_by(|&a, &b| {
+                let ma = sys.species[a].mass * sys.species[a].count as f64;
+                let mb = sys.species[b].mass * sys.species[b].count as f64;
+                ma.total_cmp(&mb)
+            });
+        if let Some(s) = target {
+            let sp = &sys.species[s];
+            let shift: Vec<f64> = singles_p.iter().map(|p| -p / (sp.mass * sp.count as f64)).collect();
+            let vs = &mut vel[ranges[s].clone()];
+            for v in vs.iter_mut() {
+                for d in 0..3 {
+                    v[d] += shift[d];
+                }
+            }
+            rescale(vs, [shift[0], shift[1], shift[2]], sp.initial_temperature, sp.mass);
+        }
+    }
+    vel
+}
+
+/// Scale the velocities about `mean` so that m <v^2> / 3 = t (when possible).
+fn rescale(vs: &mut [[f64; 4]], mean: [f64; 3], t: f64, mass: f64) {
+    let mut dev2 = 0.0;
+    for v in vs.iter() {
+        for d in 0..3 {
+            dev2 += (v[d] - mean[d]) * (v[d] - mean[d]);
+        }
+    }
+    let n = vs.len() as f64;
+    let mean2 = mean.iter().map(|m| m * m).sum::<f64>();
+    let want = 3.0 * t / mass - mean2;
+    if dev2 <= 0.0 || want <= 0.0 {
+        return;
+    }
+    let lambda = (want * n / dev2).sqrt();
+    for v in vs.iter_mut() {
+        for d in 0..3 {
+            v[d] = mean[d] + lambda * (v[d] - mean[d]);
+        }
+    }
+}

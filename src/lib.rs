@@ -1,0 +1,29 @@
+//! `granular`: ensembles of granular-gas simulations turned into Parquet tables.
+//!
+//! Layers (see `ARCHITECTURE.md`):
+//! - [`manifest`]: the JSON manifest as serde types, its JSON Schema, and validation that
+//!   reports every error at once with its JSON path.
+//! - [`plan`]: expands a manifest's sweep into points and runs with stable ids and seeds.
+//! - [`dsmc`]: the DSMC simulators (low-rank and Bird) of polydisperse granular gases.
+//! - [`theory`]: kinetic theory (pure functions, usable without simulating).
+//! - [`store`]: Parquet tables, atomic part files, checkpoints.
+//! - [`campaign`]: the engine: worker pool, dispatcher, ledger, locks, resume, status.
+//! - [`engine`]: the closed set of simulators the campaign drives.
+//!
+//! The physics never imports the campaign or the store: a simulator hands rows and
+//! checkpoint bytes to whoever drives it.
+
+pub mod campaign;
+pub mod cli;
+pub mod dsmc;
+pub mod engine;
+pub mod exit_codes;
+pub mod fsutil;
+pub mod manifest;
+pub mod plan;
+pub mod rng;
+pub mod store;
+pub mod theory;
+
+/// The code version written into every table and checkpoint.
+pub const CODE_VERSION: &str = concat!("granular ", env!("CARGO_PKG_VERSION"));

@@ -1,0 +1,231 @@
+//! Manifest types of the `dsmc` model (spec `dsmc.md`).
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+/// Parameters of a DSMC run (homogeneous cooling state of a polydisperse granular gas).
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DsmcParams {
+    /// Collision-pair selection: `low_rank` (rank-3 species selection) or `bird` (uniform pairs).
+    pub method: DsmcMethod,
+    /// The species: a power law (the paper's polydisperse case) or an explicit list.
+    pub species: SpeciesSpec,
+    /// System volume V (explicit species list only; give this or `number_density`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub volume: Option<f64>,
+    /// Total number density N/V (explicit species list only; give this or `volume`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub number_density: Option<f64>,
+    /// Restitution coefficient model.
+    pub restitution: Restitution,
+    /// Initial temperature of every species without its own `temperature` (default 1).
+    #[serde(default = "one")]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub initial_temperature: f64,
+    /// End time of the run (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub t_end: f64,
+    /// Times at which the state is reported (t = 0 and t_end are always reported).
+    #[serde(default)]
+    pub output_times: OutputTimes,
+    /// Observables beyond the always-recorded temperature: `msd` enables displacement
+    /// bookkeeping (memory and time); `temperature` may be listed for clarity.
+    #[serde(default)]
+    pub observables: Vec<DsmcObservable>,
+    /// Recompute the exact speed bounds (and rebuild the selection tables) every this many
+    /// collisions per particle (default 1, i.e. every ~N collisions).
+    #[serde(default = "one")]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub refresh_every: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// DSMC method.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum DsmcMethod {
+    /// The paper's low-rank method (section III.A): species pairs from a rank-3 majorant.
+    LowRank,
+    /// Bird's method (section III.B): uniform ordered pairs, one global majorant.
+    Bird,
+}
+
+impl DsmcMethod {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            DsmcMethod::LowRank => "low_rank",
+            DsmcMethod::Bird => "bird",
+        }
+    }
+}
+
+/// How the species are given.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum SpeciesSpec {
+    /// N_k = round(N1 k^-theta) for every k with N_k >= 1; m_k = k, sigma_k = k^(1/3);
+    /// V = N1 / n1.
+    PowerLaw(PowerLaw),
+    /// Explicit species; needs `volume` or `number_density` in params.
+    List(Vec<SpeciesEntry>),
+}
+
+/// The paper's polydisperse size distribution.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PowerLaw {
+    /// Monomer number density n_1 (sets V = N1/n1).
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub n1: f64,
+    /// Number of monomers N_1.
+    #[serde(rename = "N1")]
+    #[schemars(range(min = 1))]
+    pub n1_count: u64,
+    /// Exponent theta of N_k = round(N1 k^-theta).
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub theta: f64,
+}
+
+/// One species of an explicit list.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpeciesEntry {
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub mass: f64,
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub diameter: f64,
+    #[schemars(range(min = 1))]
+    pub count: u64,
+    /// Initial temperature of this species (overrides `initial_temperature`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub temperature: Option<f64>,
+}
+
+/// Restitution coefficient model.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Restitution {
+    /// A constant coefficient eps in [0, 1] for every pair.
+    Constant(#[schemars(range(min = 0, max = 1))] f64),
+}
+
+/// Output times: a log grid, a list, or both (merged).
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct OutputTimes {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log: Option<LogTimes>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub list: Option<Vec<f64>>,
+}
+
+/// `per_decade` log-spaced times from `from` to `to` (inclusive).
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LogTimes {
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub from: f64,
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub to: f64,
+    #[schemars(range(min = 1, max = 1000))]
+    pub per_decade: u32,
+}
+
+/// DSMC observables.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum DsmcObservable {
+    /// Species temperatures T_k = m_k <v^2>/3 (always recorded).
+    Temperature,
+    /// Partial mean-squared displacements <R_k^2(t)> (displacement bookkeeping).
+    Msd,
+}
+
+impl OutputTimes {
+    /// The sorted, de-duplicated output times, with 0 and `t_end` included.
+    pub fn resolve(&self, t_end: f64) -> Vec<f64> {
+        let mut times = vec![0.0, t_end];
+        if let Some(log) = &self.log {
+            let step = 1.0 / log.per_decade as f64;
+            let (a, b) = (log.from.log10(), log.to.log10());
+            let n = ((b - a) / step + 1e-9).floor() as i64;
+            for j in 0..=n.max(0) {
+                times.push(10f64.powf(a + j as f64 * step));
+            }
+        }
+        if let Some(list) = &self.list {
+            times.extend(list.iter().copied());
+        }
+        times.retain(|t| *t <= t_end);
+        times.sort_by(f64::total_cmp);
+        times.dedup_by(|a, b| (*a - *b).abs() <= 1e-12 * b.abs().max(1e-300));
+        times
+    }
+}
+
+impl DsmcParams {
+    pub fn wants_msd(&self) -> bool {
+        self.observables.contains(&DsmcObservable::Msd)
+    }
+
+    /// Checks that the schema cannot express; `path` is the JSON pointer of this object.
+    pub fn check(&self, path: &str, errors: &mut Vec<(String, String)>) {
+        let mut err = |p: &str, m: String| errors.push((format!("{path}{p}"), m));
+        match &self.species {
+            SpeciesSpec::PowerLaw(_) => {
+                if self.volume.is_some() {
+                    err("/volume", "must not be given with species.power_law (V = N1/n1)".into());
+                }
+                if self.number_density.is_some() {
+                    err("/number_density", "must not be given with species.power_law (V = N1/n1)".into());
+                }
+            }
+            SpeciesSpec::List(list) => {
+                if list.is_empty() {
+                    err("/species/list", "expected at least one species".into());
+                }
+                match (self.volume, self.number_density) {
+                    (None, None) => err("", "expected `volume` or `number_density` with species.list".into()),
+                    (Some(_), Some(_)) => err("/number_density", "give either `volume` or `number_density`, not both".into()),
+                    _ => {}
+                }
+                let total: u64 = list.iter().map(|s| s.count).sum();
+                if !list.is_empty() && total < 2 {
+                    err("/species/list", "expected at least 2 particles in total".into());
+                }
+            }
+        }
+        if !self.t_end.is_finite() {
+            err("/t_end", format!("expected a finite time > 0, got {}", self.t_end));
+        }
+        if let Some(log) = &self.output_times.log {
+            if log.to < log.from {
+                err("/output_times/log/to", format!("expected to >= from ({}), got {}", log.from, log.to));
+            }
+            if log.to > self.t_end * (1.0 + 1e-12) {
+                err("/output_times/log/to", format!("expected a time <= t_end ({}), got {}", self.t_end, log.to));
+            }
+        }
+        if let Some(list) = &self.output_times.list {
+            for (i, t) in list.iter().enumerate() {
+                if !(*t >= 0.0 && *t <= self.t_end * (1.0 + 1e-12)) {
+                    err(&format!("/output_times/list/{i}"), format!("expected a time in [0, t_end = {}], got {t}", self.t_end));
+                }
+            }
+        }
+        let mut seen = Vec::new();
+        for (i, o) in self.observables.iter().enumerate() {
+            if seen.contains(o) {
+                err(&format!("/observables/{i}"), format!("duplicate observable {o:?}"));
+            }
+            seen.push(*o);
+        }
+    }
+}

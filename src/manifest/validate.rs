@@ -1,0 +1,200 @@
+//! Loading a manifest with every error reported at once, each with its JSON path.
+//!
+//! Three stages: (1) JSON syntax; (2) the generated JSON Schema (unknown keys, types, ranges),
+//! where a failed `oneOf` is narrowed to the variant the user evidently meant; (3) checks the
+//! schema cannot express (cross-field rules, sweep paths, duplicate points), run on the base
+//! parameters, on every sweep value and on every point of the sweep.
+
+use std::fmt;
+use std::path::Path;
+
+use jsonschema::error::ValidationErrorKind;
+use jsonschema::ValidationError;
+use serde_json::Value;
+
+use super::{json_schema, params_schema, Manifest, ModelKind};
+use crate::plan::{self, Plan};
+
+/// One problem in a manifest.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ManifestError {
+    /// JSON pointer of the offending value (`/params/restitution/constant`).
+    pub path: String,
+    pub message: String,
+}
+
+/// Every problem found in one manifest file.
+#[derive(Debug, Clone)]
+pub struct ManifestErrors {
+    pub file: String,
+    pub errors: Vec<ManifestError>,
+}
+
+impl fmt::Display for ManifestErrors {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let n = self.errors.len();
+        writeln!(f, "{}: invalid manifest ({n} error{})", self.file, if n == 1 { "" } else { "s" })?;
+        for e in &self.errors {
+            let path = if e.path.is_empty() { "/" } else { &e.path };
+            writeln!(f, "  at {path}: {}", e.message)?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for ManifestErrors {}
+
+/// Read and validate a manifest file.
+pub fn load_manifest(path: &Path) -> Result<(Manifest, Plan), ManifestErrors> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ManifestErrors {
+        file: file.clone(),
+        errors: vec![ManifestError { path: String::new(), message: format!("cannot read the file: {e}") }],
+    })?;
+    parse_manifest(&text, &file)
+}
+
+/// Validate manifest text; `file` names it in errors.
+pub fn parse_manifest(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors> {
+    let fail = |errors: Vec<ManifestError>| ManifestErrors { file: file.to_string(), errors };
+    let value: Value = serde_json::from_str(text).map_err(|e| {
+        fail(vec![ManifestError {
+            path: String::new(),
+            message: format!("not valid JSON: {e} (line {}, column {})", e.line(), e.column()),
+        }])
+    })?;
+    let mut errors = schema_errors(&json_schema(), &value, "");
+    if !errors.is_empty() {
+        if let (Some(params), Some(sweep)) = (value.get("params"), value.get("sweep").and_then(|s| s.as_object())) {
+            let more = plan::sweep_key_errors(params, sweep);
+            errors.extend(more.into_iter().map(|(path, message)| ManifestError { path, message }));
+        }
+        dedup(&mut errors);
+        return Err(fail(errors));
+    }
+    let manifest: Manifest = match serde_json::from_value(value.clone()) {
+        Ok(m) => m,
+        Err(e) => return Err(fail(vec![ManifestError { path: String::new(), message: e.to_string() }])),
+    };
+    match plan::expand(&manifest) {
+        Ok(plan) => Ok((manifest, plan)),
+        Err(errs) => {
+            errors.extend(errs.into_iter().map(|(path, message)| ManifestError { path, message }));
+            dedup(&mut errors);
+            Err(fail(errors))
+        }
+    }
+}
+
+/// Validate a model's params object (after sweep substitution) against its schema; paths are
+/// prefixed with `prefix`.
+pub fn params_schema_errors(model: ModelKind, params: &Value, prefix: &str) -> Vec<ManifestError> {
+    thread_local! {
+        static VALIDATORS: std::cell::RefCell<Vec<(ModelKind, jsonschema::Validator)>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
+    VALIDATORS.with(|cell| {
+        let mut cache = cell.borrow_mut();
+        if !cache.iter().any(|(m, _)| *m == model) {
+            let v = jsonschema::validator_for(&params_schema(model)).expect("generated schema compiles");
+            cache.push((model, v));
+        }
+        let validator = &cache.iter().find(|(m, _)| *m == model).expect("cached").1;
+        collect(validator.iter_errors(params), prefix)
+    })
+}
+
+fn schema_errors(schema: &Value, instance: &Value, prefix: &str) -> Vec<ManifestError> {
+    let validator = jsonschema::validator_for(schema).expect("generated schema compiles");
+    collect(validator.iter_errors(instance), prefix)
+}
+
+fn collect<'a>(iter: impl Iterator<Item = ValidationError<'a>>, prefix: &str) -> Vec<ManifestError> {
+    let mut out = Vec::new();
+    for e in iter {
+        explain(&e, prefix, &mut out);
+    }
+    dedup(&mut out);
+    out
+}
+
+fn dedup(errors: &mut Vec<ManifestError>) {
+    let mut seen = std::collections::HashSet::new();
+    errors.retain(|e| seen.insert((e.path.clone(), e.message.clone())));
+}
+
+/// Turn one schema error into messages; a failed `oneOf` is narrowed to the variant whose tag
+/// the instance carries, so `{"constant": 2}` reports the range, not "no variant matched".
+fn explain(e: &ValidationError<'_>, prefix: &str, out: &mut Vec<ManifestError>) {
+    let path = format!("{prefix}{}", e.instance_path().as_str());
+    match e.kind() {
+        ValidationErrorKind::OneOfNotValid { context } => {
+            let here = e.instance_path().as_str();
+            // A variant "matches the tag" when it has no complaint about the object's shape
+            // (required key / unexpected key / type / const) at this very location.
+            let shape_error = |errs: &Vec<ValidationError<'static>>| {
+                errs.iter().any(|x| {
+                    x.instance_path().as_str() == here
+                        && matches!(
+                            x.kind(),
+                            ValidationErrorKind::Required { .. }
+                                | ValidationErrorKind::AdditionalProperties { .. }
+                                | ValidationErrorKind::Type { .. }
+                                | ValidationErrorKind::Constant { .. }
+                                | ValidationErrorKind::Enum { .. }
+                        )
+                })
+            };
+            let candidates: Vec<_> = context.iter().filter(|errs| !shape_error(errs)).collect();
+            if candidates.len() == 1 {
+                for x in candidates[0] {
+                    explain(x, prefix, out);
+                }
+                return;
+            }
+            let mut options = Vec::new();
+            for errs in context {
+                for x in errs {
+                    if x.instance_path().as_str() != here {
+                        continue;
+                    }
+                    match x.kind() {
+                        ValidationErrorKind::Required { property } => options.push(format!("an object {{{property}: ...}}")),
+                        ValidationErrorKind::Constant { expected_value } => options.push(expected_value.to_string()),
+                        ValidationErrorKind::Enum { options: o } => {
+                            if let Some(list) = o.as_array() {
+                                options.extend(list.iter().map(|v| v.to_string()));
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            options.dedup();
+            let got = short(e.instance());
+            let message = if options.is_empty() {
+                format!("{got} matches none of the allowed forms")
+            } else {
+                format!("expected {}, got {got}", options.join(" or "))
+            };
+            out.push(ManifestError { path, message });
+        }
+        ValidationErrorKind::AdditionalProperties { unexpected } => {
+            for key in unexpected {
+                out.push(ManifestError {
+                    path: format!("{path}/{}", key.replace('~', "~0").replace('/', "~1")),
+                    message: format!("unknown key {key:?}"),
+                });
+            }
+        }
+        _ => out.push(ManifestError { path, message: e.to_string() }),
+    }
+}
+
+fn short(v: &Value) -> String {
+    let s = v.to_string();
+    if s.len() > 80 {
+        format!("{}...", &s[..77])
+    } else {
+        s
+    }
+}

@@ -1,0 +1,190 @@
+//! Checkpoints of running simulations: versioned, checksummed, written atomically; the
+//! previous good checkpoint is kept as `.prev` until the next one is durable.
+//!
+//! Layout: magic `GRNLCKPT`, format (u32 LE), header length (u32 LE), payload length (u64 LE),
+//! CRC-32 of header + payload (u32 LE), header (JSON), payload (the simulator's state).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::FORMAT_VERSION;
+use crate::fsutil;
+
+const MAGIC: &[u8; 8] = b"GRNLCKPT";
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct CheckpointHeader {
+    pub run_id: u64,
+    pub seed: u64,
+    pub code_version: String,
+    /// Wall-clock seconds spent on the run so far.
+    pub wall_seconds: f64,
+    /// Simulated time reached.
+    pub t: f64,
+}
+
+pub fn path(dir: &Path, run_id: u64) -> PathBuf {
+    dir.join(format!("run-{run_id:010}.ckpt"))
+}
+
+fn prev_path(dir: &Path, run_id: u64) -> PathBuf {
+    dir.join(format!("run-{run_id:010}.ckpt.prev"))
+}
+
+pub fn encode(header: &CheckpointHeader, payload: &[u8]) -> Vec<u8> {
+    let h = serde_json::to_vec(header).expect("header serialises");
+    let mut crc = crc32fast::Hasher::new();
+    crc.update(&h);
+    crc.update(payload);
+    let mut out = Vec::with_capacity(28 + h.len() + payload.len());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    out.extend_from_slice(&(h.len() as u32).to_le_bytes());
+    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    out.extend_from_slice(&crc.finalize().to_le_bytes());
+    out.extend_from_slice(&h);
+    out.extend_from_slice(payload);
+    out
+}
+
+pub fn decode(bytes: &[u8]) -> Result<(CheckpointHeader, &[u8]), String> {
+    if bytes.len() < 28 || &bytes[..8] != MAGIC {
+        return Err("not a granular checkpoint (bad magic or too short)".into());
+    }
+    let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().expect("4 bytes"));
+    let format = u32_at(8);
+    if format != FORMAT_VERSION {
+        return Err(format!("checkpoint format {format}, this granular reads {FORMAT_VERSION}"));
+    }
+    let hlen = u32_at(12) as usize;
+    let plen = u64::from_le_bytes(bytes[16..24].try_into().expect("8 bytes")) as usize;
+    let crc = u32_at(24);
+    if bytes.len() != 28 + hlen + plen {
+        return Err(format!("truncated or padded: {} bytes, expected {}", bytes.len(), 28 + hlen + plen));
+    }
+    let (h, p) = bytes[28..].split_at(hlen);
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(h);
+    hasher.update(p);
+    if hasher.finalize() != crc {
+        return Err("checksum mismatch".into());
+    }
+    let header: CheckpointHeader = serde_json::from_slice(h).map_err(|e| format!("bad header: {e}"))?;
+    Ok((header, p))
+}
+
+/// Write a checkpoint atomically; the previous one becomes `.prev`.
+pub fn write(dir: &Path, header: &CheckpointHeader, payload: &[u8]) -> std::io::Result<()> {
+    let bytes = encode(header, payload);
+    let cur = path(dir, header.run_id);
+    let tmp = fsutil::temp_path(&cur);
+    let result = (|| {
+        {
+            use std::io::Write;
+            let mut f = fs::File::create(&tmp)?;
+            f.write_all(&bytes)?;
+            f.sync_all()?;
+        }
+        if cur.exists() {
+            fs::rename(&cur, prev_path(dir, header.run_id))?;
+        }
+        fs::rename(&tmp, &cur)?;
+        fsutil::sync_dir(dir)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// What loading a run's checkpoint found.
+pub struct Loaded {
+    pub header: CheckpointHeader,
+    pub payload: Vec<u8>,
+    /// Problems with newer checkpoint files that were skipped (for warnings).
+    pub skipped: Vec<String>,
+}
+
+/// The newest good checkpoint of a run (current, else previous); `Ok(None)` if there is none.
+/// Bad files are reported in `skipped` (or in the error when no good one is left).
+pub fn load(dir: &Path, run_id: u64, seed: u64) -> Result<Option<Loaded>, Vec<String>> {
+    let mut skipped = Vec::new();
+    for p in [path(dir, run_id), prev_path(dir, run_id)] {
+        let bytes = match fs::read(&p) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(e) => {
+                skipped.push(format!("{}: {e}", p.display()));
+                continue;
+            }
+        };
+        match decode(&bytes) {
+            Ok((header, payload)) if header.run_id == run_id && header.seed == seed => {
+                return Ok(Some(Loaded { header, payload: payload.to_vec(), skipped }))
+            }
+            Ok((header, _)) => skipped.push(format!(
+                "{}: belongs to run {} seed {}, expected run {run_id} seed {seed}",
+                p.display(),
+                header.run_id,
+                header.seed
+            )),
+            Err(e) => skipped.push(format!("{}: {e}", p.display())),
+        }
+    }
+    if skipped.is_empty() {
+        Ok(None)
+    } else {
+        Err(skipped)
+    }
+}
+
+/// Remove a run's checkpoints (after its rows are committed).
+pub fn remove(dir: &Path, run_id: u64) {
+    let _ = fs::remove_file(path(dir, run_id));
+    let _ = fs::remove_file(prev_path(dir, run_id));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn header() -> CheckpointHeader {
+        CheckpointHeader { run_id: 3, seed: 9, code_version: "x".into(), wall_seconds: 1.5, t: 2.0 }
+    }
+
+    #[test]
+    fn round_trip_and_corruption_detected() {
+        let bytes = encode(&header(), b"payload bytes");
+        let (h, p) = decode(&bytes).unwrap();
+        assert_eq!(h, header());
+        assert_eq!(p, b"payload bytes");
+        for i in 0..bytes.len() {
+            let mut bad = bytes.clone();
+            bad[i] ^= 0x40;
+            assert!(decode(&bad).is_err(), "flipped byte {i} not detected");
+        }
+        assert!(decode(&bytes[..bytes.len() - 1]).is_err());
+    }
+
+    #[test]
+    fn falls_back_to_previous() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut h = header();
+        write(dir.path(), &h, b"first").unwrap();
+        h.t = 3.0;
+        write(dir.path(), &h, b"second").unwrap();
+        // Corrupt the newest: the previous is used, with a warning.
+        let cur = path(dir.path(), 3);
+        let mut b = fs::read(&cur).unwrap();
+        let n = b.len();
+        b[n - 2] ^= 1;
+        fs::write(&cur, b).unwrap();
+        let got = load(dir.path(), 3, 9).unwrap().unwrap();
+        assert_eq!(got.payload, b"first");
+        assert_eq!(got.skipped.len(), 1);
+        // Wrong seed: nothing usable.
+        assert!(load(dir.path(), 3, 10).is_err());
+    }
+}

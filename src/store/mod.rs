@@ -1,0 +1,10 @@
+//! Storage: Parquet tables written as atomic part files, checkpoints, ensemble summaries.
+//! The store knows table schemas, not physics.
+
+pub mod checkpoint;
+pub mod parquet_io;
+pub mod summary;
+pub mod tables;
+
+/// Version of the on-disk layout (tables, ledger, checkpoints); written everywhere.
+pub const FORMAT_VERSION: u32 = 1;

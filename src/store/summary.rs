@@ -1,0 +1,185 @@
+//! Ensemble summaries over replicas: `dsmc_species_summary` (mean and standard error of the
+//! mean per point, time and species). Derived data: rewritten whole, atomically, whenever the
+//! campaign completes. Reads the raw table in chunks of points so memory stays bounded, and
+//! sums in replica order so the result is bit-identical however the runs were scheduled.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use arrow_array::cast::AsArray;
+use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
+use arrow_array::{ArrayRef, RecordBatch};
+use arrow_schema::{DataType, Field, Schema};
+
+use super::parquet_io::{self, StoreError};
+use super::tables;
+use crate::campaign::ledger::RunStatus;
+use crate::campaign::Campaign;
+use crate::fsutil;
+
+/// Rows of the raw table held at once (per chunk of points).
+const CHUNK_ROWS: u64 = 4_000_000;
+
+/// Mean and standard error of the mean (None for fewer than two values).
+pub fn mean_sem(x: &[f64]) -> (f64, Option<f64>) {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    if x.len() < 2 {
+        return (mean, None);
+    }
+    let var = x.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0);
+    (mean, Some((var / n).sqrt()))
+}
+
+pub fn table_files(c: &Campaign, table: &str) -> Result<Vec<PathBuf>, StoreError> {
+    let dir = c.root.join("tables").join(table);
+    let mut files: Vec<PathBuf> = match std::fs::read_dir(&dir) {
+        Ok(it) => it
+            .filter_map(|e| e.ok())
+            .map(|e| e.path())
+            .filter(|p| {
+                let n = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                !n.starts_with('.') && n.ends_with(".parquet")
+            })
+            .collect(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(StoreError::io(&dir, e)),
+    };
+    files.sort();
+    Ok(files)
+}
+
+type Key = (u32, u64, u32); // point, t bits, species
+
+pub fn write_summaries(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Result<(), StoreError> {
+    let files = table_files(c, tables::DSMC_SPECIES)?;
+    let replicas = c.plan.replicas as u64;
+    let rows_per_point: u64 = c
+        .plan
+        .points
+        .iter()
+        .map(|p| match &p.params {
+            crate::plan::ModelParams::Dsmc(d) => {
+                let species = crate::dsmc::DsmcSystem::from_params(d).map(|s| s.species.len()).unwrap_or(1) as u64;
+                species * d.output_times.resolve(d.t_end).len() as u64 * replicas
+            }
+        })
+        .max()
+        .unwrap_or(1)
+        .max(1);
+    let points_per_chunk = (CHUNK_ROWS / rows_per_point).max(1) as u32;
+    let n_points = c.plan.points.len() as u32;
+
+    let mut out = SummaryColumns::default();
+    let mut p0 = 0u32;
+    while p0 < n_points {
+        let p1 = (p0 + points_per_chunk).min(n_points);
+        // (point, t, species) -> [(replica, temperature, msd)]
+        let mut acc: BTreeMap<Key, Vec<(u32, f64, Option<f64>)>> = BTreeMap::new();
+        for f in &files {
+            for b in parquet_io::read_file(f, tables::DSMC_SPECIES)? {
+                let col = |name: &str| b.column_by_name(name).cloned().ok_or_else(|| StoreError::Corrupt(f.display().to_string(), format!("has no column {name}")));
+                let run = col("run_id")?;
+                let point = col("point_id")?;
+                let t = col("t")?;
+                let sp = col("species")?;
+                let temp = col("temperature")?;
+                let msd = col("msd")?;
+                let (run, point, t, sp, temp, msd) = (
+                    run.as_primitive::<UInt64Type>(),
+                    point.as_primitive::<UInt32Type>(),
+                    t.as_primitive::<Float64Type>(),
+                    sp.as_primitive::<UInt32Type>(),
+                    temp.as_primitive::<Float64Type>(),
+                    msd.as_primitive::<Float64Type>(),
+                );
+                for i in 0..b.num_rows() {
+                    let p = point.value(i);
+                    if p < p0 || p >= p1 || finished.get(&run.value(i)) != Some(&RunStatus::Done) {
+                        continue;
+                    }
+                    let m = if arrow_array::Array::is_null(msd, i) { None } else { Some(msd.value(i)) };
+                    acc.entry((p, t.value(i).to_bits(), sp.value(i))).or_default().push(((run.value(i) % replicas) as u32, temp.value(i), m));
+                }
+            }
+        }
+        // Points whose replicas are not all finished (failed ones excluded) are summarised
+        // over the replicas that succeeded.
+        let mut order: Vec<Key> = acc.keys().copied().collect();
+        order.sort_by(|a, b| (a.0, f64::from_bits(a.1), a.2).partial_cmp(&(b.0, f64::from_bits(b.1), b.2)).expect("finite times"));
+        for key in order {
+            let mut v = acc.remove(&key).expect("key");
+            v.sort_by_key(|x| x.0);
+            v.dedup_by_key(|x| x.0);
+            let temps: Vec<f64> = v.iter().map(|x| x.1).collect();
+            let (tm, ts) = mean_sem(&temps);
+            let msds: Vec<f64> = v.iter().filter_map(|x| x.2).collect();
+            let (mm, ms) = if msds.len() == v.len() && !msds.is_empty() {
+                let (m, s) = mean_sem(&msds);
+                (Some(m), s)
+            } else {
+                (None, None)
+            };
+            out.push(key.0, f64::from_bits(key.1), key.2, v.len() as u32, tm, ts, mm, ms);
+        }
+        p0 = p1;
+    }
+    let batch = out.finish();
+    let path = c.root.join("tables").join(tables::DSMC_SPECIES_SUMMARY).join("summary.parquet");
+    fsutil::create_dir_durable(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))?;
+    let tmp = fsutil::temp_path(&path);
+    parquet_io::write_file(&tmp, &batch, tables::DSMC_SPECIES_SUMMARY, &c.manifest_json)?;
+    std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
+    fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))
+}
+
+#[derive(Default)]
+struct SummaryColumns {
+    point: Vec<u32>,
+    t: Vec<f64>,
+    species: Vec<u32>,
+    n: Vec<u32>,
+    tm: Vec<f64>,
+    ts: Vec<Option<f64>>,
+    mm: Vec<Option<f64>>,
+    ms: Vec<Option<f64>>,
+}
+
+impl SummaryColumns {
+    #[allow(clippy::too_many_arguments)]
+    fn push(&mut self, p: u32, t: f64, s: u32, n: u32, tm: f64, ts: Option<f64>, mm: Option<f64>, ms: Option<f64>) {
+        self.point.push(p);
+        self.t.push(t);
+        self.species.push(s);
+        self.n.push(n);
+        self.tm.push(tm);
+        self.ts.push(ts);
+        self.mm.push(mm);
+        self.ms.push(ms);
+    }
+
+    fn finish(self) -> RecordBatch {
+        let schema = Schema::new(vec![
+            Field::new("point_id", DataType::UInt32, false),
+            Field::new("t", DataType::Float64, false),
+            Field::new("species", DataType::UInt32, false),
+            Field::new("n_replicas", DataType::UInt32, false),
+            Field::new("temperature_mean", DataType::Float64, false),
+            Field::new("temperature_sem", DataType::Float64, true),
+            Field::new("msd_mean", DataType::Float64, true),
+            Field::new("msd_sem", DataType::Float64, true),
+        ]);
+        let arrays: Vec<ArrayRef> = vec![
+            Arc::new(arrow_array::UInt32Array::from(self.point)),
+            Arc::new(arrow_array::Float64Array::from(self.t)),
+            Arc::new(arrow_array::UInt32Array::from(self.species)),
+            Arc::new(arrow_array::UInt32Array::from(self.n)),
+            Arc::new(arrow_array::Float64Array::from(self.tm)),
+            Arc::new(arrow_array::Float64Array::from(self.ts)),
+            Arc::new(arrow_array::Float64Array::from(self.mm)),
+            Arc::new(arrow_array::Float64Array::from(self.ms)),
+        ];
+        RecordBatch::try_new(Arc::new(schema), arrays).expect("summary batch matches its schema")
+    }
+}
