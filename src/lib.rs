@@ -20,6 +20,7 @@ pub mod engine;
 pub mod exit_codes;
 pub mod fsutil;
 pub mod manifest;
+pub mod memory;
 pub mod plan;
 pub mod rng;
 pub mod store;

@@ -19,19 +19,16 @@ impl DsmcSim {
         let msd = self.sys.msd;
         let n = self.sys.n_particles();
         let sig_max = self.sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
+        if self.rate <= 0.0 {
+            return self.idle_to_end();
+        }
         let mut trials = 0u64;
         let result = loop {
             if trials >= max_trials {
                 break Ok(false);
             }
-            let t_next = if self.rate > 0.0 { self.st.t + self.rng.exp1() / self.rate } else { f64::INFINITY };
-            if self.sys.output_times[self.st.next_output] <= t_next {
-                if self.outputs_before(t_next)? {
-                    break Ok(true);
-                }
-            }
-            self.st.t = t_next;
             trials += 1;
+            self.gap_trial();
             while self.ring.len() < PIPELINE_DEPTH {
                 let a = self.rng.below(n);
                 let b = self.rng.below(n);
@@ -56,6 +53,11 @@ impl DsmcSim {
             if u * 2.0 * self.st.bird_bound >= sig2 * gne.abs() {
                 continue;
             }
+            let t = self.gap_time();
+            if self.sys.output_times[self.st.next_output] <= t && self.outputs_before(t)? {
+                break Ok(true);
+            }
+            self.st.t = t;
             // (41) is invariant under e -> -e: use the orientation with g.e > 0.
             let e = if gne < 0.0 {
                 gne = -gne;
@@ -63,7 +65,6 @@ impl DsmcSim {
             } else {
                 e
             };
-            let t = self.st.t;
             if msd {
                 for (p, v) in [(a, va), (b, vb)] {
                     let d = &mut self.st.disp[p];
@@ -98,6 +99,9 @@ impl DsmcSim {
             }
             if self.refresh_due() {
                 self.refresh_bounds();
+            }
+            if self.rate <= 0.0 {
+                break self.idle_to_end();
             }
         };
         self.st.trials += trials;

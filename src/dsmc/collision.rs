@@ -60,7 +60,7 @@ pub fn uniform_direction(rng: &mut RunRng) -> [f64; 3] {
 /// Apply (41): v_a -= m_b/(m_a+m_b) (1+eps) (g.e) e, v_b += m_a/(m_a+m_b) (1+eps) (g.e) e,
 /// with g = v_a - v_b and `gne` = g.e.
 #[inline(always)]
-pub fn collide(va: &mut [f64; 4], vb: &mut [f64; 4], ma: f64, mb: f64, eps: f64, e: [f64; 3], gne: f64) {
+pub fn collide(va: &mut [f64; 3], vb: &mut [f64; 3], ma: f64, mb: f64, eps: f64, e: [f64; 3], gne: f64) {
     let j = (1.0 + eps) * gne / (ma + mb);
     let (ja, jb) = (mb * j, ma * j);
     for d in 0..3 {
@@ -94,8 +94,8 @@ mod tests {
     fn collision_rule() {
         let mut rng = RunRng::new(2);
         for &eps in &[0.0, 0.3, 1.0] {
-            let mut va = [1.0, -2.0, 0.5, 0.0];
-            let mut vb = [-0.3, 0.7, 2.0, 0.0];
+            let mut va = [1.0, -2.0, 0.5];
+            let mut vb = [-0.3, 0.7, 2.0];
             let (ma, mb) = (1.0, 7.0);
             let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
             let gn = dot(g, g).sqrt();

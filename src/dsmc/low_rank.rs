@@ -38,11 +38,9 @@ pub fn dynamic_weights(sys: &DsmcSystem, vmax: &[f64], k_tables: &[Alias; 3]) ->
 impl DsmcSim {
     #[inline(always)]
     fn draw_candidate(&mut self) -> Candidate {
-        let m = self.sys.species.len();
         let ri = self.pair_i.sample(self.rng.u64());
-        let r = ri / m;
-        let i = ri - r * m;
-        // SAFETY: r < 3 because the (r, i) table has 3 M slots.
+        // SAFETY: the slot tables have one entry per (r, i) slot; r < 3.
+        let (r, i) = unsafe { (*self.slot_term.get_unchecked(ri) as usize, *self.slot_species.get_unchecked(ri) as usize) };
         let k = unsafe { self.pair_k.get_unchecked(r) }.sample(self.rng.u64());
         let a = self.off[i] + self.rng.below(self.off[i + 1] - self.off[i]);
         let b = self.off[k] + self.rng.below(self.off[k + 1] - self.off[k]);
@@ -52,6 +50,9 @@ impl DsmcSim {
     }
 
     pub(super) fn advance_low_rank(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
+        if self.rate <= 0.0 {
+            return self.idle_to_end();
+        }
         let eps = self.sys.eps;
         let msd = self.sys.msd;
         let mut trials = 0u64;
@@ -59,20 +60,14 @@ impl DsmcSim {
             if trials >= max_trials {
                 break Ok(false);
             }
-            let t_next = if self.rate > 0.0 { self.st.t + self.rng.exp1() / self.rate } else { f64::INFINITY };
-            if self.sys.output_times[self.st.next_output] <= t_next {
-                if self.outputs_before(t_next)? {
-                    break Ok(true);
-                }
-            }
-            self.st.t = t_next;
             trials += 1;
-            // Keep the pipeline full, then take its oldest candidate.
+            // Keep the pipeline at least half full, refilling in batches.
             while self.ring.len() < PIPELINE_DEPTH {
                 let c = self.draw_candidate();
                 self.ring.push(c);
             }
             let c = self.ring.pop();
+            self.gap_trial();
             let (a, b) = (c.a as usize, c.b as usize);
             let (i, k) = (c.i as usize, c.k as usize);
             let va = self.st.vel[a];
@@ -83,10 +78,14 @@ impl DsmcSim {
             if u * u >= g2 {
                 continue;
             }
-            // Accepted: a collision.
+            // Accepted: the collision happens at t_c; outputs before it see the old state.
+            let t = self.gap_time();
+            if self.sys.output_times[self.st.next_output] <= t && self.outputs_before(t)? {
+                break Ok(true);
+            }
+            self.st.t = t;
             let gn = g2.sqrt();
             let (e, gne) = impact_direction(g, gn, &mut self.rng);
-            let t = self.st.t;
             if msd {
                 for (p, v) in [(a, va), (b, vb)] {
                     let d = &mut self.st.disp[p];
@@ -122,6 +121,9 @@ impl DsmcSim {
             }
             if self.refresh_due() {
                 self.refresh_bounds();
+            }
+            if self.rate <= 0.0 {
+                break self.idle_to_end();
             }
         };
         self.st.trials += trials;

@@ -58,8 +58,9 @@ pub struct Candidate {
     pub b: u32,
 }
 
-/// How many trials ahead candidates are drawn, so their velocities can be prefetched.
-pub const PIPELINE_DEPTH: usize = 16;
+/// How many trials ahead candidates are drawn, so their velocities can be prefetched: the
+/// ring is refilled in batches of `PIPELINE_DEPTH / 2` whenever half of it is used.
+pub const PIPELINE_DEPTH: usize = 32;
 /// A raised speed bound gets this much head-room, so that it is not raised again at once.
 pub const RAISE_SLACK: f64 = 1.05;
 
@@ -67,8 +68,8 @@ pub const RAISE_SLACK: f64 = 1.05;
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct DsmcState {
     pub t: f64,
-    /// (vx, vy, vz, unused): 32 bytes, so a particle never straddles two cache lines.
-    pub vel: Vec<[f64; 4]>,
+    /// (vx, vy, vz): 24 bytes, so that the Table I gas (1.2M particles) fits in a 32 MB L3.
+    pub vel: Vec<[f64; 3]>,
     /// (Rx, Ry, Rz, t_last) per particle; empty unless MSD is recorded.
     pub disp: Vec<[f64; 4]>,
     /// Low-rank: per-species speed bounds.
@@ -83,6 +84,11 @@ pub struct DsmcState {
     pub next_output: usize,
     pub collisions_at_refresh: u64,
     pub pipeline: Vec<Candidate>,
+    /// Product of the uniforms U of the trials since the last collision (the time to the next
+    /// collision is -ln(prod U) / rate, the sum of the trials' exponential gaps).
+    pub gap_prod: f64,
+    /// Logs of underflow-guarded parts of that product.
+    pub gap_log: f64,
     pub rows: Vec<SpeciesRow>,
     pub last_energy: f64,
     pub done: bool,
@@ -101,6 +107,11 @@ pub struct DsmcSim {
     off: Vec<usize>,
     /// Total trial rate.
     rate: f64,
+    /// Refresh the bounds after this many collisions.
+    refresh_collisions: u64,
+    /// Slot j of the (r, i) table -> (term r, species i), so decoding needs no division.
+    slot_term: Vec<u8>,
+    slot_species: Vec<u32>,
     /// Candidates drawn ahead (saved in `st.pipeline` at checkpoints).
     ring: Ring,
 }
@@ -159,7 +170,7 @@ impl DsmcSim {
         let st = DsmcState {
             t: 0.0,
             vel,
-            disp: if sys.msd { vec![[0.0; 4]; n] } else { Vec::new() },
+            disp: if sys.msd { crate::memory::huge_vec(n, [0.0; 4]) } else { Vec::new() },
             vmax: vec![0.0; m],
             bird_bound: 0.0,
             rng: rng.position(),
@@ -170,6 +181,8 @@ impl DsmcSim {
             next_output: 0,
             collisions_at_refresh: 0,
             pipeline: Vec::new(),
+            gap_prod: 1.0,
+            gap_log: 0.0,
             rows: Vec::new(),
             last_energy: f64::INFINITY,
             done: false,
@@ -187,7 +200,23 @@ impl DsmcSim {
         }
         let pair_k = low_rank::static_tables(&sys);
         let ring = Ring::from_slice(&st.pipeline);
-        let mut sim = DsmcSim { sys, st, rng, pair_i: Alias::default(), pair_k, off, rate: 0.0, ring };
+        let m = sys.species.len();
+        let refresh_collisions = (sys.refresh_every * sys.n_particles() as f64).ceil().max(1.0) as u64;
+        let slot_term = (0..3 * m).map(|j| (j / m) as u8).collect();
+        let slot_species = (0..3 * m).map(|j| (j % m) as u32).collect();
+        let mut sim = DsmcSim {
+            sys,
+            st,
+            rng,
+            pair_i: Alias::default(),
+            pair_k,
+            off,
+            rate: 0.0,
+            refresh_collisions,
+            slot_term,
+            slot_species,
+            ring,
+        };
         sim.rebuild_rates();
         sim
     }
@@ -206,6 +235,9 @@ impl DsmcSim {
             return Err("checkpoint does not match the run's species".into());
         }
         let rng = RunRng::restore(&st.rng);
+        let mut st = st;
+        st.vel = crate::memory::huge_copy(&st.vel);
+        st.disp = crate::memory::huge_copy(&st.disp);
         Ok(Self::assemble(sys, st, rng))
     }
 
@@ -275,8 +307,34 @@ impl DsmcSim {
         }
     }
 
+    #[inline(always)]
     fn refresh_due(&self) -> bool {
-        (self.st.collisions - self.st.collisions_at_refresh) as f64 >= self.sys.refresh_every * self.sys.n_particles() as f64
+        self.st.collisions - self.st.collisions_at_refresh >= self.refresh_collisions
+    }
+
+    /// One more trial's uniform in the product that gives the time to the next collision.
+    #[inline(always)]
+    fn gap_trial(&mut self) {
+        self.st.gap_prod *= self.rng.f64_open0();
+        if self.st.gap_prod < 1e-250 {
+            self.st.gap_log += self.st.gap_prod.ln();
+            self.st.gap_prod = 1.0;
+        }
+    }
+
+    /// Time of the trial just accepted: the trials since the last collision had i.i.d.
+    /// exponential gaps of rate `rate`, and their sum is -ln(prod U) / rate. Resets the product.
+    #[inline(always)]
+    fn gap_time(&mut self) -> f64 {
+        let s = -(self.st.gap_log + self.st.gap_prod.ln());
+        self.st.gap_prod = 1.0;
+        self.st.gap_log = 0.0;
+        self.st.t + s / self.rate
+    }
+
+    /// With a zero trial rate (every particle at rest) nothing happens until t_end.
+    fn idle_to_end(&mut self) -> Result<bool, PhysicsError> {
+        self.outputs_before(f64::INFINITY)
     }
 
     /// Record the state at output time `t` (velocities are constant between collisions;
@@ -372,7 +430,7 @@ fn prefetch<T>(p: *const T) {
     #[cfg(target_arch = "x86_64")]
     #[allow(unused_unsafe)]
     unsafe {
-        core::arch::x86_64::_mm_prefetch(p as *const i8, core::arch::x86_64::_MM_HINT_T0);
+        core::arch::x86_64::_mm_prefetch(p as *const i8, core::arch::x86_64::_MM_HINT_T1);
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;

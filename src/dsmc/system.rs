@@ -107,9 +107,9 @@ impl DsmcSystem {
 /// its initial temperature. Single-particle species cannot have zero momentum: their momentum
 /// is taken up by the most massive species with two or more particles (which is then rescaled
 /// about its mean to keep its temperature), so the total momentum is zero.
-pub fn initial_velocities(sys: &DsmcSystem, rng: &mut RunRng) -> Vec<[f64; 4]> {
+pub fn initial_velocities(sys: &DsmcSystem, rng: &mut RunRng) -> Vec<[f64; 3]> {
     let n = sys.n_particles();
-    let mut vel = vec![[0.0; 4]; n];
+    let mut vel = crate::memory::huge_vec(n, [0.0; 3]);
     let mut start = 0;
     let mut singles_p = [0.0; 3];
     let mut ranges = Vec::with_capacity(sys.species.len());
@@ -172,7 +172,7 @@ pub fn initial_velocities(sys: &DsmcSystem, rng: &mut RunRng) -> Vec<[f64; 4]> {
 }
 
 /// Scale the velocities about `mean` so that m <v^2> / 3 = t (when possible).
-fn rescale(vs: &mut [[f64; 4]], mean: [f64; 3], t: f64, mass: f64) {
+fn rescale(vs: &mut [[f64; 3]], mean: [f64; 3], t: f64, mass: f64) {
     let mut dev2 = 0.0;
     for v in vs.iter() {
         for d in 0..3 {
