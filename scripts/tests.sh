@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# The tests: `cargo test --release`, then a tiny campaign run with the release binary whose
+# tables are read back with DuckDB, pyarrow and Polars (scripts/check_tables.py).
+# Needs scripts/setup.sh to have been run once (for .venv).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pyarrow, duckdb, polars' 2>/dev/null; then
+    echo "tests: .venv with pyarrow, duckdb, polars not found; run scripts/setup.sh first" >&2
+    exit 2
+fi
+
+echo "== cargo test --release"
+cargo test --release
+
+echo "== tiny campaign"
+cargo build --release
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+cat > "$tmp/tiny.json" <<'JSON'
+{
+  "name": "ci-tiny",
+  "description": "CI: 2 methods x 2 replicas, N1 = 2000, t_end = 10",
+  "model": "dsmc",
+  "seed": 20240601,
+  "replicas": 2,
+  "params": {
+    "method": "low_rank",
+    "species": {"power_law": {"n1": 0.1, "N1": 2000, "theta": 3}},
+    "restitution": {"constant": 0.5},
+    "initial_temperature": 1.0,
+    "t_end": 10.0,
+    "output_times": {"log": {"from": 0.01, "to": 10.0, "per_decade": 10}},
+    "observables": ["temperature", "msd"]
+  },
+  "sweep": {"method": ["low_rank", "bird"]}
+}
+JSON
+bin=target/release/granular
+"$bin" validate "$tmp/tiny.json"
+"$bin" run "$tmp/tiny.json" --out "$tmp/runs" --quiet
+"$bin" status "$tmp/runs"
+
+echo "== table check"
+.venv/bin/python scripts/check_tables.py "$tmp/runs"
+echo "tests: all passed"
