@@ -122,18 +122,23 @@ pub fn main() -> i32 {
         Command::Status { dir, json } => match Campaign::open(&dir) {
             Ok(c) => match campaign::status::status(&c) {
                 Ok(s) => {
+                    // Write errors (a closed pipe, `| head`) are not worth a panic.
+                    use std::io::Write;
+                    let mut out = std::io::stdout().lock();
                     if json {
-                        println!("{}", serde_json::to_string_pretty(&s).expect("status"));
+                        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&s).expect("status"));
                     } else {
-                        println!(
+                        let _ = writeln!(
+                            out,
                             "{}: {} runs: {} done, {} failed, {} running, {} pending ({} with checkpoints)",
                             s.name, s.runs, s.counts.done, s.counts.failed, s.counts.running, s.counts.pending, s.counts.checkpointed
                         );
                         for l in &s.live_shards {
-                            println!("  live shard {l}");
+                            let _ = writeln!(out, "  live shard {l}");
                         }
                         for p in &s.points {
-                            println!(
+                            let _ = writeln!(
+                                out,
                                 "  point {:>4} {:<40} done {:>3}  failed {:>3}  running {:>3}  pending {:>3}",
                                 p.point_id, p.point, p.counts.done, p.counts.failed, p.counts.running, p.counts.pending
                             );
@@ -153,7 +158,8 @@ pub fn main() -> i32 {
 
 fn init_tracing(format: LogFormat) {
     let filter = tracing_subscriber::EnvFilter::try_from_env("GRANULAR_LOG").unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false);
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).with_ansi(ansi);
     let _ = match format {
         LogFormat::Text => builder.try_init(),
         LogFormat::Json => builder.json().try_init(),
@@ -213,8 +219,8 @@ fn summarise(c: &Campaign, o: &Outcome) -> i32 {
         eprintln!("stopped with {} runs of this shard left; continue with: granular resume {}", o.remaining, c.root.display());
         return exit_codes::INTERRUPTED;
     }
-    if o.failed > 0 {
-        eprintln!("{} run(s) failed; see the runs table (status = 'failed') for their reasons", o.failed);
+    if o.failed_in_shard > 0 {
+        eprintln!("{} run(s) failed; see the runs table (status = 'failed') for their reasons", o.failed_in_shard);
         return exit_codes::RUNS_FAILED;
     }
     exit_codes::OK

@@ -49,6 +49,13 @@ impl Engine {
         }
     }
 
+    /// Layout version of `state_bytes`; bump when the state struct changes.
+    pub fn state_format(&self) -> &'static str {
+        match self {
+            Engine::Dsmc(_) => crate::dsmc::STATE_FORMAT,
+        }
+    }
+
     pub fn state_bytes(&mut self) -> Vec<u8> {
         match self {
             Engine::Dsmc(s) => s.state_bytes(),

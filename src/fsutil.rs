@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 /// `.tmp`, so dataset readers (DuckDB globs, pyarrow's ignore_prefixes) never pick it up.
 pub fn temp_path(path: &Path) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+    // pid + clock: unique among processes sharing a file system (other hosts included).
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.subsec_nanos()).unwrap_or(0);
+    path.with_file_name(format!(".{name}.{}-{nanos}.tmp", std::process::id()))
 }
 
 /// fsync a directory so that a rename inside it is durable.

@@ -310,3 +310,54 @@ pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
     }
     Ok(Plan { model: m.model, campaign_seed: m.seed, replicas: m.replicas, sweep_keys: keys, points })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::manifest::parse_manifest;
+
+    fn manifest(sweep: &str) -> String {
+        format!(
+            r#"{{"name": "t", "model": "dsmc", "seed": 5, "replicas": 2,
+            "params": {{"method": "low_rank", "species": {{"list": [{{"mass": 1, "diameter": 1, "count": 10}}]}},
+                       "volume": 100, "restitution": {{"constant": 0.5}}, "t_end": 1}},
+            "sweep": {sweep}}}"#
+        )
+    }
+
+    /// A run's seed depends on its identity (swept values, replica), not on its position: adding
+    /// a value to a sweep list leaves the seeds of existing points unchanged.
+    #[test]
+    fn seeds_follow_identity_not_position() {
+        let (_, a) = parse_manifest(&manifest(r#"{"restitution.constant": [0.5, 0.9]}"#), "a").unwrap();
+        let (_, b) = parse_manifest(&manifest(r#"{"restitution.constant": [0.1, 0.5, 0.9]}"#), "b").unwrap();
+        assert_eq!(a.n_runs(), 4);
+        assert_eq!(b.n_runs(), 6);
+        // eps = 0.5 is point 0 in a, point 1 in b.
+        assert_eq!(a.run(0).seed, b.run(2).seed);
+        assert_eq!(a.run(1).seed, b.run(3).seed);
+        assert_ne!(a.run(0).seed, a.run(1).seed);
+        assert_ne!(a.run(0).seed, a.run(2).seed);
+    }
+
+    #[test]
+    fn product_order_first_key_outermost() {
+        let (_, p) = parse_manifest(&manifest(r#"{"method": ["low_rank", "bird"], "restitution.constant": [0.5, 0.9, 1.0]}"#), "m").unwrap();
+        assert_eq!(p.points.len(), 6);
+        assert_eq!(p.points[1].values, vec![serde_json::json!("low_rank"), serde_json::json!(0.9)]);
+        assert_eq!(p.points[3].values, vec![serde_json::json!("bird"), serde_json::json!(0.5)]);
+        let ModelParams::Dsmc(d) = &p.points[3].params;
+        assert_eq!(d.method, crate::manifest::dsmc::DsmcMethod::Bird);
+    }
+
+    #[test]
+    fn shards_partition_the_runs() {
+        let parts: Vec<Shard> = (1..=3).map(|i| Shard { index: i, count: 3 }).collect();
+        for r in 0..100u64 {
+            assert_eq!(parts.iter().filter(|s| s.contains(r)).count(), 1);
+        }
+        assert!(Shard::parse("0/2").is_err());
+        assert!(Shard::parse("3/2").is_err());
+        assert_eq!(Shard::parse("2/4").unwrap(), Shard { index: 2, count: 4 });
+    }
+}

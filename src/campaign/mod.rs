@@ -201,6 +201,8 @@ impl Reporter for Silent {
 pub struct Outcome {
     pub done: u64,
     pub failed: u64,
+    /// Failed runs of this shard, in this session or earlier ones.
+    pub failed_in_shard: u64,
     pub remaining: u64,
     pub interrupted: bool,
     /// Every run of the campaign (all shards) is finished and the summaries are written.
@@ -313,6 +315,10 @@ pub fn run(c: &Campaign, opts: &RunOptions, reporter: &mut dyn Reporter) -> Resu
     let commits = ledger::read_commits(&c.root).map_err(CampaignError::Refused)?;
     let finished = ledger::finished_runs(&commits);
     outcome.remaining = mine.iter().filter(|r| !finished.contains_key(&r.run_id)).count() as u64;
+    outcome.failed_in_shard = mine.iter().filter(|r| finished.get(&r.run_id) == Some(&RunStatus::Failed)).count() as u64;
+    if outcome.remaining == 0 {
+        outcome.interrupted = false;
+    }
     if finished.len() as u64 == c.plan.n_runs() {
         crate::store::summary::write_summaries(c, &finished).map_err(|e| CampaignError::Io(e.to_string()))?;
         outcome.complete = true;

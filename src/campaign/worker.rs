@@ -44,7 +44,15 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
             for s in loaded.skipped {
                 let _ = tx.send((Event::Warning { message: format!("run {}: skipped a bad checkpoint: {s}", spec.run_id) }, None));
             }
-            match Engine::restore(params, &loaded.payload) {
+            let format_ok = match params {
+                crate::plan::ModelParams::Dsmc(_) => loaded.header.state_format == crate::dsmc::STATE_FORMAT,
+            };
+            let restored = if format_ok {
+                Engine::restore(params, &loaded.payload)
+            } else {
+                Err(format!("state format {:?}, this granular writes {:?}", loaded.header.state_format, crate::dsmc::STATE_FORMAT))
+            };
+            match restored {
                 Ok(e) => {
                     wall_before = loaded.header.wall_seconds;
                     resumed_from = Some(loaded.header.t);
@@ -80,6 +88,7 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
             run_id: spec.run_id,
             seed: spec.seed,
             code_version: CODE_VERSION.into(),
+            state_format: engine.state_format().into(),
             wall_seconds: wall(&started),
             t: engine.time(),
         };

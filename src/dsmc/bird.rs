@@ -30,8 +30,7 @@ impl DsmcSim {
             trials += 1;
             self.gap_trial();
             while self.ring.len() < PIPELINE_DEPTH {
-                let a = self.rng.below(n);
-                let b = self.rng.below(n);
+                let (a, b) = self.rng.below_pair(n, n);
                 prefetch(self.st.vel.as_ptr().wrapping_add(a));
                 prefetch(self.st.vel.as_ptr().wrapping_add(b));
                 self.ring.push(Candidate { i: 0, k: 0, a: a as u32, b: b as u32 });

@@ -42,8 +42,8 @@ impl DsmcSim {
         // SAFETY: the slot tables have one entry per (r, i) slot; r < 3.
         let (r, i) = unsafe { (*self.slot_term.get_unchecked(ri) as usize, *self.slot_species.get_unchecked(ri) as usize) };
         let k = unsafe { self.pair_k.get_unchecked(r) }.sample(self.rng.u64());
-        let a = self.off[i] + self.rng.below(self.off[i + 1] - self.off[i]);
-        let b = self.off[k] + self.rng.below(self.off[k + 1] - self.off[k]);
+        let (da, db) = self.rng.below_pair(self.off[i + 1] - self.off[i], self.off[k + 1] - self.off[k]);
+        let (a, b) = (self.off[i] + da, self.off[k] + db);
         prefetch(self.st.vel.as_ptr().wrapping_add(a));
         prefetch(self.st.vel.as_ptr().wrapping_add(b));
         Candidate { i: i as u32, k: k as u32, a: a as u32, b: b as u32 }

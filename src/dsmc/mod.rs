@@ -61,6 +61,9 @@ pub struct Candidate {
 /// How many trials ahead candidates are drawn, so their velocities can be prefetched: the
 /// ring is refilled in batches of `PIPELINE_DEPTH / 2` whenever half of it is used.
 pub const PIPELINE_DEPTH: usize = 32;
+/// Layout version of [`DsmcState`] in checkpoints.
+pub const STATE_FORMAT: &str = "dsmc/1";
+
 /// A raised speed bound gets this much head-room, so that it is not raised again at once.
 pub const RAISE_SLACK: f64 = 1.05;
 

@@ -105,8 +105,8 @@ impl DsmcSystem {
 
 /// Maxwell velocities; each species with two or more particles has zero momentum and exactly
 /// its initial temperature. Single-particle species cannot have zero momentum: their momentum
-/// is taken up by the most massive species with two or more particles (which is then rescaled
-/// about its mean to keep its temperature), so the total momentum is zero.
+/// is taken up by the species with two or more particles of largest total mass m_k N_k (which
+/// is then rescaled about its mean to keep its temperature), so the total momentum is zero.
 pub fn initial_velocities(sys: &DsmcSystem, rng: &mut RunRng) -> Vec<[f64; 3]> {
     let n = sys.n_particles();
     let mut vel = crate::memory::huge_vec(n, [0.0; 3]);

@@ -126,7 +126,7 @@ pub struct OutputTimes {
     pub list: Option<Vec<f64>>,
 }
 
-/// `per_decade` log-spaced times from `from` to `to` (inclusive).
+/// `per_decade` log-spaced times from `from` up to `to` (`to` itself when it is on the grid).
 #[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct LogTimes {

@@ -19,6 +19,9 @@ pub struct CheckpointHeader {
     pub run_id: u64,
     pub seed: u64,
     pub code_version: String,
+    /// The simulator's state layout (e.g. `dsmc/1`); a checkpoint of another layout is not
+    /// resumed.
+    pub state_format: String,
     /// Wall-clock seconds spent on the run so far.
     pub wall_seconds: f64,
     /// Simulated time reached.
@@ -151,7 +154,7 @@ mod tests {
     use super::*;
 
     fn header() -> CheckpointHeader {
-        CheckpointHeader { run_id: 3, seed: 9, code_version: "x".into(), wall_seconds: 1.5, t: 2.0 }
+        CheckpointHeader { run_id: 3, seed: 9, code_version: "x".into(), state_format: "dsmc/1".into(), wall_seconds: 1.5, t: 2.0 }
     }
 
     #[test]
