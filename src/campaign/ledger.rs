@@ -130,6 +130,7 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
             }
         }
     }
+    notes.extend(remove_stale_temporaries(root));
     let tables = root.join("tables");
     if let Ok(entries) = fs::read_dir(&tables) {
         for t in entries.filter_map(|e| e.ok()) {
@@ -152,6 +153,40 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
         }
     }
     Ok(notes)
+}
+
+/// Delete temporary files (`.NAME.<pid>-<nanos>@<host>.tmp`, see `fsutil::temp_path`) left by
+/// processes of this host that died while writing (a kill during a checkpoint, say). Files of
+/// other hosts are left alone: their processes cannot be checked from here.
+fn remove_stale_temporaries(root: &Path) -> Vec<String> {
+    let mut notes = Vec::new();
+    let mut dirs = vec![root.to_path_buf(), root.join("checkpoints"), root.join("locks")];
+    for sub in ["tables", "ledger"] {
+        if let Ok(it) = fs::read_dir(root.join(sub)) {
+            dirs.extend(it.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.is_dir()));
+        }
+    }
+    for dir in dirs {
+        let Ok(it) = fs::read_dir(&dir) else { continue };
+        for f in it.filter_map(|e| e.ok()) {
+            let name = f.file_name().to_string_lossy().into_owned();
+            let Some(stem) = name.strip_suffix(".tmp") else { continue };
+            if !name.starts_with('.') {
+                continue;
+            }
+            let Some((stem, host)) = stem.rsplit_once('@') else { continue };
+            if host != fsutil::host_tag() {
+                continue;
+            }
+            let pid = stem.rsplit_once('.').and_then(|(_, tail)| tail.split('-').next()).and_then(|p| p.parse::<u32>().ok());
+            if let Some(pid) = pid {
+                if !pid_alive(pid) && fs::remove_file(f.path()).is_ok() {
+                    notes.push(format!("removed the stale temporary file {}", f.path().display()));
+                }
+            }
+        }
+    }
+    notes
 }
 
 /// Who holds a shard.

@@ -107,7 +107,6 @@ impl Campaign {
         }
         fsutil::create_dir_durable(out).map_err(|e| io_err(out, e))?;
         let text = std::fs::read(manifest_path).map_err(|e| io_err(manifest_path, e))?;
-        fsutil::write_atomic(&out.join("manifest.json"), &text).map_err(|e| io_err(out, e))?;
         let info = CampaignInfo {
             format_version: FORMAT_VERSION,
             code_version: CODE_VERSION.into(),
@@ -116,7 +115,10 @@ impl Campaign {
             manifest: value.clone(),
         };
         let bytes = serde_json::to_vec_pretty(&info).expect("info serialises");
+        // campaign.json first: it alone makes the directory a campaign (manifest.json is a copy
+        // for people), so a kill between the two writes leaves a resumable directory.
         fsutil::write_atomic(&info_path, &bytes).map_err(|e| io_err(&info_path, e))?;
+        fsutil::write_atomic(&out.join("manifest.json"), &text).map_err(|e| io_err(out, e))?;
         Ok(Campaign { root: out.to_path_buf(), manifest, plan, manifest_json: canonical(&value) })
     }
 

@@ -127,17 +127,17 @@ fn dedup(errors: &mut Vec<ManifestError>) {
 fn explain(e: &ValidationError<'_>, prefix: &str, out: &mut Vec<ManifestError>) {
     let path = format!("{prefix}{}", e.instance_path().as_str());
     match e.kind() {
-        ValidationErrorKind::OneOfNotValid { context } => {
+        ValidationErrorKind::OneOfNotValid { context } | ValidationErrorKind::AnyOf { context } => {
             let here = e.instance_path().as_str();
-            // A variant "matches the tag" when it has no complaint about the object's shape
-            // (required key / unexpected key / type / const) at this very location.
+            // A variant "matches the tag" when it has no complaint about the value's kind
+            // (a missing tag key / wrong type / const / enum) at this very location; its other
+            // errors (unknown keys, ranges, nested problems) are the ones to report.
             let shape_error = |errs: &Vec<ValidationError<'static>>| {
                 errs.iter().any(|x| {
                     x.instance_path().as_str() == here
                         && matches!(
                             x.kind(),
                             ValidationErrorKind::Required { .. }
-                                | ValidationErrorKind::AdditionalProperties { .. }
                                 | ValidationErrorKind::Type { .. }
                                 | ValidationErrorKind::Constant { .. }
                                 | ValidationErrorKind::Enum { .. }

@@ -1,0 +1,136 @@
+//! Data-driven manifest validation.
+//!
+//! `tests/manifests/good/*.json` must validate. Each `tests/manifests/bad/X.json` has a
+//! sibling `X.expected` with one `PATH: substring` line per error that must be reported
+//! (blank lines and `#` comments are ignored; `/` stands for the empty JSON pointer, i.e. the
+//! whole document). The path must match exactly and the message must contain the substring;
+//! all of them must come from one validation (every error is reported at once).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use granular::manifest::load_manifest;
+
+use super::util::{self, repo_root};
+
+fn json_files(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .collect();
+    v.sort();
+    v
+}
+
+/// (path, substring) pairs of an `.expected` file.
+fn expected_errors(path: &Path) -> Vec<(String, String)> {
+    let text = fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e} (every bad manifest needs one)", path.display()));
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let (p, msg) = line
+            .split_once(": ")
+            .unwrap_or_else(|| panic!("{}:{}: expected `PATH: substring`, got {line:?}", path.display(), n + 1));
+        let p = if p == "/" { String::new() } else { p.to_string() };
+        out.push((p, msg.to_string()));
+    }
+    assert!(!out.is_empty(), "{}: lists no expected error", path.display());
+    out
+}
+
+#[test]
+fn good_manifests_validate() {
+    let files = json_files(&repo_root().join("tests/manifests/good"));
+    assert!(files.len() >= 3, "expected the good manifests in tests/manifests/good");
+    let mut failures = Vec::new();
+    for f in &files {
+        match load_manifest(f) {
+            Ok((m, plan)) => {
+                assert!(plan.n_runs() >= 1, "{}: no runs", f.display());
+                assert_eq!(plan.n_runs(), plan.points.len() as u64 * m.replicas as u64);
+            }
+            Err(e) => failures.push(e.to_string()),
+        }
+    }
+    assert!(failures.is_empty(), "good manifests rejected:\n{}", failures.join("\n"));
+}
+
+#[test]
+fn bad_manifests_report_every_expected_error() {
+    let files = json_files(&repo_root().join("tests/manifests/bad"));
+    assert!(files.len() >= 10, "expected the bad manifests in tests/manifests/bad");
+    let mut failures = Vec::new();
+    for f in &files {
+        let expected = expected_errors(&f.with_extension("expected"));
+        let errors = match load_manifest(f) {
+            Ok(_) => {
+                failures.push(format!("{}: accepted, expected {} error(s)", f.display(), expected.len()));
+                continue;
+            }
+            Err(e) => e,
+        };
+        let missing: Vec<String> = expected
+            .iter()
+            .filter(|(p, sub)| !errors.errors.iter().any(|e| &e.path == p && e.message.contains(sub.as_str())))
+            .map(|(p, sub)| format!("    {}: ...{sub}...", if p.is_empty() { "/" } else { p }))
+            .collect();
+        if !missing.is_empty() {
+            failures.push(format!("{}: missing expected error(s):\n{}\n  reported:\n{}", f.display(), missing.join("\n"), errors));
+        }
+    }
+    assert!(failures.is_empty(), "{} bad manifest(s) not reported as expected:\n{}", failures.len(), failures.join("\n"));
+}
+
+/// The library reports every error with a path; the CLI `validate` exits 2 and prints them.
+#[test]
+fn validate_cli_exits_2_and_prints_paths() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let bad = repo_root().join("tests/manifests/bad/several_errors.json");
+    let (code, _) = util::run_capture(&["validate", bad.to_str().unwrap()], &log);
+    assert_eq!(code, Some(2), "log:\n{}", util::log_text(&log));
+    let text = util::log_text(&log);
+    for p in ["/replicas", "/extra", "/params/restitution/constant", "/sweep/restitution.value"] {
+        assert!(text.contains(&format!("at {p}: ")), "validate output lacks {p}:\n{text}");
+    }
+    let good = repo_root().join("tests/manifests/good/power_law_sweep.json");
+    let (code, out) = util::run_capture(&["validate", good.to_str().unwrap()], &log);
+    assert_eq!(code, Some(0), "log:\n{}", util::log_text(&log));
+    assert!(out.contains("4 points x 2 replicas = 8 runs"), "{out}");
+}
+
+/// `granular run` with a bad manifest exits 2 and writes nothing: neither a missing --out nor
+/// an existing empty one gets any file.
+#[test]
+fn run_with_bad_manifest_exits_2_and_creates_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let bad_dir = repo_root().join("tests/manifests/bad");
+    for name in ["several_errors.json", "duplicate_sweep_values.json", "not_json.json", "output_times_beyond_swept_t_end.json"] {
+        let manifest = bad_dir.join(name);
+        let missing = dir.path().join(format!("out-missing-{name}"));
+        let code = util::run_granular(
+            &["run", manifest.to_str().unwrap(), "--out", missing.to_str().unwrap(), "--threads", "1", "--quiet"],
+            &log,
+            Duration::from_secs(60),
+        );
+        assert_eq!(code, Some(2), "{name}: log:\n{}", util::log_text(&log));
+        assert!(!missing.exists(), "{name}: run created {}", missing.display());
+
+        let empty = dir.path().join(format!("out-empty-{name}"));
+        fs::create_dir(&empty).unwrap();
+        let code = util::run_granular(
+            &["run", manifest.to_str().unwrap(), "--out", empty.to_str().unwrap(), "--threads", "1", "--quiet"],
+            &log,
+            Duration::from_secs(60),
+        );
+        assert_eq!(code, Some(2), "{name}: log:\n{}", util::log_text(&log));
+        let left: Vec<_> = fs::read_dir(&empty).unwrap().map(|e| e.unwrap().path()).collect();
+        assert!(left.is_empty(), "{name}: run wrote into the empty --out: {left:?}");
+    }
+}

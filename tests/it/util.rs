@@ -1,0 +1,357 @@
+//! Shared helpers: the binary, the heavy-test lock, child processes with timeouts, and
+//! reading whole Parquet tables into comparable rows.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant, SystemTime};
+
+use arrow_array::cast::AsArray;
+use arrow_array::types::{Float64Type, Int32Type, Int64Type, UInt32Type, UInt64Type};
+use arrow_array::{Array, ArrayRef, RecordBatchReader};
+use arrow_schema::DataType;
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use serde_json::Value;
+
+/// The `granular` binary built for this test run.
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_granular")
+}
+
+/// The repository root (schemas/, jobs/, tests/manifests/).
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+static HEAVY: Mutex<()> = Mutex::new(());
+
+/// Serialises the CPU-heavy tests (the test harness runs tests on parallel threads).
+/// Never call a function that takes this lock while holding it.
+pub fn heavy() -> MutexGuard<'static, ()> {
+    HEAVY.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A `granular` command with its output appended to `log` (kept for failure messages).
+pub fn granular(args: &[&str], log: &Path) -> Command {
+    let mut c = Command::new(bin());
+    c.args(args).stdin(Stdio::null());
+    let f = fs::OpenOptions::new().create(true).append(true).open(log).expect("open log");
+    c.stdout(f.try_clone().expect("dup log")).stderr(f);
+    c
+}
+
+pub fn log_text(log: &Path) -> String {
+    fs::read_to_string(log).unwrap_or_default()
+}
+
+/// Wait for a child, killing it (and failing) after `limit`.
+pub fn wait_limited(child: &mut Child, limit: Duration, what: &str, log: &Path) -> ExitStatus {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = child.try_wait().expect("try_wait") {
+            return s;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{what}: still running after {limit:?}; killed it. Log:\n{}", log_text(log));
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Run `granular args` to the end (at most `limit`), returning its exit code (None if killed
+/// by a signal).
+pub fn run_granular(args: &[&str], log: &Path, limit: Duration) -> Option<i32> {
+    let mut child = granular(args, log).spawn().expect("spawn granular");
+    wait_limited(&mut child, limit, &format!("granular {}", args.join(" ")), log).code()
+}
+
+/// Run `granular args` capturing stdout (stderr goes to `log`); returns (code, stdout).
+pub fn run_capture(args: &[&str], log: &Path) -> (Option<i32>, String) {
+    let f = fs::OpenOptions::new().create(true).append(true).open(log).expect("open log");
+    let out = Command::new(bin()).args(args).stdin(Stdio::null()).stderr(f).output().expect("run granular");
+    (out.status.code(), String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// A fixed-seed 64-bit LCG (Knuth's MMIX constants): reproducible "random" moments.
+pub struct Lcg(pub u64);
+
+impl Lcg {
+    /// Uniform in [0, 1) from the top 53 bits.
+    pub fn next_f64(&mut self) -> f64 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Every file under `dir` with its bytes and modification time.
+pub fn snapshot(dir: &Path) -> BTreeMap<PathBuf, (Vec<u8>, SystemTime)> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in fs::read_dir(&d).expect("read_dir") {
+            let p = e.expect("entry").path();
+            let md = fs::symlink_metadata(&p).expect("metadata");
+            if md.is_dir() {
+                out.insert(p.clone(), (Vec::new(), md.modified().expect("mtime")));
+                stack.push(p);
+            } else {
+                out.insert(p.clone(), (fs::read(&p).expect("read"), md.modified().expect("mtime")));
+            }
+        }
+    }
+    out
+}
+
+/// One value of a table, comparable bit for bit (floats by their bits).
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Cell {
+    Null,
+    Bool(bool),
+    U(u64),
+    I(i64),
+    F(u64),
+    S(String),
+}
+
+impl fmt::Display for Cell {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Cell::Null => write!(f, "null"),
+            Cell::Bool(b) => write!(f, "{b}"),
+            Cell::U(v) => write!(f, "{v}"),
+            Cell::I(v) => write!(f, "{v}"),
+            Cell::F(bits) => write!(f, "{:e} (bits {bits:#018x})", f64::from_bits(*bits)),
+            Cell::S(s) => write!(f, "{s:?}"),
+        }
+    }
+}
+
+impl Cell {
+    pub fn as_u64(&self) -> u64 {
+        match self {
+            Cell::U(v) => *v,
+            other => panic!("expected an unsigned integer, got {other}"),
+        }
+    }
+    pub fn as_str(&self) -> &str {
+        match self {
+            Cell::S(s) => s,
+            other => panic!("expected a string, got {other}"),
+        }
+    }
+}
+
+fn cells(col: &ArrayRef) -> Vec<Cell> {
+    let n = col.len();
+    let cell = |i: usize, f: &dyn Fn(usize) -> Cell| if col.is_null(i) { Cell::Null } else { f(i) };
+    match col.data_type() {
+        DataType::UInt32 => {
+            let a = col.as_primitive::<UInt32Type>();
+            (0..n).map(|i| cell(i, &|i| Cell::U(a.value(i) as u64))).collect()
+        }
+        DataType::UInt64 => {
+            let a = col.as_primitive::<UInt64Type>();
+            (0..n).map(|i| cell(i, &|i| Cell::U(a.value(i)))).collect()
+        }
+        DataType::Int32 => {
+            let a = col.as_primitive::<Int32Type>();
+            (0..n).map(|i| cell(i, &|i| Cell::I(a.value(i) as i64))).collect()
+        }
+        DataType::Int64 => {
+            let a = col.as_primitive::<Int64Type>();
+            (0..n).map(|i| cell(i, &|i| Cell::I(a.value(i)))).collect()
+        }
+        DataType::Float64 => {
+            let a = col.as_primitive::<Float64Type>();
+            (0..n).map(|i| cell(i, &|i| Cell::F(a.value(i).to_bits()))).collect()
+        }
+        DataType::Utf8 => {
+            let a = col.as_string::<i32>();
+            (0..n).map(|i| cell(i, &|i| Cell::S(a.value(i).to_string()))).collect()
+        }
+        DataType::Boolean => {
+            let a = col.as_boolean();
+            (0..n).map(|i| cell(i, &|i| Cell::Bool(a.value(i)))).collect()
+        }
+        other => panic!("column type {other} not handled by the test helper"),
+    }
+}
+
+/// A whole table: every visible part file concatenated.
+#[derive(Clone, Debug)]
+pub struct Table {
+    pub name: String,
+    pub columns: Vec<(String, DataType)>,
+    pub rows: Vec<Vec<Cell>>,
+    pub files: Vec<String>,
+}
+
+impl Table {
+    pub fn col(&self, name: &str) -> usize {
+        self.columns.iter().position(|(c, _)| c == name).unwrap_or_else(|| panic!("table {} has no column {name}", self.name))
+    }
+
+    /// The values of one column, in row order.
+    pub fn column(&self, name: &str) -> Vec<&Cell> {
+        let j = self.col(name);
+        self.rows.iter().map(|r| &r[j]).collect()
+    }
+
+    /// Rows sorted by `keys`; an error names every duplicated key.
+    pub fn sorted_by(&self, keys: &[&str]) -> Result<Vec<Vec<Cell>>, String> {
+        let idx: Vec<usize> = keys.iter().map(|k| self.col(k)).collect();
+        let key = |r: &Vec<Cell>| idx.iter().map(|&j| r[j].clone()).collect::<Vec<_>>();
+        let mut rows = self.rows.clone();
+        rows.sort_by_key(|r| key(r));
+        let mut dups = Vec::new();
+        for w in rows.windows(2) {
+            if key(&w[0]) == key(&w[1]) {
+                dups.push(key(&w[0]).iter().map(|c| c.to_string()).collect::<Vec<_>>().join(", "));
+            }
+        }
+        if dups.is_empty() {
+            Ok(rows)
+        } else {
+            dups.truncate(10);
+            Err(format!("table {}: duplicated keys ({}) = [{}]", self.name, keys.join(", "), dups.join("], [")))
+        }
+    }
+}
+
+/// Read `<dir>/tables/<table>/*.parquet` (hidden files excluded) with the arrow reader.
+pub fn read_table(dir: &Path, table: &str) -> Table {
+    let tdir = dir.join("tables").join(table);
+    let mut files: Vec<PathBuf> = fs::read_dir(&tdir)
+        .unwrap_or_else(|e| panic!("{}: {e}", tdir.display()))
+        .map(|e| e.expect("entry").path())
+        .filter(|p| {
+            let n = p.file_name().unwrap().to_string_lossy().into_owned();
+            !n.starts_with('.') && n.ends_with(".parquet")
+        })
+        .collect();
+    files.sort();
+    assert!(!files.is_empty(), "{}: no table files", tdir.display());
+    let mut t = Table { name: table.to_string(), columns: Vec::new(), rows: Vec::new(), files: Vec::new() };
+    for (fi, f) in files.iter().enumerate() {
+        let file = fs::File::open(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        let reader = ParquetRecordBatchReaderBuilder::try_new(file)
+            .unwrap_or_else(|e| panic!("{}: not readable Parquet: {e}", f.display()))
+            .build()
+            .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        let schema = reader.schema();
+        let cols: Vec<(String, DataType)> = schema.fields().iter().map(|f| (f.name().clone(), f.data_type().clone())).collect();
+        if fi == 0 {
+            t.columns = cols;
+        } else {
+            assert_eq!(t.columns, cols, "{}: columns differ from the table's first part file", f.display());
+        }
+        for batch in reader {
+            let batch = batch.unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            let columns: Vec<Vec<Cell>> = batch.columns().iter().map(cells).collect();
+            for i in 0..batch.num_rows() {
+                t.rows.push(columns.iter().map(|c| c[i].clone()).collect());
+            }
+        }
+        t.files.push(f.file_name().unwrap().to_string_lossy().into_owned());
+    }
+    t
+}
+
+/// The tables of a campaign and the key columns that identify a row.
+pub const TABLES: [(&str, &[&str]); 4] = [
+    ("runs", &["run_id"]),
+    ("dsmc_species", &["run_id", "t", "species"]),
+    ("dsmc_species_summary", &["point_id", "t", "species"]),
+    ("points", &["point_id"]),
+];
+
+pub type Tables = BTreeMap<String, Table>;
+
+/// Every table of a finished campaign directory; fails if a table directory is unknown to
+/// this test (so a new table cannot silently escape the comparisons).
+pub fn read_tables(dir: &Path) -> Tables {
+    let present: BTreeSet<String> = fs::read_dir(dir.join("tables"))
+        .expect("tables dir")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    let known: BTreeSet<String> = TABLES.iter().map(|(t, _)| t.to_string()).collect();
+    assert_eq!(present, known, "{}: unexpected set of tables", dir.display());
+    TABLES.iter().map(|(t, _)| (t.to_string(), read_table(dir, t))).collect()
+}
+
+/// Columns excluded from bit-equality: `runs.wall_seconds` measures elapsed time (it differs
+/// between any two executions, and includes the time of killed attempts), not results.
+pub const NONDETERMINISTIC: [(&str, &str); 1] = [("runs", "wall_seconds")];
+
+/// Compare two campaigns' tables bit for bit (rows sorted by key, no duplicated keys),
+/// except the columns in `ignore` as (table, column). Returns every difference found.
+pub fn table_differences(a: &Tables, b: &Tables, ignore: &[(&str, &str)]) -> Vec<String> {
+    let mut diffs = Vec::new();
+    for (name, keys) in TABLES {
+        let (ta, tb) = (&a[name], &b[name]);
+        if ta.columns != tb.columns {
+            diffs.push(format!("{name}: columns differ:\n  {:?}\n  {:?}", ta.columns, tb.columns));
+            continue;
+        }
+        let (ra, rb) = match (ta.sorted_by(keys), tb.sorted_by(keys)) {
+            (Ok(ra), Ok(rb)) => (ra, rb),
+            (ea, eb) => {
+                diffs.extend(ea.err().map(|e| format!("first: {e}")));
+                diffs.extend(eb.err().map(|e| format!("second: {e}")));
+                continue;
+            }
+        };
+        if ra.len() != rb.len() {
+            diffs.push(format!("{name}: {} rows vs {} rows", ra.len(), rb.len()));
+            continue;
+        }
+        let skip: Vec<bool> = ta.columns.iter().map(|(c, _)| ignore.contains(&(name, c.as_str()))).collect();
+        let key_idx: Vec<usize> = keys.iter().map(|k| ta.col(k)).collect();
+        let mut n = 0;
+        for (x, y) in ra.iter().zip(&rb) {
+            if key_idx.iter().any(|&j| x[j] != y[j]) {
+                n += 1;
+                if n <= 10 {
+                    let kx: Vec<String> = key_idx.iter().map(|&j| x[j].to_string()).collect();
+                    let ky: Vec<String> = key_idx.iter().map(|&j| y[j].to_string()).collect();
+                    diffs.push(format!("{name}: row keys differ: ({}) vs ({})", kx.join(", "), ky.join(", ")));
+                }
+                continue;
+            }
+            for (j, (cx, cy)) in x.iter().zip(y).enumerate() {
+                if !skip[j] && cx != cy {
+                    n += 1;
+                    if n <= 10 {
+                        let key: Vec<String> = keys.iter().map(|k| format!("{k}={}", x[ta.col(k)])).collect();
+                        diffs.push(format!("{name} [{}] column {}: {cx} vs {cy}", key.join(", "), ta.columns[j].0));
+                    }
+                }
+            }
+        }
+        if n > 10 {
+            diffs.push(format!("{name}: ... {} differing values in all", n));
+        }
+    }
+    diffs
+}
+
+pub fn assert_tables_identical(a: &Tables, b: &Tables, what: &str) {
+    let diffs = table_differences(a, b, &NONDETERMINISTIC);
+    assert!(diffs.is_empty(), "{what}: tables differ ({} differences):\n{}", diffs.len(), diffs.join("\n"));
+}
+
+/// `granular status DIR --json`, parsed.
+pub fn status_json(dir: &Path, log: &Path) -> Value {
+    let (code, out) = run_capture(&["status", dir.to_str().unwrap(), "--json"], log);
+    assert_eq!(code, Some(0), "granular status {} --json failed; log:\n{}", dir.display(), log_text(log));
+    serde_json::from_str(&out).unwrap_or_else(|e| panic!("status --json is not JSON ({e}):\n{out}"))
+}
+
+pub fn write_json(path: &Path, v: &Value) {
+    fs::write(path, serde_json::to_string_pretty(v).unwrap()).expect("write json");
+}

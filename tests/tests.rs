@@ -1,0 +1,18 @@
+//! Integration tests of `granular`, in one test binary (one link, shared helpers).
+//!
+//! - `manifests`: data-driven validation of `tests/manifests/{good,bad}/*.json`.
+//! - `resume`: kill -9 / resume, thread count and sharding give bit-identical tables;
+//!   directory refusal, re-running a finished campaign, `status --json`.
+//! - `physics`: Haff's law, bitwise checkpoint/restore, conservation laws, low-rank vs Bird.
+//! - `schema`: the committed JSON Schema matches the code; `jobs/*.json` validate.
+//!
+//! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
+//! the machine has few cores, and the kill test scales its kill moments to a measured run time.
+
+mod it {
+    pub mod manifests;
+    pub mod physics;
+    pub mod resume;
+    pub mod schema;
+    pub mod util;
+}
