@@ -6,7 +6,23 @@
 //! rate N^2 C_max pi / V (50).
 
 use super::collision::{collide, uniform_direction};
-use super::{prefetch, Candidate, DsmcSim, PhysicsError, PIPELINE_DEPTH, RAISE_SLACK};
+use super::{prefetch, speed_bound, Candidate, DsmcSim, PhysicsError, PIPELINE_DEPTH, RAISE_SLACK};
+
+/// How many trials ahead of use a candidate's velocity lines are prefetched.
+const STAGE: usize = 8;
+
+/// Bird's per-particle rejection bound: an f32 upper bound on ((sigma_j + sigma_M)/2)^2 |v_j|.
+#[inline(always)]
+pub fn bird_weight(v: &[f64; 3], sigma: f64, sigma_max: f64) -> f32 {
+    let c = 0.25 * (sigma + sigma_max) * (sigma + sigma_max);
+    let w = speed_bound(v) as f64 * c * (1.0 + 1e-7);
+    let f = w as f32;
+    if (f as f64) < w {
+        f.next_up()
+    } else {
+        f
+    }
+}
 
 impl DsmcSim {
     #[inline(always)]
@@ -29,19 +45,32 @@ impl DsmcSim {
             }
             trials += 1;
             self.gap_trial();
-            while self.ring.len() < PIPELINE_DEPTH {
-                let (a, b) = self.rng.below_pair(n, n);
-                prefetch(self.st.vel.as_ptr().wrapping_add(a));
-                prefetch(self.st.vel.as_ptr().wrapping_add(b));
-                self.ring.push(Candidate { i: 0, k: 0, a: a as u32, b: b as u32 });
+            if self.ring.len() <= PIPELINE_DEPTH / 2 {
+                for _ in 0..PIPELINE_DEPTH / 2 {
+                    let (a, b) = self.rng.below_pair(n, n);
+                    let u = self.rng.f64();
+                    prefetch(self.speed.as_ptr().wrapping_add(a));
+                    prefetch(self.speed.as_ptr().wrapping_add(b));
+                    self.ring.push(Candidate { i: 0, k: 0, a: a as u32, b: b as u32, u });
+                }
+            }
+            {
+                let c2 = *self.ring.peek(STAGE);
+                let (a2, b2) = (c2.a as usize, c2.b as usize);
+                if c2.u * 2.0 * self.st.bird_bound < (self.speed[a2] + self.speed[b2]) as f64 {
+                    prefetch(self.st.vel.as_ptr().wrapping_add(a2));
+                    prefetch(self.st.vel.as_ptr().wrapping_add(b2));
+                }
             }
             let c = self.ring.pop();
             let (a, b) = (c.a as usize, c.b as usize);
-            let e = uniform_direction(&mut self.rng);
-            let u = self.rng.f64();
-            if a == b {
+            let u = c.u;
+            // sigma_ab^2 |g.e| <= sigma_ab^2 (|v_a| + |v_b|) <= w_a + w_b with
+            // w_j >= ((sigma_j + sigma_M)/2)^2 |v_j|: a certain rejection without the velocities.
+            if a == b || u * 2.0 * self.st.bird_bound >= (self.speed[a] + self.speed[b]) as f64 {
                 continue;
             }
+            let e = uniform_direction(&mut self.rng);
             let va = self.st.vel[a];
             let vb = self.st.vel[b];
             let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
@@ -79,6 +108,8 @@ impl DsmcSim {
             collide(&mut na, &mut nb, ma, mb, eps, e, gne);
             self.st.vel[a] = na;
             self.st.vel[b] = nb;
+            self.speed[a] = bird_weight(&na, si, sig_max);
+            self.speed[b] = bird_weight(&nb, sk, sig_max);
             self.st.collisions += 1;
             self.st.species_collisions[i] += 1;
             self.st.species_collisions[k] += 1;

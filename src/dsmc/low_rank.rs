@@ -13,7 +13,10 @@
 
 use super::alias::Alias;
 use super::collision::{collide, impact_direction};
-use super::{prefetch, Candidate, DsmcSim, DsmcSystem, PhysicsError, PIPELINE_DEPTH, RAISE_SLACK};
+use super::{prefetch, speed_bound, Candidate, DsmcSim, DsmcSystem, PhysicsError, PIPELINE_DEPTH, RAISE_SLACK};
+
+/// How many trials ahead of use a candidate's velocity lines are prefetched.
+const STAGE: usize = 8;
 
 /// The three static tables over k: weights N_k, N_k sigma_k, N_k sigma_k^2.
 pub fn static_tables(sys: &DsmcSystem) -> [Alias; 3] {
@@ -44,9 +47,10 @@ impl DsmcSim {
         let k = unsafe { self.pair_k.get_unchecked(r) }.sample(self.rng.u64());
         let (da, db) = self.rng.below_pair(self.off[i + 1] - self.off[i], self.off[k + 1] - self.off[k]);
         let (a, b) = (self.off[i] + da, self.off[k] + db);
-        prefetch(self.st.vel.as_ptr().wrapping_add(a));
-        prefetch(self.st.vel.as_ptr().wrapping_add(b));
-        Candidate { i: i as u32, k: k as u32, a: a as u32, b: b as u32 }
+        let u = self.rng.f64();
+        prefetch(self.speed.as_ptr().wrapping_add(a));
+        prefetch(self.speed.as_ptr().wrapping_add(b));
+        Candidate { i: i as u32, k: k as u32, a: a as u32, b: b as u32, u }
     }
 
     pub(super) fn advance_low_rank(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
@@ -66,15 +70,31 @@ impl DsmcSim {
                 let c = self.draw_candidate();
                 self.ring.push(c);
             }
+            // Stage 2: the candidate STAGE places ahead gets its velocity lines prefetched if
+            // its (possibly stale) speed bounds do not already reject it.
+            {
+                let c2 = *self.ring.peek(STAGE);
+                let (a2, b2) = (c2.a as usize, c2.b as usize);
+                let u2 = c2.u * (self.st.vmax[c2.i as usize] + self.st.vmax[c2.k as usize]);
+                if u2 < (self.speed[a2] + self.speed[b2]) as f64 {
+                    prefetch(self.st.vel.as_ptr().wrapping_add(a2));
+                    prefetch(self.st.vel.as_ptr().wrapping_add(b2));
+                }
+            }
             let c = self.ring.pop();
             self.gap_trial();
             let (a, b) = (c.a as usize, c.b as usize);
             let (i, k) = (c.i as usize, c.k as usize);
+            let u = c.u * (self.st.vmax[i] + self.st.vmax[k]);
+            // |g| <= |v_a| + |v_b| <= s_a + s_b: a certain rejection, decided without the
+            // velocities (the same decision the full test below would make).
+            if u >= (self.speed[a] + self.speed[b]) as f64 {
+                continue;
+            }
             let va = self.st.vel[a];
             let vb = self.st.vel[b];
             let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
             let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-            let u = self.rng.f64() * (self.st.vmax[i] + self.st.vmax[k]);
             if u * u >= g2 {
                 continue;
             }
@@ -101,6 +121,8 @@ impl DsmcSim {
             collide(&mut na, &mut nb, ma, mb, eps, e, gne);
             self.st.vel[a] = na;
             self.st.vel[b] = nb;
+            self.speed[a] = speed_bound(&na);
+            self.speed[b] = speed_bound(&nb);
             self.st.collisions += 1;
             self.st.species_collisions[i] += 1;
             self.st.species_collisions[k] += 1;

@@ -56,13 +56,15 @@ pub struct Candidate {
     pub k: u32,
     pub a: u32,
     pub b: u32,
+    /// The trial's acceptance uniform, drawn with the pair.
+    pub u: f64,
 }
 
 /// How many trials ahead candidates are drawn, so their velocities can be prefetched: the
 /// ring is refilled in batches of `PIPELINE_DEPTH / 2` whenever half of it is used.
 pub const PIPELINE_DEPTH: usize = 32;
 /// Layout version of [`DsmcState`] in checkpoints.
-pub const STATE_FORMAT: &str = "dsmc/1";
+pub const STATE_FORMAT: &str = "dsmc/2";
 
 /// A raised speed bound gets this much head-room, so that it is not raised again at once.
 pub const RAISE_SLACK: f64 = 1.05;
@@ -117,6 +119,11 @@ pub struct DsmcSim {
     slot_species: Vec<u32>,
     /// Candidates drawn ahead (saved in `st.pipeline` at checkpoints).
     ring: Ring,
+    /// Per particle, an f32 upper bound (rounded up with margin) on its speed (low-rank) or on
+    /// ((sigma_j + sigma_M)/2)^2 |v_j| (Bird): the sum of the pair's bounds majorises the
+    /// accepted quantity, so most trials are rejected without touching the velocity lines.
+    /// Derived from `vel`.
+    speed: Vec<f32>,
 }
 
 /// A fixed ring of pre-drawn candidates.
@@ -139,6 +146,11 @@ impl Ring {
         self.head = (self.head + 1) % PIPELINE_DEPTH;
         self.len -= 1;
         c
+    }
+    /// The candidate `j` places behind the oldest (j < len).
+    #[inline(always)]
+    pub fn peek(&self, j: usize) -> &Candidate {
+        &self.buf[(self.head + j) % PIPELINE_DEPTH]
     }
     #[inline(always)]
     pub fn len(&self) -> usize {
@@ -203,6 +215,16 @@ impl DsmcSim {
         }
         let pair_k = low_rank::static_tables(&sys);
         let ring = Ring::from_slice(&st.pipeline);
+        let mut speed = crate::memory::huge_vec(st.vel.len(), 0f32);
+        let sig_max = sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
+        for (k, sp) in sys.species.iter().enumerate() {
+            for j in off[k]..off[k + 1] {
+                speed[j] = match sys.method {
+                    DsmcMethod::LowRank => speed_bound(&st.vel[j]),
+                    DsmcMethod::Bird => bird::bird_weight(&st.vel[j], sp.diameter, sig_max),
+                };
+            }
+        }
         let m = sys.species.len();
         let refresh_collisions = (sys.refresh_every * sys.n_particles() as f64).ceil().max(1.0) as u64;
         let slot_term = (0..3 * m).map(|j| (j / m) as u8).collect();
@@ -219,6 +241,7 @@ impl DsmcSim {
             slot_term,
             slot_species,
             ring,
+            speed,
         };
         sim.rebuild_rates();
         sim
@@ -425,6 +448,18 @@ impl DsmcSim {
             e += sp.mass * v2;
         }
         e
+    }
+}
+
+/// An f32 upper bound on |v|: relative margin 1e-7 (far above f64 rounding), rounded up.
+#[inline(always)]
+pub fn speed_bound(v: &[f64; 3]) -> f32 {
+    let s = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() * (1.0 + 1e-7);
+    let f = s as f32;
+    if (f as f64) < s {
+        f.next_up()
+    } else {
+        f
     }
 }
 
