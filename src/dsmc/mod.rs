@@ -16,6 +16,7 @@ pub mod bird;
 pub mod collision;
 pub mod low_rank;
 pub mod system;
+pub mod viscoelastic;
 
 use serde::{Deserialize, Serialize};
 
