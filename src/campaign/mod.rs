@@ -246,12 +246,20 @@ pub fn run(c: &Campaign, opts: &RunOptions, reporter: &mut dyn Reporter) -> Resu
         let pending = &pending;
         let pool = &pool;
         scope.spawn(move || {
-            use rayon::prelude::*;
-            pool.install(|| {
-                pending.par_iter().with_max_len(1).for_each_with(tx_workers, |tx, spec| {
-                    worker::run_one(c, spec, opts, tx);
-                });
+            // A shared queue: each worker takes the next pending run in plan order.
+            let next = std::sync::atomic::AtomicUsize::new(0);
+            let next = &next;
+            pool.scope(|s| {
+                for _ in 0..threads {
+                    let mut tx = tx_workers.clone();
+                    s.spawn(move |_| loop {
+                        let j = next.fetch_add(1, Ordering::SeqCst);
+                        let Some(spec) = pending.get(j) else { break };
+                        worker::run_one(c, spec, opts, &mut tx);
+                    });
+                }
             });
+            drop(tx_workers);
         });
         drop(tx);
         loop {
