@@ -58,6 +58,13 @@ enum Command {
     },
     /// Print the manifest's JSON Schema (also committed as schemas/manifest.schema.json).
     Schema,
+    /// Draw the standard figures (PNG and SVG) of a campaign's summary tables.
+    Plot {
+        dir: PathBuf,
+        /// Where to write the figures (default: DIR/figures).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 #[derive(Args, Clone)]
@@ -106,6 +113,22 @@ pub fn main() -> i32 {
                 eprint!("{e}");
                 exit_codes::INVALID_INPUT
             }
+        },
+        Command::Plot { dir, out } => match Campaign::open(&dir) {
+            Ok(c) => {
+                let out = out.unwrap_or_else(|| dir.join("figures"));
+                match crate::plot::figures(&c).map_err(|e| e.to_string()).and_then(|f| crate::plot::render(&f, &out)) {
+                    Ok(files) => {
+                        println!("wrote {} files to {}", files.len(), out.display());
+                        exit_codes::OK
+                    }
+                    Err(e) => {
+                        eprintln!("error: {e}");
+                        exit_codes::IO_ERROR
+                    }
+                }
+            }
+            Err(e) => report_error(e),
         },
         Command::Schema => {
             println!("{}", serde_json::to_string_pretty(&crate::manifest::json_schema()).expect("schema"));

@@ -22,6 +22,7 @@ pub mod fsutil;
 pub mod manifest;
 pub mod memory;
 pub mod plan;
+pub mod plot;
 pub mod rng;
 pub mod store;
 pub mod theory;
