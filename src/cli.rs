@@ -58,6 +58,13 @@ enum Command {
     },
     /// Print the manifest's JSON Schema (also committed as schemas/manifest.schema.json).
     Schema,
+    /// Write the kinetic-theory predictions of a manifest (tables dsmc_theory and
+    /// dsmc_theory_point) into a campaign directory, without simulating.
+    Theory {
+        manifest: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Draw the standard figures (PNG and SVG) of a campaign's summary tables.
     Plot {
         dir: PathBuf,
@@ -113,6 +120,19 @@ pub fn main() -> i32 {
                 eprint!("{e}");
                 exit_codes::INVALID_INPUT
             }
+        },
+        Command::Theory { manifest, out } => match Campaign::create_or_open(&manifest, &out) {
+            Ok(c) => match crate::campaign::writer::write_theory(&c) {
+                Ok(()) => {
+                    println!("wrote {}/tables/dsmc_theory and dsmc_theory_point ({} points)", out.display(), c.plan.points.len());
+                    exit_codes::OK
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    exit_codes::IO_ERROR
+                }
+            },
+            Err(e) => report_error(e),
         },
         Command::Plot { dir, out } => match Campaign::open(&dir) {
             Ok(c) => {

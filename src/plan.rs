@@ -158,11 +158,28 @@ fn pointer_escape(key: &str) -> String {
 }
 
 /// Set `params[path]` (dotted) to `value`; the path must already exist.
+/// One step of a dotted path: an object key, or an array index when the value is an array
+/// (`species.list.0.count`).
+fn step<'v>(cur: &'v Value, part: &str) -> Option<&'v Value> {
+    match cur {
+        Value::Object(o) => o.get(part),
+        Value::Array(a) => part.parse::<usize>().ok().and_then(|i| a.get(i)),
+        _ => None,
+    }
+}
+
+fn step_mut<'v>(cur: &'v mut Value, part: &str) -> Option<&'v mut Value> {
+    match cur {
+        Value::Object(o) => o.get_mut(part),
+        Value::Array(a) => part.parse::<usize>().ok().and_then(move |i| a.get_mut(i)),
+        _ => None,
+    }
+}
+
 fn set_path(params: &mut Value, path: &[&str], value: Value) -> bool {
     let mut cur = params;
     for (i, part) in path.iter().enumerate() {
-        let Some(obj) = cur.as_object_mut() else { return false };
-        let Some(next) = obj.get_mut(*part) else { return false };
+        let Some(next) = step_mut(cur, part) else { return false };
         if i + 1 == path.len() {
             *next = value;
             return true;
@@ -195,7 +212,7 @@ fn typed(model: ModelKind, params: &Value, prefix: &str, errors: &mut Vec<(Strin
 fn path_exists(base: &Value, parts: &[&str]) -> bool {
     let mut cur = base;
     for part in parts {
-        match cur.as_object().and_then(|o| o.get(*part)) {
+        match step(cur, part) {
             Some(next) => cur = next,
             None => return false,
         }
@@ -212,7 +229,7 @@ pub fn sweep_key_errors(params: &Value, sweep: &Map<String, Value>) -> Vec<(Stri
         let kp = format!("/sweep/{}", pointer_escape(key));
         let parts: Vec<&str> = key.split('.').collect();
         if key.is_empty() || !path_exists(params, &parts) {
-            errors.push((kp.clone(), format!("sweep path {key:?} does not exist in params (expected a dotted path to a value given in params, e.g. \"restitution.constant\")")));
+            errors.push((kp.clone(), format!("sweep path {key:?} does not exist in params (expected a dotted path to a value given in params, e.g. \"restitution.constant\" or \"species.list.0.count\")")));
         }
         for other in sweep.keys() {
             if other != key && other.starts_with(&format!("{key}.")) {

@@ -228,6 +228,7 @@ pub fn run(c: &Campaign, opts: &RunOptions, reporter: &mut dyn Reporter) -> Resu
     fsutil::create_dir_durable(&ckpt_dir).map_err(|e| io_err(&ckpt_dir, e))?;
     let mut writer = writer::Writer::new(c, &tag).map_err(|e| CampaignError::Io(e.to_string()))?;
     writer.ensure_points().map_err(|e| CampaignError::Io(e.to_string()))?;
+    writer.ensure_theory().map_err(|e| CampaignError::Io(e.to_string()))?;
 
     let threads = if opts.threads == 0 { std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1) } else { opts.threads };
     let pool = rayon::ThreadPoolBuilder::new()

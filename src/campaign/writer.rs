@@ -28,7 +28,7 @@ pub struct Writer<'c> {
 
 impl<'c> Writer<'c> {
     pub fn new(c: &'c Campaign, tag: &str) -> Result<Self, StoreError> {
-        for t in [tables::RUNS, tables::POINTS, tables::DSMC_SPECIES, tables::DSMC_SPECIES_SUMMARY] {
+        for t in [tables::RUNS, tables::POINTS, tables::DSMC_SPECIES, tables::DSMC_SPECIES_SUMMARY, tables::DSMC_THEORY, tables::DSMC_THEORY_POINT] {
             let d = c.root.join("tables").join(t);
             fsutil::create_dir_durable(&d).map_err(|e| StoreError::io(&d, e))?;
         }
@@ -65,6 +65,11 @@ impl<'c> Writer<'c> {
         parquet_io::write_file(&tmp, &batch, tables::POINTS, &self.c.manifest_json)?;
         std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
         fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))
+    }
+
+    /// Write the kinetic-theory tables once (they depend only on the manifest).
+    pub fn ensure_theory(&self) -> Result<(), StoreError> {
+        write_theory(self.c)
     }
 
     pub fn add(&mut self, r: RunResult) {
@@ -171,4 +176,42 @@ impl<'c> Writer<'c> {
         self.seq += 1;
         Ok(Some((n, seq)))
     }
+}
+
+/// Compute the kinetic-theory predictions of every point (in parallel) and write
+/// `dsmc_theory` and `dsmc_theory_point`, unless they exist.
+pub fn write_theory(c: &Campaign) -> Result<(), StoreError> {
+    use rayon::prelude::*;
+    let dir = c.root.join("tables");
+    let theory = dir.join(tables::DSMC_THEORY).join("theory.parquet");
+    let per_point = dir.join(tables::DSMC_THEORY_POINT).join("theory_point.parquet");
+    if theory.exists() && per_point.exists() {
+        return Ok(());
+    }
+    for d in [theory.parent().expect("dir"), per_point.parent().expect("dir")] {
+        fsutil::create_dir_durable(d).map_err(|e| StoreError::io(d, e))?;
+    }
+    let preds: Vec<(u32, crate::dsmc::predict::Prediction)> = c
+        .plan
+        .points
+        .par_iter()
+        .filter_map(|p| match &p.params {
+            crate::plan::ModelParams::Dsmc(d) => {
+                crate::dsmc::DsmcSystem::from_params(d).ok().map(|sys| (p.point_id, crate::dsmc::predict::predict(&sys)))
+            }
+        })
+        .collect();
+    let rows: Vec<(u32, crate::dsmc::predict::TheoryRow)> =
+        preds.iter().flat_map(|(p, pr)| pr.rows.iter().map(move |r| (*p, r.clone()))).collect();
+    let points: Vec<(u32, f64, Vec<f64>)> = preds.iter().map(|(p, pr)| (*p, pr.tau0, pr.initial_temperatures.clone())).collect();
+    for (path, batch, table) in [
+        (&theory, tables::theory_batch(&rows), tables::DSMC_THEORY),
+        (&per_point, tables::theory_point_batch(&points), tables::DSMC_THEORY_POINT),
+    ] {
+        let tmp = fsutil::temp_path(path);
+        parquet_io::write_file(&tmp, &batch, table, &c.manifest_json)?;
+        std::fs::rename(&tmp, path).map_err(|e| StoreError::io(path, e))?;
+        fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(path, e))?;
+    }
+    Ok(())
 }

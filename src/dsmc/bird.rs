@@ -31,7 +31,6 @@ impl DsmcSim {
     }
 
     pub(super) fn advance_bird(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
-        let eps = self.sys.eps;
         let msd = self.sys.msd;
         let n = self.sys.n_particles();
         let sig_max = self.sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
@@ -105,6 +104,7 @@ impl DsmcSim {
             }
             let (ma, mb) = (self.sys.species[i].mass, self.sys.species[k].mass);
             let (mut na, mut nb) = (va, vb);
+            let eps = self.eps.eps(i, k, gne);
             collide(&mut na, &mut nb, ma, mb, eps, e, gne);
             self.st.vel[a] = na;
             self.st.vel[b] = nb;

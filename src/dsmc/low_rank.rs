@@ -57,7 +57,6 @@ impl DsmcSim {
         if self.rate <= 0.0 {
             return self.idle_to_end();
         }
-        let eps = self.sys.eps;
         let msd = self.sys.msd;
         let mut trials = 0u64;
         let result = loop {
@@ -118,6 +117,7 @@ impl DsmcSim {
             }
             let (ma, mb) = (self.sys.species[i].mass, self.sys.species[k].mass);
             let (mut na, mut nb) = (va, vb);
+            let eps = self.eps.eps(i, k, gne);
             collide(&mut na, &mut nb, ma, mb, eps, e, gne);
             self.st.vel[a] = na;
             self.st.vel[b] = nb;

@@ -15,6 +15,7 @@ pub mod alias;
 pub mod bird;
 pub mod collision;
 pub mod low_rank;
+pub mod predict;
 pub mod system;
 pub mod viscoelastic;
 
@@ -23,7 +24,7 @@ use serde::{Deserialize, Serialize};
 use crate::manifest::dsmc::DsmcMethod;
 use crate::rng::{RngPosition, RunRng};
 use alias::Alias;
-pub use system::{DsmcSystem, SpeciesInfo};
+pub use system::{DsmcSystem, RestitutionModel, SpeciesInfo};
 
 /// One row of the `dsmc_species` table (without the run's ids).
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -120,6 +121,8 @@ pub struct DsmcSim {
     slot_species: Vec<u32>,
     /// Candidates drawn ahead (saved in `st.pipeline` at checkpoints).
     ring: Ring,
+    /// Evaluates eps for a colliding pair.
+    eps: EpsModel,
     /// Per particle, an f32 upper bound (rounded up with margin) on its speed (low-rank) or on
     /// ((sigma_j + sigma_M)/2)^2 |v_j| (Bird): the sum of the pair's bounds majorises the
     /// accepted quantity, so most trials are rejected without touching the velocity lines.
@@ -230,7 +233,9 @@ impl DsmcSim {
         let refresh_collisions = (sys.refresh_every * sys.n_particles() as f64).ceil().max(1.0) as u64;
         let slot_term = (0..3 * m).map(|j| (j / m) as u8).collect();
         let slot_species = (0..3 * m).map(|j| (j % m) as u32).collect();
+        let eps = EpsModel::new(&sys);
         let mut sim = DsmcSim {
+            eps,
             sys,
             st,
             rng,
@@ -449,6 +454,44 @@ impl DsmcSim {
             e += sp.mass * v2;
         }
         e
+    }
+}
+
+/// Restitution as the hot loop evaluates it; nothing is tabulated for constant eps.
+pub enum EpsModel {
+    Constant(f64),
+    Viscoelastic {
+        table: viscoelastic::ViscoelasticTable,
+        /// A kappa_ki^(2/5) for every species pair (row-major, M x M).
+        a_pair: Vec<f64>,
+        m: usize,
+    },
+}
+
+impl EpsModel {
+    pub fn new(sys: &DsmcSystem) -> Self {
+        match sys.restitution {
+            RestitutionModel::Constant(e) => EpsModel::Constant(e),
+            RestitutionModel::Viscoelastic { a_kappa } => {
+                let m = sys.species.len();
+                let mut a_pair = vec![0.0; m * m];
+                for (k, sk) in sys.species.iter().enumerate() {
+                    for (i, si) in sys.species.iter().enumerate() {
+                        a_pair[k * m + i] = viscoelastic::pair_a_kappa(a_kappa, sk.mass, sk.diameter, si.mass, si.diameter);
+                    }
+                }
+                EpsModel::Viscoelastic { table: viscoelastic::ViscoelasticTable::new(), a_pair, m }
+            }
+        }
+    }
+
+    /// eps for species k, i colliding with normal impact speed `g_n`.
+    #[inline(always)]
+    pub fn eps(&self, k: usize, i: usize, g_n: f64) -> f64 {
+        match self {
+            EpsModel::Constant(e) => *e,
+            EpsModel::Viscoelastic { table, a_pair, m } => table.eps_pair(a_pair[k * m + i], g_n),
+        }
     }
 }
 

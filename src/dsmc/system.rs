@@ -1,7 +1,7 @@
 //! The physical system of a DSMC run, resolved from the manifest: species (mass, diameter,
 //! count, initial temperature), volume, restitution, output schedule.
 
-use crate::manifest::dsmc::{DsmcMethod, DsmcParams, Restitution, SpeciesSpec};
+use crate::manifest::dsmc::{DsmcMethod, DsmcParams, InitialTemperature, Restitution, SpeciesSpec};
 use crate::rng::RunRng;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -17,8 +17,7 @@ pub struct DsmcSystem {
     pub method: DsmcMethod,
     pub species: Vec<SpeciesInfo>,
     pub volume: f64,
-    /// Constant restitution coefficient.
-    pub eps: f64,
+    pub restitution: RestitutionModel,
     pub t_end: f64,
     /// Sorted output times, 0 and t_end included.
     pub output_times: Vec<f64>,
@@ -29,11 +28,42 @@ pub struct DsmcSystem {
     pub rate_scale: f64,
 }
 
+/// The restitution model of a run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RestitutionModel {
+    Constant(f64),
+    /// A kappa^(2/5) of the reference pair (m = 1, sigma = 1).
+    Viscoelastic { a_kappa: f64 },
+}
+
+/// The restitution of a system as the theory sees it (the same pair scaling as the DSMC).
+pub fn theory_restitution(r: &RestitutionModel, species: &[SpeciesInfo]) -> crate::theory::restitution::PairRestitution {
+    use crate::theory::restitution::PairRestitution;
+    match *r {
+        RestitutionModel::Constant(e) => PairRestitution::Constant(e),
+        RestitutionModel::Viscoelastic { a_kappa } => {
+            let m = species.len();
+            let mut a = vec![0.0; m * m];
+            for (k, sk) in species.iter().enumerate() {
+                for (i, si) in species.iter().enumerate() {
+                    a[k * m + i] = super::viscoelastic::pair_a_kappa(a_kappa, sk.mass, sk.diameter, si.mass, si.diameter);
+                }
+            }
+            let table = super::viscoelastic::ViscoelasticTable::new();
+            PairRestitution::velocity_dependent(move |k, i, g| table.eps_pair(a[k * m + i], g))
+        }
+    }
+}
+
 /// Largest particle count a run may have (particle indices are 32-bit).
 pub const MAX_PARTICLES: u64 = u32::MAX as u64 - 1;
 
 impl DsmcSystem {
     pub fn from_params(p: &DsmcParams) -> Result<Self, String> {
+        let base_t = match p.initial_temperature {
+            InitialTemperature::Value(t) => t,
+            InitialTemperature::Hcs { mean } => mean,
+        };
         let (species, volume) = match &p.species {
             SpeciesSpec::PowerLaw(pl) => {
                 let mut species = Vec::new();
@@ -46,7 +76,7 @@ impl DsmcSystem {
                         mass: k as f64,
                         diameter: (k as f64).cbrt(),
                         count: count as u64,
-                        initial_temperature: p.initial_temperature,
+                        initial_temperature: base_t,
                     });
                     if species.len() > 1_000_000 {
                         return Err("power_law gives more than 1e6 species".into());
@@ -61,7 +91,7 @@ impl DsmcSystem {
                         mass: s.mass,
                         diameter: s.diameter,
                         count: s.count,
-                        initial_temperature: s.temperature.unwrap_or(p.initial_temperature),
+                        initial_temperature: s.temperature.unwrap_or(base_t),
                     })
                     .collect();
                 let n: u64 = species.iter().map(|s| s.count).sum();
@@ -77,14 +107,30 @@ impl DsmcSystem {
         if n > MAX_PARTICLES {
             return Err(format!("{n} particles is more than the supported {MAX_PARTICLES}"));
         }
-        let eps = match p.restitution {
-            Restitution::Constant(e) => e,
+        let restitution = match &p.restitution {
+            Restitution::Constant(e) => RestitutionModel::Constant(*e),
+            Restitution::Viscoelastic(v) => RestitutionModel::Viscoelastic { a_kappa: v.a_kappa },
         };
+        let mut species = species;
+        if let InitialTemperature::Hcs { mean } = p.initial_temperature {
+            let th: Vec<crate::theory::temperature::Species> = species
+                .iter()
+                .map(|s| crate::theory::temperature::Species::new(s.mass, s.diameter, s.count as f64 / volume))
+                .collect();
+            let r = theory_restitution(&restitution, &species);
+            let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean);
+            for (s, t) in species.iter_mut().zip(t0) {
+                if !(t.is_finite() && t > 0.0) {
+                    return Err(format!("no homogeneous cooling state found (temperature {t})"));
+                }
+                s.initial_temperature = t;
+            }
+        }
         Ok(DsmcSystem {
             method: p.method,
             species,
             volume,
-            eps,
+            restitution,
             t_end: p.t_end,
             output_times: p.output_times.resolve(p.t_end),
             msd: p.wants_msd(),

@@ -21,10 +21,11 @@ pub struct DsmcParams {
     pub number_density: Option<f64>,
     /// Restitution coefficient model.
     pub restitution: Restitution,
-    /// Initial temperature of every species without its own `temperature` (default 1).
-    #[serde(default = "one")]
-    #[schemars(extend("exclusiveMinimum" = 0))]
-    pub initial_temperature: f64,
+    /// Initial temperature of every species without its own `temperature` (default 1), or
+    /// `{"hcs": {"mean": T}}`: every species at its homogeneous-cooling-state temperature with
+    /// number-weighted mean T (paper eq. 25).
+    #[serde(default)]
+    pub initial_temperature: InitialTemperature,
     /// End time of the run (> 0).
     #[schemars(extend("exclusiveMinimum" = 0))]
     pub t_end: f64,
@@ -44,6 +45,75 @@ pub struct DsmcParams {
 
 fn one() -> f64 {
     1.0
+}
+
+/// A number (the same temperature for every species) or `{"hcs": {"mean": T}}`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum InitialTemperature {
+    Value(f64),
+    /// Homogeneous cooling state with number-weighted mean temperature `mean`.
+    Hcs { mean: f64 },
+}
+
+impl Default for InitialTemperature {
+    fn default() -> Self {
+        InitialTemperature::Value(1.0)
+    }
+}
+
+impl Serialize for InitialTemperature {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            InitialTemperature::Value(v) => s.serialize_f64(*v),
+            InitialTemperature::Hcs { mean } => serde_json::json!({"hcs": {"mean": mean}}).serialize(s),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for InitialTemperature {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let v = serde_json::Value::deserialize(d)?;
+        if let Some(x) = v.as_f64() {
+            return Ok(InitialTemperature::Value(x));
+        }
+        let mean = v
+            .as_object()
+            .filter(|o| o.len() == 1)
+            .and_then(|o| o.get("hcs"))
+            .and_then(|h| h.as_object())
+            .filter(|h| h.len() == 1)
+            .and_then(|h| h.get("mean"))
+            .and_then(|m| m.as_f64())
+            .ok_or_else(|| D::Error::custom("expected a number or {\"hcs\": {\"mean\": number}}"))?;
+        Ok(InitialTemperature::Hcs { mean })
+    }
+}
+
+impl JsonSchema for InitialTemperature {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "InitialTemperature".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "A temperature > 0 for every species, or {\"hcs\": {\"mean\": T}}: the homogeneous cooling state with number-weighted mean temperature T.",
+            "oneOf": [
+                {"type": "number", "exclusiveMinimum": 0},
+                {
+                    "type": "object",
+                    "properties": {"hcs": {
+                        "type": "object",
+                        "properties": {"mean": {"type": "number", "exclusiveMinimum": 0}},
+                        "required": ["mean"],
+                        "additionalProperties": false
+                    }},
+                    "required": ["hcs"],
+                    "additionalProperties": false
+                }
+            ]
+        })
+    }
 }
 
 /// DSMC method.
@@ -114,6 +184,20 @@ pub struct SpeciesEntry {
 pub enum Restitution {
     /// A constant coefficient eps in [0, 1] for every pair.
     Constant(#[schemars(range(min = 0, max = 1))] f64),
+    /// Viscoelastic spheres (paper Appendix A): eps depends on the normal impact speed g_n
+    /// through beta = A kappa_ki^(2/5) g_n^(1/5), from the exact contact ODE.
+    Viscoelastic(Viscoelastic),
+}
+
+/// Parameters of viscoelastic restitution.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Viscoelastic {
+    /// A kappa^(2/5) of the reference pair m = 1, sigma = 1 (the paper's monomer pair; Figs 7-8
+    /// use 0.09). Other pairs scale with kappa_ki ~ sqrt(sigma_eff)/m_eff (A3-A5), all
+    /// species being of the same material.
+    #[schemars(range(min = 0))]
+    pub a_kappa: f64,
 }
 
 /// Output times: a log grid, a list, or both (merged).
@@ -188,6 +272,13 @@ impl DsmcParams {
                 }
             }
             SpeciesSpec::List(list) => {
+                if matches!(self.initial_temperature, InitialTemperature::Hcs { .. }) {
+                    for (i, s) in list.iter().enumerate() {
+                        if s.temperature.is_some() {
+                            err(&format!("/species/list/{i}/temperature"), "must not be given with initial_temperature.hcs (the HCS sets every species' temperature)".into());
+                        }
+                    }
+                }
                 if list.is_empty() {
                     err("/species/list", "expected at least one species".into());
                 }

@@ -71,6 +71,7 @@ pub fn write_summaries(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Res
     let points_per_chunk = (CHUNK_ROWS / rows_per_point).max(1) as u32;
     let n_points = c.plan.points.len() as u32;
 
+    let theory = read_theory(c)?;
     let mut out = SummaryColumns::default();
     let mut p0 = 0u32;
     while p0 < n_points {
@@ -121,7 +122,8 @@ pub fn write_summaries(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Res
             } else {
                 (None, None)
             };
-            out.push(key.0, f64::from_bits(key.1), key.2, v.len() as u32, tm, ts, mm, ms);
+            let th = theory.get(&key).copied();
+            out.push(key.0, f64::from_bits(key.1), key.2, v.len() as u32, tm, ts, mm, ms, th);
         }
         p0 = p1;
     }
@@ -144,11 +146,46 @@ struct SummaryColumns {
     ts: Vec<Option<f64>>,
     mm: Vec<Option<f64>>,
     ms: Vec<Option<f64>>,
+    t_th: Vec<Option<f64>>,
+    m_th: Vec<Option<f64>>,
+}
+
+/// (mean - theory) / sem and (mean - theory) / theory.
+fn deviations(mean: Option<f64>, sem: Option<f64>, theory: Option<f64>) -> (Option<f64>, Option<f64>) {
+    match (mean, theory) {
+        (Some(m), Some(t)) => (sem.filter(|s| *s > 0.0).map(|s| (m - t) / s), (t != 0.0).then(|| (m - t) / t)),
+        _ => (None, None),
+    }
+}
+
+/// Theory values (temperature, msd) by (point, t bits, species), if the table exists.
+fn read_theory(c: &Campaign) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreError> {
+    let mut out = BTreeMap::new();
+    for f in table_files(c, tables::DSMC_THEORY)? {
+        for b in parquet_io::read_file(&f, tables::DSMC_THEORY)? {
+            let col = |name: &str| b.column_by_name(name).cloned().ok_or_else(|| StoreError::Corrupt(f.display().to_string(), format!("has no column {name}")));
+            let (p, t, s, tt, m) = (col("point_id")?, col("t")?, col("species")?, col("temperature")?, col("msd")?);
+            let (p, t, s, tt, m) = (
+                p.as_primitive::<UInt32Type>(),
+                t.as_primitive::<Float64Type>(),
+                s.as_primitive::<UInt32Type>(),
+                tt.as_primitive::<Float64Type>(),
+                m.as_primitive::<Float64Type>(),
+            );
+            for i in 0..b.num_rows() {
+                let msd = if arrow_array::Array::is_null(m, i) { None } else { Some(m.value(i)) };
+                out.insert((p.value(i), t.value(i).to_bits(), s.value(i)), (tt.value(i), msd));
+            }
+        }
+    }
+    Ok(out)
 }
 
 impl SummaryColumns {
     #[allow(clippy::too_many_arguments)]
-    fn push(&mut self, p: u32, t: f64, s: u32, n: u32, tm: f64, ts: Option<f64>, mm: Option<f64>, ms: Option<f64>) {
+    fn push(&mut self, p: u32, t: f64, s: u32, n: u32, tm: f64, ts: Option<f64>, mm: Option<f64>, ms: Option<f64>, th: Option<(f64, Option<f64>)>) {
+        self.t_th.push(th.map(|x| x.0));
+        self.m_th.push(th.and_then(|x| x.1));
         self.point.push(p);
         self.t.push(t);
         self.species.push(s);
@@ -169,7 +206,23 @@ impl SummaryColumns {
             Field::new("temperature_sem", DataType::Float64, true),
             Field::new("msd_mean", DataType::Float64, true),
             Field::new("msd_sem", DataType::Float64, true),
+            Field::new("temperature_theory", DataType::Float64, true),
+            Field::new("msd_theory", DataType::Float64, true),
+            Field::new("temperature_dev_sigma", DataType::Float64, true),
+            Field::new("temperature_dev_rel", DataType::Float64, true),
+            Field::new("msd_dev_sigma", DataType::Float64, true),
+            Field::new("msd_dev_rel", DataType::Float64, true),
         ]);
+        let n = self.point.len();
+        let (mut tds, mut tdr, mut mds, mut mdr) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+        for j in 0..n {
+            let (a, b) = deviations(Some(self.tm[j]), self.ts[j], self.t_th[j]);
+            tds.push(a);
+            tdr.push(b);
+            let (a, b) = deviations(self.mm[j], self.ms[j], self.m_th[j]);
+            mds.push(a);
+            mdr.push(b);
+        }
         let arrays: Vec<ArrayRef> = vec![
             Arc::new(arrow_array::UInt32Array::from(self.point)),
             Arc::new(arrow_array::Float64Array::from(self.t)),
@@ -179,6 +232,12 @@ impl SummaryColumns {
             Arc::new(arrow_array::Float64Array::from(self.ts)),
             Arc::new(arrow_array::Float64Array::from(self.mm)),
             Arc::new(arrow_array::Float64Array::from(self.ms)),
+            Arc::new(arrow_array::Float64Array::from(self.t_th)),
+            Arc::new(arrow_array::Float64Array::from(self.m_th)),
+            Arc::new(arrow_array::Float64Array::from(tds)),
+            Arc::new(arrow_array::Float64Array::from(tdr)),
+            Arc::new(arrow_array::Float64Array::from(mds)),
+            Arc::new(arrow_array::Float64Array::from(mdr)),
         ];
         RecordBatch::try_new(Arc::new(schema), arrays).expect("summary batch matches its schema")
     }

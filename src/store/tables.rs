@@ -235,3 +235,49 @@ impl SpeciesBuffer {
         RecordBatch::try_new(Arc::new(Self::schema()), arrays).expect("species batch matches its schema")
     }
 }
+
+pub const DSMC_THEORY: &str = "dsmc_theory";
+pub const DSMC_THEORY_POINT: &str = "dsmc_theory_point";
+
+/// `dsmc_theory`: the kinetic-theory prediction per point, time and species.
+pub fn theory_batch(rows: &[(u32, crate::dsmc::predict::TheoryRow)]) -> RecordBatch {
+    let schema = Schema::new(vec![
+        Field::new("point_id", DataType::UInt32, false),
+        Field::new("t", DataType::Float64, false),
+        Field::new("species", DataType::UInt32, false),
+        Field::new("temperature", DataType::Float64, false),
+        Field::new("msd", DataType::Float64, true),
+        Field::new("tau_v", DataType::Float64, false),
+    ]);
+    let arrays: Vec<ArrayRef> = vec![
+        Arc::new(rows.iter().map(|r| r.0).collect::<arrow_array::UInt32Array>()),
+        Arc::new(rows.iter().map(|r| r.1.t).collect::<arrow_array::Float64Array>()),
+        Arc::new(rows.iter().map(|r| r.1.species).collect::<arrow_array::UInt32Array>()),
+        Arc::new(rows.iter().map(|r| r.1.temperature).collect::<arrow_array::Float64Array>()),
+        Arc::new(rows.iter().map(|r| r.1.msd).collect::<arrow_array::Float64Array>()),
+        Arc::new(rows.iter().map(|r| r.1.tau_v).collect::<arrow_array::Float64Array>()),
+    ];
+    RecordBatch::try_new(Arc::new(schema), arrays).expect("theory batch matches its schema")
+}
+
+/// `dsmc_theory_point`: per point, tau_0 (21) and the initial temperatures actually used.
+pub fn theory_point_batch(points: &[(u32, f64, Vec<f64>)]) -> RecordBatch {
+    use arrow_array::builder::ListBuilder;
+    let mut temps = ListBuilder::new(Float64Builder::new());
+    for (_, _, t) in points {
+        temps.values().append_slice(t);
+        temps.append(true);
+    }
+    let temps = temps.finish();
+    let schema = Schema::new(vec![
+        Field::new("point_id", DataType::UInt32, false),
+        Field::new("tau_0", DataType::Float64, false),
+        Field::new("initial_temperatures", arrow_array::Array::data_type(&temps).clone(), false),
+    ]);
+    let arrays: Vec<ArrayRef> = vec![
+        Arc::new(points.iter().map(|p| p.0).collect::<arrow_array::UInt32Array>()),
+        Arc::new(points.iter().map(|p| p.1).collect::<arrow_array::Float64Array>()),
+        Arc::new(temps),
+    ];
+    RecordBatch::try_new(Arc::new(schema), arrays).expect("theory point batch matches its schema")
+}

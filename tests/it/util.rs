@@ -178,6 +178,19 @@ fn cells(col: &ArrayRef) -> Vec<Cell> {
             let a = col.as_boolean();
             (0..n).map(|i| cell(i, &|i| Cell::Bool(a.value(i)))).collect()
         }
+        DataType::List(_) => {
+            // A list of doubles: compared through the bit patterns of its elements.
+            let a = col.as_list::<i32>();
+            (0..n)
+                .map(|i| {
+                    cell(i, &|i| {
+                        let v = a.value(i);
+                        let bits: Vec<u64> = v.as_primitive::<Float64Type>().values().iter().map(|x| x.to_bits()).collect();
+                        Cell::S(format!("{bits:?}"))
+                    })
+                })
+                .collect()
+        }
         other => panic!("column type {other} not handled by the test helper"),
     }
 }
@@ -263,11 +276,13 @@ pub fn read_table(dir: &Path, table: &str) -> Table {
 }
 
 /// The tables of a campaign and the key columns that identify a row.
-pub const TABLES: [(&str, &[&str]); 4] = [
+pub const TABLES: [(&str, &[&str]); 6] = [
     ("runs", &["run_id"]),
     ("dsmc_species", &["run_id", "t", "species"]),
     ("dsmc_species_summary", &["point_id", "t", "species"]),
     ("points", &["point_id"]),
+    ("dsmc_theory", &["point_id", "t", "species"]),
+    ("dsmc_theory_point", &["point_id"]),
 ];
 
 pub type Tables = BTreeMap<String, Table>;
