@@ -33,7 +33,10 @@ fn cases(quick: bool) -> Vec<Case> {
     let n1 = if quick { 3000 } else { 20000 };
     let mut v = Vec::new();
     for eps in [0.0, 1e-3, 0.5, 0.999, 1.0] {
-        v.push(Case { name: format!("eps={eps}"), params: power_law(0.1, n1, 3.0, eps, 1000.0) });
+        v.push(Case {
+            name: format!("eps={eps}"),
+            params: power_law(0.1, n1, 3.0, eps, 1000.0),
+        });
     }
     for ratio in [1e2, 1e4, 1e6] {
         let heavy = (n1 / 100).max(10);
@@ -53,15 +56,36 @@ fn cases(quick: bool) -> Vec<Case> {
         });
     }
     // 2, ~50 and ~500 species: N_k = round(N1 k^-theta), M = N1^(1/theta).
-    v.push(Case { name: "2 species".into(), params: power_law(0.1, 8, 3.0, 0.5, 1000.0) });
-    v.push(Case { name: "~50 species".into(), params: power_law(0.1, if quick { 2500 } else { 125000 }, if quick { 2.0 } else { 3.0 }, 0.5, 1000.0) });
-    v.push(Case { name: "~500 species".into(), params: power_law(0.1, if quick { 11200 } else { 11200 }, 1.5, 0.5, 1000.0) });
+    v.push(Case {
+        name: "2 species".into(),
+        params: power_law(0.1, 8, 3.0, 0.5, 1000.0),
+    });
+    v.push(Case {
+        name: "~50 species".into(),
+        params: power_law(
+            0.1,
+            if quick { 2500 } else { 125000 },
+            if quick { 2.0 } else { 3.0 },
+            0.5,
+            1000.0,
+        ),
+    });
+    v.push(Case {
+        name: "~500 species".into(),
+        params: power_law(0.1, if quick { 11200 } else { 11200 }, 1.5, 0.5, 1000.0),
+    });
     for theta in [3.0, 4.0] {
-        v.push(Case { name: format!("t_end=1e9 theta={theta}"), params: power_law(0.1, n1, theta, 0.5, 1e9) });
+        v.push(Case {
+            name: format!("t_end=1e9 theta={theta}"),
+            params: power_law(0.1, n1, theta, 0.5, 1e9),
+        });
     }
     for n in [1e-6, 1e3] {
         // The same number of collisions per particle: t_end ~ 1/n.
-        v.push(Case { name: format!("n1={n:e}"), params: power_law(n, n1, 3.0, 0.5, 100.0 * 0.1 / n) });
+        v.push(Case {
+            name: format!("n1={n:e}"),
+            params: power_law(n, n1, 3.0, 0.5, 100.0 * 0.1 / n),
+        });
     }
     v
 }
@@ -71,7 +95,16 @@ fn main() {
     let mut failed = 0;
     println!(
         "{:<24} {:<9} {:>7} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>8}  verdict",
-        "case", "method", "species", "particles", "collisions", "|P|/sum", "max dE/E", "acc min", "acc t0", "T1 dev"
+        "case",
+        "method",
+        "species",
+        "particles",
+        "collisions",
+        "|P|/sum",
+        "max dE/E",
+        "acc min",
+        "acc t0",
+        "T1 dev"
     );
     for case in cases(quick) {
         for method in ["low_rank", "bird"] {
@@ -99,7 +132,10 @@ fn main() {
                 match sim.advance(chunk) {
                     Ok(done) => {
                         let p = sim.momentum();
-                        let dp = ((p[0] - p0[0]).powi(2) + (p[1] - p0[1]).powi(2) + (p[2] - p0[2]).powi(2)).sqrt();
+                        let dp = ((p[0] - p0[0]).powi(2)
+                            + (p[1] - p0[1]).powi(2)
+                            + (p[2] - p0[2]).powi(2))
+                        .sqrt();
                         max_p = max_p.max(dp / scale);
                         let e = sim.sum_mv2();
                         if !e.is_finite() {
@@ -140,7 +176,10 @@ fn main() {
                 let t0: Vec<f64> = sys.species.iter().map(|s| s.initial_temperature).collect();
                 let t_end = sys.t_end;
                 let th = evolve_temperatures(&species, &r, &t0, &[0.0, t_end]);
-                rows.iter().rev().find(|r| r.species == 1 && r.t == t_end).map(|r| r.temperature / th[1][0] - 1.0)
+                rows.iter()
+                    .rev()
+                    .find(|r| r.species == 1 && r.t == t_end)
+                    .map(|r| r.temperature / th[1][0] - 1.0)
             } else {
                 None
             };
@@ -174,8 +213,13 @@ fn main() {
                 max_de.max(0.0),
                 acc_min,
                 acc_first,
-                dev.map(|d| format!("{:+.3}", d)).unwrap_or_else(|| "n/a".into()),
-                if ok { format!("ok ({:.1} s)", started.elapsed().as_secs_f64()) } else { verdict.join("; ") }
+                dev.map(|d| format!("{:+.3}", d))
+                    .unwrap_or_else(|| "n/a".into()),
+                if ok {
+                    format!("ok ({:.1} s)", started.elapsed().as_secs_f64())
+                } else {
+                    verdict.join("; ")
+                }
             );
         }
     }

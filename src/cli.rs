@@ -15,7 +15,11 @@ use crate::exit_codes;
 use crate::plan::Shard;
 
 #[derive(Parser)]
-#[command(name = "granular", version, about = "Ensembles of granular-gas simulations into Parquet tables")]
+#[command(
+    name = "granular",
+    version,
+    about = "Ensembles of granular-gas simulations into Parquet tables"
+)]
 struct Cli {
     /// Log format on stderr.
     #[arg(long, value_enum, default_value_t = LogFormat::Text, global = true)]
@@ -98,7 +102,11 @@ pub fn main() -> i32 {
         Ok(c) => c,
         Err(e) => {
             let _ = e.print();
-            return if e.use_stderr() { exit_codes::INVALID_INPUT } else { exit_codes::OK };
+            return if e.use_stderr() {
+                exit_codes::INVALID_INPUT
+            } else {
+                exit_codes::OK
+            };
         }
     };
     init_tracing(cli.log_format);
@@ -124,7 +132,11 @@ pub fn main() -> i32 {
         Command::Theory { manifest, out } => match Campaign::create_or_open(&manifest, &out) {
             Ok(c) => match crate::campaign::writer::write_theory(&c) {
                 Ok(()) => {
-                    println!("wrote {}/tables/dsmc_theory and dsmc_theory_point ({} points)", out.display(), c.plan.points.len());
+                    println!(
+                        "wrote {}/tables/dsmc_theory and dsmc_theory_point ({} points)",
+                        out.display(),
+                        c.plan.points.len()
+                    );
                     exit_codes::OK
                 }
                 Err(e) => {
@@ -137,7 +149,10 @@ pub fn main() -> i32 {
         Command::Plot { dir, out } => match Campaign::open(&dir) {
             Ok(c) => {
                 let out = out.unwrap_or_else(|| dir.join("figures"));
-                match crate::plot::figures(&c).map_err(|e| e.to_string()).and_then(|f| crate::plot::render(&f, &out)) {
+                match crate::plot::figures(&c)
+                    .map_err(|e| e.to_string())
+                    .and_then(|f| crate::plot::render(&f, &out))
+                {
                     Ok(files) => {
                         println!("wrote {} files to {}", files.len(), out.display());
                         exit_codes::OK
@@ -151,10 +166,17 @@ pub fn main() -> i32 {
             Err(e) => report_error(e),
         },
         Command::Schema => {
-            println!("{}", serde_json::to_string_pretty(&crate::manifest::json_schema()).expect("schema"));
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&crate::manifest::json_schema()).expect("schema")
+            );
             exit_codes::OK
         }
-        Command::Run { manifest, out, runtime } => match Campaign::create_or_open(&manifest, &out) {
+        Command::Run {
+            manifest,
+            out,
+            runtime,
+        } => match Campaign::create_or_open(&manifest, &out) {
             Ok(c) => execute(&c, &runtime),
             Err(e) => report_error(e),
         },
@@ -169,7 +191,8 @@ pub fn main() -> i32 {
                     use std::io::Write;
                     let mut out = std::io::stdout().lock();
                     if json {
-                        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&s).expect("status"));
+                        let _ =
+                            writeln!(out, "{}", serde_json::to_string_pretty(&s).expect("status"));
                     } else {
                         let _ = writeln!(
                             out,
@@ -200,9 +223,14 @@ pub fn main() -> i32 {
 }
 
 fn init_tracing(format: LogFormat) {
-    let filter = tracing_subscriber::EnvFilter::try_from_env("GRANULAR_LOG").unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let filter = tracing_subscriber::EnvFilter::try_from_env("GRANULAR_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).with_ansi(ansi);
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .with_ansi(ansi);
     let _ = match format {
         LogFormat::Text => builder.try_init(),
         LogFormat::Json => builder.json().try_init(),
@@ -233,7 +261,9 @@ fn execute(c: &Campaign, rt: &Runtime) -> i32 {
         let _ = ctrlc::set_handler(move || {
             let n = flag.fetch_add(1, Ordering::SeqCst) + 1;
             if n >= 2 {
-                eprintln!("\ninterrupted twice: exiting now (work since the last checkpoints is lost)");
+                eprintln!(
+                    "\ninterrupted twice: exiting now (work since the last checkpoints is lost)"
+                );
                 std::process::exit(exit_codes::INTERRUPTED);
             }
             eprintln!("\ninterrupt: checkpointing running simulations and stopping (press Ctrl-C again to exit at once)");
@@ -257,13 +287,26 @@ fn execute(c: &Campaign, rt: &Runtime) -> i32 {
 }
 
 fn summarise(c: &Campaign, o: &Outcome) -> i32 {
-    tracing::info!(done = o.done, failed = o.failed, remaining = o.remaining, complete = o.complete, "stopped");
+    tracing::info!(
+        done = o.done,
+        failed = o.failed,
+        remaining = o.remaining,
+        complete = o.complete,
+        "stopped"
+    );
     if o.interrupted {
-        eprintln!("stopped with {} runs of this shard left; continue with: granular resume {}", o.remaining, c.root.display());
+        eprintln!(
+            "stopped with {} runs of this shard left; continue with: granular resume {}",
+            o.remaining,
+            c.root.display()
+        );
         return exit_codes::INTERRUPTED;
     }
     if o.failed_in_shard > 0 {
-        eprintln!("{} run(s) failed; see the runs table (status = 'failed') for their reasons", o.failed_in_shard);
+        eprintln!(
+            "{} run(s) failed; see the runs table (status = 'failed') for their reasons",
+            o.failed_in_shard
+        );
         return exit_codes::RUNS_FAILED;
     }
     exit_codes::OK
@@ -288,7 +331,11 @@ impl CliReporter {
             b.enable_steady_tick(Duration::from_millis(200));
             Some(b)
         };
-        CliReporter { bar, running: Default::default(), finished: 0 }
+        CliReporter {
+            bar,
+            running: Default::default(),
+            finished: 0,
+        }
     }
 
     fn update(&mut self) {
@@ -310,16 +357,26 @@ impl CliReporter {
 impl Reporter for CliReporter {
     fn event(&mut self, e: &Event) {
         match e {
-            Event::Plan { total, already, pending } => {
+            Event::Plan {
+                total,
+                already,
+                pending,
+            } => {
                 tracing::info!(total, already_finished = already, pending, "shard plan");
                 if let Some(b) = &self.bar {
                     b.set_length(pending * 1000);
                     b.set_style(
-                        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {percent}% eta {eta} {msg}").expect("template"),
+                        ProgressStyle::with_template(
+                            "{spinner} [{elapsed_precise}] {bar:40} {percent}% eta {eta} {msg}",
+                        )
+                        .expect("template"),
                     );
                 }
             }
-            Event::Started { run_id, resumed_from } => {
+            Event::Started {
+                run_id,
+                resumed_from,
+            } => {
                 tracing::debug!(run_id, ?resumed_from, "run started");
                 self.running.insert(*run_id, 0.0);
             }
@@ -327,13 +384,23 @@ impl Reporter for CliReporter {
                 self.running.insert(*run_id, *fraction);
             }
             Event::Checkpointed { run_id, t } => tracing::debug!(run_id, t, "checkpoint written"),
-            Event::Finished { run_id, seed, status, reason, t, wall_seconds } => {
+            Event::Finished {
+                run_id,
+                seed,
+                status,
+                reason,
+                t,
+                wall_seconds,
+            } => {
                 self.running.remove(run_id);
                 self.finished += 1;
                 match status {
                     RunStatus::Done => tracing::debug!(run_id, wall_seconds, "run done"),
                     RunStatus::Failed => {
-                        let msg = format!("run {run_id} (seed {seed}) failed at t = {t}: {}", reason.as_deref().unwrap_or(""));
+                        let msg = format!(
+                            "run {run_id} (seed {seed}) failed at t = {t}: {}",
+                            reason.as_deref().unwrap_or("")
+                        );
                         match &self.bar {
                             Some(b) => b.suspend(|| tracing::error!("{msg}")),
                             None => tracing::error!("{msg}"),

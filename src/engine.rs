@@ -1,13 +1,15 @@
 //! The closed set of simulators a campaign drives, behind one small interface: start or
 //! restore, advance in bounded chunks, checkpoint, finish with rows.
 
-use crate::dsmc::{DsmcSim, DsmcSystem, PhysicsError, SpeciesRow};
+use crate::dsmc::{DsmcSim, DsmcSystem, PhysicsError, SpeciesRow, TamsdRow};
 use crate::plan::ModelParams;
 
 /// Rows and counters a finished run hands to the writer.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RunOutput {
     pub dsmc_species: Vec<SpeciesRow>,
+    /// Time-averaged MSD per species and lag (empty unless `tamsd` is observed).
+    pub dsmc_tamsd: Vec<TamsdRow>,
     pub collisions: u64,
     pub trials: u64,
 }
@@ -19,13 +21,19 @@ pub enum Engine {
 impl Engine {
     pub fn start(params: &ModelParams, seed: u64) -> Result<Engine, String> {
         match params {
-            ModelParams::Dsmc(p) => Ok(Engine::Dsmc(Box::new(DsmcSim::new(DsmcSystem::from_params(p)?, seed)))),
+            ModelParams::Dsmc(p) => Ok(Engine::Dsmc(Box::new(DsmcSim::new(
+                DsmcSystem::from_params(p)?,
+                seed,
+            )))),
         }
     }
 
     pub fn restore(params: &ModelParams, bytes: &[u8]) -> Result<Engine, String> {
         match params {
-            ModelParams::Dsmc(p) => Ok(Engine::Dsmc(Box::new(DsmcSim::from_state_bytes(DsmcSystem::from_params(p)?, bytes)?))),
+            ModelParams::Dsmc(p) => Ok(Engine::Dsmc(Box::new(DsmcSim::from_state_bytes(
+                DsmcSystem::from_params(p)?,
+                bytes,
+            )?))),
         }
     }
 
@@ -64,7 +72,12 @@ impl Engine {
 
     pub fn finish(self) -> RunOutput {
         match self {
-            Engine::Dsmc(mut s) => RunOutput { dsmc_species: s.take_rows(), collisions: s.st.collisions, trials: s.st.trials },
+            Engine::Dsmc(mut s) => RunOutput {
+                dsmc_tamsd: s.tamsd_rows(),
+                dsmc_species: s.take_rows(),
+                collisions: s.st.collisions,
+                trials: s.st.trials,
+            },
         }
     }
 }

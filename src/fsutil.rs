@@ -8,11 +8,21 @@ use std::path::{Path, PathBuf};
 /// The temporary name used while `path` is being written: hidden (leading `.`) and ending in
 /// `.tmp`, so dataset readers (DuckDB globs, pyarrow's ignore_prefixes) never pick it up.
 pub fn temp_path(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     // pid, clock and host: unique among processes sharing a file system, and recognisable as
     // this host's when a crashed process's leftovers are cleaned up.
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.subsec_nanos()).unwrap_or(0);
-    path.with_file_name(format!(".{name}.{}-{nanos}@{}.tmp", std::process::id(), host_tag()))
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.subsec_nanos())
+        .unwrap_or(0);
+    path.with_file_name(format!(
+        ".{name}.{}-{nanos}@{}.tmp",
+        std::process::id(),
+        host_tag()
+    ))
 }
 
 /// This host's name, reduced to characters safe in a file name.
@@ -20,7 +30,16 @@ pub fn host_tag() -> String {
     let h = std::fs::read_to_string("/proc/sys/kernel/hostname")
         .or_else(|_| std::fs::read_to_string("/etc/hostname"))
         .unwrap_or_else(|_| "unknown".into());
-    h.trim().chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect()
+    h.trim()
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
 }
 
 /// fsync a directory so that a rename inside it is durable.

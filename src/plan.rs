@@ -59,9 +59,17 @@ impl Shard {
     pub const ALL: Shard = Shard { index: 1, count: 1 };
 
     pub fn parse(s: &str) -> Result<Shard, String> {
-        let (a, b) = s.split_once('/').ok_or_else(|| format!("expected I/N, got {s:?}"))?;
-        let index: u32 = a.trim().parse().map_err(|_| format!("expected I/N with integers, got {s:?}"))?;
-        let count: u32 = b.trim().parse().map_err(|_| format!("expected I/N with integers, got {s:?}"))?;
+        let (a, b) = s
+            .split_once('/')
+            .ok_or_else(|| format!("expected I/N, got {s:?}"))?;
+        let index: u32 = a
+            .trim()
+            .parse()
+            .map_err(|_| format!("expected I/N with integers, got {s:?}"))?;
+        let count: u32 = b
+            .trim()
+            .parse()
+            .map_err(|_| format!("expected I/N with integers, got {s:?}"))?;
         if count == 0 || index == 0 || index > count {
             return Err(format!("expected 1 <= I <= N in I/N, got {s:?}"));
         }
@@ -93,7 +101,18 @@ impl Plan {
         let point_id = (run_id / self.replicas as u64) as u32;
         let replica = (run_id % self.replicas as u64) as u32;
         let point = &self.points[point_id as usize];
-        RunSpec { run_id, point_id, replica, seed: derive_seed(self.campaign_seed, self.model, &self.sweep_keys, &point.values, replica) }
+        RunSpec {
+            run_id,
+            point_id,
+            replica,
+            seed: derive_seed(
+                self.campaign_seed,
+                self.model,
+                &self.sweep_keys,
+                &point.values,
+                replica,
+            ),
+        }
     }
 
     pub fn point(&self, point_id: u32) -> &Point {
@@ -137,7 +156,13 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 }
 
 /// The run's seed: ChaCha20 keyed by (campaign seed, hash of the run's identity).
-pub fn derive_seed(campaign_seed: u64, model: ModelKind, keys: &[String], values: &[Value], replica: u32) -> u64 {
+pub fn derive_seed(
+    campaign_seed: u64,
+    model: ModelKind,
+    keys: &[String],
+    values: &[Value],
+    replica: u32,
+) -> u64 {
     let mut identity = String::from(model.as_str());
     for (k, v) in keys.iter().zip(values) {
         identity.push('\u{1f}');
@@ -179,7 +204,9 @@ fn step_mut<'v>(cur: &'v mut Value, part: &str) -> Option<&'v mut Value> {
 fn set_path(params: &mut Value, path: &[&str], value: Value) -> bool {
     let mut cur = params;
     for (i, part) in path.iter().enumerate() {
-        let Some(next) = step_mut(cur, part) else { return false };
+        let Some(next) = step_mut(cur, part) else {
+            return false;
+        };
         if i + 1 == path.len() {
             *next = value;
             return true;
@@ -189,7 +216,12 @@ fn set_path(params: &mut Value, path: &[&str], value: Value) -> bool {
     false
 }
 
-fn typed(model: ModelKind, params: &Value, prefix: &str, errors: &mut Vec<(String, String)>) -> Option<ModelParams> {
+fn typed(
+    model: ModelKind,
+    params: &Value,
+    prefix: &str,
+    errors: &mut Vec<(String, String)>,
+) -> Option<ModelParams> {
     let schema_errs = params_schema_errors(model, params, prefix);
     if !schema_errs.is_empty() {
         errors.extend(schema_errs.into_iter().map(|e| (e.path, e.message)));
@@ -233,17 +265,28 @@ pub fn sweep_key_errors(params: &Value, sweep: &Map<String, Value>) -> Vec<(Stri
         }
         for other in sweep.keys() {
             if other != key && other.starts_with(&format!("{key}.")) {
-                errors.push((kp.clone(), format!("sweep paths {key:?} and {other:?} overlap")));
+                errors.push((
+                    kp.clone(),
+                    format!("sweep paths {key:?} and {other:?} overlap"),
+                ));
             }
         }
-        let Some(list) = list.as_array() else { continue };
+        let Some(list) = list.as_array() else {
+            continue;
+        };
         if list.is_empty() {
             errors.push((kp.clone(), "expected a non-empty list of values".into()));
         }
         let canon: Vec<String> = list.iter().map(canonical).collect();
         for i in 0..canon.len() {
             if canon[..i].contains(&canon[i]) {
-                errors.push((format!("{kp}/{i}"), format!("duplicate sweep value {} (would make duplicate points)", canon[i])));
+                errors.push((
+                    format!("{kp}/{i}"),
+                    format!(
+                        "duplicate sweep value {} (would make duplicate points)",
+                        canon[i]
+                    ),
+                ));
             }
         }
     }
@@ -271,13 +314,24 @@ pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
                 set_path(&mut p, &parts, v.clone());
                 let mut errs = Vec::new();
                 typed(m.model, &p, "/params", &mut errs);
-                let at = format!("/params/{}", parts.iter().map(|s| pointer_escape(s)).collect::<Vec<_>>().join("/"));
+                let at = format!(
+                    "/params/{}",
+                    parts
+                        .iter()
+                        .map(|s| pointer_escape(s))
+                        .collect::<Vec<_>>()
+                        .join("/")
+                );
                 for (path, msg) in errs {
                     let mapped = match path.strip_prefix(&at) {
                         Some(rest) => format!("{kp}/{i}{rest}"),
                         None => format!("{kp}/{i}"),
                     };
-                    let msg = if path.starts_with(&at) { msg } else { format!("with this value, {path}: {msg}") };
+                    let msg = if path.starts_with(&at) {
+                        msg
+                    } else {
+                        format!("with this value, {path}: {msg}")
+                    };
                     errors.push((mapped, msg));
                 }
             }
@@ -291,7 +345,13 @@ pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
     // Cartesian product, first key outermost.
     let n_points: usize = lists.iter().map(|l| l.len()).product();
     if n_points as u64 * m.replicas as u64 > u32::MAX as u64 {
-        return Err(vec![("/sweep".into(), format!("{} runs is more than this version supports", n_points as u64 * m.replicas as u64))]);
+        return Err(vec![(
+            "/sweep".into(),
+            format!(
+                "{} runs is more than this version supports",
+                n_points as u64 * m.replicas as u64
+            ),
+        )]);
     }
     let mut points = Vec::with_capacity(n_points);
     for point_id in 0..n_points {
@@ -301,7 +361,11 @@ pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
             idx[j] = rem % l.len();
             rem /= l.len();
         }
-        let values: Vec<Value> = idx.iter().enumerate().map(|(j, &i)| lists[j][i].clone()).collect();
+        let values: Vec<Value> = idx
+            .iter()
+            .enumerate()
+            .map(|(j, &i)| lists[j][i].clone())
+            .collect();
         let params = if keys.is_empty() {
             base_typed.clone()
         } else {
@@ -313,19 +377,33 @@ pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
             let mut errs = Vec::new();
             let t = typed(m.model, &p, "/params", &mut errs);
             for (path, msg) in errs {
-                let desc: Vec<String> = keys.iter().zip(&values).map(|(k, v)| format!("{k}={v}")).collect();
+                let desc: Vec<String> = keys
+                    .iter()
+                    .zip(&values)
+                    .map(|(k, v)| format!("{k}={v}"))
+                    .collect();
                 errors.push((path, format!("{msg} (at sweep point {})", desc.join(", "))));
             }
             t
         };
         if let Some(params) = params {
-            points.push(Point { point_id: point_id as u32, values, params });
+            points.push(Point {
+                point_id: point_id as u32,
+                values,
+                params,
+            });
         }
     }
     if !errors.is_empty() {
         return Err(errors);
     }
-    Ok(Plan { model: m.model, campaign_seed: m.seed, replicas: m.replicas, sweep_keys: keys, points })
+    Ok(Plan {
+        model: m.model,
+        campaign_seed: m.seed,
+        replicas: m.replicas,
+        sweep_keys: keys,
+        points,
+    })
 }
 
 #[cfg(test)]
@@ -346,8 +424,13 @@ mod tests {
     /// a value to a sweep list leaves the seeds of existing points unchanged.
     #[test]
     fn seeds_follow_identity_not_position() {
-        let (_, a) = parse_manifest(&manifest(r#"{"restitution.constant": [0.5, 0.9]}"#), "a").unwrap();
-        let (_, b) = parse_manifest(&manifest(r#"{"restitution.constant": [0.1, 0.5, 0.9]}"#), "b").unwrap();
+        let (_, a) =
+            parse_manifest(&manifest(r#"{"restitution.constant": [0.5, 0.9]}"#), "a").unwrap();
+        let (_, b) = parse_manifest(
+            &manifest(r#"{"restitution.constant": [0.1, 0.5, 0.9]}"#),
+            "b",
+        )
+        .unwrap();
         assert_eq!(a.n_runs(), 4);
         assert_eq!(b.n_runs(), 6);
         // eps = 0.5 is point 0 in a, point 1 in b.
@@ -359,10 +442,22 @@ mod tests {
 
     #[test]
     fn product_order_first_key_outermost() {
-        let (_, p) = parse_manifest(&manifest(r#"{"method": ["low_rank", "bird"], "restitution.constant": [0.5, 0.9, 1.0]}"#), "m").unwrap();
+        let (_, p) = parse_manifest(
+            &manifest(
+                r#"{"method": ["low_rank", "bird"], "restitution.constant": [0.5, 0.9, 1.0]}"#,
+            ),
+            "m",
+        )
+        .unwrap();
         assert_eq!(p.points.len(), 6);
-        assert_eq!(p.points[1].values, vec![serde_json::json!("low_rank"), serde_json::json!(0.9)]);
-        assert_eq!(p.points[3].values, vec![serde_json::json!("bird"), serde_json::json!(0.5)]);
+        assert_eq!(
+            p.points[1].values,
+            vec![serde_json::json!("low_rank"), serde_json::json!(0.9)]
+        );
+        assert_eq!(
+            p.points[3].values,
+            vec![serde_json::json!("bird"), serde_json::json!(0.5)]
+        );
         let ModelParams::Dsmc(d) = &p.points[3].params;
         assert_eq!(d.method, crate::manifest::dsmc::DsmcMethod::Bird);
     }

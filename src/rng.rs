@@ -29,14 +29,21 @@ pub struct RngPosition {
 
 impl RunRng {
     pub fn new(seed: u64) -> Self {
-        let mut r = RunRng { core: ChaCha8Rng::seed_from_u64(seed), filled_at: 0, buf: Box::new([0; BUF]), idx: BUF, seed };
+        let mut r = RunRng {
+            core: ChaCha8Rng::seed_from_u64(seed),
+            filled_at: 0,
+            buf: Box::new([0; BUF]),
+            idx: BUF,
+            seed,
+        };
         r.refill();
         r
     }
 
     fn refill(&mut self) {
         self.filled_at = self.core.get_word_pos();
-        let bytes: &mut [u8; BUF * 8] = unsafe { &mut *(self.buf.as_mut_ptr() as *mut [u8; BUF * 8]) };
+        let bytes: &mut [u8; BUF * 8] =
+            unsafe { &mut *(self.buf.as_mut_ptr() as *mut [u8; BUF * 8]) };
         self.core.fill_bytes(bytes);
         for w in self.buf.iter_mut() {
             *w = u64::from_le(*w);
@@ -115,7 +122,11 @@ impl RunRng {
     }
 
     pub fn position(&self) -> RngPosition {
-        RngPosition { seed: self.seed, filled_at: self.filled_at, idx: self.idx as u32 }
+        RngPosition {
+            seed: self.seed,
+            filled_at: self.filled_at,
+            idx: self.idx as u32,
+        }
     }
 
     pub fn restore(pos: &RngPosition) -> Self {

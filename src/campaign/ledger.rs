@@ -62,22 +62,38 @@ pub fn pending_path(final_path: &Path) -> PathBuf {
 pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
     let mut out = Vec::new();
     let dir = root.join("ledger");
-    let Ok(entries) = fs::read_dir(&dir) else { return Ok(out) };
-    let mut tags: Vec<PathBuf> = entries.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.is_dir()).collect();
+    let Ok(entries) = fs::read_dir(&dir) else {
+        return Ok(out);
+    };
+    let mut tags: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.is_dir())
+        .collect();
     tags.sort();
     for tag in tags {
         let mut files: Vec<PathBuf> = fs::read_dir(&tag)
             .map_err(|e| format!("{}: {e}", tag.display()))?
             .filter_map(|e| e.ok())
             .map(|e| e.path())
-            .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("commit-") && n.to_string_lossy().ends_with(".json")))
+            .filter(|p| {
+                p.file_name().is_some_and(|n| {
+                    n.to_string_lossy().starts_with("commit-")
+                        && n.to_string_lossy().ends_with(".json")
+                })
+            })
             .collect();
         files.sort();
         for f in files {
             let text = fs::read_to_string(&f).map_err(|e| format!("{}: {e}", f.display()))?;
-            let c: Commit = serde_json::from_str(&text).map_err(|e| format!("{}: corrupt commit record: {e}", f.display()))?;
+            let c: Commit = serde_json::from_str(&text)
+                .map_err(|e| format!("{}: corrupt commit record: {e}", f.display()))?;
             if c.format_version != FORMAT_VERSION {
-                return Err(format!("{}: format version {}, this granular reads {FORMAT_VERSION}", f.display(), c.format_version));
+                return Err(format!(
+                    "{}: format version {}, this granular reads {FORMAT_VERSION}",
+                    f.display(),
+                    c.format_version
+                ));
             }
             out.push(c);
         }
@@ -97,12 +113,17 @@ pub fn finished_runs(commits: &[Commit]) -> BTreeMap<u64, RunStatus> {
 }
 
 pub fn next_seq(root: &Path, tag: &str) -> u64 {
-    let Ok(entries) = fs::read_dir(ledger_dir(root, tag)) else { return 1 };
+    let Ok(entries) = fs::read_dir(ledger_dir(root, tag)) else {
+        return 1;
+    };
     entries
         .filter_map(|e| e.ok())
         .filter_map(|e| {
             let n = e.file_name().to_string_lossy().into_owned();
-            n.strip_prefix("commit-")?.strip_suffix(".json")?.parse::<u64>().ok()
+            n.strip_prefix("commit-")?
+                .strip_suffix(".json")?
+                .parse::<u64>()
+                .ok()
         })
         .max()
         .unwrap_or(0)
@@ -114,7 +135,11 @@ pub fn next_seq(root: &Path, tag: &str) -> u64 {
 pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
     let mut notes = Vec::new();
     let commits = read_commits(root)?;
-    let live: Vec<String> = live_locks(root).into_iter().map(|l| l.shard_tag).filter(|t| t != ours).collect();
+    let live: Vec<String> = live_locks(root)
+        .into_iter()
+        .map(|l| l.shard_tag)
+        .filter(|t| t != ours)
+        .collect();
     let mut referenced = std::collections::HashSet::new();
     for c in &commits {
         for f in &c.files {
@@ -134,7 +159,9 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
     let tables = root.join("tables");
     if let Ok(entries) = fs::read_dir(&tables) {
         for t in entries.filter_map(|e| e.ok()) {
-            let Ok(files) = fs::read_dir(t.path()) else { continue };
+            let Ok(files) = fs::read_dir(t.path()) else {
+                continue;
+            };
             for f in files.filter_map(|e| e.ok()) {
                 let p = f.path();
                 let name = f.file_name().to_string_lossy().into_owned();
@@ -142,7 +169,12 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
                     continue;
                 }
                 // `.part-<tag>-<seq>.parquet.pending`
-                let tag = name.trim_start_matches(".part-").split('-').next().unwrap_or("").to_string();
+                let tag = name
+                    .trim_start_matches(".part-")
+                    .split('-')
+                    .next()
+                    .unwrap_or("")
+                    .to_string();
                 if live.contains(&tag) {
                     continue;
                 }
@@ -160,28 +192,46 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
 /// other hosts are left alone: their processes cannot be checked from here.
 fn remove_stale_temporaries(root: &Path) -> Vec<String> {
     let mut notes = Vec::new();
-    let mut dirs = vec![root.to_path_buf(), root.join("checkpoints"), root.join("locks")];
+    let mut dirs = vec![
+        root.to_path_buf(),
+        root.join("checkpoints"),
+        root.join("locks"),
+    ];
     for sub in ["tables", "ledger"] {
         if let Ok(it) = fs::read_dir(root.join(sub)) {
-            dirs.extend(it.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.is_dir()));
+            dirs.extend(
+                it.filter_map(|e| e.ok())
+                    .map(|e| e.path())
+                    .filter(|p| p.is_dir()),
+            );
         }
     }
     for dir in dirs {
         let Ok(it) = fs::read_dir(&dir) else { continue };
         for f in it.filter_map(|e| e.ok()) {
             let name = f.file_name().to_string_lossy().into_owned();
-            let Some(stem) = name.strip_suffix(".tmp") else { continue };
+            let Some(stem) = name.strip_suffix(".tmp") else {
+                continue;
+            };
             if !name.starts_with('.') {
                 continue;
             }
-            let Some((stem, host)) = stem.rsplit_once('@') else { continue };
+            let Some((stem, host)) = stem.rsplit_once('@') else {
+                continue;
+            };
             if host != fsutil::host_tag() {
                 continue;
             }
-            let pid = stem.rsplit_once('.').and_then(|(_, tail)| tail.split('-').next()).and_then(|p| p.parse::<u32>().ok());
+            let pid = stem
+                .rsplit_once('.')
+                .and_then(|(_, tail)| tail.split('-').next())
+                .and_then(|p| p.parse::<u32>().ok());
             if let Some(pid) = pid {
                 if !pid_alive(pid) && fs::remove_file(f.path()).is_ok() {
-                    notes.push(format!("removed the stale temporary file {}", f.path().display()));
+                    notes.push(format!(
+                        "removed the stale temporary file {}",
+                        f.path().display()
+                    ));
                 }
             }
         }
@@ -210,7 +260,9 @@ pub fn hostname() -> String {
 pub fn pid_alive(pid: u32) -> bool {
     match fs::read_to_string(format!("/proc/{pid}/stat")) {
         Ok(s) => {
-            let state = s.rsplit_once(')').and_then(|(_, rest)| rest.trim_start().chars().next());
+            let state = s
+                .rsplit_once(')')
+                .and_then(|(_, rest)| rest.trim_start().chars().next());
             !matches!(state, Some('Z') | Some('X'))
         }
         Err(_) => false,
@@ -224,7 +276,9 @@ fn lock_is_live(l: &LockInfo) -> bool {
 
 /// Locks of live processes.
 pub fn live_locks(root: &Path) -> Vec<LockInfo> {
-    let Ok(entries) = fs::read_dir(root.join("locks")) else { return Vec::new() };
+    let Ok(entries) = fs::read_dir(root.join("locks")) else {
+        return Vec::new();
+    };
     entries
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().ends_with(".lock"))
@@ -262,7 +316,11 @@ impl ShardLock {
             shard_count: shard.count,
         };
         for _ in 0..2 {
-            match fs::OpenOptions::new().write(true).create_new(true).open(&path) {
+            match fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&path)
+            {
                 Ok(mut f) => {
                     use std::io::Write;
                     f.write_all(serde_json::to_string(&info).expect("lock info").as_bytes())
@@ -272,7 +330,9 @@ impl ShardLock {
                     return Ok(ShardLock { path });
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let holder = fs::read_to_string(&path).ok().and_then(|s| serde_json::from_str::<LockInfo>(&s).ok());
+                    let holder = fs::read_to_string(&path)
+                        .ok()
+                        .and_then(|s| serde_json::from_str::<LockInfo>(&s).ok());
                     match holder {
                         Some(h) if lock_is_live(&h) => {
                             return Err(format!(

@@ -97,7 +97,10 @@ impl Campaign {
             return Ok(existing);
         }
         if out.exists() {
-            let non_empty = std::fs::read_dir(out).map_err(|e| io_err(out, e))?.next().is_some();
+            let non_empty = std::fs::read_dir(out)
+                .map_err(|e| io_err(out, e))?
+                .next()
+                .is_some();
             if non_empty {
                 return Err(CampaignError::Refused(format!(
                     "{} exists and is not a granular campaign directory (no campaign.json); refusing to write into it",
@@ -119,17 +122,29 @@ impl Campaign {
         // for people), so a kill between the two writes leaves a resumable directory.
         fsutil::write_atomic(&info_path, &bytes).map_err(|e| io_err(&info_path, e))?;
         fsutil::write_atomic(&out.join("manifest.json"), &text).map_err(|e| io_err(out, e))?;
-        Ok(Campaign { root: out.to_path_buf(), manifest, plan, manifest_json: canonical(&value) })
+        Ok(Campaign {
+            root: out.to_path_buf(),
+            manifest,
+            plan,
+            manifest_json: canonical(&value),
+        })
     }
 
     /// Open an existing campaign directory.
     pub fn open(root: &Path) -> Result<Campaign, CampaignError> {
         let info_path = root.join("campaign.json");
         let text = std::fs::read_to_string(&info_path).map_err(|e| {
-            CampaignError::Refused(format!("{}: not a granular campaign directory ({e})", root.display()))
+            CampaignError::Refused(format!(
+                "{}: not a granular campaign directory ({e})",
+                root.display()
+            ))
         })?;
-        let info: CampaignInfo = serde_json::from_str(&text)
-            .map_err(|e| CampaignError::Refused(format!("{}: corrupt or foreign file: {e}", info_path.display())))?;
+        let info: CampaignInfo = serde_json::from_str(&text).map_err(|e| {
+            CampaignError::Refused(format!(
+                "{}: corrupt or foreign file: {e}",
+                info_path.display()
+            ))
+        })?;
         if info.format_version != FORMAT_VERSION {
             return Err(CampaignError::Refused(format!(
                 "{}: format version {}, this granular reads {FORMAT_VERSION}",
@@ -142,7 +157,20 @@ impl Campaign {
         }
         let text = serde_json::to_string(&info.manifest).expect("value serialises");
         let (manifest, plan) = manifest::parse_manifest(&text, &info_path.display().to_string())?;
-        Ok(Campaign { root: root.to_path_buf(), manifest, plan, manifest_json: canonical(&info.manifest) })
+        Ok(Campaign {
+            root: root.to_path_buf(),
+            manifest,
+            plan,
+            manifest_json: canonical(&info.manifest),
+        })
+    }
+
+    /// Whether any point records the time-averaged MSD (then, and only then, the campaign has
+    /// the `dsmc_tamsd*` and `dsmc_theory_tamsd` tables).
+    pub fn observes_tamsd(&self) -> bool {
+        self.plan.points.iter().any(|p| match &p.params {
+            crate::plan::ModelParams::Dsmc(d) => d.wants_tamsd(),
+        })
     }
 
     pub fn checkpoint_dir(&self) -> PathBuf {
@@ -178,14 +206,41 @@ impl Default for RunOptions {
 #[derive(Debug, Clone)]
 pub enum Event {
     /// The shard's work: `pending` runs to do out of `total` in the shard.
-    Plan { total: u64, already: u64, pending: u64 },
-    Started { run_id: u64, resumed_from: Option<f64> },
-    Progress { run_id: u64, fraction: f64 },
-    Checkpointed { run_id: u64, t: f64 },
-    Finished { run_id: u64, seed: u64, status: RunStatus, reason: Option<String>, t: f64, wall_seconds: f64 },
-    Interrupted { run_id: u64 },
-    Committed { runs: usize, seq: u64 },
-    Warning { message: String },
+    Plan {
+        total: u64,
+        already: u64,
+        pending: u64,
+    },
+    Started {
+        run_id: u64,
+        resumed_from: Option<f64>,
+    },
+    Progress {
+        run_id: u64,
+        fraction: f64,
+    },
+    Checkpointed {
+        run_id: u64,
+        t: f64,
+    },
+    Finished {
+        run_id: u64,
+        seed: u64,
+        status: RunStatus,
+        reason: Option<String>,
+        t: f64,
+        wall_seconds: f64,
+    },
+    Interrupted {
+        run_id: u64,
+    },
+    Committed {
+        runs: usize,
+        seq: u64,
+    },
+    Warning {
+        message: String,
+    },
 }
 
 /// Receives events (progress bar, logs); called on the dispatcher thread only.
@@ -212,7 +267,11 @@ pub struct Outcome {
 }
 
 /// Run (or continue) the pending runs of `opts.shard`.
-pub fn run(c: &Campaign, opts: &RunOptions, reporter: &mut dyn Reporter) -> Result<Outcome, CampaignError> {
+pub fn run(
+    c: &Campaign,
+    opts: &RunOptions,
+    reporter: &mut dyn Reporter,
+) -> Result<Outcome, CampaignError> {
     let _lock = ShardLock::acquire(&c.root, opts.shard).map_err(CampaignError::Refused)?;
     let tag = opts.shard.tag();
     for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
@@ -220,17 +279,38 @@ pub fn run(c: &Campaign, opts: &RunOptions, reporter: &mut dyn Reporter) -> Resu
     }
     let commits = ledger::read_commits(&c.root).map_err(CampaignError::Refused)?;
     let finished = ledger::finished_runs(&commits);
-    let mine: Vec<RunSpec> = (0..c.plan.n_runs()).filter(|r| opts.shard.contains(*r)).map(|r| c.plan.run(r)).collect();
-    let pending: Vec<RunSpec> = mine.iter().filter(|r| !finished.contains_key(&r.run_id)).copied().collect();
-    reporter.event(&Event::Plan { total: mine.len() as u64, already: (mine.len() - pending.len()) as u64, pending: pending.len() as u64 });
+    let mine: Vec<RunSpec> = (0..c.plan.n_runs())
+        .filter(|r| opts.shard.contains(*r))
+        .map(|r| c.plan.run(r))
+        .collect();
+    let pending: Vec<RunSpec> = mine
+        .iter()
+        .filter(|r| !finished.contains_key(&r.run_id))
+        .copied()
+        .collect();
+    reporter.event(&Event::Plan {
+        total: mine.len() as u64,
+        already: (mine.len() - pending.len()) as u64,
+        pending: pending.len() as u64,
+    });
 
     let ckpt_dir = c.checkpoint_dir();
     fsutil::create_dir_durable(&ckpt_dir).map_err(|e| io_err(&ckpt_dir, e))?;
     let mut writer = writer::Writer::new(c, &tag).map_err(|e| CampaignError::Io(e.to_string()))?;
-    writer.ensure_points().map_err(|e| CampaignError::Io(e.to_string()))?;
-    writer.ensure_theory().map_err(|e| CampaignError::Io(e.to_string()))?;
+    writer
+        .ensure_points()
+        .map_err(|e| CampaignError::Io(e.to_string()))?;
+    writer
+        .ensure_theory()
+        .map_err(|e| CampaignError::Io(e.to_string()))?;
 
-    let threads = if opts.threads == 0 { std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1) } else { opts.threads };
+    let threads = if opts.threads == 0 {
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+    } else {
+        opts.threads
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("granular-worker-{i}"))
@@ -325,21 +405,32 @@ pub fn run(c: &Campaign, opts: &RunOptions, reporter: &mut dyn Reporter) -> Resu
     }
     let commits = ledger::read_commits(&c.root).map_err(CampaignError::Refused)?;
     let finished = ledger::finished_runs(&commits);
-    outcome.remaining = mine.iter().filter(|r| !finished.contains_key(&r.run_id)).count() as u64;
-    outcome.failed_in_shard = mine.iter().filter(|r| finished.get(&r.run_id) == Some(&RunStatus::Failed)).count() as u64;
+    outcome.remaining = mine
+        .iter()
+        .filter(|r| !finished.contains_key(&r.run_id))
+        .count() as u64;
+    outcome.failed_in_shard = mine
+        .iter()
+        .filter(|r| finished.get(&r.run_id) == Some(&RunStatus::Failed))
+        .count() as u64;
     if outcome.remaining == 0 {
         outcome.interrupted = false;
     }
     if finished.len() as u64 == c.plan.n_runs() {
-        crate::store::summary::write_summaries(c, &finished).map_err(|e| CampaignError::Io(e.to_string()))?;
+        crate::store::summary::write_summaries(c, &finished)
+            .map_err(|e| CampaignError::Io(e.to_string()))?;
         outcome.complete = true;
     }
     Ok(outcome)
 }
 
 /// Run a single run to completion in memory, without a campaign directory (tests, benches).
-pub fn run_in_memory(params: &crate::plan::ModelParams, seed: u64) -> Result<crate::engine::RunOutput, crate::dsmc::PhysicsError> {
-    let mut e = crate::engine::Engine::start(params, seed).map_err(|reason| crate::dsmc::PhysicsError { t: 0.0, reason })?;
+pub fn run_in_memory(
+    params: &crate::plan::ModelParams,
+    seed: u64,
+) -> Result<crate::engine::RunOutput, crate::dsmc::PhysicsError> {
+    let mut e = crate::engine::Engine::start(params, seed)
+        .map_err(|reason| crate::dsmc::PhysicsError { t: 0.0, reason })?;
     while !e.advance(u64::MAX)? {}
     Ok(e.finish())
 }

@@ -45,8 +45,13 @@ struct Heartbeat {
 }
 
 pub fn write_heartbeat(root: &Path, tag: &str, running: &BTreeSet<u64>) -> std::io::Result<()> {
-    let hb = Heartbeat { running: running.iter().copied().collect() };
-    fsutil::write_atomic(&root.join("locks").join(format!("{tag}.running.json")), &serde_json::to_vec(&hb).expect("heartbeat"))
+    let hb = Heartbeat {
+        running: running.iter().copied().collect(),
+    };
+    fsutil::write_atomic(
+        &root.join("locks").join(format!("{tag}.running.json")),
+        &serde_json::to_vec(&hb).expect("heartbeat"),
+    )
 }
 
 pub fn remove_heartbeat(root: &Path, tag: &str) {
@@ -59,8 +64,14 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
     let live = ledger::live_locks(&c.root);
     let mut running = BTreeSet::new();
     for l in &live {
-        let p = c.root.join("locks").join(format!("{}.running.json", l.shard_tag));
-        if let Some(hb) = std::fs::read_to_string(p).ok().and_then(|s| serde_json::from_str::<Heartbeat>(&s).ok()) {
+        let p = c
+            .root
+            .join("locks")
+            .join(format!("{}.running.json", l.shard_tag));
+        if let Some(hb) = std::fs::read_to_string(p)
+            .ok()
+            .and_then(|s| serde_json::from_str::<Heartbeat>(&s).ok())
+        {
             running.extend(hb.running);
         }
     }
@@ -69,7 +80,10 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
             it.filter_map(|e| e.ok())
                 .filter_map(|e| {
                     let n = e.file_name().to_string_lossy().into_owned();
-                    n.strip_prefix("run-")?.strip_suffix(".ckpt")?.parse::<u64>().ok()
+                    n.strip_prefix("run-")?
+                        .strip_suffix(".ckpt")?
+                        .parse::<u64>()
+                        .ok()
                 })
                 .collect()
         })
@@ -80,7 +94,14 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
         .iter()
         .map(|p| PointStatus {
             point_id: p.point_id,
-            point: c.plan.sweep_keys.iter().zip(&p.values).map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(" "),
+            point: c
+                .plan
+                .sweep_keys
+                .iter()
+                .zip(&p.values)
+                .map(|(k, v)| format!("{k}={v}"))
+                .collect::<Vec<_>>()
+                .join(" "),
             counts: Counts::default(),
         })
         .collect();
@@ -116,7 +137,10 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
         name: c.manifest.name.clone(),
         runs: c.plan.n_runs(),
         counts: total,
-        live_shards: live.iter().map(|l| format!("{} (pid {} on {})", l.shard, l.pid, l.host)).collect(),
+        live_shards: live
+            .iter()
+            .map(|l| format!("{} (pid {} on {})", l.shard, l.pid, l.host))
+            .collect(),
         points,
     })
 }

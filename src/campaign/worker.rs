@@ -16,7 +16,10 @@ use crate::CODE_VERSION;
 pub enum RunEnd {
     Done(RunOutput),
     /// A deterministic physics failure.
-    Failed { reason: String, t: f64 },
+    Failed {
+        reason: String,
+        t: f64,
+    },
     Interrupted,
 }
 
@@ -42,15 +45,26 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
     match checkpoint::load(&dir, spec.run_id, spec.seed) {
         Ok(Some(loaded)) => {
             for s in loaded.skipped {
-                let _ = tx.send((Event::Warning { message: format!("run {}: skipped a bad checkpoint: {s}", spec.run_id) }, None));
+                let _ = tx.send((
+                    Event::Warning {
+                        message: format!("run {}: skipped a bad checkpoint: {s}", spec.run_id),
+                    },
+                    None,
+                ));
             }
             let format_ok = match params {
-                crate::plan::ModelParams::Dsmc(_) => loaded.header.state_format == crate::dsmc::STATE_FORMAT,
+                crate::plan::ModelParams::Dsmc(_) => {
+                    loaded.header.state_format == crate::dsmc::STATE_FORMAT
+                }
             };
             let restored = if format_ok {
                 Engine::restore(params, &loaded.payload)
             } else {
-                Err(format!("state format {:?}, this granular writes {:?}", loaded.header.state_format, crate::dsmc::STATE_FORMAT))
+                Err(format!(
+                    "state format {:?}, this granular writes {:?}",
+                    loaded.header.state_format,
+                    crate::dsmc::STATE_FORMAT
+                ))
             };
             match restored {
                 Ok(e) => {
@@ -59,14 +73,28 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
                     engine = Some(e);
                 }
                 Err(e) => {
-                    let _ = tx.send((Event::Warning { message: format!("run {}: checkpoint unusable ({e}); restarting from t = 0", spec.run_id) }, None));
+                    let _ = tx.send((
+                        Event::Warning {
+                            message: format!(
+                                "run {}: checkpoint unusable ({e}); restarting from t = 0",
+                                spec.run_id
+                            ),
+                        },
+                        None,
+                    ));
                 }
             }
         }
         Ok(None) => {}
         Err(problems) => {
             let _ = tx.send((
-                Event::Warning { message: format!("run {}: no usable checkpoint ({}); restarting from t = 0", spec.run_id, problems.join("; ")) },
+                Event::Warning {
+                    message: format!(
+                        "run {}: no usable checkpoint ({}); restarting from t = 0",
+                        spec.run_id,
+                        problems.join("; ")
+                    ),
+                },
                 None,
             ));
         }
@@ -78,7 +106,13 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
             Err(reason) => return finish(tx, spec, RunEnd::Failed { reason, t: 0.0 }, 0.0, None),
         },
     };
-    let _ = tx.send((Event::Started { run_id: spec.run_id, resumed_from }, None));
+    let _ = tx.send((
+        Event::Started {
+            run_id: spec.run_id,
+            resumed_from,
+        },
+        None,
+    ));
     let mut last_ckpt = Instant::now();
     let mut last_ckpt_t = resumed_from;
     let mut last_progress = Instant::now();
@@ -100,9 +134,19 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
     loop {
         if opts.interrupt.load(Ordering::Relaxed) > 0 {
             if let Err(e) = save(&mut engine, &mut last_ckpt_t) {
-                let _ = tx.send((Event::Warning { message: format!("run {}: checkpoint failed: {e}", spec.run_id) }, None));
+                let _ = tx.send((
+                    Event::Warning {
+                        message: format!("run {}: checkpoint failed: {e}", spec.run_id),
+                    },
+                    None,
+                ));
             }
-            let _ = tx.send((Event::Interrupted { run_id: spec.run_id }, None));
+            let _ = tx.send((
+                Event::Interrupted {
+                    run_id: spec.run_id,
+                },
+                None,
+            ));
             return;
         }
         match engine.advance(WORK_CHUNK) {
@@ -114,26 +158,57 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
                     pe.reason,
                     spec.run_id,
                     spec.seed,
-                    last_ckpt_t.map(|t| t.to_string()).unwrap_or_else(|| "none".into())
+                    last_ckpt_t
+                        .map(|t| t.to_string())
+                        .unwrap_or_else(|| "none".into())
                 );
-                return finish(tx, spec, RunEnd::Failed { reason, t: pe.t }, wall(&started), None);
+                return finish(
+                    tx,
+                    spec,
+                    RunEnd::Failed { reason, t: pe.t },
+                    wall(&started),
+                    None,
+                );
             }
         }
         if last_ckpt.elapsed() >= opts.checkpoint_every {
             if let Err(e) = save(&mut engine, &mut last_ckpt_t) {
-                let _ = tx.send((Event::Warning { message: format!("run {}: checkpoint failed: {e}", spec.run_id) }, None));
+                let _ = tx.send((
+                    Event::Warning {
+                        message: format!("run {}: checkpoint failed: {e}", spec.run_id),
+                    },
+                    None,
+                ));
             } else {
-                let _ = tx.send((Event::Checkpointed { run_id: spec.run_id, t: engine.time() }, None));
+                let _ = tx.send((
+                    Event::Checkpointed {
+                        run_id: spec.run_id,
+                        t: engine.time(),
+                    },
+                    None,
+                ));
             }
             last_ckpt = Instant::now();
         }
         if last_progress.elapsed().as_millis() >= 250 {
             last_progress = Instant::now();
-            let _ = tx.send((Event::Progress { run_id: spec.run_id, fraction: engine.progress() }, None));
+            let _ = tx.send((
+                Event::Progress {
+                    run_id: spec.run_id,
+                    fraction: engine.progress(),
+                },
+                None,
+            ));
         }
     }
     let t = engine.time();
-    finish(tx, spec, RunEnd::Done(engine.finish()), wall(&started), Some(t))
+    finish(
+        tx,
+        spec,
+        RunEnd::Done(engine.finish()),
+        wall(&started),
+        Some(t),
+    )
 }
 
 fn finish(tx: &mut Tx, spec: &RunSpec, end: RunEnd, wall_seconds: f64, t: Option<f64>) {
@@ -142,6 +217,20 @@ fn finish(tx: &mut Tx, spec: &RunSpec, end: RunEnd, wall_seconds: f64, t: Option
         RunEnd::Failed { reason, t } => (RunStatus::Failed, Some(reason.clone()), *t),
         RunEnd::Interrupted => unreachable!("interrupted runs are not finished"),
     };
-    let event = Event::Finished { run_id: spec.run_id, seed: spec.seed, status, reason, t, wall_seconds };
-    let _ = tx.send((event, Some(RunResult { spec: *spec, end, wall_seconds })));
+    let event = Event::Finished {
+        run_id: spec.run_id,
+        seed: spec.seed,
+        status,
+        reason,
+        t,
+        wall_seconds,
+    };
+    let _ = tx.send((
+        event,
+        Some(RunResult {
+            spec: *spec,
+            end,
+            wall_seconds,
+        }),
+    ));
 }

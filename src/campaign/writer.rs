@@ -10,7 +10,7 @@ use super::Campaign;
 use crate::fsutil;
 use crate::plan::canonical;
 use crate::store::parquet_io::{self, StoreError};
-use crate::store::tables::{self, RunRow, SpeciesBuffer, SweepColumn};
+use crate::store::tables::{self, RunRow, SpeciesBuffer, SweepColumn, TamsdBuffer};
 use crate::store::{checkpoint, FORMAT_VERSION};
 
 /// Flush when this many rows are buffered, whatever the time.
@@ -23,12 +23,30 @@ pub struct Writer<'c> {
     cols: Vec<SweepColumn>,
     runs: Vec<RunRow>,
     species: SpeciesBuffer,
+    tamsd: TamsdBuffer,
     since: Option<Instant>,
 }
 
 impl<'c> Writer<'c> {
     pub fn new(c: &'c Campaign, tag: &str) -> Result<Self, StoreError> {
-        for t in [tables::RUNS, tables::POINTS, tables::DSMC_SPECIES, tables::DSMC_SPECIES_SUMMARY, tables::DSMC_THEORY, tables::DSMC_THEORY_POINT] {
+        let mut names = vec![
+            tables::RUNS,
+            tables::POINTS,
+            tables::DSMC_SPECIES,
+            tables::DSMC_SPECIES_SUMMARY,
+            tables::DSMC_THEORY,
+            tables::DSMC_THEORY_POINT,
+        ];
+        // Tables of an observable exist only when it is recorded (an empty dataset directory
+        // is an error for DuckDB's globs).
+        if c.observes_tamsd() {
+            names.extend([
+                tables::DSMC_TAMSD,
+                tables::DSMC_TAMSD_SUMMARY,
+                tables::DSMC_THEORY_TAMSD,
+            ]);
+        }
+        for t in names {
             let d = c.root.join("tables").join(t);
             fsutil::create_dir_durable(&d).map_err(|e| StoreError::io(&d, e))?;
         }
@@ -41,13 +59,19 @@ impl<'c> Writer<'c> {
             cols: tables::sweep_columns(&c.plan),
             runs: Vec::new(),
             species: SpeciesBuffer::default(),
+            tamsd: TamsdBuffer::default(),
             since: None,
         })
     }
 
     /// Write the `points` table once (it depends only on the manifest).
     pub fn ensure_points(&self) -> Result<(), StoreError> {
-        let path = self.c.root.join("tables").join(tables::POINTS).join("points.parquet");
+        let path = self
+            .c
+            .root
+            .join("tables")
+            .join(tables::POINTS)
+            .join("points.parquet");
         if path.exists() {
             return Ok(());
         }
@@ -57,7 +81,9 @@ impl<'c> Writer<'c> {
             .points
             .iter()
             .map(|p| match &p.params {
-                crate::plan::ModelParams::Dsmc(d) => canonical(&serde_json::to_value(d).expect("params serialise")),
+                crate::plan::ModelParams::Dsmc(d) => {
+                    canonical(&serde_json::to_value(d).expect("params serialise"))
+                }
             })
             .collect();
         let batch = tables::points_batch(&self.c.plan, &self.cols, &params);
@@ -75,10 +101,15 @@ impl<'c> Writer<'c> {
     pub fn add(&mut self, r: RunResult) {
         let (status, reason, t_failed, collisions, trials) = match &r.end {
             RunEnd::Done(out) => {
-                self.species.push(r.spec.run_id, r.spec.point_id, &out.dsmc_species);
+                self.species
+                    .push(r.spec.run_id, r.spec.point_id, &out.dsmc_species);
+                self.tamsd
+                    .push(r.spec.run_id, r.spec.point_id, &out.dsmc_tamsd);
                 (RunStatus::Done, None, None, out.collisions, out.trials)
             }
-            RunEnd::Failed { reason, t } => (RunStatus::Failed, Some(reason.clone()), Some(*t), 0, 0),
+            RunEnd::Failed { reason, t } => {
+                (RunStatus::Failed, Some(reason.clone()), Some(*t), 0, 0)
+            }
             RunEnd::Interrupted => return,
         };
         self.runs.push(RunRow {
@@ -100,7 +131,9 @@ impl<'c> Writer<'c> {
     }
 
     pub fn due(&self, every: Duration) -> bool {
-        !self.runs.is_empty() && (self.species.rows >= FLUSH_ROWS || self.since.is_some_and(|s| s.elapsed() >= every))
+        !self.runs.is_empty()
+            && (self.species.rows + self.tamsd.rows >= FLUSH_ROWS
+                || self.since.is_some_and(|s| s.elapsed() >= every))
     }
 
     fn part(&self, table: &str) -> (String, PathBuf) {
@@ -115,9 +148,15 @@ impl<'c> Writer<'c> {
             return Ok(None);
         }
         let mut files = Vec::new();
-        let mut batches = vec![(tables::RUNS, tables::runs_batch(&self.c.plan, &self.cols, &self.runs))];
+        let mut batches = vec![(
+            tables::RUNS,
+            tables::runs_batch(&self.c.plan, &self.cols, &self.runs),
+        )];
         if self.species.rows > 0 {
             batches.push((tables::DSMC_SPECIES, self.species.finish()));
+        }
+        if self.tamsd.rows > 0 {
+            batches.push((tables::DSMC_TAMSD, self.tamsd.finish()));
         }
         // 1. pending parts
         let mut written = Vec::new();
@@ -144,13 +183,20 @@ impl<'c> Writer<'c> {
                 .iter()
                 .map(|r| CommittedRun {
                     run_id: r.run_id,
-                    status: if r.status == "done" { RunStatus::Done } else { RunStatus::Failed },
+                    status: if r.status == "done" {
+                        RunStatus::Done
+                    } else {
+                        RunStatus::Failed
+                    },
                 })
                 .collect(),
             files: files.iter().map(|(rel, _)| rel.clone()).collect(),
         };
         let cpath = ledger::commit_path(&self.c.root, &self.tag, self.seq);
-        if let Err(e) = fsutil::write_atomic(&cpath, &serde_json::to_vec(&commit).expect("commit serialises")) {
+        if let Err(e) = fsutil::write_atomic(
+            &cpath,
+            &serde_json::to_vec(&commit).expect("commit serialises"),
+        ) {
             for p in &written {
                 let _ = std::fs::remove_file(p);
             }
@@ -179,16 +225,31 @@ impl<'c> Writer<'c> {
 }
 
 /// Compute the kinetic-theory predictions of every point (in parallel) and write
-/// `dsmc_theory` and `dsmc_theory_point`, unless they exist.
+/// those of `dsmc_theory`, `dsmc_theory_point` and `dsmc_theory_tamsd` that do not exist yet
+/// (a campaign directory of an older version gains the tables it lacks; existing ones are
+/// never rewritten).
 pub fn write_theory(c: &Campaign) -> Result<(), StoreError> {
     use rayon::prelude::*;
     let dir = c.root.join("tables");
     let theory = dir.join(tables::DSMC_THEORY).join("theory.parquet");
-    let per_point = dir.join(tables::DSMC_THEORY_POINT).join("theory_point.parquet");
-    if theory.exists() && per_point.exists() {
+    let per_point = dir
+        .join(tables::DSMC_THEORY_POINT)
+        .join("theory_point.parquet");
+    let tamsd = dir
+        .join(tables::DSMC_THEORY_TAMSD)
+        .join("theory_tamsd.parquet");
+    let with_tamsd = c.observes_tamsd();
+    if theory.exists() && per_point.exists() && (tamsd.exists() || !with_tamsd) {
         return Ok(());
     }
-    for d in [theory.parent().expect("dir"), per_point.parent().expect("dir")] {
+    let mut dirs = vec![
+        theory.parent().expect("dir"),
+        per_point.parent().expect("dir"),
+    ];
+    if with_tamsd {
+        dirs.push(tamsd.parent().expect("dir"));
+    }
+    for d in dirs {
         fsutil::create_dir_durable(d).map_err(|e| StoreError::io(d, e))?;
     }
     let preds: Vec<(u32, crate::dsmc::predict::Prediction)> = c
@@ -196,18 +257,39 @@ pub fn write_theory(c: &Campaign) -> Result<(), StoreError> {
         .points
         .par_iter()
         .filter_map(|p| match &p.params {
-            crate::plan::ModelParams::Dsmc(d) => {
-                crate::dsmc::DsmcSystem::from_params(d).ok().map(|sys| (p.point_id, crate::dsmc::predict::predict(&sys)))
-            }
+            crate::plan::ModelParams::Dsmc(d) => crate::dsmc::DsmcSystem::from_params(d)
+                .ok()
+                .map(|sys| (p.point_id, crate::dsmc::predict::predict(&sys))),
         })
         .collect();
-    let rows: Vec<(u32, crate::dsmc::predict::TheoryRow)> =
-        preds.iter().flat_map(|(p, pr)| pr.rows.iter().map(move |r| (*p, r.clone()))).collect();
-    let points: Vec<(u32, f64, Vec<f64>)> = preds.iter().map(|(p, pr)| (*p, pr.tau0, pr.initial_temperatures.clone())).collect();
+    let rows: Vec<(u32, crate::dsmc::predict::TheoryRow)> = preds
+        .iter()
+        .flat_map(|(p, pr)| pr.rows.iter().map(move |r| (*p, r.clone())))
+        .collect();
+    let tamsd_rows: Vec<(u32, crate::dsmc::predict::TamsdTheoryRow)> = preds
+        .iter()
+        .flat_map(|(p, pr)| pr.tamsd.iter().map(move |r| (*p, r.clone())))
+        .collect();
+    let points: Vec<(u32, f64, Vec<f64>)> = preds
+        .iter()
+        .map(|(p, pr)| (*p, pr.tau0, pr.initial_temperatures.clone()))
+        .collect();
     for (path, batch, table) in [
         (&theory, tables::theory_batch(&rows), tables::DSMC_THEORY),
-        (&per_point, tables::theory_point_batch(&points), tables::DSMC_THEORY_POINT),
+        (
+            &per_point,
+            tables::theory_point_batch(&points),
+            tables::DSMC_THEORY_POINT,
+        ),
+        (
+            &tamsd,
+            tables::theory_tamsd_batch(&tamsd_rows),
+            tables::DSMC_THEORY_TAMSD,
+        ),
     ] {
+        if path.exists() || (table == tables::DSMC_THEORY_TAMSD && !with_tamsd) {
+            continue;
+        }
         let tmp = fsutil::temp_path(path);
         parquet_io::write_file(&tmp, &batch, table, &c.manifest_json)?;
         std::fs::rename(&tmp, path).map_err(|e| StoreError::io(path, e))?;

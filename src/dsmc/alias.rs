@@ -118,7 +118,11 @@ mod tests {
         for (i, &c) in counts.iter().enumerate() {
             let p = w[i] / total;
             let sd = (n as f64 * p * (1.0 - p)).sqrt();
-            assert!((c as f64 - n as f64 * p).abs() <= 5.0 * sd + 1e-9, "slot {i}: {c} vs {}", n as f64 * p);
+            assert!(
+                (c as f64 - n as f64 * p).abs() <= 5.0 * sd + 1e-9,
+                "slot {i}: {c} vs {}",
+                n as f64 * p
+            );
         }
         assert_eq!(counts[1], 0);
     }

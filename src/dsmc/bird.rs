@@ -31,9 +31,14 @@ impl DsmcSim {
     }
 
     pub(super) fn advance_bird(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
-        let msd = self.sys.msd;
+        let msd = self.sys.displacements();
         let n = self.sys.n_particles();
-        let sig_max = self.sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
+        let sig_max = self
+            .sys
+            .species
+            .iter()
+            .map(|s| s.diameter)
+            .fold(0.0, f64::max);
         if self.rate <= 0.0 {
             return self.idle_to_end();
         }
@@ -50,7 +55,13 @@ impl DsmcSim {
                     let u = self.rng.f64();
                     prefetch(self.speed.as_ptr().wrapping_add(a));
                     prefetch(self.speed.as_ptr().wrapping_add(b));
-                    self.ring.push(Candidate { i: 0, k: 0, a: a as u32, b: b as u32, u });
+                    self.ring.push(Candidate {
+                        i: 0,
+                        k: 0,
+                        a: a as u32,
+                        b: b as u32,
+                        u,
+                    });
                 }
             }
             {
@@ -81,7 +92,7 @@ impl DsmcSim {
                 continue;
             }
             let t = self.gap_time();
-            if self.sys.output_times[self.st.next_output] <= t && self.outputs_before(t)? {
+            if self.next_event <= t && self.outputs_before(t)? {
                 break Ok(true);
             }
             self.st.t = t;

@@ -60,7 +60,15 @@ pub fn uniform_direction(rng: &mut RunRng) -> [f64; 3] {
 /// Apply (41): v_a -= m_b/(m_a+m_b) (1+eps) (g.e) e, v_b += m_a/(m_a+m_b) (1+eps) (g.e) e,
 /// with g = v_a - v_b and `gne` = g.e.
 #[inline(always)]
-pub fn collide(va: &mut [f64; 3], vb: &mut [f64; 3], ma: f64, mb: f64, eps: f64, e: [f64; 3], gne: f64) {
+pub fn collide(
+    va: &mut [f64; 3],
+    vb: &mut [f64; 3],
+    ma: f64,
+    mb: f64,
+    eps: f64,
+    e: [f64; 3],
+    gne: f64,
+) {
     let j = (1.0 + eps) * gne / (ma + mb);
     let (ja, jb) = (mb * j, ma * j);
     for d in 0..3 {
@@ -83,7 +91,13 @@ mod tests {
         for _ in 0..1000 {
             let n = uniform_direction(&mut rng);
             let (p, q) = basis(n);
-            for (a, b, want) in [(n, p, 0.0), (n, q, 0.0), (p, q, 0.0), (p, p, 1.0), (q, q, 1.0)] {
+            for (a, b, want) in [
+                (n, p, 0.0),
+                (n, q, 0.0),
+                (p, q, 0.0),
+                (p, p, 1.0),
+                (q, q, 1.0),
+            ] {
                 assert!((dot(a, b) - want).abs() < 1e-12);
             }
         }
@@ -118,7 +132,13 @@ mod tests {
         let g = [0.3, -1.0, 2.0];
         let gn = dot(g, g).sqrt();
         let n = 100_000;
-        let mean: f64 = (0..n).map(|_| impact_direction(g, gn, &mut rng).1 / gn).sum::<f64>() / n as f64;
-        assert!((mean - 2.0 / 3.0).abs() < 5.0 * (1.0f64 / 18.0 / n as f64).sqrt(), "{mean}");
+        let mean: f64 = (0..n)
+            .map(|_| impact_direction(g, gn, &mut rng).1 / gn)
+            .sum::<f64>()
+            / n as f64;
+        assert!(
+            (mean - 2.0 / 3.0).abs() < 5.0 * (1.0f64 / 18.0 / n as f64).sqrt(),
+            "{mean}"
+        );
     }
 }

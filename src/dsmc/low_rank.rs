@@ -13,14 +13,22 @@
 
 use super::alias::Alias;
 use super::collision::{collide, impact_direction};
-use super::{prefetch, speed_bound, Candidate, DsmcSim, DsmcSystem, PhysicsError, PIPELINE_DEPTH, RAISE_SLACK};
+use super::{
+    prefetch, speed_bound, Candidate, DsmcSim, DsmcSystem, PhysicsError, PIPELINE_DEPTH,
+    RAISE_SLACK,
+};
 
 /// How many trials ahead of use a candidate's velocity lines are prefetched.
 const STAGE: usize = 8;
 
 /// The three static tables over k: weights N_k, N_k sigma_k, N_k sigma_k^2.
 pub fn static_tables(sys: &DsmcSystem) -> [Alias; 3] {
-    let w = |p: i32| -> Vec<f64> { sys.species.iter().map(|s| s.count as f64 * s.diameter.powi(p)).collect() };
+    let w = |p: i32| -> Vec<f64> {
+        sys.species
+            .iter()
+            .map(|s| s.count as f64 * s.diameter.powi(p))
+            .collect()
+    };
     [Alias::new(&w(0)), Alias::new(&w(1)), Alias::new(&w(2))]
 }
 
@@ -43,21 +51,34 @@ impl DsmcSim {
     fn draw_candidate(&mut self) -> Candidate {
         let ri = self.pair_i.sample(self.rng.u64());
         // SAFETY: the slot tables have one entry per (r, i) slot; r < 3.
-        let (r, i) = unsafe { (*self.slot_term.get_unchecked(ri) as usize, *self.slot_species.get_unchecked(ri) as usize) };
+        let (r, i) = unsafe {
+            (
+                *self.slot_term.get_unchecked(ri) as usize,
+                *self.slot_species.get_unchecked(ri) as usize,
+            )
+        };
         let k = unsafe { self.pair_k.get_unchecked(r) }.sample(self.rng.u64());
-        let (da, db) = self.rng.below_pair(self.off[i + 1] - self.off[i], self.off[k + 1] - self.off[k]);
+        let (da, db) = self
+            .rng
+            .below_pair(self.off[i + 1] - self.off[i], self.off[k + 1] - self.off[k]);
         let (a, b) = (self.off[i] + da, self.off[k] + db);
         let u = self.rng.f64();
         prefetch(self.speed.as_ptr().wrapping_add(a));
         prefetch(self.speed.as_ptr().wrapping_add(b));
-        Candidate { i: i as u32, k: k as u32, a: a as u32, b: b as u32, u }
+        Candidate {
+            i: i as u32,
+            k: k as u32,
+            a: a as u32,
+            b: b as u32,
+            u,
+        }
     }
 
     pub(super) fn advance_low_rank(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
         if self.rate <= 0.0 {
             return self.idle_to_end();
         }
-        let msd = self.sys.msd;
+        let msd = self.sys.displacements();
         let mut trials = 0u64;
         let result = loop {
             if trials >= max_trials {
@@ -99,7 +120,7 @@ impl DsmcSim {
             }
             // Accepted: the collision happens at t_c; outputs before it see the old state.
             let t = self.gap_time();
-            if self.sys.output_times[self.st.next_output] <= t && self.outputs_before(t)? {
+            if self.next_event <= t && self.outputs_before(t)? {
                 break Ok(true);
             }
             self.st.t = t;

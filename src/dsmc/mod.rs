@@ -43,6 +43,21 @@ pub struct SpeciesRow {
     pub collisions: u64,
 }
 
+/// One row of the `dsmc_tamsd` table (without the run's ids): the time-averaged MSD (26) of
+/// species `species` at lag `lag`, averaged over the species' tracers.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct TamsdRow {
+    /// Species index k, from 1.
+    pub species: u32,
+    /// The lag Delta (a multiple of the grid step t_end / grid).
+    pub lag: f64,
+    /// <delta_k^2(Delta)>: the mean over tracers and over grid points t_j <= t_total - Delta of
+    /// |R(t_j + Delta) - R(t_j)|^2.
+    pub tamsd: f64,
+    /// The measurement time t of (26): t_end.
+    pub t_total: f64,
+}
+
 /// A deterministic physics failure (the same seed fails the same way).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{reason} at t = {t}")]
@@ -66,7 +81,7 @@ pub struct Candidate {
 /// ring is refilled in batches of `PIPELINE_DEPTH / 2` whenever half of it is used.
 pub const PIPELINE_DEPTH: usize = 32;
 /// Layout version of [`DsmcState`] in checkpoints.
-pub const STATE_FORMAT: &str = "dsmc/2";
+pub const STATE_FORMAT: &str = "dsmc/3";
 
 /// A raised speed bound gets this much head-room, so that it is not raised again at once.
 pub const RAISE_SLACK: f64 = 1.05;
@@ -77,7 +92,7 @@ pub struct DsmcState {
     pub t: f64,
     /// (vx, vy, vz): 24 bytes, so that the Table I gas (1.2M particles) fits in a 32 MB L3.
     pub vel: Vec<[f64; 3]>,
-    /// (Rx, Ry, Rz, t_last) per particle; empty unless MSD is recorded.
+    /// (Rx, Ry, Rz, t_last) per particle; empty unless MSD or TAMSD is recorded.
     pub disp: Vec<[f64; 4]>,
     /// Low-rank: per-species speed bounds.
     pub vmax: Vec<f64>,
@@ -89,6 +104,12 @@ pub struct DsmcState {
     pub species_collisions: Vec<u64>,
     pub bound_raises: u64,
     pub next_output: usize,
+    /// TAMSD: the next grid point j to record (grid + 1 once all are recorded).
+    pub next_grid: u64,
+    /// TAMSD: tracer displacements R(t_j) at the grid points recorded so far, grid-point major
+    /// (for each j, the tracers of species 1, then of species 2, ...); empty unless TAMSD is
+    /// recorded.
+    pub tracks: Vec<[f64; 3]>,
     pub collisions_at_refresh: u64,
     pub pipeline: Vec<Candidate>,
     /// Product of the uniforms U of the trials since the last collision (the time to the next
@@ -114,6 +135,10 @@ pub struct DsmcSim {
     off: Vec<usize>,
     /// Total trial rate.
     rate: f64,
+    /// The next time at which something is recorded: the earlier of the next output time and
+    /// the next TAMSD grid time (infinity when none is left). Derived from `next_output` and
+    /// `next_grid`.
+    next_event: f64,
     /// Refresh the bounds after this many collisions.
     refresh_collisions: u64,
     /// Slot j of the (r, i) table -> (term r, species i), so decoding needs no division.
@@ -167,7 +192,9 @@ impl Ring {
         self.len = 0;
     }
     pub fn to_vec(&self) -> Vec<Candidate> {
-        (0..self.len).map(|j| self.buf[(self.head + j) % PIPELINE_DEPTH]).collect()
+        (0..self.len)
+            .map(|j| self.buf[(self.head + j) % PIPELINE_DEPTH])
+            .collect()
     }
     pub fn from_slice(cs: &[Candidate]) -> Ring {
         let mut r = Ring::default();
@@ -189,7 +216,11 @@ impl DsmcSim {
         let st = DsmcState {
             t: 0.0,
             vel,
-            disp: if sys.msd { crate::memory::huge_vec(n, [0.0; 4]) } else { Vec::new() },
+            disp: if sys.displacements() {
+                crate::memory::huge_vec(n, [0.0; 4])
+            } else {
+                Vec::new()
+            },
             vmax: vec![0.0; m],
             bird_bound: 0.0,
             rng: rng.position(),
@@ -198,6 +229,11 @@ impl DsmcSim {
             species_collisions: vec![0; m],
             bound_raises: 0,
             next_output: 0,
+            next_grid: 0,
+            tracks: match &sys.tamsd {
+                Some(plan) => Vec::with_capacity(plan.n_tracers() * (plan.grid as usize + 1)),
+                None => Vec::new(),
+            },
             collisions_at_refresh: 0,
             pipeline: Vec::new(),
             gap_prod: 1.0,
@@ -230,7 +266,9 @@ impl DsmcSim {
             }
         }
         let m = sys.species.len();
-        let refresh_collisions = (sys.refresh_every * sys.n_particles() as f64).ceil().max(1.0) as u64;
+        let refresh_collisions = (sys.refresh_every * sys.n_particles() as f64)
+            .ceil()
+            .max(1.0) as u64;
         let slot_term = (0..3 * m).map(|j| (j / m) as u8).collect();
         let slot_species = (0..3 * m).map(|j| (j % m) as u32).collect();
         let eps = EpsModel::new(&sys);
@@ -243,6 +281,7 @@ impl DsmcSim {
             pair_k,
             off,
             rate: 0.0,
+            next_event: f64::INFINITY,
             refresh_collisions,
             slot_term,
             slot_species,
@@ -250,6 +289,7 @@ impl DsmcSim {
             speed,
         };
         sim.rebuild_rates();
+        sim.update_next_event();
         sim
     }
 
@@ -262,14 +302,33 @@ impl DsmcSim {
 
     /// Rebuild a simulation from a checkpoint payload.
     pub fn from_state_bytes(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
-        let st: DsmcState = postcard::from_bytes(bytes).map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
+        let st: DsmcState = postcard::from_bytes(bytes)
+            .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         if st.vel.len() != sys.n_particles() || st.vmax.len() != sys.species.len() {
             return Err("checkpoint does not match the run's species".into());
+        }
+        if st.disp.len() != if sys.displacements() { st.vel.len() } else { 0 } {
+            return Err("checkpoint does not match the run's observables (displacements)".into());
+        }
+        let tracks_ok = match &sys.tamsd {
+            Some(plan) => {
+                st.next_grid <= plan.grid + 1
+                    && st.tracks.len() as u64 == st.next_grid * plan.n_tracers() as u64
+            }
+            None => st.next_grid == 0 && st.tracks.is_empty(),
+        };
+        if !tracks_ok {
+            return Err("checkpoint does not match the run's observables (tamsd)".into());
         }
         let rng = RunRng::restore(&st.rng);
         let mut st = st;
         st.vel = crate::memory::huge_copy(&st.vel);
         st.disp = crate::memory::huge_copy(&st.disp);
+        if let Some(plan) = &sys.tamsd {
+            // The trajectories grow to their final size without reallocating.
+            let total = plan.n_tracers() * (plan.grid as usize + 1);
+            st.tracks.reserve_exact(total - st.tracks.len());
+        }
         Ok(Self::assemble(sys, st, rng))
     }
 
@@ -296,6 +355,48 @@ impl DsmcSim {
         }
     }
 
+    /// The time-averaged MSD (26) of every species at every lag, from the tracer trajectories
+    /// (empty unless TAMSD is recorded and the run is complete). On the grid t_j = j h
+    /// (h = t_end / grid), the integral of (26) becomes the mean over j = 0..=grid - l of
+    /// |R(t_{j+l}) - R(t_j)|^2 for the lag Delta = l h, averaged over the species' tracers;
+    /// summed in a fixed order (deterministic).
+    pub fn tamsd_rows(&self) -> Vec<TamsdRow> {
+        let Some(plan) = &self.sys.tamsd else {
+            return Vec::new();
+        };
+        if self.st.next_grid != plan.grid + 1 {
+            return Vec::new();
+        }
+        let nt = plan.n_tracers();
+        let grid = plan.grid as usize;
+        let tracks = &self.st.tracks;
+        debug_assert_eq!(tracks.len(), nt * (grid + 1));
+        let mut rows = Vec::with_capacity(plan.tracers.len() * plan.lag_steps.len());
+        let mut start = 0;
+        for (s, &m) in plan.tracers.iter().enumerate() {
+            for (&l, &lag) in plan.lag_steps.iter().zip(&plan.lags) {
+                let l = l as usize;
+                let mut sum = 0.0;
+                for j in 0..=grid - l {
+                    let a = &tracks[j * nt + start..j * nt + start + m];
+                    let b = &tracks[(j + l) * nt + start..(j + l) * nt + start + m];
+                    for (x, y) in a.iter().zip(b) {
+                        let (dx, dy, dz) = (y[0] - x[0], y[1] - x[1], y[2] - x[2]);
+                        sum += dx * dx + dy * dy + dz * dz;
+                    }
+                }
+                rows.push(TamsdRow {
+                    species: s as u32 + 1,
+                    lag,
+                    tamsd: sum / (m as f64 * (grid - l + 1) as f64),
+                    t_total: self.sys.t_end,
+                });
+            }
+            start += m;
+        }
+        rows
+    }
+
     /// Take the recorded rows (the run's output so far).
     pub fn take_rows(&mut self) -> Vec<SpeciesRow> {
         std::mem::take(&mut self.st.rows)
@@ -311,14 +412,20 @@ impl DsmcSim {
             }
             DsmcMethod::Bird => {
                 let n = self.sys.n_particles() as f64;
-                self.rate = n * n * 2.0 * self.st.bird_bound * std::f64::consts::PI / self.sys.volume;
+                self.rate =
+                    n * n * 2.0 * self.st.bird_bound * std::f64::consts::PI / self.sys.volume;
             }
         }
     }
 
     /// Recompute exact speed bounds (they shrink as the gas cools) and the rates.
     fn refresh_bounds(&mut self) {
-        let sig_max = self.sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
+        let sig_max = self
+            .sys
+            .species
+            .iter()
+            .map(|s| s.diameter)
+            .fold(0.0, f64::max);
         let mut bound: f64 = 0.0;
         for (s, sp) in self.sys.species.iter().enumerate() {
             let mut v2max: f64 = 0.0;
@@ -381,7 +488,10 @@ impl DsmcSim {
             }
             let msd = if self.sys.msd {
                 let mut r2 = 0.0;
-                for (v, d) in self.st.vel[range.clone()].iter().zip(&self.st.disp[range.clone()]) {
+                for (v, d) in self.st.vel[range.clone()]
+                    .iter()
+                    .zip(&self.st.disp[range.clone()])
+                {
                     let dt = t - d[3];
                     let (x, y, z) = (d[0] + v[0] * dt, d[1] + v[1] * dt, d[2] + v[2] * dt);
                     r2 += x * x + y * y + z * z;
@@ -393,7 +503,10 @@ impl DsmcSim {
             energy += 0.5 * sp.mass * v2;
             let temperature = sp.mass * v2 / (3.0 * sp.count as f64);
             if !temperature.is_finite() || msd.is_some_and(|m| !m.is_finite()) {
-                return Err(PhysicsError { t, reason: format!("non-finite temperature or MSD in species {}", s + 1) });
+                return Err(PhysicsError {
+                    t,
+                    reason: format!("non-finite temperature or MSD in species {}", s + 1),
+                });
             }
             self.st.rows.push(SpeciesRow {
                 t,
@@ -408,20 +521,72 @@ impl DsmcSim {
         }
         // Inelastic collisions never add energy; allow rounding only.
         if energy > self.st.last_energy * (1.0 + 1e-9) {
-            return Err(PhysicsError { t, reason: format!("kinetic energy increased from {} to {energy}", self.st.last_energy) });
+            return Err(PhysicsError {
+                t,
+                reason: format!(
+                    "kinetic energy increased from {} to {energy}",
+                    self.st.last_energy
+                ),
+            });
         }
         self.st.last_energy = energy;
         Ok(())
     }
 
-    /// Emit every output time before `t_next`; mark the run done if `t_next` is past t_end.
+    /// The earlier of the next output time and the next TAMSD grid time.
+    fn update_next_event(&mut self) {
+        let output = self
+            .sys
+            .output_times
+            .get(self.st.next_output)
+            .copied()
+            .unwrap_or(f64::INFINITY);
+        let grid = match &self.sys.tamsd {
+            Some(plan) if self.st.next_grid <= plan.grid => {
+                plan.time(self.sys.t_end, self.st.next_grid)
+            }
+            _ => f64::INFINITY,
+        };
+        self.next_event = output.min(grid);
+    }
+
+    /// Append the tracers' displacements at grid time `t` (extrapolated like `record`, without
+    /// modifying the stored ones).
+    fn record_tracks(&mut self, t: f64) {
+        let Some(plan) = &self.sys.tamsd else { return };
+        for (s, &m) in plan.tracers.iter().enumerate() {
+            let range = self.off[s]..self.off[s] + m;
+            for (v, d) in self.st.vel[range.clone()].iter().zip(&self.st.disp[range]) {
+                let dt = t - d[3];
+                self.st
+                    .tracks
+                    .push([d[0] + v[0] * dt, d[1] + v[1] * dt, d[2] + v[2] * dt]);
+            }
+        }
+    }
+
+    /// Emit every output time and TAMSD grid time up to `t_next` (the time of the next
+    /// collision: they see the state before it); mark the run done if `t_next` is past t_end.
     #[inline]
     fn outputs_before(&mut self, t_next: f64) -> Result<bool, PhysicsError> {
-        while self.st.next_output < self.sys.output_times.len() && self.sys.output_times[self.st.next_output] <= t_next {
+        if let Some((grid, t_end)) = self.sys.tamsd.as_ref().map(|p| (p.grid, self.sys.t_end)) {
+            while self.st.next_grid <= grid {
+                let t = crate::manifest::dsmc::grid_time(t_end, grid, self.st.next_grid);
+                if t > t_next {
+                    break;
+                }
+                self.record_tracks(t);
+                self.st.next_grid += 1;
+            }
+        }
+        while self.st.next_output < self.sys.output_times.len()
+            && self.sys.output_times[self.st.next_output] <= t_next
+        {
             let t = self.sys.output_times[self.st.next_output];
             self.record(t)?;
             self.st.next_output += 1;
         }
+        self.update_next_event();
         if t_next > self.sys.t_end || self.st.next_output == self.sys.output_times.len() {
             self.st.t = self.sys.t_end;
             self.st.done = true;
@@ -477,10 +642,20 @@ impl EpsModel {
                 let mut a_pair = vec![0.0; m * m];
                 for (k, sk) in sys.species.iter().enumerate() {
                     for (i, si) in sys.species.iter().enumerate() {
-                        a_pair[k * m + i] = viscoelastic::pair_a_kappa(a_kappa, sk.mass, sk.diameter, si.mass, si.diameter);
+                        a_pair[k * m + i] = viscoelastic::pair_a_kappa(
+                            a_kappa,
+                            sk.mass,
+                            sk.diameter,
+                            si.mass,
+                            si.diameter,
+                        );
                     }
                 }
-                EpsModel::Viscoelastic { table: viscoelastic::ViscoelasticTable::new(), a_pair, m }
+                EpsModel::Viscoelastic {
+                    table: viscoelastic::ViscoelasticTable::new(),
+                    a_pair,
+                    m,
+                }
             }
         }
     }

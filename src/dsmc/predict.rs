@@ -3,7 +3,7 @@
 //! theory share the pair scaling of the restitution (`system::theory_restitution`).
 
 use super::system::{theory_restitution, DsmcSystem};
-use crate::theory::{diffusion, msd, temperature, Species};
+use crate::theory::{diffusion, msd, tamsd, temperature, Species};
 
 /// One row of `dsmc_theory`.
 #[derive(Clone, Debug, PartialEq)]
@@ -17,6 +17,15 @@ pub struct TheoryRow {
     pub tau_v: f64,
 }
 
+/// One row of `dsmc_theory_tamsd`: the TAMSD (27) of a species at a lag, for t = t_end.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TamsdTheoryRow {
+    pub species: u32,
+    /// The lag as the run reports it (a multiple of the grid step).
+    pub lag: f64,
+    pub tamsd: f64,
+}
+
 /// The predictions for one point.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prediction {
@@ -24,10 +33,15 @@ pub struct Prediction {
     pub tau0: f64,
     pub initial_temperatures: Vec<f64>,
     pub rows: Vec<TheoryRow>,
+    /// The TAMSD (27) per species and lag (empty unless `tamsd` is observed).
+    pub tamsd: Vec<TamsdTheoryRow>,
 }
 
 pub fn theory_species(sys: &DsmcSystem) -> Vec<Species> {
-    sys.species.iter().map(|s| Species::new(s.mass, s.diameter, s.count as f64 / sys.volume)).collect()
+    sys.species
+        .iter()
+        .map(|s| Species::new(s.mass, s.diameter, s.count as f64 / sys.volume))
+        .collect()
 }
 
 /// Predict T_k(t), <R_k^2(t)> and tau_v,k(t) at the system's output times.
@@ -37,7 +51,11 @@ pub fn predict(sys: &DsmcSystem) -> Prediction {
     let t0: Vec<f64> = sys.species.iter().map(|s| s.initial_temperature).collect();
     let times = &sys.output_times;
     let temps = temperature::evolve_temperatures(&species, &r, &t0, times);
-    let msds = if sys.msd { Some(msd::msd_numeric(&species, &r, &t0, times)) } else { None };
+    let msds = if sys.msd {
+        Some(msd::msd_numeric(&species, &r, &t0, times))
+    } else {
+        None
+    };
     let mut rows = Vec::with_capacity(times.len() * species.len());
     for (j, &t) in times.iter().enumerate() {
         let tv = diffusion::tau_v(&species, &temps[j], &r);
@@ -51,5 +69,76 @@ pub fn predict(sys: &DsmcSystem) -> Prediction {
             });
         }
     }
-    Prediction { tau0: temperature::tau0_with(&species, &t0, &r), initial_temperatures: t0, rows }
+    let tamsd = match &sys.tamsd {
+        Some(plan) => predict_tamsd(&species, &r, &t0, sys.t_end, &plan.lags),
+        None => Vec::new(),
+    };
+    Prediction {
+        tau0: temperature::tau0_with(&species, &t0, &r),
+        initial_temperatures: t0,
+        rows,
+        tamsd,
+    }
+}
+
+/// The TAMSD (27) of every species at the lags `lags`, measured over [0, t_end].
+///
+/// (27) is the time average of the MSD increment of a gas that is in its homogeneous cooling
+/// state from t = 0 on (with D_k(0), tau_v,k(0) and tau_0 at the initial temperatures `t0`);
+/// for a run that starts elsewhere (e.g. every species at the same temperature while the HCS
+/// has T_k != T_1) it is that of the HCS with the run's initial temperatures, not a prediction
+/// of the transient. This is `tamsd::tamsd_hcs_species` for every species, with D_k(0),
+/// tau_v,k(0) and tau_0 computed once for all species (each costs O(M^2) pair integrals).
+pub fn predict_tamsd(
+    species: &[Species],
+    r: &crate::theory::PairRestitution,
+    t0: &[f64],
+    t_end: f64,
+    lags: &[f64],
+) -> Vec<TamsdTheoryRow> {
+    let d = diffusion::diffusion_coefficients(species, t0, r);
+    let tv = diffusion::tau_v(species, t0, r);
+    let tau0 = temperature::tau0_with(species, t0, r);
+    let mut rows = Vec::with_capacity(species.len() * lags.len());
+    for k in 0..species.len() {
+        for &lag in lags {
+            rows.push(TamsdTheoryRow {
+                species: k as u32 + 1,
+                lag,
+                tamsd: tamsd::tamsd_hcs(d[k], tv[k], tau0, t_end, lag),
+            });
+        }
+    }
+    rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::theory::PairRestitution;
+
+    /// `predict_tamsd` is `tamsd_hcs_species` for every species (k 0-based there), bit for bit.
+    #[test]
+    fn predict_tamsd_is_tamsd_hcs_species() {
+        let s = vec![
+            Species::new(1.0, 1.0, 0.1),
+            Species::new(8.0, 2.0, 0.01),
+            Species::new(100.0, 100f64.cbrt(), 1e-5),
+        ];
+        let r = PairRestitution::Constant(0.7);
+        let t0 = [1.0, 3.0, 50.0];
+        let lags = [0.5, 7.0, 300.0];
+        let rows = predict_tamsd(&s, &r, &t0, 1000.0, &lags);
+        assert_eq!(rows.len(), 9);
+        for k in 0..3 {
+            let want = tamsd::tamsd_hcs_species(&s, &r, &t0, k, 1000.0, &lags);
+            for (j, w) in want.iter().enumerate() {
+                let row = &rows[k * 3 + j];
+                assert_eq!(
+                    (row.species, row.lag.to_bits(), row.tamsd.to_bits()),
+                    (k as u32 + 1, lags[j].to_bits(), w.to_bits())
+                );
+            }
+        }
+    }
 }

@@ -21,11 +21,40 @@ pub struct DsmcSystem {
     pub t_end: f64,
     /// Sorted output times, 0 and t_end included.
     pub output_times: Vec<f64>,
+    /// Report <R_k^2(t)> (observable `msd`).
     pub msd: bool,
+    /// The time-averaged MSD's tracers, grid and lags (observable `tamsd`).
+    pub tamsd: Option<TamsdPlan>,
     /// Refresh bounds every `refresh_every * N` collisions.
     pub refresh_every: f64,
     /// pi / (4 V): the low-rank rate constant of (43).
     pub rate_scale: f64,
+}
+
+/// The time-averaged MSD of a run, resolved: which particles are tracers, the recording grid,
+/// the lags.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TamsdPlan {
+    /// Number of intervals of [0, t_end]; positions are recorded at t_j = j t_end / grid,
+    /// j = 0..=grid.
+    pub grid: u64,
+    /// Tracers of each species: its first min(tracers, N_k) particles.
+    pub tracers: Vec<usize>,
+    /// Lags in grid steps (sorted, distinct, 1 <= l < grid).
+    pub lag_steps: Vec<u64>,
+    /// The lags in time units, l t_end / grid (the `lag` column).
+    pub lags: Vec<f64>,
+}
+
+impl TamsdPlan {
+    pub fn n_tracers(&self) -> usize {
+        self.tracers.iter().sum()
+    }
+
+    /// Time of grid point j.
+    pub fn time(&self, t_end: f64, j: u64) -> f64 {
+        crate::manifest::dsmc::grid_time(t_end, self.grid, j)
+    }
 }
 
 /// The restitution model of a run.
@@ -33,24 +62,41 @@ pub struct DsmcSystem {
 pub enum RestitutionModel {
     Constant(f64),
     /// A kappa^(2/5) of the reference pair (m = 1, sigma = 1).
-    Viscoelastic { a_kappa: f64 },
+    Viscoelastic {
+        a_kappa: f64,
+    },
 }
 
 /// The restitution of a system as the theory sees it (the same pair scaling as the DSMC).
-pub fn theory_restitution(r: &RestitutionModel, species: &[SpeciesInfo]) -> crate::theory::restitution::PairRestitution {
+pub fn theory_restitution(
+    r: &RestitutionModel,
+    species: &[SpeciesInfo],
+) -> crate::theory::restitution::PairRestitution {
     use crate::theory::restitution::PairRestitution;
     match *r {
         RestitutionModel::Constant(e) => PairRestitution::Constant(e),
         RestitutionModel::Viscoelastic { a_kappa } => {
-            let m = species.len();
-            let mut a = vec![0.0; m * m];
-            for (k, sk) in species.iter().enumerate() {
-                for (i, si) in species.iter().enumerate() {
-                    a[k * m + i] = super::viscoelastic::pair_a_kappa(a_kappa, sk.mass, sk.diameter, si.mass, si.diameter);
-                }
-            }
+            // eps_ki = F(a_ki g_n^(1/5)) with the DSMC's pair scaling; the `Scaled` form lets the
+            // theory tabulate its Maxwell averages once.
+            let a: Vec<Vec<f64>> = species
+                .iter()
+                .map(|sk| {
+                    species
+                        .iter()
+                        .map(|si| {
+                            super::viscoelastic::pair_a_kappa(
+                                a_kappa,
+                                sk.mass,
+                                sk.diameter,
+                                si.mass,
+                                si.diameter,
+                            )
+                        })
+                        .collect()
+                })
+                .collect();
             let table = super::viscoelastic::ViscoelasticTable::new();
-            PairRestitution::velocity_dependent(move |k, i, g| table.eps_pair(a[k * m + i], g))
+            PairRestitution::scaled(a, 0.2, move |b| table.eps(b))
         }
     }
 }
@@ -98,14 +144,18 @@ impl DsmcSystem {
                 let volume = match (p.volume, p.number_density) {
                     (Some(v), _) => v,
                     (None, Some(d)) => n as f64 / d,
-                    (None, None) => return Err("species.list needs volume or number_density".into()),
+                    (None, None) => {
+                        return Err("species.list needs volume or number_density".into())
+                    }
                 };
                 (species, volume)
             }
         };
         let n: u64 = species.iter().map(|s| s.count).sum();
         if n > MAX_PARTICLES {
-            return Err(format!("{n} particles is more than the supported {MAX_PARTICLES}"));
+            return Err(format!(
+                "{n} particles is more than the supported {MAX_PARTICLES}"
+            ));
         }
         let restitution = match &p.restitution {
             Restitution::Constant(e) => RestitutionModel::Constant(*e),
@@ -115,17 +165,47 @@ impl DsmcSystem {
         if let InitialTemperature::Hcs { mean } = p.initial_temperature {
             let th: Vec<crate::theory::temperature::Species> = species
                 .iter()
-                .map(|s| crate::theory::temperature::Species::new(s.mass, s.diameter, s.count as f64 / volume))
+                .map(|s| {
+                    crate::theory::temperature::Species::new(
+                        s.mass,
+                        s.diameter,
+                        s.count as f64 / volume,
+                    )
+                })
                 .collect();
             let r = theory_restitution(&restitution, &species);
             let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean);
             for (s, t) in species.iter_mut().zip(t0) {
                 if !(t.is_finite() && t > 0.0) {
-                    return Err(format!("no homogeneous cooling state found (temperature {t})"));
+                    return Err(format!(
+                        "no homogeneous cooling state found (temperature {t})"
+                    ));
                 }
                 s.initial_temperature = t;
             }
         }
+        let tamsd = match (&p.tamsd, p.wants_tamsd()) {
+            (Some(tm), true) => {
+                let lag_steps: Vec<u64> = tm
+                    .resolve(p.t_end)
+                    .into_iter()
+                    .filter(|&l| l < tm.grid)
+                    .collect();
+                Some(TamsdPlan {
+                    grid: tm.grid,
+                    tracers: species
+                        .iter()
+                        .map(|s| s.count.min(tm.tracers) as usize)
+                        .collect(),
+                    lags: lag_steps
+                        .iter()
+                        .map(|&l| crate::manifest::dsmc::grid_time(p.t_end, tm.grid, l))
+                        .collect(),
+                    lag_steps,
+                })
+            }
+            _ => None,
+        };
         Ok(DsmcSystem {
             method: p.method,
             species,
@@ -134,9 +214,15 @@ impl DsmcSystem {
             t_end: p.t_end,
             output_times: p.output_times.resolve(p.t_end),
             msd: p.wants_msd(),
+            tamsd,
             refresh_every: p.refresh_every,
             rate_scale: std::f64::consts::PI / (4.0 * volume),
         })
+    }
+
+    /// Whether per-particle displacements are kept (for `msd` and `tamsd`).
+    pub fn displacements(&self) -> bool {
+        self.msd || self.tamsd.is_some()
     }
 
     pub fn n_particles(&self) -> usize {
@@ -204,14 +290,22 @@ pub fn initial_velocities(sys: &DsmcSystem, rng: &mut RunRng) -> Vec<[f64; 3]> {
             });
         if let Some(s) = target {
             let sp = &sys.species[s];
-            let shift: Vec<f64> = singles_p.iter().map(|p| -p / (sp.mass * sp.count as f64)).collect();
+            let shift: Vec<f64> = singles_p
+                .iter()
+                .map(|p| -p / (sp.mass * sp.count as f64))
+                .collect();
             let vs = &mut vel[ranges[s].clone()];
             for v in vs.iter_mut() {
                 for d in 0..3 {
                     v[d] += shift[d];
                 }
             }
-            rescale(vs, [shift[0], shift[1], shift[2]], sp.initial_temperature, sp.mass);
+            rescale(
+                vs,
+                [shift[0], shift[1], shift[2]],
+                sp.initial_temperature,
+                sp.mass,
+            );
         }
     }
     vel

@@ -33,9 +33,13 @@ pub struct DsmcParams {
     #[serde(default)]
     pub output_times: OutputTimes,
     /// Observables beyond the always-recorded temperature: `msd` enables displacement
-    /// bookkeeping (memory and time); `temperature` may be listed for clarity.
+    /// bookkeeping (memory and time); `tamsd` records tracer trajectories for the time-averaged
+    /// MSD (needs the `tamsd` object); `temperature` may be listed for clarity.
     #[serde(default)]
     pub observables: Vec<DsmcObservable>,
+    /// Settings of the time-averaged MSD (required with, and only with, the observable `tamsd`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tamsd: Option<TamsdSpec>,
     /// Recompute the exact speed bounds (and rebuild the selection tables) every this many
     /// collisions per particle (default 1, i.e. every ~N collisions).
     #[serde(default = "one")]
@@ -52,7 +56,9 @@ fn one() -> f64 {
 pub enum InitialTemperature {
     Value(f64),
     /// Homogeneous cooling state with number-weighted mean temperature `mean`.
-    Hcs { mean: f64 },
+    Hcs {
+        mean: f64,
+    },
 }
 
 impl Default for InitialTemperature {
@@ -65,7 +71,9 @@ impl Serialize for InitialTemperature {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         match self {
             InitialTemperature::Value(v) => s.serialize_f64(*v),
-            InitialTemperature::Hcs { mean } => serde_json::json!({"hcs": {"mean": mean}}).serialize(s),
+            InitialTemperature::Hcs { mean } => {
+                serde_json::json!({"hcs": {"mean": mean}}).serialize(s)
+            }
         }
     }
 }
@@ -85,7 +93,9 @@ impl<'de> Deserialize<'de> for InitialTemperature {
             .filter(|h| h.len() == 1)
             .and_then(|h| h.get("mean"))
             .and_then(|m| m.as_f64())
-            .ok_or_else(|| D::Error::custom("expected a number or {\"hcs\": {\"mean\": number}}"))?;
+            .ok_or_else(|| {
+                D::Error::custom("expected a number or {\"hcs\": {\"mean\": number}}")
+            })?;
         Ok(InitialTemperature::Hcs { mean })
     }
 }
@@ -230,6 +240,82 @@ pub enum DsmcObservable {
     Temperature,
     /// Partial mean-squared displacements <R_k^2(t)> (displacement bookkeeping).
     Msd,
+    /// Time-averaged MSD (26) of tracer particles at the lags of the `tamsd` object
+    /// (displacement bookkeeping, plus the tracers' trajectories on a uniform grid).
+    Tamsd,
+}
+
+/// Time-averaged MSD (paper eq. 26): the displacements of `tracers` particles per species are
+/// recorded on the uniform grid t_j = j t_end / grid, j = 0..grid; at the end of the run the
+/// mean over tracers and over j of |R(t_j + Delta) - R(t_j)|^2 is reported for every lag.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TamsdSpec {
+    /// Lags Delta (0 < Delta < t_end). Each is rounded to the nearest positive multiple of the
+    /// grid step t_end / grid (at least one step); lags equal after rounding are merged.
+    #[schemars(length(min = 1), extend("items" = {"type": "number", "exclusiveMinimum": 0}))]
+    pub lags: Vec<f64>,
+    /// Tracers per species (default 100): the first `tracers` particles of each species
+    /// (particles are exchangeable); a species with fewer particles uses all of them.
+    #[serde(default = "default_tracers")]
+    #[schemars(range(min = 1))]
+    pub tracers: u64,
+    /// Number of uniform intervals of [0, t_end] on which the tracers' displacements are
+    /// recorded (default 10000); the grid step is t_end / grid.
+    #[serde(default = "default_grid")]
+    #[schemars(range(min = 1))]
+    pub grid: u64,
+}
+
+fn default_tracers() -> u64 {
+    100
+}
+
+fn default_grid() -> u64 {
+    10_000
+}
+
+/// Most doubles the tracer trajectories of one run may hold (tracers x 3 x (grid + 1)):
+/// 1.6 GB.
+pub const TAMSD_MAX_DOUBLES: f64 = 2e8;
+
+impl TamsdSpec {
+    /// The lags in grid steps for a run of length `t_end`: each rounded to the nearest
+    /// multiple of t_end / grid (at least one step), sorted, duplicates merged. Steps >= `grid`
+    /// (a lag that rounds to t_end) are kept here; `DsmcParams::check` rejects them.
+    pub fn resolve(&self, t_end: f64) -> Vec<u64> {
+        let step = t_end / self.grid as f64;
+        let mut steps: Vec<u64> = self
+            .lags
+            .iter()
+            .map(|&l| {
+                let x = (l / step).round();
+                if x.is_finite() && x >= 1.0 {
+                    x.min(u64::MAX as f64) as u64
+                } else {
+                    1
+                }
+            })
+            .collect();
+        steps.sort_unstable();
+        steps.dedup();
+        steps
+    }
+
+    /// The time of grid point `j` of a run of length `t_end`: j t_end / grid (t_end exactly
+    /// for j = grid).
+    pub fn grid_time(&self, t_end: f64, j: u64) -> f64 {
+        grid_time(t_end, self.grid, j)
+    }
+}
+
+/// j t_end / grid, and t_end exactly for j = grid (also the lag of j steps).
+pub fn grid_time(t_end: f64, grid: u64, j: u64) -> f64 {
+    if j == grid {
+        t_end
+    } else {
+        j as f64 * t_end / grid as f64
+    }
 }
 
 impl OutputTimes {
@@ -259,16 +345,48 @@ impl DsmcParams {
         self.observables.contains(&DsmcObservable::Msd)
     }
 
+    pub fn wants_tamsd(&self) -> bool {
+        self.observables.contains(&DsmcObservable::Tamsd)
+    }
+
+    /// Particle counts N_k as `DsmcSystem` resolves them (None for a power law with more than
+    /// 1e6 species, which `DsmcSystem::from_params` refuses anyway).
+    fn species_counts(&self) -> Option<Vec<u64>> {
+        match &self.species {
+            SpeciesSpec::PowerLaw(pl) => {
+                let mut counts = Vec::new();
+                for k in 1u64.. {
+                    let count = (pl.n1_count as f64 * (k as f64).powf(-pl.theta)).round();
+                    if count < 1.0 {
+                        break;
+                    }
+                    counts.push(count as u64);
+                    if counts.len() > 1_000_000 {
+                        return None;
+                    }
+                }
+                Some(counts)
+            }
+            SpeciesSpec::List(list) => Some(list.iter().map(|s| s.count).collect()),
+        }
+    }
+
     /// Checks that the schema cannot express; `path` is the JSON pointer of this object.
     pub fn check(&self, path: &str, errors: &mut Vec<(String, String)>) {
         let mut err = |p: &str, m: String| errors.push((format!("{path}{p}"), m));
         match &self.species {
             SpeciesSpec::PowerLaw(_) => {
                 if self.volume.is_some() {
-                    err("/volume", "must not be given with species.power_law (V = N1/n1)".into());
+                    err(
+                        "/volume",
+                        "must not be given with species.power_law (V = N1/n1)".into(),
+                    );
                 }
                 if self.number_density.is_some() {
-                    err("/number_density", "must not be given with species.power_law (V = N1/n1)".into());
+                    err(
+                        "/number_density",
+                        "must not be given with species.power_law (V = N1/n1)".into(),
+                    );
                 }
             }
             SpeciesSpec::List(list) => {
@@ -283,40 +401,133 @@ impl DsmcParams {
                     err("/species/list", "expected at least one species".into());
                 }
                 match (self.volume, self.number_density) {
-                    (None, None) => err("", "expected `volume` or `number_density` with species.list".into()),
-                    (Some(_), Some(_)) => err("/number_density", "give either `volume` or `number_density`, not both".into()),
+                    (None, None) => err(
+                        "",
+                        "expected `volume` or `number_density` with species.list".into(),
+                    ),
+                    (Some(_), Some(_)) => err(
+                        "/number_density",
+                        "give either `volume` or `number_density`, not both".into(),
+                    ),
                     _ => {}
                 }
                 let total: u64 = list.iter().map(|s| s.count).sum();
                 if !list.is_empty() && total < 2 {
-                    err("/species/list", "expected at least 2 particles in total".into());
+                    err(
+                        "/species/list",
+                        "expected at least 2 particles in total".into(),
+                    );
                 }
             }
         }
         if !self.t_end.is_finite() {
-            err("/t_end", format!("expected a finite time > 0, got {}", self.t_end));
+            err(
+                "/t_end",
+                format!("expected a finite time > 0, got {}", self.t_end),
+            );
         }
         if let Some(log) = &self.output_times.log {
             if log.to < log.from {
-                err("/output_times/log/to", format!("expected to >= from ({}), got {}", log.from, log.to));
+                err(
+                    "/output_times/log/to",
+                    format!("expected to >= from ({}), got {}", log.from, log.to),
+                );
             }
             if log.to > self.t_end * (1.0 + 1e-12) {
-                err("/output_times/log/to", format!("expected a time <= t_end ({}), got {}", self.t_end, log.to));
+                err(
+                    "/output_times/log/to",
+                    format!("expected a time <= t_end ({}), got {}", self.t_end, log.to),
+                );
             }
         }
         if let Some(list) = &self.output_times.list {
             for (i, t) in list.iter().enumerate() {
                 if !(*t >= 0.0 && *t <= self.t_end * (1.0 + 1e-12)) {
-                    err(&format!("/output_times/list/{i}"), format!("expected a time in [0, t_end = {}], got {t}", self.t_end));
+                    err(
+                        &format!("/output_times/list/{i}"),
+                        format!("expected a time in [0, t_end = {}], got {t}", self.t_end),
+                    );
                 }
             }
         }
         let mut seen = Vec::new();
         for (i, o) in self.observables.iter().enumerate() {
             if seen.contains(o) {
-                err(&format!("/observables/{i}"), format!("duplicate observable {o:?}"));
+                err(
+                    &format!("/observables/{i}"),
+                    format!("duplicate observable {o:?}"),
+                );
+            }
+            if *o == DsmcObservable::Tamsd && self.tamsd.is_none() && !seen.contains(o) {
+                err(
+                    &format!("/observables/{i}"),
+                    "observable `tamsd` needs a `tamsd` object with its `lags`".into(),
+                );
             }
             seen.push(*o);
         }
+        if let Some(tm) = &self.tamsd {
+            if !self.wants_tamsd() {
+                err(
+                    "/tamsd",
+                    "given, but `tamsd` is not in `observables`".into(),
+                );
+            }
+            let step = self.t_end / tm.grid as f64;
+            for (i, &lag) in tm.lags.iter().enumerate() {
+                if !(lag > 0.0 && lag < self.t_end) {
+                    err(
+                        &format!("/tamsd/lags/{i}"),
+                        format!("expected a lag in (0, t_end = {}), got {lag}", self.t_end),
+                    );
+                } else if (lag / step).round() >= tm.grid as f64 {
+                    err(
+                        &format!("/tamsd/lags/{i}"),
+                        format!("lag {lag} rounds to t_end on the grid of step t_end / grid = {step}: expected a lag < t_end - step / 2"),
+                    );
+                }
+            }
+            if let Some(counts) = self.species_counts() {
+                let tracers: u64 = counts.iter().map(|&n| n.min(tm.tracers)).sum();
+                let doubles = tracers as f64 * 3.0 * (tm.grid as f64 + 1.0);
+                if doubles > TAMSD_MAX_DOUBLES {
+                    err(
+                        "/tamsd",
+                        format!(
+                            "{tracers} tracers x 3 x (grid + 1 = {}) = {doubles:.3e} doubles of trajectories, more than the limit {TAMSD_MAX_DOUBLES:e} (1.6 GB): lower `tracers` or `grid`",
+                            tm.grid as f64 + 1.0
+                        ),
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Lags are rounded to the nearest multiple of the grid step (at least one step), sorted,
+    /// merged; grid times are j t_end / grid with t_end exact at the end.
+    #[test]
+    fn tamsd_lags_round_to_the_grid() {
+        let tm = TamsdSpec {
+            lags: vec![10.0, 0.01, 2.4, 2.6, 3.0, 0.7, 99.4],
+            tracers: 1,
+            grid: 50,
+        };
+        // step 100 / 50 = 2
+        assert_eq!(tm.resolve(100.0), vec![1, 2, 5, 50]);
+        assert_eq!(tm.grid_time(100.0, 50), 100.0);
+        assert_eq!(tm.grid_time(100.0, 5), 10.0);
+        let t_end = 0.3;
+        let tm = TamsdSpec {
+            lags: vec![0.1],
+            tracers: 1,
+            grid: 3,
+        };
+        assert_eq!(tm.grid_time(t_end, 3).to_bits(), t_end.to_bits());
+        assert_eq!(tm.resolve(t_end), vec![1]);
     }
 }

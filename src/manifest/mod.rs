@@ -75,7 +75,9 @@ pub fn json_schema() -> Value {
     let mut root = root.to_value();
     let defs = generator.take_definitions(true);
     let obj = root.as_object_mut().expect("schema is an object");
-    let root_defs = obj.entry("$defs").or_insert_with(|| Value::Object(Map::new()));
+    let root_defs = obj
+        .entry("$defs")
+        .or_insert_with(|| Value::Object(Map::new()));
     for (k, v) in defs {
         root_defs.as_object_mut().expect("$defs").insert(k, v);
     }

@@ -33,7 +33,12 @@ pub struct ManifestErrors {
 impl fmt::Display for ManifestErrors {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let n = self.errors.len();
-        writeln!(f, "{}: invalid manifest ({n} error{})", self.file, if n == 1 { "" } else { "s" })?;
+        writeln!(
+            f,
+            "{}: invalid manifest ({n} error{})",
+            self.file,
+            if n == 1 { "" } else { "s" }
+        )?;
         for e in &self.errors {
             let path = if e.path.is_empty() { "/" } else { &e.path };
             writeln!(f, "  at {path}: {}", e.message)?;
@@ -49,37 +54,61 @@ pub fn load_manifest(path: &Path) -> Result<(Manifest, Plan), ManifestErrors> {
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ManifestErrors {
         file: file.clone(),
-        errors: vec![ManifestError { path: String::new(), message: format!("cannot read the file: {e}") }],
+        errors: vec![ManifestError {
+            path: String::new(),
+            message: format!("cannot read the file: {e}"),
+        }],
     })?;
     parse_manifest(&text, &file)
 }
 
 /// Validate manifest text; `file` names it in errors.
 pub fn parse_manifest(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors> {
-    let fail = |errors: Vec<ManifestError>| ManifestErrors { file: file.to_string(), errors };
+    let fail = |errors: Vec<ManifestError>| ManifestErrors {
+        file: file.to_string(),
+        errors,
+    };
     let value: Value = serde_json::from_str(text).map_err(|e| {
         fail(vec![ManifestError {
             path: String::new(),
-            message: format!("not valid JSON: {e} (line {}, column {})", e.line(), e.column()),
+            message: format!(
+                "not valid JSON: {e} (line {}, column {})",
+                e.line(),
+                e.column()
+            ),
         }])
     })?;
     let mut errors = schema_errors(&json_schema(), &value, "");
     if !errors.is_empty() {
-        if let (Some(params), Some(sweep)) = (value.get("params"), value.get("sweep").and_then(|s| s.as_object())) {
+        if let (Some(params), Some(sweep)) = (
+            value.get("params"),
+            value.get("sweep").and_then(|s| s.as_object()),
+        ) {
             let more = plan::sweep_key_errors(params, sweep);
-            errors.extend(more.into_iter().map(|(path, message)| ManifestError { path, message }));
+            errors.extend(
+                more.into_iter()
+                    .map(|(path, message)| ManifestError { path, message }),
+            );
         }
         dedup(&mut errors);
         return Err(fail(errors));
     }
     let manifest: Manifest = match serde_json::from_value(value.clone()) {
         Ok(m) => m,
-        Err(e) => return Err(fail(vec![ManifestError { path: String::new(), message: e.to_string() }])),
+        Err(e) => {
+            return Err(fail(vec![ManifestError {
+                path: String::new(),
+                message: e.to_string(),
+            }]))
+        }
     };
     match plan::expand(&manifest) {
         Ok(plan) => Ok((manifest, plan)),
         Err(errs) => {
-            errors.extend(errs.into_iter().map(|(path, message)| ManifestError { path, message }));
+            errors.extend(
+                errs.into_iter()
+                    .map(|(path, message)| ManifestError { path, message }),
+            );
             dedup(&mut errors);
             Err(fail(errors))
         }
@@ -95,7 +124,8 @@ pub fn params_schema_errors(model: ModelKind, params: &Value, prefix: &str) -> V
     VALIDATORS.with(|cell| {
         let mut cache = cell.borrow_mut();
         if !cache.iter().any(|(m, _)| *m == model) {
-            let v = jsonschema::validator_for(&params_schema(model)).expect("generated schema compiles");
+            let v = jsonschema::validator_for(&params_schema(model))
+                .expect("generated schema compiles");
             cache.push((model, v));
         }
         let validator = &cache.iter().find(|(m, _)| *m == model).expect("cached").1;
@@ -108,7 +138,10 @@ fn schema_errors(schema: &Value, instance: &Value, prefix: &str) -> Vec<Manifest
     collect(validator.iter_errors(instance), prefix)
 }
 
-fn collect<'a>(iter: impl Iterator<Item = ValidationError<'a>>, prefix: &str) -> Vec<ManifestError> {
+fn collect<'a>(
+    iter: impl Iterator<Item = ValidationError<'a>>,
+    prefix: &str,
+) -> Vec<ManifestError> {
     let mut out = Vec::new();
     for e in iter {
         explain(&e, prefix, &mut out);
@@ -158,8 +191,12 @@ fn explain(e: &ValidationError<'_>, prefix: &str, out: &mut Vec<ManifestError>) 
                         continue;
                     }
                     match x.kind() {
-                        ValidationErrorKind::Required { property } => options.push(format!("an object {{{property}: ...}}")),
-                        ValidationErrorKind::Constant { expected_value } => options.push(expected_value.to_string()),
+                        ValidationErrorKind::Required { property } => {
+                            options.push(format!("an object {{{property}: ...}}"))
+                        }
+                        ValidationErrorKind::Constant { expected_value } => {
+                            options.push(expected_value.to_string())
+                        }
                         ValidationErrorKind::Enum { options: o } => {
                             if let Some(list) = o.as_array() {
                                 options.extend(list.iter().map(|v| v.to_string()));
@@ -186,7 +223,10 @@ fn explain(e: &ValidationError<'_>, prefix: &str, out: &mut Vec<ManifestError>) 
                 });
             }
         }
-        _ => out.push(ManifestError { path, message: e.to_string() }),
+        _ => out.push(ManifestError {
+            path,
+            message: e.to_string(),
+        }),
     }
 }
 

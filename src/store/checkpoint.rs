@@ -59,13 +59,19 @@ pub fn decode(bytes: &[u8]) -> Result<(CheckpointHeader, &[u8]), String> {
     let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().expect("4 bytes"));
     let format = u32_at(8);
     if format != FORMAT_VERSION {
-        return Err(format!("checkpoint format {format}, this granular reads {FORMAT_VERSION}"));
+        return Err(format!(
+            "checkpoint format {format}, this granular reads {FORMAT_VERSION}"
+        ));
     }
     let hlen = u32_at(12) as usize;
     let plen = u64::from_le_bytes(bytes[16..24].try_into().expect("8 bytes")) as usize;
     let crc = u32_at(24);
     if bytes.len() != 28 + hlen + plen {
-        return Err(format!("truncated or padded: {} bytes, expected {}", bytes.len(), 28 + hlen + plen));
+        return Err(format!(
+            "truncated or padded: {} bytes, expected {}",
+            bytes.len(),
+            28 + hlen + plen
+        ));
     }
     let (h, p) = bytes[28..].split_at(hlen);
     let mut hasher = crc32fast::Hasher::new();
@@ -74,7 +80,8 @@ pub fn decode(bytes: &[u8]) -> Result<(CheckpointHeader, &[u8]), String> {
     if hasher.finalize() != crc {
         return Err("checksum mismatch".into());
     }
-    let header: CheckpointHeader = serde_json::from_slice(h).map_err(|e| format!("bad header: {e}"))?;
+    let header: CheckpointHeader =
+        serde_json::from_slice(h).map_err(|e| format!("bad header: {e}"))?;
     Ok((header, p))
 }
 
@@ -125,7 +132,11 @@ pub fn load(dir: &Path, run_id: u64, seed: u64) -> Result<Option<Loaded>, Vec<St
         };
         match decode(&bytes) {
             Ok((header, payload)) if header.run_id == run_id && header.seed == seed => {
-                return Ok(Some(Loaded { header, payload: payload.to_vec(), skipped }))
+                return Ok(Some(Loaded {
+                    header,
+                    payload: payload.to_vec(),
+                    skipped,
+                }))
             }
             Ok((header, _)) => skipped.push(format!(
                 "{}: belongs to run {} seed {}, expected run {run_id} seed {seed}",
@@ -154,7 +165,14 @@ mod tests {
     use super::*;
 
     fn header() -> CheckpointHeader {
-        CheckpointHeader { run_id: 3, seed: 9, code_version: "x".into(), state_format: "dsmc/1".into(), wall_seconds: 1.5, t: 2.0 }
+        CheckpointHeader {
+            run_id: 3,
+            seed: 9,
+            code_version: "x".into(),
+            state_format: "dsmc/1".into(),
+            wall_seconds: 1.5,
+            t: 2.0,
+        }
     }
 
     #[test]

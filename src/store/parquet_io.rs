@@ -30,10 +30,15 @@ pub fn file_metadata(table: &str, manifest_json: &str) -> Vec<(String, String)> 
 /// The writer properties of every table file.
 pub fn writer_properties(table: &str, manifest_json: &str) -> WriterProperties {
     WriterProperties::builder()
-        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid level")))
+        .set_compression(Compression::ZSTD(
+            ZstdLevel::try_new(3).expect("valid level"),
+        ))
         .set_created_by(CODE_VERSION.to_string())
         .set_key_value_metadata(Some(
-            file_metadata(table, manifest_json).into_iter().map(|(k, v)| KeyValue::new(k, v)).collect(),
+            file_metadata(table, manifest_json)
+                .into_iter()
+                .map(|(k, v)| KeyValue::new(k, v))
+                .collect(),
         ))
         .set_max_row_group_row_count(Some(256 * 1024))
         .build()
@@ -46,14 +51,25 @@ pub fn schema_with_metadata(schema: &Schema, table: &str, manifest_json: &str) -
 }
 
 /// Write `batch` as a Parquet file at `tmp` (fsynced). The caller renames it into place.
-pub fn write_file(tmp: &Path, batch: &RecordBatch, table: &str, manifest_json: &str) -> Result<(), StoreError> {
+pub fn write_file(
+    tmp: &Path,
+    batch: &RecordBatch,
+    table: &str,
+    manifest_json: &str,
+) -> Result<(), StoreError> {
     let schema = schema_with_metadata(batch.schema().as_ref(), table, manifest_json);
-    let batch = batch.clone().with_schema(schema.clone()).map_err(|e| StoreError::Arrow(e.to_string()))?;
+    let batch = batch
+        .clone()
+        .with_schema(schema.clone())
+        .map_err(|e| StoreError::Arrow(e.to_string()))?;
     let file = File::create(tmp).map_err(|e| StoreError::io(tmp, e))?;
     let mut w = ArrowWriter::try_new(file, schema, Some(writer_properties(table, manifest_json)))
         .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
-    w.write(&batch).map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
-    let file = w.into_inner().map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
+    w.write(&batch)
+        .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
+    let file = w
+        .into_inner()
+        .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
     file.sync_all().map_err(|e| StoreError::io(tmp, e))?;
     Ok(())
 }
@@ -61,14 +77,33 @@ pub fn write_file(tmp: &Path, batch: &RecordBatch, table: &str, manifest_json: &
 /// Read every batch of a table file, checking that it is one of ours and of this format.
 pub fn read_file(path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| StoreError::Corrupt(path.display().to_string(), format!("not a readable Parquet file: {e}")))?;
-    let kv = builder.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| {
+        StoreError::Corrupt(
+            path.display().to_string(),
+            format!("not a readable Parquet file: {e}"),
+        )
+    })?;
+    let kv = builder
+        .metadata()
+        .file_metadata()
+        .key_value_metadata()
+        .cloned()
+        .unwrap_or_default();
     let get = |k: &str| kv.iter().find(|x| x.key == k).and_then(|x| x.value.clone());
     match get("granular.table") {
         Some(t) if t == table => {}
-        Some(t) => return Err(StoreError::Corrupt(path.display().to_string(), format!("holds table {t:?}, expected {table:?}"))),
-        None => return Err(StoreError::Corrupt(path.display().to_string(), "is not a granular table file".into())),
+        Some(t) => {
+            return Err(StoreError::Corrupt(
+                path.display().to_string(),
+                format!("holds table {t:?}, expected {table:?}"),
+            ))
+        }
+        None => {
+            return Err(StoreError::Corrupt(
+                path.display().to_string(),
+                "is not a granular table file".into(),
+            ))
+        }
     }
     match get("granular.format_version").and_then(|v| v.parse::<u32>().ok()) {
         Some(FORMAT_VERSION) => {}
@@ -79,7 +114,9 @@ pub fn read_file(path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreErro
             ))
         }
     }
-    let reader = builder.build().map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))?;
+    let reader = builder
+        .build()
+        .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))?;
     reader
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))
@@ -88,7 +125,10 @@ pub fn read_file(path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreErro
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
     #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
     #[error("{0}: Parquet write failed: {1}")]
     Parquet(String, String),
     #[error("Arrow: {0}")]
@@ -99,6 +139,9 @@ pub enum StoreError {
 
 impl StoreError {
     pub fn io(path: &Path, source: std::io::Error) -> Self {
-        StoreError::Io { path: path.display().to_string(), source }
+        StoreError::Io {
+            path: path.display().to_string(),
+            source,
+        }
     }
 }

@@ -1,5 +1,6 @@
 //! Ensemble summaries over replicas: `dsmc_species_summary` (mean and standard error of the
-//! mean per point, time and species). Derived data: rewritten whole, atomically, whenever the
+//! mean per point, time and species) and `dsmc_tamsd_summary` (the same per point, species and
+//! lag). Derived data: rewritten whole, atomically, whenever the
 //! campaign completes. Reads the raw table in chunks of points so memory stays bounded, and
 //! sums in replica order so the result is bit-identical however the runs were scheduled.
 
@@ -39,7 +40,10 @@ pub fn table_files(c: &Campaign, table: &str) -> Result<Vec<PathBuf>, StoreError
             .filter_map(|e| e.ok())
             .map(|e| e.path())
             .filter(|p| {
-                let n = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                let n = p
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
                 !n.starts_with('.') && n.ends_with(".parquet")
             })
             .collect(),
@@ -52,7 +56,10 @@ pub fn table_files(c: &Campaign, table: &str) -> Result<Vec<PathBuf>, StoreError
 
 type Key = (u32, u64, u32); // point, t bits, species
 
-pub fn write_summaries(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Result<(), StoreError> {
+pub fn write_summaries(
+    c: &Campaign,
+    finished: &BTreeMap<u64, RunStatus>,
+) -> Result<(), StoreError> {
     let files = table_files(c, tables::DSMC_SPECIES)?;
     let replicas = c.plan.replicas as u64;
     let rows_per_point: u64 = c
@@ -61,7 +68,9 @@ pub fn write_summaries(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Res
         .iter()
         .map(|p| match &p.params {
             crate::plan::ModelParams::Dsmc(d) => {
-                let species = crate::dsmc::DsmcSystem::from_params(d).map(|s| s.species.len()).unwrap_or(1) as u64;
+                let species = crate::dsmc::DsmcSystem::from_params(d)
+                    .map(|s| s.species.len())
+                    .unwrap_or(1) as u64;
                 species * d.output_times.resolve(d.t_end).len() as u64 * replicas
             }
         })
@@ -80,7 +89,14 @@ pub fn write_summaries(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Res
         let mut acc: BTreeMap<Key, Vec<(u32, f64, Option<f64>)>> = BTreeMap::new();
         for f in &files {
             for b in parquet_io::read_file(f, tables::DSMC_SPECIES)? {
-                let col = |name: &str| b.column_by_name(name).cloned().ok_or_else(|| StoreError::Corrupt(f.display().to_string(), format!("has no column {name}")));
+                let col = |name: &str| {
+                    b.column_by_name(name).cloned().ok_or_else(|| {
+                        StoreError::Corrupt(
+                            f.display().to_string(),
+                            format!("has no column {name}"),
+                        )
+                    })
+                };
                 let run = col("run_id")?;
                 let point = col("point_id")?;
                 let t = col("t")?;
@@ -100,15 +116,25 @@ pub fn write_summaries(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Res
                     if p < p0 || p >= p1 || finished.get(&run.value(i)) != Some(&RunStatus::Done) {
                         continue;
                     }
-                    let m = if arrow_array::Array::is_null(msd, i) { None } else { Some(msd.value(i)) };
-                    acc.entry((p, t.value(i).to_bits(), sp.value(i))).or_default().push(((run.value(i) % replicas) as u32, temp.value(i), m));
+                    let m = if arrow_array::Array::is_null(msd, i) {
+                        None
+                    } else {
+                        Some(msd.value(i))
+                    };
+                    acc.entry((p, t.value(i).to_bits(), sp.value(i)))
+                        .or_default()
+                        .push(((run.value(i) % replicas) as u32, temp.value(i), m));
                 }
             }
         }
         // Points whose replicas are not all finished (failed ones excluded) are summarised
         // over the replicas that succeeded.
         let mut order: Vec<Key> = acc.keys().copied().collect();
-        order.sort_by(|a, b| (a.0, f64::from_bits(a.1), a.2).partial_cmp(&(b.0, f64::from_bits(b.1), b.2)).expect("finite times"));
+        order.sort_by(|a, b| {
+            (a.0, f64::from_bits(a.1), a.2)
+                .partial_cmp(&(b.0, f64::from_bits(b.1), b.2))
+                .expect("finite times")
+        });
         for key in order {
             let mut v = acc.remove(&key).expect("key");
             v.sort_by_key(|x| x.0);
@@ -123,17 +149,214 @@ pub fn write_summaries(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Res
                 (None, None)
             };
             let th = theory.get(&key).copied();
-            out.push(key.0, f64::from_bits(key.1), key.2, v.len() as u32, tm, ts, mm, ms, th);
+            out.push(
+                key.0,
+                f64::from_bits(key.1),
+                key.2,
+                v.len() as u32,
+                tm,
+                ts,
+                mm,
+                ms,
+                th,
+            );
         }
         p0 = p1;
     }
-    let batch = out.finish();
-    let path = c.root.join("tables").join(tables::DSMC_SPECIES_SUMMARY).join("summary.parquet");
-    fsutil::create_dir_durable(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))?;
+    write_whole(
+        c,
+        tables::DSMC_SPECIES_SUMMARY,
+        "summary.parquet",
+        &out.finish(),
+    )?;
+    if c.observes_tamsd() {
+        write_tamsd_summary(c, finished)?;
+    }
+    Ok(())
+}
+
+/// Write `tables/<table>/<name>` atomically (the whole table in one file).
+fn write_whole(
+    c: &Campaign,
+    table: &str,
+    name: &str,
+    batch: &RecordBatch,
+) -> Result<(), StoreError> {
+    let path = c.root.join("tables").join(table).join(name);
+    fsutil::create_dir_durable(path.parent().expect("dir"))
+        .map_err(|e| StoreError::io(&path, e))?;
     let tmp = fsutil::temp_path(&path);
-    parquet_io::write_file(&tmp, &batch, tables::DSMC_SPECIES_SUMMARY, &c.manifest_json)?;
+    parquet_io::write_file(&tmp, batch, table, &c.manifest_json)?;
     std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
     fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))
+}
+
+type TamsdKey = (u32, u32, u64); // point, species, lag bits
+
+/// `dsmc_tamsd_summary`: mean and standard error over the finished replicas of each (point,
+/// species, lag), with the theory (27) joined; in chunks of points, summed in replica order.
+fn write_tamsd_summary(
+    c: &Campaign,
+    finished: &BTreeMap<u64, RunStatus>,
+) -> Result<(), StoreError> {
+    let files = table_files(c, tables::DSMC_TAMSD)?;
+    let replicas = c.plan.replicas as u64;
+    let rows_per_point: u64 = c
+        .plan
+        .points
+        .iter()
+        .map(|p| match &p.params {
+            crate::plan::ModelParams::Dsmc(d) => match (&d.tamsd, d.wants_tamsd()) {
+                (Some(tm), true) => {
+                    let species = crate::dsmc::DsmcSystem::from_params(d)
+                        .map(|s| s.species.len())
+                        .unwrap_or(1) as u64;
+                    species * tm.lags.len() as u64 * replicas
+                }
+                _ => 0,
+            },
+        })
+        .max()
+        .unwrap_or(1)
+        .max(1);
+    let points_per_chunk = (CHUNK_ROWS / rows_per_point).max(1) as u32;
+    let n_points = c.plan.points.len() as u32;
+    let theory = read_tamsd_theory(c)?;
+    let mut cols = TamsdSummaryColumns::default();
+    let mut p0 = 0u32;
+    while p0 < n_points && !files.is_empty() {
+        let p1 = (p0 + points_per_chunk).min(n_points);
+        // (point, species, lag) -> [(replica, tamsd)]
+        let mut acc: BTreeMap<TamsdKey, Vec<(u32, f64)>> = BTreeMap::new();
+        for f in &files {
+            for b in parquet_io::read_file(f, tables::DSMC_TAMSD)? {
+                let col = |name: &str| {
+                    b.column_by_name(name).cloned().ok_or_else(|| {
+                        StoreError::Corrupt(
+                            f.display().to_string(),
+                            format!("has no column {name}"),
+                        )
+                    })
+                };
+                let (run, point, sp, lag, val) = (
+                    col("run_id")?,
+                    col("point_id")?,
+                    col("species")?,
+                    col("lag")?,
+                    col("tamsd")?,
+                );
+                let (run, point, sp, lag, val) = (
+                    run.as_primitive::<UInt64Type>(),
+                    point.as_primitive::<UInt32Type>(),
+                    sp.as_primitive::<UInt32Type>(),
+                    lag.as_primitive::<Float64Type>(),
+                    val.as_primitive::<Float64Type>(),
+                );
+                for i in 0..b.num_rows() {
+                    let p = point.value(i);
+                    if p < p0 || p >= p1 || finished.get(&run.value(i)) != Some(&RunStatus::Done) {
+                        continue;
+                    }
+                    acc.entry((p, sp.value(i), lag.value(i).to_bits()))
+                        .or_default()
+                        .push(((run.value(i) % replicas) as u32, val.value(i)));
+                }
+            }
+        }
+        let mut order: Vec<TamsdKey> = acc.keys().copied().collect();
+        order.sort_by(|a, b| {
+            (a.0, a.1, f64::from_bits(a.2))
+                .partial_cmp(&(b.0, b.1, f64::from_bits(b.2)))
+                .expect("finite lags")
+        });
+        for key in order {
+            let mut v = acc.remove(&key).expect("key");
+            v.sort_by_key(|x| x.0);
+            v.dedup_by_key(|x| x.0);
+            let x: Vec<f64> = v.iter().map(|x| x.1).collect();
+            let (mean, sem) = mean_sem(&x);
+            cols.point.push(key.0);
+            cols.species.push(key.1);
+            cols.lag.push(f64::from_bits(key.2));
+            cols.n.push(v.len() as u32);
+            cols.mean.push(mean);
+            cols.sem.push(sem);
+            cols.theory.push(theory.get(&key).copied());
+        }
+        p0 = p1;
+    }
+    write_whole(
+        c,
+        tables::DSMC_TAMSD_SUMMARY,
+        "summary.parquet",
+        &cols.finish(),
+    )
+}
+
+/// Theory (27) by (point, species, lag bits), if the table exists.
+fn read_tamsd_theory(c: &Campaign) -> Result<BTreeMap<TamsdKey, f64>, StoreError> {
+    let mut out = BTreeMap::new();
+    for f in table_files(c, tables::DSMC_THEORY_TAMSD)? {
+        for b in parquet_io::read_file(&f, tables::DSMC_THEORY_TAMSD)? {
+            let col = |name: &str| {
+                b.column_by_name(name).cloned().ok_or_else(|| {
+                    StoreError::Corrupt(f.display().to_string(), format!("has no column {name}"))
+                })
+            };
+            let (p, s, l, v) = (
+                col("point_id")?,
+                col("species")?,
+                col("lag")?,
+                col("tamsd")?,
+            );
+            let (p, s, l, v) = (
+                p.as_primitive::<UInt32Type>(),
+                s.as_primitive::<UInt32Type>(),
+                l.as_primitive::<Float64Type>(),
+                v.as_primitive::<Float64Type>(),
+            );
+            for i in 0..b.num_rows() {
+                out.insert((p.value(i), s.value(i), l.value(i).to_bits()), v.value(i));
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[derive(Default)]
+struct TamsdSummaryColumns {
+    point: Vec<u32>,
+    species: Vec<u32>,
+    lag: Vec<f64>,
+    n: Vec<u32>,
+    mean: Vec<f64>,
+    sem: Vec<Option<f64>>,
+    theory: Vec<Option<f64>>,
+}
+
+impl TamsdSummaryColumns {
+    fn finish(self) -> RecordBatch {
+        let schema = Schema::new(vec![
+            Field::new("point_id", DataType::UInt32, false),
+            Field::new("species", DataType::UInt32, false),
+            Field::new("lag", DataType::Float64, false),
+            Field::new("n_replicas", DataType::UInt32, false),
+            Field::new("tamsd_mean", DataType::Float64, false),
+            Field::new("tamsd_sem", DataType::Float64, true),
+            Field::new("tamsd_theory", DataType::Float64, true),
+        ]);
+        let arrays: Vec<ArrayRef> = vec![
+            Arc::new(arrow_array::UInt32Array::from(self.point)),
+            Arc::new(arrow_array::UInt32Array::from(self.species)),
+            Arc::new(arrow_array::Float64Array::from(self.lag)),
+            Arc::new(arrow_array::UInt32Array::from(self.n)),
+            Arc::new(arrow_array::Float64Array::from(self.mean)),
+            Arc::new(arrow_array::Float64Array::from(self.sem)),
+            Arc::new(arrow_array::Float64Array::from(self.theory)),
+        ];
+        RecordBatch::try_new(Arc::new(schema), arrays)
+            .expect("tamsd summary batch matches its schema")
+    }
 }
 
 #[derive(Default)]
@@ -151,9 +374,16 @@ struct SummaryColumns {
 }
 
 /// (mean - theory) / sem and (mean - theory) / theory.
-fn deviations(mean: Option<f64>, sem: Option<f64>, theory: Option<f64>) -> (Option<f64>, Option<f64>) {
+fn deviations(
+    mean: Option<f64>,
+    sem: Option<f64>,
+    theory: Option<f64>,
+) -> (Option<f64>, Option<f64>) {
     match (mean, theory) {
-        (Some(m), Some(t)) => (sem.filter(|s| *s > 0.0).map(|s| (m - t) / s), (t != 0.0).then(|| (m - t) / t)),
+        (Some(m), Some(t)) => (
+            sem.filter(|s| *s > 0.0).map(|s| (m - t) / s),
+            (t != 0.0).then(|| (m - t) / t),
+        ),
         _ => (None, None),
     }
 }
@@ -163,8 +393,18 @@ fn read_theory(c: &Campaign) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreE
     let mut out = BTreeMap::new();
     for f in table_files(c, tables::DSMC_THEORY)? {
         for b in parquet_io::read_file(&f, tables::DSMC_THEORY)? {
-            let col = |name: &str| b.column_by_name(name).cloned().ok_or_else(|| StoreError::Corrupt(f.display().to_string(), format!("has no column {name}")));
-            let (p, t, s, tt, m) = (col("point_id")?, col("t")?, col("species")?, col("temperature")?, col("msd")?);
+            let col = |name: &str| {
+                b.column_by_name(name).cloned().ok_or_else(|| {
+                    StoreError::Corrupt(f.display().to_string(), format!("has no column {name}"))
+                })
+            };
+            let (p, t, s, tt, m) = (
+                col("point_id")?,
+                col("t")?,
+                col("species")?,
+                col("temperature")?,
+                col("msd")?,
+            );
             let (p, t, s, tt, m) = (
                 p.as_primitive::<UInt32Type>(),
                 t.as_primitive::<Float64Type>(),
@@ -173,8 +413,15 @@ fn read_theory(c: &Campaign) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreE
                 m.as_primitive::<Float64Type>(),
             );
             for i in 0..b.num_rows() {
-                let msd = if arrow_array::Array::is_null(m, i) { None } else { Some(m.value(i)) };
-                out.insert((p.value(i), t.value(i).to_bits(), s.value(i)), (tt.value(i), msd));
+                let msd = if arrow_array::Array::is_null(m, i) {
+                    None
+                } else {
+                    Some(m.value(i))
+                };
+                out.insert(
+                    (p.value(i), t.value(i).to_bits(), s.value(i)),
+                    (tt.value(i), msd),
+                );
             }
         }
     }
@@ -183,7 +430,18 @@ fn read_theory(c: &Campaign) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreE
 
 impl SummaryColumns {
     #[allow(clippy::too_many_arguments)]
-    fn push(&mut self, p: u32, t: f64, s: u32, n: u32, tm: f64, ts: Option<f64>, mm: Option<f64>, ms: Option<f64>, th: Option<(f64, Option<f64>)>) {
+    fn push(
+        &mut self,
+        p: u32,
+        t: f64,
+        s: u32,
+        n: u32,
+        tm: f64,
+        ts: Option<f64>,
+        mm: Option<f64>,
+        ms: Option<f64>,
+        th: Option<(f64, Option<f64>)>,
+    ) {
         self.t_th.push(th.map(|x| x.0));
         self.m_th.push(th.and_then(|x| x.1));
         self.point.push(p);
@@ -214,7 +472,12 @@ impl SummaryColumns {
             Field::new("msd_dev_rel", DataType::Float64, true),
         ]);
         let n = self.point.len();
-        let (mut tds, mut tdr, mut mds, mut mdr) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+        let (mut tds, mut tdr, mut mds, mut mdr) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
         for j in 0..n {
             let (a, b) = deviations(Some(self.tm[j]), self.ts[j], self.t_th[j]);
             tds.push(a);

@@ -2,18 +2,22 @@
 
 use std::sync::Arc;
 
-use arrow_array::builder::{BooleanBuilder, Float64Builder, Int64Builder, StringBuilder, UInt32Builder, UInt64Builder};
+use arrow_array::builder::{
+    BooleanBuilder, Float64Builder, Int64Builder, StringBuilder, UInt32Builder, UInt64Builder,
+};
 use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
 use serde_json::Value;
 
-use crate::dsmc::SpeciesRow;
+use crate::dsmc::{SpeciesRow, TamsdRow};
 use crate::plan::{canonical, Plan};
 
 pub const RUNS: &str = "runs";
 pub const POINTS: &str = "points";
 pub const DSMC_SPECIES: &str = "dsmc_species";
 pub const DSMC_SPECIES_SUMMARY: &str = "dsmc_species_summary";
+pub const DSMC_TAMSD: &str = "dsmc_tamsd";
+pub const DSMC_TAMSD_SUMMARY: &str = "dsmc_tamsd_summary";
 
 /// How a swept parameter is stored: as a typed column, never as a string of a number.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -50,7 +54,10 @@ pub fn sweep_columns(plan: &Plan) -> Vec<SweepColumn> {
             } else {
                 SweepKind::Json
             };
-            SweepColumn { name: Plan::sweep_column(key), kind }
+            SweepColumn {
+                name: Plan::sweep_column(key),
+                kind,
+            }
         })
         .collect()
 }
@@ -76,22 +83,30 @@ fn sweep_arrays(cols: &[SweepColumn], values: &[&[Value]]) -> Vec<ArrayRef> {
             match c.kind {
                 SweepKind::Int => {
                     let mut b = Int64Builder::new();
-                    values.iter().for_each(|v| b.append_value(v[j].as_i64().unwrap_or(v[j].as_u64().unwrap_or(0) as i64)));
+                    values.iter().for_each(|v| {
+                        b.append_value(v[j].as_i64().unwrap_or(v[j].as_u64().unwrap_or(0) as i64))
+                    });
                     Arc::new(b.finish())
                 }
                 SweepKind::Float => {
                     let mut b = Float64Builder::new();
-                    values.iter().for_each(|v| b.append_value(v[j].as_f64().unwrap_or(f64::NAN)));
+                    values
+                        .iter()
+                        .for_each(|v| b.append_value(v[j].as_f64().unwrap_or(f64::NAN)));
                     Arc::new(b.finish())
                 }
                 SweepKind::Bool => {
                     let mut b = BooleanBuilder::new();
-                    values.iter().for_each(|v| b.append_value(v[j].as_bool().unwrap_or(false)));
+                    values
+                        .iter()
+                        .for_each(|v| b.append_value(v[j].as_bool().unwrap_or(false)));
                     Arc::new(b.finish())
                 }
                 SweepKind::Str => {
                     let mut b = StringBuilder::new();
-                    values.iter().for_each(|v| b.append_value(v[j].as_str().unwrap_or("")));
+                    values
+                        .iter()
+                        .for_each(|v| b.append_value(v[j].as_str().unwrap_or("")));
                     Arc::new(b.finish())
                 }
                 SweepKind::Json => {
@@ -139,23 +154,71 @@ pub fn runs_batch(plan: &Plan, cols: &[SweepColumn], rows: &[RunRow]) -> RecordB
         Field::new("code_version", DataType::Utf8, false),
     ]);
     let mut arrays: Vec<ArrayRef> = vec![
-        Arc::new(rows.iter().map(|r| r.run_id).collect::<arrow_array::UInt64Array>()),
-        Arc::new(rows.iter().map(|r| r.point_id).collect::<arrow_array::UInt32Array>()),
-        Arc::new(rows.iter().map(|r| r.replica).collect::<arrow_array::UInt32Array>()),
-        Arc::new(rows.iter().map(|r| r.seed).collect::<arrow_array::UInt64Array>()),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.run_id)
+                .collect::<arrow_array::UInt64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.point_id)
+                .collect::<arrow_array::UInt32Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.replica)
+                .collect::<arrow_array::UInt32Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.seed)
+                .collect::<arrow_array::UInt64Array>(),
+        ),
     ];
-    let values: Vec<&[Value]> = rows.iter().map(|r| plan.point(r.point_id).values.as_slice()).collect();
+    let values: Vec<&[Value]> = rows
+        .iter()
+        .map(|r| plan.point(r.point_id).values.as_slice())
+        .collect();
     arrays.extend(sweep_arrays(cols, &values));
     arrays.extend::<[ArrayRef; 7]>([
-        Arc::new(rows.iter().map(|r| Some(r.status.as_str())).collect::<arrow_array::StringArray>()),
-        Arc::new(rows.iter().map(|r| r.reason.as_deref()).collect::<arrow_array::StringArray>()),
-        Arc::new(rows.iter().map(|r| r.t_failed).collect::<arrow_array::Float64Array>()),
-        Arc::new(rows.iter().map(|r| r.wall_seconds).collect::<arrow_array::Float64Array>()),
-        Arc::new(rows.iter().map(|r| r.collisions).collect::<arrow_array::UInt64Array>()),
-        Arc::new(rows.iter().map(|r| r.trials).collect::<arrow_array::UInt64Array>()),
-        Arc::new(rows.iter().map(|_| Some(crate::CODE_VERSION)).collect::<arrow_array::StringArray>()),
+        Arc::new(
+            rows.iter()
+                .map(|r| Some(r.status.as_str()))
+                .collect::<arrow_array::StringArray>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.reason.as_deref())
+                .collect::<arrow_array::StringArray>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.t_failed)
+                .collect::<arrow_array::Float64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.wall_seconds)
+                .collect::<arrow_array::Float64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.collisions)
+                .collect::<arrow_array::UInt64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.trials)
+                .collect::<arrow_array::UInt64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|_| Some(crate::CODE_VERSION))
+                .collect::<arrow_array::StringArray>(),
+        ),
     ]);
-    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).expect("runs batch matches its schema")
+    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays)
+        .expect("runs batch matches its schema")
 }
 
 /// The `points` table: one row per sweep point with its swept values and full params.
@@ -163,11 +226,22 @@ pub fn points_batch(plan: &Plan, cols: &[SweepColumn], params_json: &[String]) -
     let mut fields = vec![Field::new("point_id", DataType::UInt32, false)];
     fields.extend(sweep_fields(cols));
     fields.push(Field::new("params", DataType::Utf8, false));
-    let mut arrays: Vec<ArrayRef> = vec![Arc::new(plan.points.iter().map(|p| p.point_id).collect::<arrow_array::UInt32Array>())];
+    let mut arrays: Vec<ArrayRef> = vec![Arc::new(
+        plan.points
+            .iter()
+            .map(|p| p.point_id)
+            .collect::<arrow_array::UInt32Array>(),
+    )];
     let values: Vec<&[Value]> = plan.points.iter().map(|p| p.values.as_slice()).collect();
     arrays.extend(sweep_arrays(cols, &values));
-    arrays.push(Arc::new(params_json.iter().map(|s| Some(s.as_str())).collect::<arrow_array::StringArray>()));
-    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).expect("points batch matches its schema")
+    arrays.push(Arc::new(
+        params_json
+            .iter()
+            .map(|s| Some(s.as_str()))
+            .collect::<arrow_array::StringArray>(),
+    ));
+    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays)
+        .expect("points batch matches its schema")
 }
 
 /// Buffered `dsmc_species` rows.
@@ -232,11 +306,64 @@ impl SpeciesBuffer {
             Arc::new(self.msd.finish()),
             Arc::new(self.collisions.finish()),
         ];
-        RecordBatch::try_new(Arc::new(Self::schema()), arrays).expect("species batch matches its schema")
+        RecordBatch::try_new(Arc::new(Self::schema()), arrays)
+            .expect("species batch matches its schema")
+    }
+}
+
+/// Buffered `dsmc_tamsd` rows.
+#[derive(Default)]
+pub struct TamsdBuffer {
+    run_id: UInt64Builder,
+    point_id: UInt32Builder,
+    species: UInt32Builder,
+    lag: Float64Builder,
+    tamsd: Float64Builder,
+    t_total: Float64Builder,
+    pub rows: usize,
+}
+
+impl TamsdBuffer {
+    pub fn push(&mut self, run_id: u64, point_id: u32, rows: &[TamsdRow]) {
+        for r in rows {
+            self.run_id.append_value(run_id);
+            self.point_id.append_value(point_id);
+            self.species.append_value(r.species);
+            self.lag.append_value(r.lag);
+            self.tamsd.append_value(r.tamsd);
+            self.t_total.append_value(r.t_total);
+        }
+        self.rows += rows.len();
+    }
+
+    pub fn schema() -> Schema {
+        Schema::new(vec![
+            Field::new("run_id", DataType::UInt64, false),
+            Field::new("point_id", DataType::UInt32, false),
+            Field::new("species", DataType::UInt32, false),
+            Field::new("lag", DataType::Float64, false),
+            Field::new("tamsd", DataType::Float64, false),
+            Field::new("t_total", DataType::Float64, false),
+        ])
+    }
+
+    pub fn finish(&mut self) -> RecordBatch {
+        self.rows = 0;
+        let arrays: Vec<ArrayRef> = vec![
+            Arc::new(self.run_id.finish()),
+            Arc::new(self.point_id.finish()),
+            Arc::new(self.species.finish()),
+            Arc::new(self.lag.finish()),
+            Arc::new(self.tamsd.finish()),
+            Arc::new(self.t_total.finish()),
+        ];
+        RecordBatch::try_new(Arc::new(Self::schema()), arrays)
+            .expect("tamsd batch matches its schema")
     }
 }
 
 pub const DSMC_THEORY: &str = "dsmc_theory";
+pub const DSMC_THEORY_TAMSD: &str = "dsmc_theory_tamsd";
 pub const DSMC_THEORY_POINT: &str = "dsmc_theory_point";
 
 /// `dsmc_theory`: the kinetic-theory prediction per point, time and species.
@@ -250,14 +377,71 @@ pub fn theory_batch(rows: &[(u32, crate::dsmc::predict::TheoryRow)]) -> RecordBa
         Field::new("tau_v", DataType::Float64, false),
     ]);
     let arrays: Vec<ArrayRef> = vec![
-        Arc::new(rows.iter().map(|r| r.0).collect::<arrow_array::UInt32Array>()),
-        Arc::new(rows.iter().map(|r| r.1.t).collect::<arrow_array::Float64Array>()),
-        Arc::new(rows.iter().map(|r| r.1.species).collect::<arrow_array::UInt32Array>()),
-        Arc::new(rows.iter().map(|r| r.1.temperature).collect::<arrow_array::Float64Array>()),
-        Arc::new(rows.iter().map(|r| r.1.msd).collect::<arrow_array::Float64Array>()),
-        Arc::new(rows.iter().map(|r| r.1.tau_v).collect::<arrow_array::Float64Array>()),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.0)
+                .collect::<arrow_array::UInt32Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.1.t)
+                .collect::<arrow_array::Float64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.1.species)
+                .collect::<arrow_array::UInt32Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.1.temperature)
+                .collect::<arrow_array::Float64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.1.msd)
+                .collect::<arrow_array::Float64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.1.tau_v)
+                .collect::<arrow_array::Float64Array>(),
+        ),
     ];
     RecordBatch::try_new(Arc::new(schema), arrays).expect("theory batch matches its schema")
+}
+
+/// `dsmc_theory_tamsd`: the TAMSD (27) per point, species and lag (measured over [0, t_end]).
+pub fn theory_tamsd_batch(rows: &[(u32, crate::dsmc::predict::TamsdTheoryRow)]) -> RecordBatch {
+    let schema = Schema::new(vec![
+        Field::new("point_id", DataType::UInt32, false),
+        Field::new("species", DataType::UInt32, false),
+        Field::new("lag", DataType::Float64, false),
+        Field::new("tamsd", DataType::Float64, false),
+    ]);
+    let arrays: Vec<ArrayRef> = vec![
+        Arc::new(
+            rows.iter()
+                .map(|r| r.0)
+                .collect::<arrow_array::UInt32Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.1.species)
+                .collect::<arrow_array::UInt32Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.1.lag)
+                .collect::<arrow_array::Float64Array>(),
+        ),
+        Arc::new(
+            rows.iter()
+                .map(|r| r.1.tamsd)
+                .collect::<arrow_array::Float64Array>(),
+        ),
+    ];
+    RecordBatch::try_new(Arc::new(schema), arrays).expect("theory tamsd batch matches its schema")
 }
 
 /// `dsmc_theory_point`: per point, tau_0 (21) and the initial temperatures actually used.
@@ -272,11 +456,25 @@ pub fn theory_point_batch(points: &[(u32, f64, Vec<f64>)]) -> RecordBatch {
     let schema = Schema::new(vec![
         Field::new("point_id", DataType::UInt32, false),
         Field::new("tau_0", DataType::Float64, false),
-        Field::new("initial_temperatures", arrow_array::Array::data_type(&temps).clone(), false),
+        Field::new(
+            "initial_temperatures",
+            arrow_array::Array::data_type(&temps).clone(),
+            false,
+        ),
     ]);
     let arrays: Vec<ArrayRef> = vec![
-        Arc::new(points.iter().map(|p| p.0).collect::<arrow_array::UInt32Array>()),
-        Arc::new(points.iter().map(|p| p.1).collect::<arrow_array::Float64Array>()),
+        Arc::new(
+            points
+                .iter()
+                .map(|p| p.0)
+                .collect::<arrow_array::UInt32Array>(),
+        ),
+        Arc::new(
+            points
+                .iter()
+                .map(|p| p.1)
+                .collect::<arrow_array::Float64Array>(),
+        ),
         Arc::new(temps),
     ];
     RecordBatch::try_new(Arc::new(schema), arrays).expect("theory point batch matches its schema")

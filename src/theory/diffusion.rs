@@ -13,15 +13,24 @@ pub fn tau_c(s1: &Species, t1: f64) -> f64 {
     1.0 / (4.0 * s1.density * s1.diameter * s1.diameter * (PI * t1 / s1.mass).sqrt())
 }
 
-/// tau_v,ki^-1 (11) for every pair: result[k][i].
+/// tau_v,ki^-1 (11) for every pair: `result[k][i]`.
 pub fn tau_v_inv_pairs(species: &[Species], t: &[f64], r: &PairRestitution) -> Vec<Vec<f64>> {
     let m = species.len();
-    (0..m).map(|k| (0..m).map(|i| pair_rates(&species[k], k, t[k], &species[i], i, t[i], r).tau_v_inv).collect()).collect()
+    (0..m)
+        .map(|k| {
+            (0..m)
+                .map(|i| pair_rates(&species[k], k, t[k], &species[i], i, t[i], r).tau_v_inv)
+                .collect()
+        })
+        .collect()
 }
 
 /// tau_v,k (10)-(11) of every species at temperatures `t`.
 pub fn tau_v(species: &[Species], t: &[f64], r: &PairRestitution) -> Vec<f64> {
-    tau_v_inv_pairs(species, t, r).iter().map(|row| 1.0 / row.iter().sum::<f64>()).collect()
+    tau_v_inv_pairs(species, t, r)
+        .iter()
+        .map(|row| 1.0 / row.iter().sum::<f64>())
+        .collect()
 }
 
 /// tau_v,k(0) by the paper's HCS form (24) (constant eps_ki), literally transcribed:
@@ -38,7 +47,10 @@ pub fn tau_v_24(species: &[Species], t: &[f64], r: &PairRestitution) -> Vec<f64>
                     let (mk, mi) = (sk.mass, si.mass);
                     let g = t[i] / t[k];
                     let sig = 0.5 * (sk.diameter + si.diameter);
-                    si.density * sig * sig * mi / (mi * mk).sqrt() * (mi + g * mk).powf(1.5) / ((mi + mk) * (mi + mk)) * (1.0 + e) * (1.0 + e)
+                    si.density * sig * sig * mi / (mi * mk).sqrt() * (mi + g * mk).powf(1.5)
+                        / ((mi + mk) * (mi + mk))
+                        * (1.0 + e)
+                        * (1.0 + e)
                 })
                 .sum();
             1.0 / (2.0 * (2.0 * PI * t[k]).sqrt() / 3.0 * s)
@@ -48,7 +60,12 @@ pub fn tau_v_24(species: &[Species], t: &[f64], r: &PairRestitution) -> Vec<f64>
 
 /// D_k (8) = T_k tau_v,k / m_k at temperatures `t`.
 pub fn diffusion_coefficients(species: &[Species], t: &[f64], r: &PairRestitution) -> Vec<f64> {
-    tau_v(species, t, r).iter().zip(species).zip(t).map(|((tv, s), tk)| tk * tv / s.mass).collect()
+    tau_v(species, t, r)
+        .iter()
+        .zip(species)
+        .zip(t)
+        .map(|((tv, s), tk)| tk * tv / s.mass)
+        .collect()
 }
 
 #[cfg(test)]
@@ -60,7 +77,14 @@ mod tests {
     /// 6 tau_c/(1+eps)^2 (30) (1e-14).
     #[test]
     fn tau_v_forms_agree() {
-        let s: Vec<Species> = [1.0, 100.0, 500.0].iter().map(|&m: &f64| Species { mass: m, diameter: m.cbrt(), density: 0.1 }).collect();
+        let s: Vec<Species> = [1.0, 100.0, 500.0]
+            .iter()
+            .map(|&m: &f64| Species {
+                mass: m,
+                diameter: m.cbrt(),
+                density: 0.1,
+            })
+            .collect();
         let r = PairRestitution::Constant(0.5);
         let t = hcs_temperatures(&s, &r, 1.0);
         let a = tau_v(&s, &t, &r);
@@ -68,7 +92,11 @@ mod tests {
         for k in 0..3 {
             assert!((a[k] / b[k] - 1.0).abs() < 1e-13, "{a:?} {b:?}");
         }
-        let one = [Species { mass: 2.0, diameter: 1.3, density: 0.2 }];
+        let one = [Species {
+            mass: 2.0,
+            diameter: 1.3,
+            density: 0.2,
+        }];
         let tv = tau_v(&one, &[0.7], &PairRestitution::Constant(0.8))[0];
         let want = 6.0 * tau_c(&one[0], 0.7) / (1.8 * 1.8);
         assert!((tv / want - 1.0).abs() < 1e-14);

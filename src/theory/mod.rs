@@ -7,10 +7,13 @@
 //! Species and restitution
 //! - [`Species`] `{ mass, diameter, density }` (sigma_ki = (sigma_k + sigma_i)/2).
 //! - [`PairRestitution`]: `Constant(eps)`, `ConstantPairs(eps_ki)`,
-//!   `VelocityDependent(Arc<dyn PairEps>)` with eps_ki(g_n) of the normal impact speed;
-//!   constructors `velocity_dependent(|k, i, g_n| ..)`, `per_pair(..)`,
-//!   `viscoelastic(species, a_kappa_00, F)` (eps = F(A kappa_ki^(2/5) g_n^(1/5))),
-//!   `series(species, a_kappa_00, h)` (A1).
+//!   `VelocityDependent(Arc<dyn PairEps>)` with eps_ki(g_n) of the normal impact speed,
+//!   `Scaled(Arc<ScaledEps>)` for eps_ki = f(a_ki g_n^p) (Maxwell averages tabulated once:
+//!   use it for viscoelastic restitution, ~100x faster than an equivalent closure);
+//!   constructors `velocity_dependent(|k, i, g_n| ..)`, `per_pair(..)`, `scaled(a, p, f)`,
+//!   `viscoelastic(species, a_kappa_00, F)` (= `scaled(a_kappa_pairs(..), 0.2, F)`,
+//!   eps = F(A kappa_ki^(2/5) g_n^(1/5))), `series(species, a_kappa_00, h)` (A1); `eps(k, i, g_n)`,
+//!   `averages(k, i, u)`, `constant(k, i)`, `is_constant()`.
 //! - [`restitution::pair_rates`]`(s_k, k, T_k, s_i, i, T_i, &r) -> PairRates { xi, tau_v_inv,
 //!   collision_rate }`: xi_ki (15)/(A7) and tau_v,ki^-1 (11)/(A6), by exact quadrature over the
 //!   Maxwellian impact speeds for velocity-dependent eps; [`restitution::maxwell_averages`].
@@ -53,6 +56,19 @@
 //!
 //! Numerics ([`quad`]): Gauss-Legendre rules, adaptive Gauss-Legendre, graded composite rules,
 //! Gamma(x). The stiff ODE integrator and LU live in the private `ode` module.
+//!
+//! # Notes on the paper (each checked by a test)
+//! - Fig 2: the HCS at mean T = 1 is T = (0.554070, 45.59302), ratio 82.2875, tau_0 = 19.2562.
+//!   The printed T_2 = 45.58755 is the rounded T_1 = 0.554 times the ratio 82.288, and the
+//!   printed tau_0 = 19.258 is 2/xi at those rounded temperatures.
+//! - Fig 3: the printed T = (0.048, 1.1, 1.845) are the HCS at mean exactly 1, rounded
+//!   (0.048152, 1.10659, 1.845261); tau_0 = 1.8368 there, printed 1.83 (truncated).
+//! - Fig 5: the exact tracer HCS (n_2 = 0) gives T_2/T_1 = 412.928, tau_0 (29) = 11.284,
+//!   tau_v,2 (32)-(33) = 1212.02, as printed. (35) as printed has sigma_12^2/sigma_2^2 where the
+//!   mu >> 1 expansion gives sigma_1^2/sigma_12^2; with either, b > 1 for Fig 5, so (34) does
+//!   not apply there (T_2/T_1 = 4.1 mu is not << mu).
+//! - (28) is the asymptote of the first term of (27) only: Xi cancels its logarithm.
+//! - (11) equals the velocity-relaxation rate of a tagged particle minus half the cooling rate.
 
 pub mod diffusion;
 pub mod hcs;
@@ -64,5 +80,5 @@ pub mod tamsd;
 pub mod temperature;
 pub mod tracer;
 
-pub use restitution::{PairEps, PairRates, PairRestitution};
+pub use restitution::{PairEps, PairRates, PairRestitution, ScaledEps};
 pub use temperature::Species;

@@ -16,7 +16,7 @@
 
 use super::diffusion::{diffusion_coefficients, tau_v};
 use super::quad::{composite_nodes, phi, tau_ln1p};
-use super::restitution::PairRestitution;
+use super::restitution::{PairRestitution, PairTable};
 use super::temperature::{evolve, tau0_with, time_scale, Species};
 
 /// (22): 6 D_k(0) tau_0 ln(1 + t/tau_0) + 6 D_k(0) tau_v,k(0) ((1 + t/tau_0)^-beta_k - 1),
@@ -30,7 +30,8 @@ pub fn msd_hcs(d0: f64, tau_v0: f64, tau0: f64, t: f64) -> f64 {
 /// (22) written literally as in the paper (for checks; cancels badly at small t).
 pub fn msd_hcs_literal(d0: f64, tau_v0: f64, tau0: f64, t: f64) -> f64 {
     let beta = tau0 / tau_v0;
-    6.0 * d0 * tau0 * (1.0 + t / tau0).ln() + 6.0 * d0 * tau_v0 * ((1.0 + t / tau0).powf(-beta) - 1.0)
+    6.0 * d0 * tau0 * (1.0 + t / tau0).ln()
+        + 6.0 * d0 * tau_v0 * ((1.0 + t / tau0).powf(-beta) - 1.0)
 }
 
 /// The long-time limit (23): 6 D_k(0) tau_0 ln(1 + t/tau_0).
@@ -39,34 +40,58 @@ pub fn msd_hcs_long(d0: f64, tau0: f64, t: f64) -> f64 {
 }
 
 /// Partial MSDs (22) of every species for a start in the HCS at temperatures `t0`:
-/// result[j][k] = <R_k^2(times[j])>, with D_k(0), tau_v,k(0) from (8), (10)-(11) and tau_0 (21).
-pub fn msd_hcs_species(species: &[Species], restitution: &PairRestitution, t0: &[f64], times: &[f64]) -> Vec<Vec<f64>> {
+/// `result[j][k]` = `<R_k^2(times[j])>`, with D_k(0), tau_v,k(0) from (8), (10)-(11) and tau_0 (21).
+pub fn msd_hcs_species(
+    species: &[Species],
+    restitution: &PairRestitution,
+    t0: &[f64],
+    times: &[f64],
+) -> Vec<Vec<f64>> {
     let d = diffusion_coefficients(species, t0, restitution);
     let tv = tau_v(species, t0, restitution);
     let tau0 = tau0_with(species, t0, restitution);
-    times.iter().map(|&t| (0..species.len()).map(|k| msd_hcs(d[k], tv[k], tau0, t)).collect()).collect()
+    times
+        .iter()
+        .map(|&t| {
+            (0..species.len())
+                .map(|k| msd_hcs(d[k], tv[k], tau0, t))
+                .collect()
+        })
+        .collect()
 }
 
 /// The total MSD (3): sum_k n_k <R_k^2> / n, from the partial MSDs `partial` (one per species).
 pub fn msd_total(species: &[Species], partial: &[f64]) -> f64 {
     let n: f64 = species.iter().map(|s| s.density).sum();
-    species.iter().zip(partial).map(|(s, r)| s.density * r).sum::<f64>() / n
+    species
+        .iter()
+        .zip(partial)
+        .map(|(s, r)| s.density * r)
+        .sum::<f64>()
+        / n
 }
 
 /// Partial MSDs (4) for any temperature history: the temperatures start at `t0` (t = 0) and
-/// follow (13)-(15) (or their velocity-dependent form), result[j][k] = <R_k^2(times[j])>.
+/// follow (13)-(15) (or their velocity-dependent form), `result[j][k]` = `<R_k^2(times[j])>`.
 /// `times` sorted, >= 0, any range (e.g. up to 1e9). See the module docs for the method.
 ///
 /// # Panics
 /// See [`super::temperature::evolve`].
-pub fn msd_numeric(species: &[Species], restitution: &PairRestitution, t0: &[f64], times: &[f64]) -> Vec<Vec<f64>> {
+pub fn msd_numeric(
+    species: &[Species],
+    restitution: &PairRestitution,
+    t0: &[f64],
+    times: &[f64],
+) -> Vec<Vec<f64>> {
     let m = species.len();
     let first = evolve(species, restitution, t0, times, false, 1e-11);
     let t_s = time_scale(species, t0);
     let t_max = times.iter().cloned().fold(0.0, f64::max);
     let ds = 0.5;
     let n_global = ((t_max / t_s).ln_1p() / ds).ceil() as usize + 1;
-    let global: Vec<f64> = (0..=n_global).map(|j| t_s * (j as f64 * ds).exp_m1()).collect();
+    let global: Vec<f64> = (0..=n_global)
+        .map(|j| t_s * (j as f64 * ds).exp_m1())
+        .collect();
 
     // Quadrature nodes and weights for each output time.
     let mut per_output: Vec<(Vec<f64>, Vec<f64>)> = Vec::with_capacity(times.len());
@@ -75,7 +100,10 @@ pub fn msd_numeric(species: &[Species], restitution: &PairRestitution, t0: &[f64
             per_output.push((vec![], vec![]));
             continue;
         }
-        let w = tau_v(species, &first[j].temperatures, restitution).into_iter().fold(f64::INFINITY, f64::min).min(t);
+        let w = tau_v(species, &first[j].temperatures, restitution)
+            .into_iter()
+            .fold(f64::INFINITY, f64::min)
+            .min(t);
         let mut b: Vec<f64> = global.iter().cloned().filter(|&x| x < t).collect();
         let mut d = w / 16.0;
         while t - d > 0.0 {
@@ -96,12 +124,16 @@ pub fn msd_numeric(species: &[Species], restitution: &PairRestitution, t0: &[f64
     all.sort_by(f64::total_cmp);
     all.dedup();
     let states = evolve(species, restitution, t0, &all, true, 1e-11);
-    let find = |t: f64| -> usize { all.binary_search_by(|x| x.total_cmp(&t)).expect("node time") };
+    let find = |t: f64| -> usize {
+        all.binary_search_by(|x| x.total_cmp(&t))
+            .expect("node time")
+    };
     // D_k, tau_hat_k (without tau_c(0)) and tau_k at each node.
     let mut node_d = vec![vec![0.0; m]; all.len()];
     let mut node_that = vec![vec![0.0; m]; all.len()];
+    let table = PairTable::new(species, restitution);
     for (idx, st) in states.iter().enumerate() {
-        let tv = tau_v(species, &st.temperatures, restitution);
+        let tv = table.tau_v(&st.temperatures);
         for k in 0..m {
             node_d[idx][k] = st.temperatures[k] * tv[k] / species[k].mass;
             node_that[idx][k] = tv[k] * (st.temperatures[k] / t0[k]).sqrt();
@@ -141,7 +173,15 @@ mod tests {
     use crate::theory::tracer::msd_gas_tracer;
 
     fn same_material(masses: &[f64], dens: &[f64]) -> Vec<Species> {
-        masses.iter().zip(dens).map(|(&m, &n)| Species { mass: m, diameter: m.cbrt(), density: n }).collect()
+        masses
+            .iter()
+            .zip(dens)
+            .map(|(&m, &n)| Species {
+                mass: m,
+                diameter: m.cbrt(),
+                density: n,
+            })
+            .collect()
     }
 
     /// In the HCS the numerical integration of (4) equals the closed form (22) to 1e-6
@@ -149,7 +189,10 @@ mod tests {
     #[test]
     fn numeric_4_equals_22_in_hcs() {
         let r = PairRestitution::Constant(0.5);
-        for (masses, dens) in [(vec![1.0, 100.0], vec![0.1, 0.001]), (vec![1.0, 100.0, 500.0], vec![0.1, 0.1, 0.1])] {
+        for (masses, dens) in [
+            (vec![1.0, 100.0], vec![0.1, 0.001]),
+            (vec![1.0, 100.0, 500.0], vec![0.1, 0.1, 0.1]),
+        ] {
             let s = same_material(&masses, &dens);
             let t0 = hcs_temperatures(&s, &r, 1.0);
             let times = [0.0, 1e-3, 0.1, 1.0, 10.0, 100.0, 1e3, 1e5, 1e7, 1e9];
@@ -178,7 +221,10 @@ mod tests {
             assert!((a / b - 1.0).abs() < 1e-12, "{a} {b}");
         }
         let t = 1e12;
-        assert!((msd_hcs(d, tv, tau0, t) - msd_hcs_long(d, tau0, t) + 6.0 * d * tv).abs() < 1e-9 * msd_hcs(d, tv, tau0, t));
+        assert!(
+            (msd_hcs(d, tv, tau0, t) - msd_hcs_long(d, tau0, t) + 6.0 * d * tv).abs()
+                < 1e-9 * msd_hcs(d, tv, tau0, t)
+        );
     }
 
     /// The tracer-limit gas MSD (31) equals (22) for k = 1 (one species: D_1(0), tau_v,1(0),
@@ -186,7 +232,11 @@ mod tests {
     #[test]
     fn tracer_31_equals_22() {
         for eps in [0.1, 0.5, 0.9] {
-            let s = [Species { mass: 1.0, diameter: 1.0, density: 0.1 }];
+            let s = [Species {
+                mass: 1.0,
+                diameter: 1.0,
+                density: 0.1,
+            }];
             let r = PairRestitution::Constant(eps);
             let t0 = [1.0];
             let d1 = diffusion_coefficients(&s, &t0, &r)[0];
@@ -211,7 +261,12 @@ mod tests {
         let cf = msd_hcs_species(&s, &r, &t0, &times);
         for j in 0..times.len() {
             for k in 0..2 {
-                assert!((num[j][k] / cf[j][k] - 1.0).abs() < 1e-6, "{} {}", num[j][k], cf[j][k]);
+                assert!(
+                    (num[j][k] / cf[j][k] - 1.0).abs() < 1e-6,
+                    "{} {}",
+                    num[j][k],
+                    cf[j][k]
+                );
             }
         }
     }
@@ -222,12 +277,23 @@ mod tests {
     #[test]
     fn numeric_4_against_brute_force() {
         use crate::theory::temperature::cooling_rates_with;
-        let s = vec![Species { mass: 1.0, diameter: 1.0, density: 0.1 }, Species { mass: 100.0, diameter: 1.0, density: 0.1 }];
+        let s = vec![
+            Species {
+                mass: 1.0,
+                diameter: 1.0,
+                density: 0.1,
+            },
+            Species {
+                mass: 100.0,
+                diameter: 1.0,
+                density: 0.1,
+            },
+        ];
         let r = PairRestitution::Constant(0.5);
         let t0 = [1.0, 1.0];
         let dt = 2e-3;
         let n_steps = 100_000; // t = 200
-        // State: ln T_1, ln T_2, tau_1, tau_2.
+                               // State: ln T_1, ln T_2, tau_1, tau_2.
         let f = |y: &[f64; 4]| -> [f64; 4] {
             let t = [y[0].exp(), y[1].exp()];
             let xi = cooling_rates_with(&s, &t, &r);
@@ -237,7 +303,14 @@ mod tests {
         let mut grid = vec![y];
         for _ in 0..n_steps {
             let k1 = f(&y);
-            let a = |k: &[f64; 4], c: f64| -> [f64; 4] { [y[0] + c * k[0], y[1] + c * k[1], y[2] + c * k[2], y[3] + c * k[3]] };
+            let a = |k: &[f64; 4], c: f64| -> [f64; 4] {
+                [
+                    y[0] + c * k[0],
+                    y[1] + c * k[1],
+                    y[2] + c * k[2],
+                    y[3] + c * k[3],
+                ]
+            };
             let k2 = f(&a(&k1, 0.5 * dt));
             let k3 = f(&a(&k2, 0.5 * dt));
             let k4 = f(&a(&k3, dt));
@@ -251,7 +324,10 @@ mod tests {
             .map(|g| {
                 let t = [g[0].exp(), g[1].exp()];
                 let tv = tau_v(&s, &t, &r);
-                ((0..2).map(|k| t[k] * tv[k] / s[k].mass).collect(), (0..2).map(|k| tv[k] * (t[k] / t0[k]).sqrt()).collect())
+                (
+                    (0..2).map(|k| t[k] * tv[k] / s[k].mass).collect(),
+                    (0..2).map(|k| tv[k] * (t[k] / t0[k]).sqrt()).collect(),
+                )
             })
             .collect();
         let outs = [1000usize, 10_000, 50_000, 100_000];
@@ -260,7 +336,10 @@ mod tests {
         let mut worst: f64 = 0.0;
         for (o, &j) in outs.iter().enumerate() {
             for k in 0..2 {
-                let integrand = |i: usize| 6.0 * dt_at[i].0[k] * -(-(grid[j][2 + k] - grid[i][2 + k]) / dt_at[i].1[k]).exp_m1();
+                let integrand = |i: usize| {
+                    6.0 * dt_at[i].0[k]
+                        * -(-(grid[j][2 + k] - grid[i][2 + k]) / dt_at[i].1[k]).exp_m1()
+                };
                 let mut sum = integrand(0) + integrand(j);
                 for i in 1..j {
                     sum += if i % 2 == 1 { 4.0 } else { 2.0 } * integrand(i);
@@ -281,6 +360,7 @@ mod tests {
     /// approach is slow, as the number of collisions grows only like t^(1/6): the same exponent
     /// is 0.150 / 0.135 (species 1 / 2) at 1e7..1e9 and 0.163 / 0.160 at 1e11..1e13.)
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn viscoelastic_msd_exponents() {
         let s = same_material(&[1.0, 100.0], &[0.1, 0.1]);
         let r = PairRestitution::viscoelastic(&s, 0.09, |b| 1.0 - 1.15344 * b + 0.79826 * b * b);

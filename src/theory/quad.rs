@@ -79,7 +79,12 @@ fn gl_panel<const D: usize>(f: &mut impl FnMut(f64) -> [f64; D], a: f64, b: f64)
 /// `abs_tol`, or at rounding level; otherwise both halves are refined. The accepted value is the
 /// refined one, so the error is typically far below the tolerance for smooth integrands;
 /// integrable algebraic end-point singularities (e.g. x^0.2) are handled by bisection.
-pub fn adaptive<const D: usize>(f: &mut impl FnMut(f64) -> [f64; D], breaks: &[f64], rel_tol: f64, abs_tol: f64) -> [f64; D] {
+pub fn adaptive<const D: usize>(
+    f: &mut impl FnMut(f64) -> [f64; D],
+    breaks: &[f64],
+    rel_tol: f64,
+    abs_tol: f64,
+) -> [f64; D] {
     assert!(breaks.len() >= 2);
     let length = breaks[breaks.len() - 1] - breaks[0];
     let mut stack: Vec<(f64, f64, [f64; D], u32)> = Vec::new();
@@ -161,7 +166,11 @@ pub fn graded_integral(f: impl Fn(f64) -> f64, a: f64, b: f64, h: f64) -> f64 {
     }
     let mid = 0.5 * (a + b);
     let mut breaks = graded_from(a, mid, h);
-    let right: Vec<f64> = graded_from(-b, -mid, h).into_iter().map(|x| -x).rev().collect();
+    let right: Vec<f64> = graded_from(-b, -mid, h)
+        .into_iter()
+        .map(|x| -x)
+        .rev()
+        .collect();
     breaks.pop();
     breaks.extend(right);
     let (nodes, weights) = composite_nodes(&breaks);
@@ -246,7 +255,12 @@ mod tests {
     /// Gamma(x) vs known values (1e-14).
     #[test]
     fn adaptive_and_gamma() {
-        let got = adaptive(&mut |x: f64| [x.powf(3.2) * (-x * x).exp()], &[0.0, 10.0], 1e-14, 0.0)[0];
+        let got = adaptive(
+            &mut |x: f64| [x.powf(3.2) * (-x * x).exp()],
+            &[0.0, 10.0],
+            1e-14,
+            0.0,
+        )[0];
         let want = 0.5 * gamma(2.1);
         assert!((got / want - 1.0).abs() < 1e-13, "{got} vs {want}");
         assert!((gamma(5.0) - 24.0).abs() < 24.0 * 1e-14);
@@ -258,9 +272,17 @@ mod tests {
     #[test]
     fn stable_helpers() {
         for x in [1e-9f64, 1e-4, 0.05, 0.0999, 0.1, 0.5, 3.0, 50.0] {
-            let direct = x - 1.0 + (-x as f64).exp();
-            let want = if x < 1e-3 { x * x / 2.0 - x * x * x / 6.0 + x.powi(4) / 24.0 } else { direct };
-            assert!((phi(x) / want - 1.0).abs() < 1e-12, "{x}: {} vs {want}", phi(x));
+            let direct = x - 1.0 + (-x).exp();
+            let want = if x < 1e-3 {
+                x * x / 2.0 - x * x * x / 6.0 + x.powi(4) / 24.0
+            } else {
+                direct
+            };
+            assert!(
+                (phi(x) / want - 1.0).abs() < 1e-12,
+                "{x}: {} vs {want}",
+                phi(x)
+            );
         }
         assert_eq!(tau_ln1p(f64::INFINITY, 3.0), 3.0);
         let g = graded_integral(|x| 1.0 / (1.0 + x), 0.0, 1e9, 1e-3);

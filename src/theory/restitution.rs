@@ -7,30 +7,45 @@
 //! Species k and i have Maxwellian velocity distributions at temperatures T_k, T_i (g2 = 1).
 //! The relative velocity g = v_k - v_i is then Gaussian with variance u^2 per component,
 //!
-//!   u^2 = T_k/m_k + T_i/m_i = (T_k m_i + T_i m_k) / (m_i m_k),
+//! ```text
+//! u^2 = T_k/m_k + T_i/m_i = (T_k m_i + T_i m_k) / (m_i m_k),
+//! ```
 //!
 //! and E[v_k | g] = (T_k/m_k)/u^2 g. A collision with unit vector e and g_n = g.e > 0 changes
-//! v_k by -mu_i (1 + eps(g_n)) g_n e, mu_i = m_i/(m_i + m_k) (spec 2, (41)). Averaging the
-//! energy change of species k and the rate sigma_ki^2 g_n over the hemisphere and over g, every
-//! rate becomes an average over the flux-weighted distribution of the normal impact speed,
+//! v_k by dv_k = -mu_i (1 + eps(g_n)) g_n e, mu_i = m_i/(m_i + m_k) (spec 2, (41)). The
+//! collision integrals are
 //!
-//!   <G> = 2 int_0^inf z^3 exp(-z^2) G(sqrt(2) u z) dz        (g_n = sqrt(2) u z, <1> = 1),
+//! ```text
+//! xi_ki = -(2/(3 n_k T_k)) n_k n_i sigma_ki^2 int dv_k dv_i f_k f_i int_{g.e>0} de g_n
+//!         [m_k (v_k + dv_k)^2/2 - m_k v_k^2/2]
+//! nu^v_ki = (m_k/(3 T_k)) n_i sigma_ki^2 int dv_k dv_i f_k f_i int_{g.e>0} de g_n (-v_k . dv_k)
+//! ```
+//!
+//! (f normalised to 1; nu^v_ki is the rate at which collisions with species i relax a tagged
+//! k particle's velocity, <v_k . dv_k>/<v_k^2>). With the Gaussian g and E[v_k | g], the
+//! integrals over e (4 pi, one normal direction) and over the tangential components of g
+//! leave one integral over the flux-weighted distribution of the normal impact speed,
+//!
+//! `<G> = 2 int_0^inf z^3 exp(-z^2) G(sqrt(2) u z) dz`  (g_n = sqrt(2) u z, `<1>` = 1),
 //!
 //! and with P_ki = (8 sqrt(2 pi)/3) n_i sigma_ki^2 u mu_i and
 //! Gam_ki = (T_k m_i + T_i m_k) / (T_k (m_i + m_k)) = m_k mu_i u^2 / T_k:
 //!
-//!   xi_ki        = P_ki [ <1 + eps> - (Gam_ki/2) <(1 + eps)^2> ]            (15), (A7)
-//!   tau_v,ki^-1  = P_ki (Gam_ki/4) <(1 + eps)^2>                            (11), (A6)
-//!   nu_ki        = 2 sqrt(2 pi) n_i sigma_ki^2 u   (collision frequency of a k particle with i)
+//! ```text
+//! xi_ki        = P_ki [ <1 + eps> - (Gam_ki/2) <(1 + eps)^2> ]            (15), (A7)
+//! nu^v_ki      = P_ki <1 + eps> / 2
+//! tau_v,ki^-1  = nu^v_ki - xi_ki/2 = P_ki (Gam_ki/4) <(1 + eps)^2>         (11), (A6)
+//! nu_ki        = 2 sqrt(2 pi) n_i sigma_ki^2 u   (collision frequency of a k particle with i)
+//! ```
 //!
 //! For constant eps these are exactly (15) and (11). With eps = 1 + sum_j h_j x^j,
 //! x = (A kappa^(2/5))^(1/2) g_n^(1/10), one has <x^n> = 2 B_n with the paper's B_n, and the
 //! two lines become the paper's (A7) and (A6) term by term (see [`xi_pair_series`]).
 //!
-//! Note: tau_v,ki^-1 = P_ki <1 + eps>/2 - xi_ki/2 identically. The first term is the rate at
-//! which collisions with species i relax the mean velocity of a tagged k particle
-//! (<v_k . dv_k>/<v_k^2>); the paper's (11) subtracts half the cooling rate (the Chapman-Enskog
-//! form of the textbook self-diffusion coefficient, D ∝ 1/(1 + eps)^2 for one species).
+//! Note: the paper's (11) is not the bare velocity-relaxation rate nu^v_ki but nu^v_ki minus
+//! half the cooling rate (the form of the textbook self-diffusion coefficient,
+//! D ∝ 1/(1 + eps)^2 for one species); the identity holds for any eps(g_n), which is how (11)
+//! is generalised here, consistently with the paper's (A6).
 //!
 //! For velocity-dependent eps the averages are computed by adaptive Gauss-Legendre quadrature
 //! over z in [0, 9.5] (the neglected tail is < 1e-33 of the total), to ~1e-13 relative.
@@ -64,6 +79,102 @@ pub enum PairRestitution {
     ConstantPairs(Vec<Vec<f64>>),
     /// eps_ki(g_n) depending on the normal impact speed (symmetric in k, i).
     VelocityDependent(Arc<dyn PairEps>),
+    /// eps_ki(g_n) = f(a_ki g_n^p), one function f for every pair (the viscoelastic form,
+    /// p = 1/5): evaluated like `VelocityDependent`, but the Maxwell averages are tabulated once
+    /// (see [`ScaledEps`]), which makes many species and long integrations cheap.
+    Scaled(Arc<ScaledEps>),
+}
+
+/// Restitution of the form eps_ki(g_n) = f(a_ki g_n^p).
+///
+/// The flux-weighted averages then depend on the pair and the temperatures only through
+/// x = a_ki (sqrt(2) u)^p: `<(1 + eps)^m> = Phi_m(x) = 2 int z^3 exp(-z^2) (1 + f(x z^p))^m dz`.
+/// Phi_1, Phi_2 are computed by the adaptive quadrature on a uniform grid in ln x (step 1/128,
+/// ln x in [-40, 12], built lazily in chunks of 64 nodes where needed) and interpolated with
+/// 8-point Lagrange polynomials: relative error < 1e-12 for a smooth f, ~1e-9 for a piecewise
+/// linear f with knots every 0.05 in beta (Phi is smooth in ln x even where f is only
+/// piecewise smooth, but only on the scale ~0.07 in ln x over which the average over z
+/// smooths it). Outside the grid the quadrature is used directly.
+pub struct ScaledEps {
+    a: Vec<Vec<f64>>,
+    p: f64,
+    f: Box<dyn Fn(f64) -> f64 + Send + Sync>,
+    chunks: Vec<std::sync::OnceLock<Vec<[f64; 2]>>>,
+}
+
+const LNX_LO: f64 = -40.0;
+const LNX_HI: f64 = 12.0;
+const LNX_PER_UNIT: usize = 128;
+const CHUNK: usize = 64;
+
+impl ScaledEps {
+    /// eps_ki(g_n) = f(`a[k][i]` g_n^p).
+    pub fn new(a: Vec<Vec<f64>>, p: f64, f: impl Fn(f64) -> f64 + Send + Sync + 'static) -> Self {
+        let n = ((LNX_HI - LNX_LO) as usize) * LNX_PER_UNIT + 1;
+        ScaledEps {
+            a,
+            p,
+            f: Box::new(f),
+            chunks: (0..n.div_ceil(CHUNK))
+                .map(|_| std::sync::OnceLock::new())
+                .collect(),
+        }
+    }
+
+    /// eps of pair (k, i) at normal impact speed g_n.
+    pub fn eps(&self, k: usize, i: usize, g_n: f64) -> f64 {
+        (self.f)(self.a[k][i] * g_n.powf(self.p))
+    }
+
+    /// (Phi_1(x), Phi_2(x)) by quadrature.
+    pub fn phi_direct(&self, x: f64) -> (f64, f64) {
+        flux_averages(|z| (self.f)(x * z.powf(self.p)))
+    }
+
+    fn node(&self, j: usize) -> [f64; 2] {
+        let c = self.chunks[j / CHUNK].get_or_init(|| {
+            (0..CHUNK)
+                .map(|o| {
+                    let l = LNX_LO + ((j / CHUNK) * CHUNK + o) as f64 / LNX_PER_UNIT as f64;
+                    let (a, b) = self.phi_direct(l.exp());
+                    [a, b]
+                })
+                .collect()
+        });
+        c[j % CHUNK]
+    }
+
+    /// (Phi_1(x), Phi_2(x)), interpolated in ln x where tabulated.
+    pub fn phi(&self, x: f64) -> (f64, f64) {
+        if x <= 0.0 {
+            let e = (self.f)(0.0);
+            return (1.0 + e, (1.0 + e) * (1.0 + e));
+        }
+        let r = (x.ln() - LNX_LO) * LNX_PER_UNIT as f64;
+        let n = ((LNX_HI - LNX_LO) as usize) * LNX_PER_UNIT + 1;
+        if !(r >= 3.0 && r <= (n - 5) as f64) {
+            return self.phi_direct(x);
+        }
+        let j0 = r.floor() as usize - 3;
+        let mut out = [0.0; 2];
+        for a in 0..8 {
+            let mut w = 1.0;
+            for b in 0..8 {
+                if a != b {
+                    w *= (r - (j0 + b) as f64) / (a as f64 - b as f64);
+                }
+            }
+            let v = self.node(j0 + a);
+            out[0] += w * v[0];
+            out[1] += w * v[1];
+        }
+        (out[0], out[1])
+    }
+
+    /// (<1 + eps>, <(1 + eps)^2>) of pair (k, i) at relative-velocity scale u.
+    pub fn averages(&self, k: usize, i: usize, u: f64) -> (f64, f64) {
+        self.phi(self.a[k][i] * (2f64.sqrt() * u).powf(self.p))
+    }
 }
 
 impl fmt::Debug for PairRestitution {
@@ -72,13 +183,16 @@ impl fmt::Debug for PairRestitution {
             PairRestitution::Constant(e) => write!(f, "Constant({e})"),
             PairRestitution::ConstantPairs(m) => write!(f, "ConstantPairs({m:?})"),
             PairRestitution::VelocityDependent(_) => write!(f, "VelocityDependent(..)"),
+            PairRestitution::Scaled(s) => write!(f, "Scaled {{ a: {:?}, p: {} }}", s.a, s.p),
         }
     }
 }
 
 impl PairRestitution {
     /// Velocity-dependent restitution from a function (k, i, g_n) -> eps.
-    pub fn velocity_dependent(f: impl Fn(usize, usize, f64) -> f64 + Send + Sync + 'static) -> Self {
+    pub fn velocity_dependent(
+        f: impl Fn(usize, usize, f64) -> f64 + Send + Sync + 'static,
+    ) -> Self {
         PairRestitution::VelocityDependent(Arc::new(f))
     }
 
@@ -91,9 +205,31 @@ impl PairRestitution {
     /// beta = A kappa_ki^(2/5) g_n^(1/5), A kappa_ki^(2/5) from [`a_kappa_pairs`] (the value for
     /// the pair (0, 0) is `a_kappa_00`). `f` is the dimensionless restitution function F(beta)
     /// of the contact model (F(beta) = 1 - 1.15344 beta + ... for small beta).
-    pub fn viscoelastic(species: &[Species], a_kappa_00: f64, f: impl Fn(f64) -> f64 + Send + Sync + 'static) -> Self {
-        let ak = a_kappa_pairs(species, a_kappa_00);
-        PairRestitution::velocity_dependent(move |k, i, g| f(ak[k][i] * g.powf(0.2)))
+    pub fn viscoelastic(
+        species: &[Species],
+        a_kappa_00: f64,
+        f: impl Fn(f64) -> f64 + Send + Sync + 'static,
+    ) -> Self {
+        PairRestitution::scaled(a_kappa_pairs(species, a_kappa_00), 0.2, f)
+    }
+
+    /// eps_ki(g_n) = f(`a[k][i]` g_n^p).(see [`ScaledEps`]); viscoelastic: p = 1/5,
+    /// `a[k][i]` = A kappa_ki^(2/5), f = F(beta).
+    pub fn scaled(
+        a: Vec<Vec<f64>>,
+        p: f64,
+        f: impl Fn(f64) -> f64 + Send + Sync + 'static,
+    ) -> Self {
+        PairRestitution::Scaled(Arc::new(ScaledEps::new(a, p, f)))
+    }
+
+    /// eps_ki(g_n) for any restitution.
+    pub fn eps(&self, k: usize, i: usize, g_n: f64) -> f64 {
+        match self {
+            PairRestitution::VelocityDependent(f) => f.eps(k, i, g_n),
+            PairRestitution::Scaled(s) => s.eps(k, i, g_n),
+            _ => self.constant(k, i).unwrap(),
+        }
     }
 
     /// The truncated series (A1): eps_ki = 1 + sum_{j>=1} h_j (A kappa_ki^(2/5))^(j/2) g_n^(j/10)
@@ -105,7 +241,10 @@ impl PairRestitution {
 
     /// True when eps does not depend on the impact speed (an exact HCS then exists).
     pub fn is_constant(&self) -> bool {
-        !matches!(self, PairRestitution::VelocityDependent(_))
+        matches!(
+            self,
+            PairRestitution::Constant(_) | PairRestitution::ConstantPairs(_)
+        )
     }
 
     /// The constant eps_ki, None for velocity-dependent restitution.
@@ -113,7 +252,7 @@ impl PairRestitution {
         match self {
             PairRestitution::Constant(e) => Some(*e),
             PairRestitution::ConstantPairs(m) => Some(m[k][i]),
-            PairRestitution::VelocityDependent(_) => None,
+            PairRestitution::VelocityDependent(_) | PairRestitution::Scaled(_) => None,
         }
     }
 
@@ -122,6 +261,7 @@ impl PairRestitution {
     pub fn averages(&self, k: usize, i: usize, u: f64) -> (f64, f64) {
         match self {
             PairRestitution::VelocityDependent(f) => maxwell_averages(|g| f.eps(k, i, g), u),
+            PairRestitution::Scaled(s) => s.averages(k, i, u),
             _ => {
                 let e = self.constant(k, i).unwrap();
                 (1.0 + e, (1.0 + e) * (1.0 + e))
@@ -134,12 +274,22 @@ impl PairRestitution {
 /// 2 z^3 exp(-z^2) dz, g_n = sqrt(2) u z, by adaptive quadrature (~1e-13 relative).
 pub fn maxwell_averages(eps: impl Fn(f64) -> f64, u: f64) -> (f64, f64) {
     let scale = 2f64.sqrt() * u;
+    flux_averages(|z| eps(scale * z))
+}
+
+/// 2 int_0^9.5 z^3 exp(-z^2) (1 + e(z))^m dz for m = 1, 2 (adaptive, ~1e-13 relative).
+fn flux_averages(e: impl Fn(f64) -> f64) -> (f64, f64) {
     let mut f = |z: f64| {
         let w = 2.0 * z * z * z * (-z * z).exp();
-        let e1 = 1.0 + eps(scale * z);
+        let e1 = 1.0 + e(z);
         [w * e1, w * e1 * e1]
     };
-    let r = adaptive(&mut f, &[0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.5, 9.5], 1e-13, 1e-300);
+    let r = adaptive(
+        &mut f,
+        &[0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.5, 9.5],
+        1e-13,
+        1e-300,
+    );
     (r[0], r[1])
 }
 
@@ -165,7 +315,15 @@ pub(crate) fn pair_geometry(sk: &Species, tk: f64, si: &Species, ti: f64) -> (f6
 
 /// xi_ki, tau_v,ki^-1 and nu_ki for species k (index `k`, temperature `tk`) colliding with
 /// species i, restitution `r` (see the module docs for the integrals).
-pub fn pair_rates(sk: &Species, k: usize, tk: f64, si: &Species, i: usize, ti: f64, r: &PairRestitution) -> PairRates {
+pub fn pair_rates(
+    sk: &Species,
+    k: usize,
+    tk: f64,
+    si: &Species,
+    i: usize,
+    ti: f64,
+    r: &PairRestitution,
+) -> PairRates {
     let (sigma, mu, u2, gam) = pair_geometry(sk, tk, si, ti);
     let u = u2.sqrt();
     let (a1, a2) = r.averages(k, i, u);
@@ -174,6 +332,72 @@ pub fn pair_rates(sk: &Species, k: usize, tk: f64, si: &Species, i: usize, ti: f
         xi: p * (a1 - 0.5 * gam * a2),
         tau_v_inv: p * 0.25 * gam * a2,
         collision_rate: 2.0 * (2.0 * PI).sqrt() * si.density * sigma * sigma * u,
+    }
+}
+
+/// Per-pair constants for fast repeated evaluation of the rates at changing temperatures
+/// (the ODE right-hand sides); same formulas as [`pair_rates`].
+pub(crate) struct PairTable<'a> {
+    m: usize,
+    species: &'a [Species],
+    r: &'a PairRestitution,
+    /// (8 sqrt(2 pi)/3) n_i sigma_ki^2, mu_i, and the constant (a1, a2) when eps is constant.
+    pre: Vec<(f64, f64, f64, f64)>,
+}
+
+impl<'a> PairTable<'a> {
+    pub(crate) fn new(species: &'a [Species], r: &'a PairRestitution) -> Self {
+        let m = species.len();
+        let mut pre = Vec::with_capacity(m * m);
+        for k in 0..m {
+            for i in 0..m {
+                let (sk, si) = (&species[k], &species[i]);
+                let sigma = 0.5 * (sk.diameter + si.diameter);
+                let p0 = 8.0 / 3.0 * (2.0 * PI).sqrt() * si.density * sigma * sigma;
+                let mu = si.mass / (si.mass + sk.mass);
+                let (a1, a2) = match r.constant(k, i) {
+                    Some(e) => (1.0 + e, (1.0 + e) * (1.0 + e)),
+                    None => (f64::NAN, f64::NAN),
+                };
+                pre.push((p0, mu, a1, a2));
+            }
+        }
+        PairTable { m, species, r, pre }
+    }
+
+    /// (xi_ki, tau_v,ki^-1).
+    #[inline]
+    pub(crate) fn rates(&self, k: usize, tk: f64, i: usize, ti: f64) -> (f64, f64) {
+        let (p0, mu, a1, a2) = self.pre[k * self.m + i];
+        let (mk, mi) = (self.species[k].mass, self.species[i].mass);
+        let u2 = tk / mk + ti / mi;
+        let u = u2.sqrt();
+        let (a1, a2) = if a1.is_nan() {
+            self.r.averages(k, i, u)
+        } else {
+            (a1, a2)
+        };
+        let gam = mk * mu * u2 / tk;
+        let p = p0 * u * mu;
+        (p * (a1 - 0.5 * gam * a2), p * 0.25 * gam * a2)
+    }
+
+    /// xi_k (14) of every species.
+    pub(crate) fn cooling_rates(&self, t: &[f64]) -> Vec<f64> {
+        (0..self.m)
+            .map(|k| (0..self.m).map(|i| self.rates(k, t[k], i, t[i]).0).sum())
+            .collect()
+    }
+
+    /// tau_v,k (10) of every species.
+    pub(crate) fn tau_v(&self, t: &[f64]) -> Vec<f64> {
+        (0..self.m)
+            .map(|k| {
+                1.0 / (0..self.m)
+                    .map(|i| self.rates(k, t[k], i, t[i]).1)
+                    .sum::<f64>()
+            })
+            .collect()
     }
 }
 
@@ -187,7 +411,15 @@ pub fn a_kappa_pairs(species: &[Species], a_kappa_00: f64) -> Vec<Vec<f64>> {
         se.sqrt() / me
     };
     let k00 = kappa(&species[0], &species[0]);
-    species.iter().map(|a| species.iter().map(|b| a_kappa_00 * (kappa(a, b) / k00).powf(0.4)).collect()).collect()
+    species
+        .iter()
+        .map(|a| {
+            species
+                .iter()
+                .map(|b| a_kappa_00 * (kappa(a, b) / k00).powf(0.4))
+                .collect()
+        })
+        .collect()
 }
 
 /// eps of the series (A1) with coefficients h = [h_1, h_2, ...] at A kappa^(2/5) = `ak`.
@@ -241,10 +473,21 @@ pub fn xi_pair_series(sk: &Species, tk: f64, si: &Species, ti: f64, ak: f64, h: 
 
 /// tau_v,ki^-1 of (A6) for the series restitution (A1):
 /// (8 sqrt(2 pi)/3) n_i sigma_ki^2 mu_i Gam u (1 + sum_n A_n B_n / 2).
-pub fn tau_v_inv_pair_series(sk: &Species, tk: f64, si: &Species, ti: f64, ak: f64, h: &[f64]) -> f64 {
+pub fn tau_v_inv_pair_series(
+    sk: &Species,
+    tk: f64,
+    si: &Species,
+    ti: f64,
+    ak: f64,
+    h: &[f64],
+) -> f64 {
     let (sigma, mu, u2, gam) = pair_geometry(sk, tk, si, ti);
     let a = series_a(h);
-    let s: f64 = 1.0 + 0.5 * (1..=a.len()).map(|n| a[n - 1] * series_b(n, ak, u2)).sum::<f64>();
+    let s: f64 = 1.0
+        + 0.5
+            * (1..=a.len())
+                .map(|n| a[n - 1] * series_b(n, ak, u2))
+                .sum::<f64>();
     8.0 / 3.0 * (2.0 * PI).sqrt() * si.density * sigma * sigma * mu * gam * u2.sqrt() * s
 }
 
@@ -254,7 +497,11 @@ mod tests {
     use crate::theory::temperature::xi_pair;
 
     fn sp(m: f64, n: f64) -> Species {
-        Species { mass: m, diameter: m.cbrt(), density: n }
+        Species {
+            mass: m,
+            diameter: m.cbrt(),
+            density: n,
+        }
     }
 
     /// For constant eps the general pair rates are (15) and (11) (1e-14 relative), also when
@@ -265,16 +512,67 @@ mod tests {
         for (ta, tb, e) in [(1.0, 3.0, 0.5), (0.3, 20.0, 0.9), (2.0, 0.1, 0.0)] {
             let r = pair_rates(&a, 0, ta, &b, 1, tb, &PairRestitution::Constant(e));
             let want = xi_pair(&a, ta, &b, tb, e);
-            assert!((r.xi - want).abs() < 1e-14 * want.abs().max(1e-3), "{} vs {want}", r.xi);
+            assert!(
+                (r.xi - want).abs() < 1e-14 * want.abs().max(1e-3),
+                "{} vs {want}",
+                r.xi
+            );
             // (11) literally.
             let (mk, mi) = (a.mass, b.mass);
             let sigma = 0.5 * (a.diameter + b.diameter);
-            let t11 = 8.0 * (2.0 * PI).sqrt() / 3.0 * b.density * sigma * sigma * mi / (mi + mk) * (ta * mi + tb * mk) / (ta * (mi + mk))
-                * ((ta * mi + tb * mk) / (mi * mk)).sqrt() * (1.0 + e) * (1.0 + e) / 4.0;
-            assert!((r.tau_v_inv - t11).abs() < 1e-14 * t11, "{} vs {t11}", r.tau_v_inv);
-            let rv = pair_rates(&a, 0, ta, &b, 1, tb, &PairRestitution::velocity_dependent(move |_, _, _| e));
-            assert!((rv.xi - r.xi).abs() < 1e-12 * r.xi.abs().max(1e-3 * r.tau_v_inv), "{} vs {}", rv.xi, r.xi);
+            let t11 = 8.0 * (2.0 * PI).sqrt() / 3.0 * b.density * sigma * sigma * mi / (mi + mk)
+                * (ta * mi + tb * mk)
+                / (ta * (mi + mk))
+                * ((ta * mi + tb * mk) / (mi * mk)).sqrt()
+                * (1.0 + e)
+                * (1.0 + e)
+                / 4.0;
+            assert!(
+                (r.tau_v_inv - t11).abs() < 1e-14 * t11,
+                "{} vs {t11}",
+                r.tau_v_inv
+            );
+            let rv = pair_rates(
+                &a,
+                0,
+                ta,
+                &b,
+                1,
+                tb,
+                &PairRestitution::velocity_dependent(move |_, _, _| e),
+            );
+            assert!(
+                (rv.xi - r.xi).abs() < 1e-12 * r.xi.abs().max(1e-3 * r.tau_v_inv),
+                "{} vs {}",
+                rv.xi,
+                r.xi
+            );
             assert!((rv.tau_v_inv / r.tau_v_inv - 1.0).abs() < 1e-12);
+        }
+    }
+
+    /// The fast per-pair table equals pair_rates (1e-14), constant and velocity-dependent.
+    #[test]
+    fn pair_table_matches() {
+        let s = [sp(1.0, 0.1), sp(37.0, 0.02), sp(500.0, 0.3)];
+        let t = [0.4, 7.0, 30.0];
+        for r in [
+            PairRestitution::Constant(0.7),
+            PairRestitution::series(&s, 0.09, vec![0.0, -1.15344, 0.0, 0.79826]),
+        ] {
+            let table = PairTable::new(&s, &r);
+            for k in 0..3 {
+                for i in 0..3 {
+                    let a = pair_rates(&s[k], k, t[k], &s[i], i, t[i], &r);
+                    let (xi, tv) = table.rates(k, t[k], i, t[i]);
+                    assert!(
+                        (xi - a.xi).abs() <= 1e-14 * a.tau_v_inv.max(a.xi.abs()),
+                        "{xi} {}",
+                        a.xi
+                    );
+                    assert!((tv / a.tau_v_inv - 1.0).abs() < 1e-14);
+                }
+            }
         }
     }
 
@@ -293,13 +591,68 @@ mod tests {
             for i in 0..3 {
                 let q = pair_rates(&species[k], k, temps[k], &species[i], i, temps[i], &r);
                 let xi = xi_pair_series(&species[k], temps[k], &species[i], temps[i], ak[k][i], &h);
-                let tv = tau_v_inv_pair_series(&species[k], temps[k], &species[i], temps[i], ak[k][i], &h);
+                let tv = tau_v_inv_pair_series(
+                    &species[k],
+                    temps[k],
+                    &species[i],
+                    temps[i],
+                    ak[k][i],
+                    &h,
+                );
                 let scale = q.tau_v_inv; // xi may be near zero: compare on the rate scale
-                worst = worst.max((q.xi - xi).abs() / scale).max((q.tau_v_inv / tv - 1.0).abs());
+                worst = worst
+                    .max((q.xi - xi).abs() / scale)
+                    .max((q.tau_v_inv / tv - 1.0).abs());
             }
         }
         eprintln!("A6-A7 vs quadrature: worst relative deviation {worst:.2e}");
         assert!(worst < 1e-10, "{worst}");
+    }
+
+    /// The tabulated Scaled averages equal the direct quadrature for the viscoelastic form,
+    /// over u from 1e-9 to 1e4 and three pairs: 1e-12 relative with a smooth F, 2e-9 with a
+    /// piecewise linear F (40 knots; its Phi is smooth only on a scale ~0.07 in ln x). The
+    /// viscoelastic constructor uses the table.
+    #[test]
+    fn scaled_table_matches_direct() {
+        let species = [sp(1.0, 0.1), sp(100.0, 0.1), sp(1e4, 0.1)];
+        let knots: Vec<f64> = (0..=40)
+            .map(|j| (-0.05 * j as f64).exp() * (1.0 - 0.02 * j as f64))
+            .collect();
+        let kinked = move |b: f64| {
+            let x = (b * 20.0).min(39.999);
+            let j = x.floor() as usize;
+            knots[j] + (x - j as f64) * (knots[j + 1] - knots[j])
+        };
+        let smooth = |b: f64| 1.0 / (1.0 + 1.15344 * b + 0.5 * b * b);
+        let fs: [Box<dyn Fn(f64) -> f64 + Send + Sync>; 2] = [Box::new(smooth), Box::new(kinked)];
+        let mut worst = [0.0f64; 2];
+        for (fi, f) in fs.into_iter().enumerate() {
+            let f = Arc::new(f);
+            let f2 = f.clone();
+            let ak = a_kappa_pairs(&species, 0.09);
+            let ak2 = ak.clone();
+            let scaled = PairRestitution::scaled(ak, 0.2, move |b| f(b));
+            let direct =
+                PairRestitution::velocity_dependent(move |k, i, g| f2(ak2[k][i] * g.powf(0.2)));
+            for (k, i) in [(0, 0), (0, 2), (2, 1)] {
+                for e in -18..=8 {
+                    let u = 10f64.powf(e as f64 * 0.5);
+                    let (a1, a2) = scaled.averages(k, i, u);
+                    let (b1, b2) = direct.averages(k, i, u);
+                    worst[fi] = worst[fi]
+                        .max((a1 / b1 - 1.0).abs())
+                        .max((a2 / b2 - 1.0).abs());
+                }
+            }
+        }
+        eprintln!("Scaled table vs direct quadrature: worst relative deviation {:.2e} (smooth F), {:.2e} (piecewise linear F)", worst[0], worst[1]);
+        assert!(worst[0] < 1e-12, "{worst:?}");
+        assert!(worst[1] < 2e-9, "{worst:?}");
+        assert!(matches!(
+            PairRestitution::viscoelastic(&species, 0.09, |b| 1.0 - b),
+            PairRestitution::Scaled(_)
+        ));
     }
 
     /// The flux-weighted average of a smooth eps(g) = exp(-g/3) against a closed form:

@@ -1,9 +1,11 @@
 //! Time-averaged MSD in the HCS (section II.E, (26)-(28)):
 //!
-//!   <delta_k^2(Delta)> = <delta_0^2(Delta)> + Xi(Delta)                                  (27)
-//!   <delta_0^2> = 6 D_k(0) tau_0 / (t - Delta) [(t + tau_0) ln(t + tau_0)
-//!       - (Delta + tau_0) ln(Delta + tau_0) - (t - Delta + tau_0) ln(t - Delta + tau_0) + tau_0 ln tau_0]
-//!   Xi(Delta) = 6 D_k(0) tau_v,k(0) / (t - Delta) int_0^(t-Delta) [(1 + Delta/(t' + tau_0))^-beta_k - 1] dt'
+//! ```text
+//! <delta_k^2(Delta)> = <delta_0^2(Delta)> + Xi(Delta)                                  (27)
+//! <delta_0^2> = 6 D_k(0) tau_0 / (t - Delta) [(t + tau_0) ln(t + tau_0)
+//!     - (Delta + tau_0) ln(Delta + tau_0) - (t - Delta + tau_0) ln(t - Delta + tau_0) + tau_0 ln tau_0]
+//! Xi(Delta) = 6 D_k(0) tau_v,k(0) / (t - Delta) int_0^(t-Delta) [(1 + Delta/(t' + tau_0))^-beta_k - 1] dt'
+//! ```
 //!
 //! with beta_k = tau_0/tau_v,k(0); t is the measurement time, Delta the lag. (27) is the time
 //! average over t' of the HCS increment <[R(t'+Delta) - R(t')]^2> = 6 D tau_0 ln((t'+Delta+tau_0)/
@@ -35,7 +37,8 @@ pub fn tamsd_first_term(d0: f64, tau0: f64, t: f64, delta: f64) -> f64 {
     assert!(delta > 0.0 && delta < t, "need 0 < Delta < t");
     let tp = t - delta;
     let j = if tau0.is_finite() && tau0 <= 1e6 * tp {
-        tau0 * ((tp + tau0) * (delta / (tp + tau0)).ln_1p() - tau0 * (delta / tau0).ln_1p() + delta * (tp / (tau0 + delta)).ln_1p())
+        tau0 * ((tp + tau0) * (delta / (tp + tau0)).ln_1p() - tau0 * (delta / tau0).ln_1p()
+            + delta * (tp / (tau0 + delta)).ln_1p())
     } else {
         let h = tau0.min(delta).min(tp) / 4.0;
         graded_integral(|x| l_of(tau0, delta, x), 0.0, tp, h)
@@ -72,11 +75,21 @@ pub fn tamsd_asymptotic(d0: f64, tau0: f64, t: f64, delta: f64) -> f64 {
 
 /// TAMSD (27) of species `k` at lags `deltas`, for a start in the HCS at temperatures `t0`
 /// (D_k(0), tau_v,k(0), tau_0 from (8), (10)-(11), (21)).
-pub fn tamsd_hcs_species(species: &[Species], restitution: &PairRestitution, t0: &[f64], k: usize, t: f64, deltas: &[f64]) -> Vec<f64> {
+pub fn tamsd_hcs_species(
+    species: &[Species],
+    restitution: &PairRestitution,
+    t0: &[f64],
+    k: usize,
+    t: f64,
+    deltas: &[f64],
+) -> Vec<f64> {
     let d = diffusion_coefficients(species, t0, restitution)[k];
     let tv = tau_v(species, t0, restitution)[k];
     let tau0 = tau0_with(species, t0, restitution);
-    deltas.iter().map(|&dl| tamsd_hcs(d, tv, tau0, t, dl)).collect()
+    deltas
+        .iter()
+        .map(|&dl| tamsd_hcs(d, tv, tau0, t, dl))
+        .collect()
 }
 
 #[cfg(test)]
@@ -86,7 +99,18 @@ mod tests {
     use crate::theory::msd::msd_hcs;
 
     fn fig5() -> (Vec<Species>, PairRestitution, Vec<f64>) {
-        let s = vec![Species { mass: 1.0, diameter: 1.0, density: 0.1 }, Species { mass: 100.0, diameter: 100f64.cbrt(), density: 0.0 }];
+        let s = vec![
+            Species {
+                mass: 1.0,
+                diameter: 1.0,
+                density: 0.1,
+            },
+            Species {
+                mass: 100.0,
+                diameter: 100f64.cbrt(),
+                density: 0.0,
+            },
+        ];
         let r = PairRestitution::Constant(0.5);
         let t = hcs_temperatures(&s, &r, 1.0);
         (s, r, t)
@@ -105,7 +129,10 @@ mod tests {
             let dl = 1e-6 * tv[k].min(tau0);
             let got = tamsd_hcs_species(&s, &r, &t0, k, t, &[dl])[0];
             let want = 3.0 * t0[k] / s[k].mass * tau0 / (t + tau0) * dl * dl;
-            eprintln!("species {k}: TAMSD({dl:.3e}) = {got:.6e}, ballistic limit {want:.6e} ({:+.2e})", got / want - 1.0);
+            eprintln!(
+                "species {k}: TAMSD({dl:.3e}) = {got:.6e}, ballistic limit {want:.6e} ({:+.2e})",
+                got / want - 1.0
+            );
             assert!((got / want - 1.0).abs() < 1e-5, "{got} vs {want}");
             assert!(got < 1e-10 * tamsd_hcs_species(&s, &r, &t0, k, t, &[0.5 * t])[0]);
         }
@@ -115,10 +142,24 @@ mod tests {
     /// (ergodic), to 1e-10, for lags from 1e-3 tau_v to 0.9 t.
     #[test]
     fn elastic_tamsd_equals_msd() {
-        let s = vec![Species { mass: 1.0, diameter: 1.0, density: 0.1 }, Species { mass: 100.0, diameter: 100f64.cbrt(), density: 0.05 }];
+        let s = vec![
+            Species {
+                mass: 1.0,
+                diameter: 1.0,
+                density: 0.1,
+            },
+            Species {
+                mass: 100.0,
+                diameter: 100f64.cbrt(),
+                density: 0.05,
+            },
+        ];
         let r = PairRestitution::Constant(1.0);
         let t0 = hcs_temperatures(&s, &r, 1.0);
-        assert!((t0[1] / t0[0] - 1.0).abs() < 1e-14, "elastic HCS is equipartition");
+        assert!(
+            (t0[1] / t0[0] - 1.0).abs() < 1e-14,
+            "elastic HCS is equipartition"
+        );
         let tau0 = tau0_with(&s, &t0, &r);
         assert!(tau0.is_infinite());
         let d = diffusion_coefficients(&s, &t0, &r);
@@ -145,7 +186,10 @@ mod tests {
             let b = tamsd_first_term_literal(d, tau0, t, dl);
             assert!((a / b - 1.0).abs() < 1e-9, "{a} {b}");
             let beta = tau0 / tv;
-            let inc = |x: f64| 6.0 * d * tau0 * ((x + dl + tau0) / (x + tau0)).ln() + 6.0 * d * tv * ((1.0 + dl / (x + tau0)).powf(-beta) - 1.0);
+            let inc = |x: f64| {
+                6.0 * d * tau0 * ((x + dl + tau0) / (x + tau0)).ln()
+                    + 6.0 * d * tv * ((1.0 + dl / (x + tau0)).powf(-beta) - 1.0)
+            };
             let avg = graded_integral(inc, 0.0, t - dl, 0.1) / (t - dl);
             let full = tamsd_hcs(d, tv, tau0, t, dl);
             assert!((full / avg - 1.0).abs() < 1e-9, "{full} vs {avg}");

@@ -7,7 +7,9 @@
 //! dT_k/dt = -T_k xi_k(T) is integrated for y_k = ln T_k in the log-time variable
 //! s = ln(1 + t/t_s), t_s = 1/max_k nu_k(0) (the shortest collision time at the start):
 //!
-//!   dy_k/ds = -xi_k(T) (t_s + t).
+//! ```text
+//! dy_k/ds = -xi_k(T) (t_s + t).
+//! ```
 //!
 //! In the HCS dy_k/ds -> -2, so the solution is smooth and O(1) in s for every t up to 1e9 and
 //! beyond (s ~ 25). The relaxation of the temperature ratios can be very stiff (mass ratios up
@@ -16,7 +18,7 @@
 //! doubling error control on y (absolute 1e-11, i.e. relative 1e-11 on T per step).
 
 use super::ode::{integrate, OdeSystem, Tolerances};
-use super::restitution::{pair_rates, PairRestitution};
+use super::restitution::{pair_rates, PairRestitution, PairTable};
 
 /// One species as the theory sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,7 +31,11 @@ pub struct Species {
 
 impl Species {
     pub fn new(mass: f64, diameter: f64, density: f64) -> Self {
-        Species { mass, diameter, density }
+        Species {
+            mass,
+            diameter,
+            density,
+        }
     }
 }
 
@@ -38,14 +44,25 @@ pub fn xi_pair(k: &Species, tk: f64, i: &Species, ti: f64, eps: f64) -> f64 {
     let sigma = 0.5 * (k.diameter + i.diameter);
     let (mk, mi) = (k.mass, i.mass);
     let root = ((tk * mi + ti * mk) / (mi * mk)).sqrt();
-    8.0 / 3.0 * (2.0 * std::f64::consts::PI).sqrt() * i.density * sigma * sigma * root * (1.0 + eps) * (mi / (mi + mk))
+    8.0 / 3.0
+        * (2.0 * std::f64::consts::PI).sqrt()
+        * i.density
+        * sigma
+        * sigma
+        * root
+        * (1.0 + eps)
+        * (mi / (mi + mk))
         * (1.0 - 0.5 * (1.0 + eps) * (ti * mk + tk * mi) / (tk * (mi + mk)))
 }
 
 /// xi_k of (14) for every species at temperatures `t`.
 pub fn cooling_rates(species: &[Species], t: &[f64], eps: f64) -> Vec<f64> {
     (0..species.len())
-        .map(|k| (0..species.len()).map(|i| xi_pair(&species[k], t[k], &species[i], t[i], eps)).sum())
+        .map(|k| {
+            (0..species.len())
+                .map(|i| xi_pair(&species[k], t[k], &species[i], t[i], eps))
+                .sum()
+        })
         .collect()
 }
 
@@ -54,7 +71,12 @@ pub fn cooling_rates(species: &[Species], t: &[f64], eps: f64) -> Vec<f64> {
 pub fn tau0(species: &[Species], t0: &[f64], eps: f64) -> f64 {
     let xi = cooling_rates(species, t0, eps);
     let n: f64 = species.iter().map(|s| s.density).sum();
-    let mean: f64 = species.iter().zip(&xi).map(|(s, x)| s.density * x).sum::<f64>() / n;
+    let mean: f64 = species
+        .iter()
+        .zip(&xi)
+        .map(|(s, x)| s.density * x)
+        .sum::<f64>()
+        / n;
     2.0 / mean
 }
 
@@ -67,21 +89,42 @@ pub fn haff(t: f64, tau0: f64) -> f64 {
 /// velocity-dependent: the quadrature of [`super::restitution`], i.e. (A7) generalised).
 pub fn cooling_rates_with(species: &[Species], t: &[f64], r: &PairRestitution) -> Vec<f64> {
     (0..species.len())
-        .map(|k| (0..species.len()).map(|i| pair_rates(&species[k], k, t[k], &species[i], i, t[i], r).xi).sum())
+        .map(|k| {
+            (0..species.len())
+                .map(|i| pair_rates(&species[k], k, t[k], &species[i], i, t[i], r).xi)
+                .sum()
+        })
         .collect()
 }
 
 /// nu_k: collisions per unit time of one particle of species k (all partners), Maxwellian.
 pub fn collision_frequencies(species: &[Species], t: &[f64]) -> Vec<f64> {
     (0..species.len())
-        .map(|k| (0..species.len()).map(|i| pair_rates(&species[k], k, t[k], &species[i], i, t[i], &PairRestitution::Constant(1.0)).collision_rate).sum())
+        .map(|k| {
+            (0..species.len())
+                .map(|i| {
+                    pair_rates(
+                        &species[k],
+                        k,
+                        t[k],
+                        &species[i],
+                        i,
+                        t[i],
+                        &PairRestitution::Constant(1.0),
+                    )
+                    .collision_rate
+                })
+                .sum()
+        })
         .collect()
 }
 
 /// The shortest collision time 1/max_k nu_k at temperatures `t` (1 if nothing collides): the
 /// time unit of the log-time variable s = ln(1 + t/t_s) used by the integrators.
 pub fn time_scale(species: &[Species], t: &[f64]) -> f64 {
-    let nu = collision_frequencies(species, t).into_iter().fold(0.0, f64::max);
+    let nu = collision_frequencies(species, t)
+        .into_iter()
+        .fold(0.0, f64::max);
     if nu > 0.0 && nu.is_finite() {
         1.0 / nu
     } else {
@@ -94,7 +137,12 @@ pub fn time_scale(species: &[Species], t: &[f64]) -> f64 {
 pub fn tau0_with(species: &[Species], t0: &[f64], r: &PairRestitution) -> f64 {
     let xi = cooling_rates_with(species, t0, r);
     let n: f64 = species.iter().map(|s| s.density).sum();
-    let mean: f64 = species.iter().zip(&xi).map(|(s, x)| s.density * x).sum::<f64>() / n;
+    let mean: f64 = species
+        .iter()
+        .zip(&xi)
+        .map(|(s, x)| s.density * x)
+        .sum::<f64>()
+        / n;
     2.0 / mean
 }
 
@@ -102,8 +150,14 @@ pub(crate) fn check_input(species: &[Species], temps: &[f64]) {
     assert!(!species.is_empty(), "no species");
     assert_eq!(species.len(), temps.len(), "one temperature per species");
     for (s, t) in species.iter().zip(temps) {
-        assert!(s.mass > 0.0 && s.diameter > 0.0 && s.density >= 0.0, "invalid species {s:?}");
-        assert!(*t > 0.0 && t.is_finite(), "temperatures must be positive and finite (got {t})");
+        assert!(
+            s.mass > 0.0 && s.diameter > 0.0 && s.density >= 0.0,
+            "invalid species {s:?}"
+        );
+        assert!(
+            *t > 0.0 && t.is_finite(),
+            "temperatures must be positive and finite (got {t})"
+        );
     }
 }
 
@@ -111,8 +165,8 @@ pub(crate) fn check_input(species: &[Species], temps: &[f64]) {
 /// quadrature components q_k = int_0^t sqrt(T_k(t')/T_k(0)) dt' (without the factor
 /// tau_c^-1(0), which cancels wherever they are used).
 pub(crate) struct TemperatureOde<'a> {
-    pub species: &'a [Species],
-    pub r: &'a PairRestitution,
+    pub table: PairTable<'a>,
+    pub m: usize,
     pub t_s: f64,
     pub y0: Vec<f64>,
     pub with_reduced_time: bool,
@@ -120,24 +174,24 @@ pub(crate) struct TemperatureOde<'a> {
 
 impl TemperatureOde<'_> {
     fn xi_pair(&self, k: usize, tk: f64, i: usize, ti: f64) -> f64 {
-        pair_rates(&self.species[k], k, tk, &self.species[i], i, ti, self.r).xi
+        self.table.rates(k, tk, i, ti).0
     }
 }
 
 impl OdeSystem for TemperatureOde<'_> {
     fn dim(&self) -> usize {
-        self.species.len()
+        self.m
     }
     fn quad_dim(&self) -> usize {
         if self.with_reduced_time {
-            self.species.len()
+            self.m
         } else {
             0
         }
     }
     fn rhs(&self, s: f64, y: &[f64], dy: &mut [f64]) {
         let t: Vec<f64> = y.iter().map(|v| v.exp()).collect();
-        let xi = cooling_rates_with(self.species, &t, self.r);
+        let xi = self.table.cooling_rates(&t);
         let dtds = self.t_s * s.exp();
         for k in 0..y.len() {
             dy[k] = -xi[k] * dtds;
@@ -192,31 +246,68 @@ pub struct TemperatureState {
 /// # Panics
 /// On invalid input (no species, non-positive masses/diameters/temperatures, unsorted or
 /// negative times) or if the integrator fails.
-pub fn evolve(species: &[Species], restitution: &PairRestitution, t0: &[f64], times: &[f64], with_reduced_time: bool, tol: f64) -> Vec<TemperatureState> {
+pub fn evolve(
+    species: &[Species],
+    restitution: &PairRestitution,
+    t0: &[f64],
+    times: &[f64],
+    with_reduced_time: bool,
+    tol: f64,
+) -> Vec<TemperatureState> {
     check_input(species, t0);
-    assert!(times.iter().all(|t| *t >= 0.0 && t.is_finite()), "times must be finite and >= 0");
-    assert!(times.windows(2).all(|w| w[0] <= w[1]), "times must be sorted");
+    assert!(
+        times.iter().all(|t| *t >= 0.0 && t.is_finite()),
+        "times must be finite and >= 0"
+    );
+    assert!(
+        times.windows(2).all(|w| w[0] <= w[1]),
+        "times must be sorted"
+    );
     let t_s = time_scale(species, t0);
     let y0: Vec<f64> = t0.iter().map(|t| t.ln()).collect();
-    let sys = TemperatureOde { species, r: restitution, t_s, y0: y0.clone(), with_reduced_time };
+    let sys = TemperatureOde {
+        table: PairTable::new(species, restitution),
+        m: species.len(),
+        t_s,
+        y0: y0.clone(),
+        with_reduced_time,
+    };
     let s_out: Vec<f64> = times.iter().map(|t| (t / t_s).ln_1p()).collect();
     let q0 = vec![0.0; sys.quad_dim()];
-    let tols = Tolerances { atol_y: tol, rtol_y: 0.0, atol_q: tol * t_s, rtol_q: tol };
-    let res = integrate(&sys, &y0, &q0, &s_out, tols, 1e-3).unwrap_or_else(|e| panic!("temperature ODE failed: {e}"));
+    let tols = Tolerances {
+        atol_y: tol,
+        rtol_y: 0.0,
+        atol_q: tol * t_s,
+        rtol_q: tol,
+    };
+    let res = integrate(&sys, &y0, &q0, &s_out, tols, 1e-3)
+        .unwrap_or_else(|e| panic!("temperature ODE failed: {e}"));
     times
         .iter()
         .zip(res)
-        .map(|(&t, (y, q))| TemperatureState { t, temperatures: y.iter().map(|v| v.exp()).collect(), reduced_times: q })
+        .map(|(&t, (y, q))| TemperatureState {
+            t,
+            temperatures: y.iter().map(|v| v.exp()).collect(),
+            reduced_times: q,
+        })
         .collect()
 }
 
 /// T_k at each of the sorted `times` (>= 0; any range, e.g. up to 1e9), solving (13)-(15)
-/// from the temperatures `t0` at t = 0: result[j][k] = T_k(times[j]). Accuracy ~1e-9 relative.
+/// from the temperatures `t0` at t = 0: `result[j][k]` = `T_k(times[j])`. Accuracy ~1e-9 relative.
 ///
 /// # Panics
 /// See [`evolve`].
-pub fn evolve_temperatures(species: &[Species], restitution: &PairRestitution, t0: &[f64], times: &[f64]) -> Vec<Vec<f64>> {
-    evolve(species, restitution, t0, times, false, 1e-11).into_iter().map(|s| s.temperatures).collect()
+pub fn evolve_temperatures(
+    species: &[Species],
+    restitution: &PairRestitution,
+    t0: &[f64],
+    times: &[f64],
+) -> Vec<Vec<f64>> {
+    evolve(species, restitution, t0, times, false, 1e-11)
+        .into_iter()
+        .map(|s| s.temperatures)
+        .collect()
 }
 
 #[cfg(test)]
@@ -226,9 +317,19 @@ mod tests {
     /// One species: xi = (4/3) sqrt(pi) n sigma^2 sqrt(T/m) (1 - eps^2), the textbook value.
     #[test]
     fn single_species_cooling_rate() {
-        let s = Species { mass: 2.0, diameter: 1.5, density: 0.1 };
+        let s = Species {
+            mass: 2.0,
+            diameter: 1.5,
+            density: 0.1,
+        };
         let (t, eps) = (3.0, 0.7);
-        let want = 4.0 / 3.0 * std::f64::consts::PI.sqrt() * 0.1 * 1.5 * 1.5 * (t / 2.0f64).sqrt() * (1.0 - eps * eps);
+        let want = 4.0 / 3.0
+            * std::f64::consts::PI.sqrt()
+            * 0.1
+            * 1.5
+            * 1.5
+            * (t / 2.0f64).sqrt()
+            * (1.0 - eps * eps);
         let got = cooling_rates(&[s], &[t], eps)[0];
         assert!((got - want).abs() < 1e-12 * want, "{got} vs {want}");
     }
@@ -236,8 +337,16 @@ mod tests {
     /// The paper's Fig 2 mixture at its printed HCS temperatures has tau_0 = 19.258.
     #[test]
     fn fig2_tau0() {
-        let s1 = Species { mass: 1.0, diameter: 1.0, density: 0.1 };
-        let s2 = Species { mass: 100.0, diameter: 100f64.cbrt(), density: 0.001 };
+        let s1 = Species {
+            mass: 1.0,
+            diameter: 1.0,
+            density: 0.1,
+        };
+        let s2 = Species {
+            mass: 100.0,
+            diameter: 100f64.cbrt(),
+            density: 0.001,
+        };
         let xi = cooling_rates(&[s1, s2], &[0.554, 45.58755], 0.5);
         // In the HCS both species cool at the same rate (to the printed digits).
         assert!((xi[0] - xi[1]).abs() < 2e-3 * xi[0], "{xi:?}");
@@ -246,11 +355,25 @@ mod tests {
     }
 
     fn same_material(masses: &[f64], dens: &[f64]) -> Vec<Species> {
-        masses.iter().zip(dens).map(|(&m, &n)| Species { mass: m, diameter: m.cbrt(), density: n }).collect()
+        masses
+            .iter()
+            .zip(dens)
+            .map(|(&m, &n)| Species {
+                mass: m,
+                diameter: m.cbrt(),
+                density: n,
+            })
+            .collect()
     }
 
     /// Classical RK4 in (s, ln T) with a fixed small step: an independent reference.
-    fn rk4_reference(rhs: &dyn Fn(&[f64]) -> Vec<f64>, t0: &[f64], t_s: f64, times: &[f64], h: f64) -> Vec<Vec<f64>> {
+    fn rk4_reference(
+        rhs: &dyn Fn(&[f64]) -> Vec<f64>,
+        t0: &[f64],
+        t_s: f64,
+        times: &[f64],
+        h: f64,
+    ) -> Vec<Vec<f64>> {
         let f = |s: f64, y: &[f64]| -> Vec<f64> {
             let t: Vec<f64> = y.iter().map(|v| v.exp()).collect();
             rhs(&t).iter().map(|x| -x * t_s * s.exp()).collect()
@@ -286,11 +409,22 @@ mod tests {
     #[test]
     fn haff_from_hcs_up_to_1e9() {
         let r = PairRestitution::Constant(0.5);
-        for (masses, dens) in [(vec![1.0, 100.0], vec![0.1, 0.001]), (vec![1.0, 100.0, 500.0], vec![0.1, 0.1, 0.1])] {
+        for (masses, dens) in [
+            (vec![1.0, 100.0], vec![0.1, 0.001]),
+            (vec![1.0, 100.0, 500.0], vec![0.1, 0.1, 0.1]),
+        ] {
             let s = same_material(&masses, &dens);
             let t0 = crate::theory::hcs::hcs_temperatures(&s, &r, 1.0);
             let tau = tau0_with(&s, &t0, &r);
-            let times: Vec<f64> = (0..=36).map(|j| if j == 0 { 0.0 } else { 10f64.powf(-3.0 + j as f64 / 3.0) }).collect();
+            let times: Vec<f64> = (0..=36)
+                .map(|j| {
+                    if j == 0 {
+                        0.0
+                    } else {
+                        10f64.powf(-3.0 + j as f64 / 3.0)
+                    }
+                })
+                .collect();
             let ts = evolve_temperatures(&s, &r, &t0, &times);
             let mut worst: f64 = 0.0;
             for (t, tk) in times.iter().zip(&ts) {
@@ -298,7 +432,9 @@ mod tests {
                     worst = worst.max((tk[k] / (t0[k] * haff(*t, tau)) - 1.0).abs());
                 }
             }
-            eprintln!("Haff from HCS, masses {masses:?}: worst relative deviation {worst:.2e} (t <= 1e9)");
+            eprintln!(
+                "Haff from HCS, masses {masses:?}: worst relative deviation {worst:.2e} (t <= 1e9)"
+            );
             assert!(worst < 1e-8, "{worst}");
         }
     }
@@ -308,12 +444,29 @@ mod tests {
     /// 1e9, and T_2/T_1 relaxes to the HCS ratio (1e-9 at t = 1e9).
     #[test]
     fn binary_from_equipartition() {
-        let s = vec![Species { mass: 1.0, diameter: 1.0, density: 0.1 }, Species { mass: 100.0, diameter: 1.0, density: 0.1 }];
+        let s = vec![
+            Species {
+                mass: 1.0,
+                diameter: 1.0,
+                density: 0.1,
+            },
+            Species {
+                mass: 100.0,
+                diameter: 1.0,
+                density: 0.1,
+            },
+        ];
         let r = PairRestitution::Constant(0.5);
         let t0 = [1.0, 1.0];
         let times = [0.1, 1.0, 10.0, 100.0, 1e3, 1e4, 1e6, 1e9];
         let got = evolve_temperatures(&s, &r, &t0, &times);
-        let reference = rk4_reference(&|t| cooling_rates_with(&s, t, &r), &t0, time_scale(&s, &t0), &times, 2e-3);
+        let reference = rk4_reference(
+            &|t| cooling_rates_with(&s, t, &r),
+            &t0,
+            time_scale(&s, &t0),
+            &times,
+            2e-3,
+        );
         let mut worst: f64 = 0.0;
         for (g, w) in got.iter().zip(&reference) {
             for k in 0..2 {
@@ -322,7 +475,10 @@ mod tests {
         }
         let hcs = crate::theory::hcs::hcs_ratios(&s, &r)[1];
         let last = got.last().unwrap();
-        eprintln!("Fig 1 binary: worst deviation from RK4 {worst:.2e}; T2/T1: {:?} -> HCS {hcs:.8}", got.iter().map(|v| v[1] / v[0]).collect::<Vec<_>>());
+        eprintln!(
+            "Fig 1 binary: worst deviation from RK4 {worst:.2e}; T2/T1: {:?} -> HCS {hcs:.8}",
+            got.iter().map(|v| v[1] / v[0]).collect::<Vec<_>>()
+        );
         assert!(worst < 1e-8, "{worst}");
         assert!((last[1] / last[0] / hcs - 1.0).abs() < 1e-9);
     }
@@ -341,7 +497,15 @@ mod tests {
         let t0 = [1.0, 1.0];
         let times = [1.0, 100.0, 1e4, 1e6, 1e9];
         let got = evolve_temperatures(&s, &r, &t0, &times);
-        let rhs = |t: &[f64]| -> Vec<f64> { (0..2).map(|k| (0..2).map(|i| xi_pair_series(&s[k], t[k], &s[i], t[i], ak[k][i], &h)).sum()).collect() };
+        let rhs = |t: &[f64]| -> Vec<f64> {
+            (0..2)
+                .map(|k| {
+                    (0..2)
+                        .map(|i| xi_pair_series(&s[k], t[k], &s[i], t[i], ak[k][i], &h))
+                        .sum()
+                })
+                .collect()
+        };
         let reference = rk4_reference(&rhs, &t0, time_scale(&s, &t0), &times, 2e-3);
         let mut worst: f64 = 0.0;
         for (g, w) in got.iter().zip(&reference) {
@@ -355,7 +519,10 @@ mod tests {
         let r1 = PairRestitution::viscoelastic(&one, 0.09, |b| 1.0 - 1.15344 * b + 0.79826 * b * b);
         let tt = evolve_temperatures(&one, &r1, &[1.0], &[1e8, 1e9]);
         let slope = (tt[1][0] / tt[0][0]).ln() / 10f64.ln();
-        eprintln!("viscoelastic single species: d ln T / d ln t at 1e8..1e9 = {slope:.5} (-5/3 = {:.5})", -5.0 / 3.0);
+        eprintln!(
+            "viscoelastic single species: d ln T / d ln t at 1e8..1e9 = {slope:.5} (-5/3 = {:.5})",
+            -5.0 / 3.0
+        );
         assert!((slope + 5.0 / 3.0).abs() < 0.01, "{slope}");
     }
 }

@@ -32,19 +32,27 @@ pub fn msd_gas_tracer(d1_0: f64, tau_c0: f64, eps: f64, t: f64) -> f64 {
     let x = (t / tau0).ln_1p();
     let e2 = 1.0 - eps * eps;
     let p2 = (1.0 + eps) * (1.0 + eps);
-    // Stable form of the bracket: (1/p2) phi(p2 x / e2) with phi(y) = y - 1 + e^-y.
-    let _literal = x / e2 + ((-(p2 / e2) * x).exp() - 1.0) / p2;
+    // The bracket x/e2 + (exp(-p2 x/e2) - 1)/p2 written stably as phi(p2 x/e2)/p2,
+    // phi(y) = y - 1 + e^-y (no cancellation at small t).
     36.0 * d1_0 * tau_c0 * phi(p2 / e2 * x) / p2
 }
 
 /// tau_hat_v,21 (33): 6 sigma_1^2 (1 + mu)^2 gamma_21 sqrt(mu) /
 /// (sqrt(2) sigma_12^2 (mu + gamma_21)^(3/2) (1 + eps_12)^2).
 pub fn tau_v2_hat(mu: f64, gamma21: f64, sigma1: f64, sigma12: f64, eps12: f64) -> f64 {
-    6.0 * sigma1 * sigma1 * (1.0 + mu).powi(2) * gamma21 * mu.sqrt() / (2f64.sqrt() * sigma12 * sigma12 * (mu + gamma21).powf(1.5) * (1.0 + eps12).powi(2))
+    6.0 * sigma1 * sigma1 * (1.0 + mu).powi(2) * gamma21 * mu.sqrt()
+        / (2f64.sqrt() * sigma12 * sigma12 * (mu + gamma21).powf(1.5) * (1.0 + eps12).powi(2))
 }
 
 /// tau_v,2(0) (32) = tau_c(0) tau_hat_v,21.
-pub fn tau_v2_tracer(tau_c0: f64, mu: f64, gamma21: f64, sigma1: f64, sigma12: f64, eps12: f64) -> f64 {
+pub fn tau_v2_tracer(
+    tau_c0: f64,
+    mu: f64,
+    gamma21: f64,
+    sigma1: f64,
+    sigma12: f64,
+    eps12: f64,
+) -> f64 {
     tau_c0 * tau_v2_hat(mu, gamma21, sigma1, sigma12, eps12)
 }
 
@@ -59,7 +67,15 @@ pub enum B35 {
 }
 
 /// b of (35) (g2 = 1).
-pub fn b35(mu: f64, eps11: f64, eps12: f64, sigma1: f64, sigma2: f64, sigma12: f64, which: B35) -> f64 {
+pub fn b35(
+    mu: f64,
+    eps11: f64,
+    eps12: f64,
+    sigma1: f64,
+    sigma2: f64,
+    sigma12: f64,
+    which: B35,
+) -> f64 {
     let geo = match which {
         B35::Printed => sigma12 * sigma12 / (sigma2 * sigma2),
         B35::Derived => sigma1 * sigma1 / (sigma12 * sigma12),
@@ -69,7 +85,15 @@ pub fn b35(mu: f64, eps11: f64, eps12: f64, sigma1: f64, sigma2: f64, sigma12: f
 
 /// gamma_21 (34) = (1 + eps_12) / (2 (1 - b)) for mu >> 1; None when b >= 1 (no positive
 /// solution: the expansion does not apply).
-pub fn gamma21_heavy(mu: f64, eps11: f64, eps12: f64, sigma1: f64, sigma2: f64, sigma12: f64, which: B35) -> Option<f64> {
+pub fn gamma21_heavy(
+    mu: f64,
+    eps11: f64,
+    eps12: f64,
+    sigma1: f64,
+    sigma2: f64,
+    sigma12: f64,
+    which: B35,
+) -> Option<f64> {
     let b = b35(mu, eps11, eps12, sigma1, sigma2, sigma12, which);
     (b < 1.0).then(|| (1.0 + eps12) / (2.0 * (1.0 - b)))
 }
@@ -101,12 +125,24 @@ pub fn gamma21_exact(gas: &Species, intruder: &Species, eps11: f64, eps12: f64) 
 
 /// The tracer-limit quantities for gas at temperature T_1(0) = `t1`: (gamma_21, tau_c(0),
 /// tau_0 (29), tau_v,1(0) (30), tau_v,2(0) (32)-(33) with the exact gamma_21).
-pub fn tracer_hcs(gas: &Species, intruder: &Species, eps11: f64, eps12: f64, t1: f64) -> (f64, f64, f64, f64, f64) {
+pub fn tracer_hcs(
+    gas: &Species,
+    intruder: &Species,
+    eps11: f64,
+    eps12: f64,
+    t1: f64,
+) -> (f64, f64, f64, f64, f64) {
     let gamma = gamma21_exact(gas, intruder, eps11, eps12);
     let tc = tau_c(gas, t1);
     let mu = intruder.mass / gas.mass;
     let s12 = 0.5 * (gas.diameter + intruder.diameter);
-    (gamma, tc, tau0_tracer(eps11, tc), tau_v1_tracer(eps11, tc), tau_v2_tracer(tc, mu, gamma, gas.diameter, s12, eps12))
+    (
+        gamma,
+        tc,
+        tau0_tracer(eps11, tc),
+        tau_v1_tracer(eps11, tc),
+        tau_v2_tracer(tc, mu, gamma, gas.diameter, s12, eps12),
+    )
 }
 
 #[cfg(test)]
@@ -123,19 +159,35 @@ mod tests {
     /// (34)-(35) give no positive gamma here (b > 1 in both forms), as asserted.
     #[test]
     fn fig5_tracer() {
-        let gas = Species { mass: 1.0, diameter: 1.0, density: 0.1 };
-        let intruder = Species { mass: 100.0, diameter: 100f64.cbrt(), density: 0.0 };
+        let gas = Species {
+            mass: 1.0,
+            diameter: 1.0,
+            density: 0.1,
+        };
+        let intruder = Species {
+            mass: 100.0,
+            diameter: 100f64.cbrt(),
+            density: 0.0,
+        };
         let (gamma, tc, tau0, tv1, tv2) = tracer_hcs(&gas, &intruder, 0.5, 0.5, 1.0);
         let s12 = 0.5 * (1.0 + intruder.diameter);
         let bp = b35(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Printed);
         let bd = b35(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Derived);
         eprintln!("fig5: gamma_21 = {gamma:.5} ({:+.2e} vs 412.93), tau_c = {tc:.6}, tau0 = {tau0:.5} ({:+.2e} vs 11.3), tau_v1 = {tv1:.5}, tau_v2 = {tv2:.3} ({:+.2e} vs 1212)", gamma / 412.93 - 1.0, tau0 / 11.3 - 1.0, tv2 / 1212.0 - 1.0);
-        eprintln!("fig5: (35) printed b = {bp:.4}, derived b = {bd:.4}: (34) gives {:?} / {:?}", gamma21_heavy(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Printed), gamma21_heavy(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Derived));
+        eprintln!(
+            "fig5: (35) printed b = {bp:.4}, derived b = {bd:.4}: (34) gives {:?} / {:?}",
+            gamma21_heavy(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Printed),
+            gamma21_heavy(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Derived)
+        );
         assert!((gamma / 412.93 - 1.0).abs() < 2e-5);
         assert!((tau0 - 11.3).abs() < 0.05);
         assert!((tv2 - 1212.0).abs() < 0.5);
-        assert!(gamma21_heavy(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Printed).is_none());
-        assert!(gamma21_heavy(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Derived).is_none());
+        assert!(
+            gamma21_heavy(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Printed).is_none()
+        );
+        assert!(
+            gamma21_heavy(100.0, 0.5, 0.5, 1.0, intruder.diameter, s12, B35::Derived).is_none()
+        );
         // General theory with n_2 = 0.
         let s = [gas, intruder];
         let r = PairRestitution::Constant(0.5);
@@ -155,8 +207,16 @@ mod tests {
     #[test]
     fn heavy_intruder_34() {
         let mu = 1e6;
-        let gas = Species { mass: 1.0, diameter: 1.0, density: 0.1 };
-        let intruder = Species { mass: mu, diameter: 3.0, density: 0.0 };
+        let gas = Species {
+            mass: 1.0,
+            diameter: 1.0,
+            density: 0.1,
+        };
+        let intruder = Species {
+            mass: mu,
+            diameter: 3.0,
+            density: 0.0,
+        };
         let (e11, e12) = (0.999995, 0.8);
         let exact = gamma21_exact(&gas, &intruder, e11, e12);
         let d = gamma21_heavy(mu, e11, e12, 1.0, 3.0, 2.0, B35::Derived).unwrap();

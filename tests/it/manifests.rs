@@ -26,27 +26,43 @@ fn json_files(dir: &Path) -> Vec<PathBuf> {
 
 /// (path, substring) pairs of an `.expected` file.
 fn expected_errors(path: &Path) -> Vec<(String, String)> {
-    let text = fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e} (every bad manifest needs one)", path.display()));
+    let text = fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e} (every bad manifest needs one)", path.display()));
     let mut out = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let (p, msg) = line
-            .split_once(": ")
-            .unwrap_or_else(|| panic!("{}:{}: expected `PATH: substring`, got {line:?}", path.display(), n + 1));
-        let p = if p == "/" { String::new() } else { p.to_string() };
+        let (p, msg) = line.split_once(": ").unwrap_or_else(|| {
+            panic!(
+                "{}:{}: expected `PATH: substring`, got {line:?}",
+                path.display(),
+                n + 1
+            )
+        });
+        let p = if p == "/" {
+            String::new()
+        } else {
+            p.to_string()
+        };
         out.push((p, msg.to_string()));
     }
-    assert!(!out.is_empty(), "{}: lists no expected error", path.display());
+    assert!(
+        !out.is_empty(),
+        "{}: lists no expected error",
+        path.display()
+    );
     out
 }
 
 #[test]
 fn good_manifests_validate() {
     let files = json_files(&repo_root().join("tests/manifests/good"));
-    assert!(files.len() >= 3, "expected the good manifests in tests/manifests/good");
+    assert!(
+        files.len() >= 3,
+        "expected the good manifests in tests/manifests/good"
+    );
     let mut failures = Vec::new();
     for f in &files {
         match load_manifest(f) {
@@ -57,33 +73,59 @@ fn good_manifests_validate() {
             Err(e) => failures.push(e.to_string()),
         }
     }
-    assert!(failures.is_empty(), "good manifests rejected:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "good manifests rejected:\n{}",
+        failures.join("\n")
+    );
 }
 
 #[test]
 fn bad_manifests_report_every_expected_error() {
     let files = json_files(&repo_root().join("tests/manifests/bad"));
-    assert!(files.len() >= 10, "expected the bad manifests in tests/manifests/bad");
+    assert!(
+        files.len() >= 10,
+        "expected the bad manifests in tests/manifests/bad"
+    );
     let mut failures = Vec::new();
     for f in &files {
         let expected = expected_errors(&f.with_extension("expected"));
         let errors = match load_manifest(f) {
             Ok(_) => {
-                failures.push(format!("{}: accepted, expected {} error(s)", f.display(), expected.len()));
+                failures.push(format!(
+                    "{}: accepted, expected {} error(s)",
+                    f.display(),
+                    expected.len()
+                ));
                 continue;
             }
             Err(e) => e,
         };
         let missing: Vec<String> = expected
             .iter()
-            .filter(|(p, sub)| !errors.errors.iter().any(|e| &e.path == p && e.message.contains(sub.as_str())))
+            .filter(|(p, sub)| {
+                !errors
+                    .errors
+                    .iter()
+                    .any(|e| &e.path == p && e.message.contains(sub.as_str()))
+            })
             .map(|(p, sub)| format!("    {}: ...{sub}...", if p.is_empty() { "/" } else { p }))
             .collect();
         if !missing.is_empty() {
-            failures.push(format!("{}: missing expected error(s):\n{}\n  reported:\n{}", f.display(), missing.join("\n"), errors));
+            failures.push(format!(
+                "{}: missing expected error(s):\n{}\n  reported:\n{}",
+                f.display(),
+                missing.join("\n"),
+                errors
+            ));
         }
     }
-    assert!(failures.is_empty(), "{} bad manifest(s) not reported as expected:\n{}", failures.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} bad manifest(s) not reported as expected:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }
 
 /// The library reports every error with a path; the CLI `validate` exits 2 and prints them.
@@ -95,8 +137,16 @@ fn validate_cli_exits_2_and_prints_paths() {
     let (code, _) = util::run_capture(&["validate", bad.to_str().unwrap()], &log);
     assert_eq!(code, Some(2), "log:\n{}", util::log_text(&log));
     let text = util::log_text(&log);
-    for p in ["/replicas", "/extra", "/params/restitution/constant", "/sweep/restitution.value"] {
-        assert!(text.contains(&format!("at {p}: ")), "validate output lacks {p}:\n{text}");
+    for p in [
+        "/replicas",
+        "/extra",
+        "/params/restitution/constant",
+        "/sweep/restitution.value",
+    ] {
+        assert!(
+            text.contains(&format!("at {p}: ")),
+            "validate output lacks {p}:\n{text}"
+        );
     }
     let good = repo_root().join("tests/manifests/good/power_law_sweep.json");
     let (code, out) = util::run_capture(&["validate", good.to_str().unwrap()], &log);
@@ -111,26 +161,57 @@ fn run_with_bad_manifest_exits_2_and_creates_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("log");
     let bad_dir = repo_root().join("tests/manifests/bad");
-    for name in ["several_errors.json", "duplicate_sweep_values.json", "not_json.json", "output_times_beyond_swept_t_end.json"] {
+    for name in [
+        "several_errors.json",
+        "duplicate_sweep_values.json",
+        "not_json.json",
+        "output_times_beyond_swept_t_end.json",
+    ] {
         let manifest = bad_dir.join(name);
         let missing = dir.path().join(format!("out-missing-{name}"));
         let code = util::run_granular(
-            &["run", manifest.to_str().unwrap(), "--out", missing.to_str().unwrap(), "--threads", "1", "--quiet"],
+            &[
+                "run",
+                manifest.to_str().unwrap(),
+                "--out",
+                missing.to_str().unwrap(),
+                "--threads",
+                "1",
+                "--quiet",
+            ],
             &log,
             Duration::from_secs(60),
         );
         assert_eq!(code, Some(2), "{name}: log:\n{}", util::log_text(&log));
-        assert!(!missing.exists(), "{name}: run created {}", missing.display());
+        assert!(
+            !missing.exists(),
+            "{name}: run created {}",
+            missing.display()
+        );
 
         let empty = dir.path().join(format!("out-empty-{name}"));
         fs::create_dir(&empty).unwrap();
         let code = util::run_granular(
-            &["run", manifest.to_str().unwrap(), "--out", empty.to_str().unwrap(), "--threads", "1", "--quiet"],
+            &[
+                "run",
+                manifest.to_str().unwrap(),
+                "--out",
+                empty.to_str().unwrap(),
+                "--threads",
+                "1",
+                "--quiet",
+            ],
             &log,
             Duration::from_secs(60),
         );
         assert_eq!(code, Some(2), "{name}: log:\n{}", util::log_text(&log));
-        let left: Vec<_> = fs::read_dir(&empty).unwrap().map(|e| e.unwrap().path()).collect();
-        assert!(left.is_empty(), "{name}: run wrote into the empty --out: {left:?}");
+        let left: Vec<_> = fs::read_dir(&empty)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        assert!(
+            left.is_empty(),
+            "{name}: run wrote into the empty --out: {left:?}"
+        );
     }
 }

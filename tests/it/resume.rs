@@ -10,14 +10,17 @@ use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
 
-use super::util::{self, heavy, log_text, read_table, read_tables, run_granular, status_json, Lcg, Tables};
+use super::util::{
+    self, heavy, log_text, read_table, read_tables, run_granular, status_json, Lcg, Tables,
+};
 
 /// Upper bound on any single `granular` process of these tests (a hang is a failure).
 const LIMIT: Duration = Duration::from_secs(300);
 
 /// The campaign of the kill test: 2 methods x 3 replicas = 6 runs of ~96 000 particles (a
-/// power law N_k = round(N1 k^-3), 54 species), t_end = 30 with 19 output times; about 3-6 s
-/// uninterrupted on 2 threads.
+/// power law N_k = round(N1 k^-3), 54 species), t_end = 30 with 19 output times, MSD and
+/// time-averaged MSD (20 tracers per species, ~470 in all, on a grid of 300 steps, so the
+/// tracer trajectories are part of every checkpoint); about 3-6 s uninterrupted on 2 threads.
 fn campaign_manifest() -> Value {
     json!({
         "name": "kill-test",
@@ -31,7 +34,8 @@ fn campaign_manifest() -> Value {
             "restitution": {"constant": 0.9},
             "t_end": 30.0,
             "output_times": {"log": {"from": 0.01, "to": 30.0, "per_decade": 5}},
-            "observables": ["temperature", "msd"]
+            "observables": ["temperature", "msd", "tamsd"],
+            "tamsd": {"lags": [0.5, 3.0, 10.0], "tracers": 20, "grid": 300}
         },
         "sweep": {"method": ["low_rank", "bird"]}
     })
@@ -75,12 +79,58 @@ fn check_complete(t: &Tables, n_runs: u64, what: &str) {
     let runs = &t["runs"];
     let mut ids: Vec<u64> = runs.column("run_id").iter().map(|c| c.as_u64()).collect();
     ids.sort();
-    assert_eq!(ids, (0..n_runs).collect::<Vec<_>>(), "{what}: run ids in the runs table");
-    assert!(runs.column("status").iter().all(|c| c.as_str() == "done"), "{what}: not every run is done");
-    assert!(runs.column("collisions").iter().all(|c| c.as_u64() > 0), "{what}: a run without collisions");
-    let species_runs: std::collections::BTreeSet<u64> = t["dsmc_species"].column("run_id").iter().map(|c| c.as_u64()).collect();
-    assert_eq!(species_runs.len() as u64, n_runs, "{what}: runs with dsmc_species rows");
-    assert!(!t["dsmc_species_summary"].rows.is_empty(), "{what}: empty summary");
+    assert_eq!(
+        ids,
+        (0..n_runs).collect::<Vec<_>>(),
+        "{what}: run ids in the runs table"
+    );
+    assert!(
+        runs.column("status").iter().all(|c| c.as_str() == "done"),
+        "{what}: not every run is done"
+    );
+    assert!(
+        runs.column("collisions").iter().all(|c| c.as_u64() > 0),
+        "{what}: a run without collisions"
+    );
+    let species_runs: std::collections::BTreeSet<u64> = t["dsmc_species"]
+        .column("run_id")
+        .iter()
+        .map(|c| c.as_u64())
+        .collect();
+    assert_eq!(
+        species_runs.len() as u64,
+        n_runs,
+        "{what}: runs with dsmc_species rows"
+    );
+    assert!(
+        !t["dsmc_species_summary"].rows.is_empty(),
+        "{what}: empty summary"
+    );
+    // With the observable `tamsd`: rows of every run, a summary with the theory joined.
+    let tamsd = &t["dsmc_tamsd"];
+    if !tamsd.rows.is_empty() {
+        let tamsd_runs: std::collections::BTreeSet<u64> =
+            tamsd.column("run_id").iter().map(|c| c.as_u64()).collect();
+        assert_eq!(
+            tamsd_runs.len() as u64,
+            n_runs,
+            "{what}: runs with dsmc_tamsd rows"
+        );
+        let summary = &t["dsmc_tamsd_summary"];
+        let replicas = n_runs as usize / t["points"].rows.len();
+        assert_eq!(
+            summary.rows.len() * replicas,
+            tamsd.rows.len(),
+            "{what}: tamsd summary rows"
+        );
+        assert!(
+            summary
+                .column("tamsd_theory")
+                .iter()
+                .all(|c| **c != util::Cell::Null),
+            "{what}: tamsd summary without theory"
+        );
+    }
 }
 
 /// The uninterrupted 2-thread run of `campaign_manifest`, done once per test binary.
@@ -94,9 +144,26 @@ fn reference() -> &'static Reference {
         let a = dir.path().join("A");
         let log = dir.path().join("log");
         let start = Instant::now();
-        let code = run_granular(&["run", s(&manifest), "--out", s(&a), "--threads", "2", "--quiet"], &log, LIMIT);
+        let code = run_granular(
+            &[
+                "run",
+                s(&manifest),
+                "--out",
+                s(&a),
+                "--threads",
+                "2",
+                "--quiet",
+            ],
+            &log,
+            LIMIT,
+        );
         let seconds = start.elapsed().as_secs_f64();
-        assert_eq!(code, Some(0), "uninterrupted run failed; log:\n{}", log_text(&log));
+        assert_eq!(
+            code,
+            Some(0),
+            "uninterrupted run failed; log:\n{}",
+            log_text(&log)
+        );
         let tables = read_tables(&a);
         check_complete(&tables, N_RUNS, "uninterrupted run");
         eprintln!("reference campaign: {seconds:.2} s uninterrupted on 2 threads");
@@ -131,20 +198,54 @@ struct Scenario {
 /// Run the campaign into `b`, SIGKILLing it `planned` times at LCG-drawn moments
 /// (`scale` x [4%, 12%] of the uninterrupted wall time `seconds`, i.e. ~0.15-0.7 s), resuming
 /// after each kill, then resuming until a resume exits 0.
-fn kill_scenario(manifest: &Path, b: &Path, log: &Path, planned: u32, scale: f64, lcg: &mut Lcg, seconds: f64) -> Scenario {
-    let mut sc = Scenario { kills: 0, attempts: 0, finished_early: false };
-    let opts = ["--threads", "2", "--checkpoint-every", "0.05", "--flush-every", "0.2", "--quiet"];
+fn kill_scenario(
+    manifest: &Path,
+    b: &Path,
+    log: &Path,
+    planned: u32,
+    scale: f64,
+    lcg: &mut Lcg,
+    seconds: f64,
+) -> Scenario {
+    let mut sc = Scenario {
+        kills: 0,
+        attempts: 0,
+        finished_early: false,
+    };
+    let opts = [
+        "--threads",
+        "2",
+        "--checkpoint-every",
+        "0.05",
+        "--flush-every",
+        "0.2",
+        "--quiet",
+    ];
     while sc.kills < planned {
-        let mut args: Vec<&str> = if sc.attempts == 0 { vec!["run", s(manifest), "--out", s(b)] } else { vec!["resume", s(b)] };
+        let mut args: Vec<&str> = if sc.attempts == 0 {
+            vec!["run", s(manifest), "--out", s(b)]
+        } else {
+            vec!["resume", s(b)]
+        };
         args.extend(opts);
         // The first attempt lives at least 0.2 s, so that the directory exists as a campaign
         // (`resume` needs its campaign.json).
         let floor = if sc.attempts == 0 { 0.2 } else { 0.05 };
-        let delay = Duration::from_secs_f64((seconds * scale * (0.04 + 0.08 * lcg.next_f64())).max(floor));
-        let _ = fs::OpenOptions::new().append(true).create(true).open(log).and_then(|mut f| {
-            use std::io::Write;
-            writeln!(f, "---- attempt {}: granular {} (kill after {delay:?})", sc.attempts + 1, args.join(" "))
-        });
+        let delay =
+            Duration::from_secs_f64((seconds * scale * (0.04 + 0.08 * lcg.next_f64())).max(floor));
+        let _ = fs::OpenOptions::new()
+            .append(true)
+            .create(true)
+            .open(log)
+            .and_then(|mut f| {
+                use std::io::Write;
+                writeln!(
+                    f,
+                    "---- attempt {}: granular {} (kill after {delay:?})",
+                    sc.attempts + 1,
+                    args.join(" ")
+                )
+            });
         let mut child = util::granular(&args, log).spawn().expect("spawn");
         sc.attempts += 1;
         let start = Instant::now();
@@ -170,28 +271,60 @@ fn kill_scenario(manifest: &Path, b: &Path, log: &Path, planned: u32, scale: f64
                 sc.finished_early = true;
                 return sc;
             }
-            _ => panic!("attempt {} ended with {status:?} (expected SIGKILL or exit 0); log:\n{}", sc.attempts, log_text(log)),
+            _ => panic!(
+                "attempt {} ended with {status:?} (expected SIGKILL or exit 0); log:\n{}",
+                sc.attempts,
+                log_text(log)
+            ),
         }
         // After a kill the directory is a consistent campaign: status works and counts every
         // run once; the killed process holds nothing.
-        assert!(b.join("campaign.json").exists(), "no campaign.json after {delay:?}; log:\n{}", log_text(log));
+        assert!(
+            b.join("campaign.json").exists(),
+            "no campaign.json after {delay:?}; log:\n{}",
+            log_text(log)
+        );
         let st = status_json(b, log);
-        let count = |k: &str| st[k].as_u64().unwrap_or_else(|| panic!("status lacks {k}: {st}"));
+        let count = |k: &str| {
+            st[k]
+                .as_u64()
+                .unwrap_or_else(|| panic!("status lacks {k}: {st}"))
+        };
         assert_eq!(count("runs"), N_RUNS, "{st}");
-        assert_eq!(count("done") + count("pending") + count("running") + count("failed"), N_RUNS, "{st}");
+        assert_eq!(
+            count("done") + count("pending") + count("running") + count("failed"),
+            N_RUNS,
+            "{st}"
+        );
         assert_eq!(count("failed"), 0, "{st}");
-        assert_eq!(count("running"), 0, "a killed process is reported running: {st}");
-        assert_eq!(st["live_shards"], json!([]), "a killed process is reported live: {st}");
+        assert_eq!(
+            count("running"),
+            0,
+            "a killed process is reported running: {st}"
+        );
+        assert_eq!(
+            st["live_shards"],
+            json!([]),
+            "a killed process is reported live: {st}"
+        );
     }
     let mut args = vec!["resume", s(b)];
     args.extend(opts);
-    let _ = fs::OpenOptions::new().append(true).open(log).and_then(|mut f| {
-        use std::io::Write;
-        writeln!(f, "---- final: granular {}", args.join(" "))
-    });
+    let _ = fs::OpenOptions::new()
+        .append(true)
+        .open(log)
+        .and_then(|mut f| {
+            use std::io::Write;
+            writeln!(f, "---- final: granular {}", args.join(" "))
+        });
     let code = run_granular(&args, log, LIMIT);
     sc.attempts += 1;
-    assert_eq!(code, Some(0), "final resume failed; log:\n{}", log_text(log));
+    assert_eq!(
+        code,
+        Some(0),
+        "final resume failed; log:\n{}",
+        log_text(log)
+    );
     sc
 }
 
@@ -218,26 +351,41 @@ fn kill_9_and_resume_gives_identical_tables() {
             "kill scenario {round}: {} kills in {} attempts{}, {:.1} s (uninterrupted: {:.1} s)",
             sc.kills,
             sc.attempts,
-            if sc.finished_early { ", finished before a planned kill" } else { "" },
+            if sc.finished_early {
+                ", finished before a planned kill"
+            } else {
+                ""
+            },
             start.elapsed().as_secs_f64(),
             reference.seconds
         );
         let tables = read_tables(&b);
         check_complete(&tables, N_RUNS, "killed and resumed campaign");
-        util::assert_tables_identical(&reference.tables, &tables, &format!("uninterrupted vs killed {} times and resumed", sc.kills));
+        util::assert_tables_identical(
+            &reference.tables,
+            &tables,
+            &format!("uninterrupted vs killed {} times and resumed", sc.kills),
+        );
         // Nothing of the crashes is left: no uncommitted parts, no checkpoints of finished runs.
         // (Hidden temporary files of killed writers are the subject of
         // `stale_temporary_files_are_removed_on_resume`; here they are only counted.)
         let pending = files_named(&b, &|n| n.ends_with(".pending"));
         assert!(pending.is_empty(), "uncommitted parts left: {pending:?}");
         let ckpts = files_named(&b.join("checkpoints"), &|n| n.starts_with("run-"));
-        assert!(ckpts.is_empty(), "checkpoints left after completion: {ckpts:?}");
+        assert!(
+            ckpts.is_empty(),
+            "checkpoints left after completion: {ckpts:?}"
+        );
         let stale = files_named(&b, &|n| n.starts_with('.') && n.ends_with(".tmp"));
         if !stale.is_empty() {
             eprintln!("kill scenario {round}: {} stale temporary file(s) of killed processes left: {stale:?}", stale.len());
         }
         let st = status_json(&b, &log);
-        assert_eq!((st["done"].as_u64(), st["pending"].as_u64()), (Some(N_RUNS), Some(0)), "{st}");
+        assert_eq!(
+            (st["done"].as_u64(), st["pending"].as_u64()),
+            (Some(N_RUNS), Some(0)),
+            "{st}"
+        );
         if sc.kills >= 5 {
             return;
         }
@@ -258,12 +406,38 @@ fn threads_and_shards_give_identical_tables() {
     let log = dir.path().join("log");
 
     let c = dir.path().join("C");
-    let code = run_granular(&["run", s(&manifest), "--out", s(&c), "--threads", "1", "--quiet"], &log, LIMIT);
+    let code = run_granular(
+        &[
+            "run",
+            s(&manifest),
+            "--out",
+            s(&c),
+            "--threads",
+            "1",
+            "--quiet",
+        ],
+        &log,
+        LIMIT,
+    );
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     util::assert_tables_identical(&reference.tables, &read_tables(&c), "2 threads vs 1 thread");
 
     let d = dir.path().join("D");
-    let code = run_granular(&["run", s(&manifest), "--out", s(&d), "--threads", "2", "--shard", "1/2", "--quiet"], &log, LIMIT);
+    let code = run_granular(
+        &[
+            "run",
+            s(&manifest),
+            "--out",
+            s(&d),
+            "--threads",
+            "2",
+            "--shard",
+            "1/2",
+            "--quiet",
+        ],
+        &log,
+        LIMIT,
+    );
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     // Shard 1 of 2 holds the even run ids, and the campaign is not complete yet.
     let runs = read_table(&d, "runs");
@@ -272,10 +446,32 @@ fn threads_and_shards_give_identical_tables() {
     sorted.sort();
     assert_eq!(sorted, vec![0, 2, 4], "runs of shard 1/2");
     let st = status_json(&d, &log);
-    assert_eq!((st["done"].as_u64(), st["pending"].as_u64()), (Some(3), Some(3)), "{st}");
-    let code = run_granular(&["run", s(&manifest), "--out", s(&d), "--threads", "2", "--shard", "2/2", "--quiet"], &log, LIMIT);
+    assert_eq!(
+        (st["done"].as_u64(), st["pending"].as_u64()),
+        (Some(3), Some(3)),
+        "{st}"
+    );
+    let code = run_granular(
+        &[
+            "run",
+            s(&manifest),
+            "--out",
+            s(&d),
+            "--threads",
+            "2",
+            "--shard",
+            "2/2",
+            "--quiet",
+        ],
+        &log,
+        LIMIT,
+    );
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
-    util::assert_tables_identical(&reference.tables, &read_tables(&d), "one process vs shards 1/2 + 2/2");
+    util::assert_tables_identical(
+        &reference.tables,
+        &read_tables(&d),
+        "one process vs shards 1/2 + 2/2",
+    );
 }
 
 /// A directory holding another campaign is refused (exit 3) and left exactly as it was (and
@@ -289,7 +485,11 @@ fn other_campaign_refused_and_rerun_adds_nothing() {
     let m1 = dir.path().join("m1.json");
     util::write_json(&m1, &small_manifest(1));
     let e = dir.path().join("E");
-    let code = run_granular(&["run", s(&m1), "--out", s(&e), "--threads", "2", "--quiet"], &log, LIMIT);
+    let code = run_granular(
+        &["run", s(&m1), "--out", s(&e), "--threads", "2", "--quiet"],
+        &log,
+        LIMIT,
+    );
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     let before_tables = read_tables(&e);
     check_complete(&before_tables, 4, "small campaign");
@@ -301,11 +501,23 @@ fn other_campaign_refused_and_rerun_adds_nothing() {
     other_replicas["replicas"] = json!(3);
     let mut other_params = small_manifest(1);
     other_params["params"]["restitution"]["constant"] = json!(0.8);
-    for (i, m) in [other_seed, other_replicas, other_params].iter().enumerate() {
+    for (i, m) in [other_seed, other_replicas, other_params]
+        .iter()
+        .enumerate()
+    {
         let path = dir.path().join(format!("other{i}.json"));
         util::write_json(&path, m);
-        let code = run_granular(&["run", s(&path), "--out", s(&e), "--threads", "2", "--quiet"], &log, LIMIT);
-        assert_eq!(code, Some(3), "other manifest {i}: log:\n{}", log_text(&log));
+        let code = run_granular(
+            &["run", s(&path), "--out", s(&e), "--threads", "2", "--quiet"],
+            &log,
+            LIMIT,
+        );
+        assert_eq!(
+            code,
+            Some(3),
+            "other manifest {i}: log:\n{}",
+            log_text(&log)
+        );
         let after = util::snapshot(&e);
         let changed: Vec<_> = before
             .keys()
@@ -314,7 +526,10 @@ fn other_campaign_refused_and_rerun_adds_nothing() {
             .collect::<std::collections::BTreeSet<_>>()
             .into_iter()
             .collect();
-        assert!(changed.is_empty(), "other manifest {i}: refused run changed {changed:?}");
+        assert!(
+            changed.is_empty(),
+            "other manifest {i}: refused run changed {changed:?}"
+        );
     }
 
     // A non-empty directory that is no campaign is refused too, untouched.
@@ -322,23 +537,54 @@ fn other_campaign_refused_and_rerun_adds_nothing() {
     fs::create_dir(&foreign).unwrap();
     fs::write(foreign.join("notes.txt"), "mine").unwrap();
     let foreign_before = util::snapshot(&foreign);
-    let code = run_granular(&["run", s(&m1), "--out", s(&foreign), "--threads", "2", "--quiet"], &log, LIMIT);
+    let code = run_granular(
+        &[
+            "run",
+            s(&m1),
+            "--out",
+            s(&foreign),
+            "--threads",
+            "2",
+            "--quiet",
+        ],
+        &log,
+        LIMIT,
+    );
     assert_eq!(code, Some(3), "log:\n{}", log_text(&log));
-    assert_eq!(util::snapshot(&foreign), foreign_before, "refused run touched a foreign directory");
+    assert_eq!(
+        util::snapshot(&foreign),
+        foreign_before,
+        "refused run touched a foreign directory"
+    );
     // `resume` of a directory that is no campaign is refused as well.
-    let code = run_granular(&["resume", s(&foreign), "--threads", "1", "--quiet"], &log, LIMIT);
+    let code = run_granular(
+        &["resume", s(&foreign), "--threads", "1", "--quiet"],
+        &log,
+        LIMIT,
+    );
     assert_eq!(code, Some(3), "log:\n{}", log_text(&log));
 
     // The same manifest again, then resume: nothing to do, no table changes (bit for bit,
     // wall_seconds included, since no run is redone).
-    let code = run_granular(&["run", s(&m1), "--out", s(&e), "--threads", "2", "--quiet"], &log, LIMIT);
+    let code = run_granular(
+        &["run", s(&m1), "--out", s(&e), "--threads", "2", "--quiet"],
+        &log,
+        LIMIT,
+    );
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     let code = run_granular(&["resume", s(&e), "--threads", "2", "--quiet"], &log, LIMIT);
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     let after_tables = read_tables(&e);
     let diffs = util::table_differences(&before_tables, &after_tables, &[]);
-    assert!(diffs.is_empty(), "re-running a finished campaign changed its tables:\n{}", diffs.join("\n"));
-    assert_eq!(after_tables["runs"].files, before_tables["runs"].files, "re-running added table parts");
+    assert!(
+        diffs.is_empty(),
+        "re-running a finished campaign changed its tables:\n{}",
+        diffs.join("\n")
+    );
+    assert_eq!(
+        after_tables["runs"].files, before_tables["runs"].files,
+        "re-running added table parts"
+    );
 }
 
 /// `granular status DIR --json` after completion: every run done, per point too.
@@ -353,23 +599,53 @@ fn status_json_after_completion() {
     let st = {
         // Before any run the directory is not a campaign.
         let (code, _) = util::run_capture(&["status", s(&e), "--json"], &log);
-        assert_eq!(code, Some(3), "status of a missing directory; log:\n{}", log_text(&log));
-        let code = run_granular(&["run", s(&m), "--out", s(&e), "--threads", "2", "--quiet"], &log, LIMIT);
+        assert_eq!(
+            code,
+            Some(3),
+            "status of a missing directory; log:\n{}",
+            log_text(&log)
+        );
+        let code = run_granular(
+            &["run", s(&m), "--out", s(&e), "--threads", "2", "--quiet"],
+            &log,
+            LIMIT,
+        );
         assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
         status_json(&e, &log)
     };
     assert_eq!(st["name"], json!("small"), "{st}");
-    for (k, want) in [("runs", 4), ("done", 4), ("failed", 0), ("running", 0), ("pending", 0), ("checkpointed", 0)] {
+    for (k, want) in [
+        ("runs", 4),
+        ("done", 4),
+        ("failed", 0),
+        ("running", 0),
+        ("pending", 0),
+        ("checkpointed", 0),
+    ] {
         assert_eq!(st[k].as_u64(), Some(want), "status {k}: {st}");
     }
     assert_eq!(st["live_shards"], json!([]), "{st}");
-    let points = st["points"].as_array().unwrap_or_else(|| panic!("no points: {st}"));
+    let points = st["points"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no points: {st}"));
     assert_eq!(points.len(), 2, "{st}");
     for (i, p) in points.iter().enumerate() {
         assert_eq!(p["point_id"].as_u64(), Some(i as u64), "{st}");
-        assert_eq!((p["done"].as_u64(), p["pending"].as_u64(), p["failed"].as_u64()), (Some(2), Some(0), Some(0)), "{st}");
+        assert_eq!(
+            (
+                p["done"].as_u64(),
+                p["pending"].as_u64(),
+                p["failed"].as_u64()
+            ),
+            (Some(2), Some(0), Some(0)),
+            "{st}"
+        );
     }
-    assert!(points[0]["point"].as_str().unwrap().contains("low_rank") && points[1]["point"].as_str().unwrap().contains("bird"), "{st}");
+    assert!(
+        points[0]["point"].as_str().unwrap().contains("low_rank")
+            && points[1]["point"].as_str().unwrap().contains("bird"),
+        "{st}"
+    );
 }
 
 /// A finished small campaign in `dir/E`; returns (campaign dir, log, its tables).
@@ -378,7 +654,11 @@ fn finished_small(dir: &Path) -> (PathBuf, PathBuf, Tables) {
     let m = dir.join("m.json");
     util::write_json(&m, &small_manifest(9));
     let e = dir.join("E");
-    let code = run_granular(&["run", s(&m), "--out", s(&e), "--threads", "2", "--quiet"], &log, LIMIT);
+    let code = run_granular(
+        &["run", s(&m), "--out", s(&e), "--threads", "2", "--quiet"],
+        &log,
+        LIMIT,
+    );
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     let t = read_tables(&e);
     check_complete(&t, 4, "small campaign");
@@ -387,7 +667,9 @@ fn finished_small(dir: &Path) -> (PathBuf, PathBuf, Tables) {
 
 /// The pid of a process that has exited (and been reaped): what a killed writer leaves.
 fn dead_pid() -> u32 {
-    let mut c = std::process::Command::new("true").spawn().expect("spawn true");
+    let mut c = std::process::Command::new("true")
+        .spawn()
+        .expect("spawn true");
     c.wait().unwrap();
     c.id()
 }
@@ -413,11 +695,23 @@ fn interrupted_commits_are_recovered_on_resume() {
     fs::copy(&sp, &orphan).unwrap();
     let code = run_granular(&["resume", s(&e), "--threads", "2", "--quiet"], &log, LIMIT);
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
-    assert!(part.exists(), "the committed part was not rolled forward; log:\n{}", log_text(&log));
-    assert!(!orphan.exists(), "the uncommitted part was not rolled back; log:\n{}", log_text(&log));
+    assert!(
+        part.exists(),
+        "the committed part was not rolled forward; log:\n{}",
+        log_text(&log)
+    );
+    assert!(
+        !orphan.exists(),
+        "the uncommitted part was not rolled back; log:\n{}",
+        log_text(&log)
+    );
     let after = read_tables(&e);
     let diffs = util::table_differences(&before, &after, &[]);
-    assert!(diffs.is_empty(), "recovery changed the tables:\n{}", diffs.join("\n"));
+    assert!(
+        diffs.is_empty(),
+        "recovery changed the tables:\n{}",
+        diffs.join("\n")
+    );
 }
 
 /// Temporary files that a killed process leaves behind (a checkpoint or a summary being
@@ -434,8 +728,12 @@ fn stale_temporary_files_are_removed_on_resume() {
     // `pid` of this host.
     let host = granular::fsutil::host_tag();
     let stale = [
-        e.join(format!("checkpoints/.run-0000000001.ckpt.{pid}-123456789@{host}.tmp")),
-        e.join(format!("tables/dsmc_species_summary/.summary.parquet.{pid}-987654321@{host}.tmp")),
+        e.join(format!(
+            "checkpoints/.run-0000000001.ckpt.{pid}-123456789@{host}.tmp"
+        )),
+        e.join(format!(
+            "tables/dsmc_species_summary/.summary.parquet.{pid}-987654321@{host}.tmp"
+        )),
     ];
     for p in &stale {
         fs::write(p, vec![0u8; 4096]).unwrap();
@@ -445,5 +743,8 @@ fn stale_temporary_files_are_removed_on_resume() {
     let after = read_tables(&e);
     assert!(util::table_differences(&before, &after, &[]).is_empty());
     let left: Vec<&PathBuf> = stale.iter().filter(|p| p.exists()).collect();
-    assert!(left.is_empty(), "stale temporary files of a dead process (pid {pid}) survive a resume: {left:?}");
+    assert!(
+        left.is_empty(),
+        "stale temporary files of a dead process (pid {pid}) survive a resume: {left:?}"
+    );
 }

@@ -10,9 +10,13 @@ const REGENERATE: &str = "cargo run --release -- schema > schemas/manifest.schem
 #[test]
 fn committed_schema_matches_generated() {
     let path = repo_root().join("schemas/manifest.schema.json");
-    let committed = fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}; regenerate with `{REGENERATE}`", path.display()));
+    let committed = fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("{}: {e}; regenerate with `{REGENERATE}`", path.display()));
     // Exactly what `granular schema` prints (println!: pretty JSON and a newline).
-    let generated = format!("{}\n", serde_json::to_string_pretty(&granular::manifest::json_schema()).unwrap());
+    let generated = format!(
+        "{}\n",
+        serde_json::to_string_pretty(&granular::manifest::json_schema()).unwrap()
+    );
     if committed != generated {
         let first = committed
             .lines()
@@ -33,8 +37,10 @@ fn committed_schema_matches_generated() {
 #[test]
 fn committed_schema_accepts_good_manifests() {
     let path = repo_root().join("schemas/manifest.schema.json");
-    let schema: serde_json::Value = serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
-    let validator = jsonschema::validator_for(&schema).unwrap_or_else(|e| panic!("{}: does not compile: {e}", path.display()));
+    let schema: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
+    let validator = jsonschema::validator_for(&schema)
+        .unwrap_or_else(|e| panic!("{}: does not compile: {e}", path.display()));
     let mut files = Vec::new();
     for dir in ["tests/manifests/good", "jobs"] {
         for e in fs::read_dir(repo_root().join(dir)).unwrap() {
@@ -47,12 +53,24 @@ fn committed_schema_accepts_good_manifests() {
     assert!(files.len() >= 4);
     for p in &files {
         let v: serde_json::Value = serde_json::from_str(&fs::read_to_string(p).unwrap()).unwrap();
-        let errs: Vec<String> = validator.iter_errors(&v).map(|e| format!("{}: {e}", e.instance_path())).collect();
-        assert!(errs.is_empty(), "{} fails the committed schema:\n{}", p.display(), errs.join("\n"));
+        let errs: Vec<String> = validator
+            .iter_errors(&v)
+            .map(|e| format!("{}: {e}", e.instance_path()))
+            .collect();
+        assert!(
+            errs.is_empty(),
+            "{} fails the committed schema:\n{}",
+            p.display(),
+            errs.join("\n")
+        );
     }
     let bad = repo_root().join("tests/manifests/bad/unknown_keys.json");
     let v: serde_json::Value = serde_json::from_str(&fs::read_to_string(&bad).unwrap()).unwrap();
-    assert!(!validator.is_valid(&v), "{} passes the committed schema", bad.display());
+    assert!(
+        !validator.is_valid(&v),
+        "{} passes the committed schema",
+        bad.display()
+    );
 }
 
 #[test]
@@ -65,6 +83,17 @@ fn job_manifests_validate() {
         .collect();
     files.sort();
     assert!(!files.is_empty(), "no jobs/*.json");
-    let failures: Vec<String> = files.iter().filter_map(|f| granular::manifest::load_manifest(f).err().map(|e| e.to_string())).collect();
-    assert!(failures.is_empty(), "job manifests do not validate:\n{}", failures.join("\n"));
+    let failures: Vec<String> = files
+        .iter()
+        .filter_map(|f| {
+            granular::manifest::load_manifest(f)
+                .err()
+                .map(|e| e.to_string())
+        })
+        .collect();
+    assert!(
+        failures.is_empty(),
+        "job manifests do not validate:\n{}",
+        failures.join("\n")
+    );
 }

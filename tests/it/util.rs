@@ -38,7 +38,11 @@ pub fn heavy() -> MutexGuard<'static, ()> {
 pub fn granular(args: &[&str], log: &Path) -> Command {
     let mut c = Command::new(bin());
     c.args(args).stdin(Stdio::null());
-    let f = fs::OpenOptions::new().create(true).append(true).open(log).expect("open log");
+    let f = fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log)
+        .expect("open log");
     c.stdout(f.try_clone().expect("dup log")).stderr(f);
     c
 }
@@ -57,7 +61,10 @@ pub fn wait_limited(child: &mut Child, limit: Duration, what: &str, log: &Path) 
         if start.elapsed() > limit {
             let _ = child.kill();
             let _ = child.wait();
-            panic!("{what}: still running after {limit:?}; killed it. Log:\n{}", log_text(log));
+            panic!(
+                "{what}: still running after {limit:?}; killed it. Log:\n{}",
+                log_text(log)
+            );
         }
         std::thread::sleep(Duration::from_millis(10));
     }
@@ -67,14 +74,32 @@ pub fn wait_limited(child: &mut Child, limit: Duration, what: &str, log: &Path) 
 /// by a signal).
 pub fn run_granular(args: &[&str], log: &Path, limit: Duration) -> Option<i32> {
     let mut child = granular(args, log).spawn().expect("spawn granular");
-    wait_limited(&mut child, limit, &format!("granular {}", args.join(" ")), log).code()
+    wait_limited(
+        &mut child,
+        limit,
+        &format!("granular {}", args.join(" ")),
+        log,
+    )
+    .code()
 }
 
 /// Run `granular args` capturing stdout (stderr goes to `log`); returns (code, stdout).
 pub fn run_capture(args: &[&str], log: &Path) -> (Option<i32>, String) {
-    let f = fs::OpenOptions::new().create(true).append(true).open(log).expect("open log");
-    let out = Command::new(bin()).args(args).stdin(Stdio::null()).stderr(f).output().expect("run granular");
-    (out.status.code(), String::from_utf8_lossy(&out.stdout).into_owned())
+    let f = fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log)
+        .expect("open log");
+    let out = Command::new(bin())
+        .args(args)
+        .stdin(Stdio::null())
+        .stderr(f)
+        .output()
+        .expect("run granular");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+    )
 }
 
 /// A fixed-seed 64-bit LCG (Knuth's MMIX constants): reproducible "random" moments.
@@ -83,7 +108,10 @@ pub struct Lcg(pub u64);
 impl Lcg {
     /// Uniform in [0, 1) from the top 53 bits.
     pub fn next_f64(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (self.0 >> 11) as f64 / (1u64 << 53) as f64
     }
 }
@@ -100,7 +128,10 @@ pub fn snapshot(dir: &Path) -> BTreeMap<PathBuf, (Vec<u8>, SystemTime)> {
                 out.insert(p.clone(), (Vec::new(), md.modified().expect("mtime")));
                 stack.push(p);
             } else {
-                out.insert(p.clone(), (fs::read(&p).expect("read"), md.modified().expect("mtime")));
+                out.insert(
+                    p.clone(),
+                    (fs::read(&p).expect("read"), md.modified().expect("mtime")),
+                );
             }
         }
     }
@@ -152,7 +183,9 @@ fn cells(col: &ArrayRef) -> Vec<Cell> {
     match col.data_type() {
         DataType::UInt32 => {
             let a = col.as_primitive::<UInt32Type>();
-            (0..n).map(|i| cell(i, &|i| Cell::U(a.value(i) as u64))).collect()
+            (0..n)
+                .map(|i| cell(i, &|i| Cell::U(a.value(i) as u64)))
+                .collect()
         }
         DataType::UInt64 => {
             let a = col.as_primitive::<UInt64Type>();
@@ -160,7 +193,9 @@ fn cells(col: &ArrayRef) -> Vec<Cell> {
         }
         DataType::Int32 => {
             let a = col.as_primitive::<Int32Type>();
-            (0..n).map(|i| cell(i, &|i| Cell::I(a.value(i) as i64))).collect()
+            (0..n)
+                .map(|i| cell(i, &|i| Cell::I(a.value(i) as i64)))
+                .collect()
         }
         DataType::Int64 => {
             let a = col.as_primitive::<Int64Type>();
@@ -168,15 +203,21 @@ fn cells(col: &ArrayRef) -> Vec<Cell> {
         }
         DataType::Float64 => {
             let a = col.as_primitive::<Float64Type>();
-            (0..n).map(|i| cell(i, &|i| Cell::F(a.value(i).to_bits()))).collect()
+            (0..n)
+                .map(|i| cell(i, &|i| Cell::F(a.value(i).to_bits())))
+                .collect()
         }
         DataType::Utf8 => {
             let a = col.as_string::<i32>();
-            (0..n).map(|i| cell(i, &|i| Cell::S(a.value(i).to_string()))).collect()
+            (0..n)
+                .map(|i| cell(i, &|i| Cell::S(a.value(i).to_string())))
+                .collect()
         }
         DataType::Boolean => {
             let a = col.as_boolean();
-            (0..n).map(|i| cell(i, &|i| Cell::Bool(a.value(i)))).collect()
+            (0..n)
+                .map(|i| cell(i, &|i| Cell::Bool(a.value(i))))
+                .collect()
         }
         DataType::List(_) => {
             // A list of doubles: compared through the bit patterns of its elements.
@@ -185,7 +226,12 @@ fn cells(col: &ArrayRef) -> Vec<Cell> {
                 .map(|i| {
                     cell(i, &|i| {
                         let v = a.value(i);
-                        let bits: Vec<u64> = v.as_primitive::<Float64Type>().values().iter().map(|x| x.to_bits()).collect();
+                        let bits: Vec<u64> = v
+                            .as_primitive::<Float64Type>()
+                            .values()
+                            .iter()
+                            .map(|x| x.to_bits())
+                            .collect();
                         Cell::S(format!("{bits:?}"))
                     })
                 })
@@ -206,7 +252,10 @@ pub struct Table {
 
 impl Table {
     pub fn col(&self, name: &str) -> usize {
-        self.columns.iter().position(|(c, _)| c == name).unwrap_or_else(|| panic!("table {} has no column {name}", self.name))
+        self.columns
+            .iter()
+            .position(|(c, _)| c == name)
+            .unwrap_or_else(|| panic!("table {} has no column {name}", self.name))
     }
 
     /// The values of one column, in row order.
@@ -224,21 +273,42 @@ impl Table {
         let mut dups = Vec::new();
         for w in rows.windows(2) {
             if key(&w[0]) == key(&w[1]) {
-                dups.push(key(&w[0]).iter().map(|c| c.to_string()).collect::<Vec<_>>().join(", "));
+                dups.push(
+                    key(&w[0])
+                        .iter()
+                        .map(|c| c.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                );
             }
         }
         if dups.is_empty() {
             Ok(rows)
         } else {
             dups.truncate(10);
-            Err(format!("table {}: duplicated keys ({}) = [{}]", self.name, keys.join(", "), dups.join("], [")))
+            Err(format!(
+                "table {}: duplicated keys ({}) = [{}]",
+                self.name,
+                keys.join(", "),
+                dups.join("], [")
+            ))
         }
     }
 }
 
 /// Read `<dir>/tables/<table>/*.parquet` (hidden files excluded) with the arrow reader.
+/// A table without files is an error, except for the tables in [`MAY_BE_EMPTY`], which are
+/// then read as no columns and no rows.
 pub fn read_table(dir: &Path, table: &str) -> Table {
     let tdir = dir.join("tables").join(table);
+    if !tdir.exists() && OPTIONAL.contains(&table) {
+        return Table {
+            name: table.to_string(),
+            columns: Vec::new(),
+            rows: Vec::new(),
+            files: Vec::new(),
+        };
+    }
     let mut files: Vec<PathBuf> = fs::read_dir(&tdir)
         .unwrap_or_else(|e| panic!("{}: {e}", tdir.display()))
         .map(|e| e.expect("entry").path())
@@ -248,8 +318,17 @@ pub fn read_table(dir: &Path, table: &str) -> Table {
         })
         .collect();
     files.sort();
-    assert!(!files.is_empty(), "{}: no table files", tdir.display());
-    let mut t = Table { name: table.to_string(), columns: Vec::new(), rows: Vec::new(), files: Vec::new() };
+    assert!(
+        !files.is_empty() || MAY_BE_EMPTY.contains(&table),
+        "{}: no table files",
+        tdir.display()
+    );
+    let mut t = Table {
+        name: table.to_string(),
+        columns: Vec::new(),
+        rows: Vec::new(),
+        files: Vec::new(),
+    };
     for (fi, f) in files.iter().enumerate() {
         let file = fs::File::open(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
         let reader = ParquetRecordBatchReaderBuilder::try_new(file)
@@ -257,11 +336,20 @@ pub fn read_table(dir: &Path, table: &str) -> Table {
             .build()
             .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
         let schema = reader.schema();
-        let cols: Vec<(String, DataType)> = schema.fields().iter().map(|f| (f.name().clone(), f.data_type().clone())).collect();
+        let cols: Vec<(String, DataType)> = schema
+            .fields()
+            .iter()
+            .map(|f| (f.name().clone(), f.data_type().clone()))
+            .collect();
         if fi == 0 {
             t.columns = cols;
         } else {
-            assert_eq!(t.columns, cols, "{}: columns differ from the table's first part file", f.display());
+            assert_eq!(
+                t.columns,
+                cols,
+                "{}: columns differ from the table's first part file",
+                f.display()
+            );
         }
         for batch in reader {
             let batch = batch.unwrap_or_else(|e| panic!("{}: {e}", f.display()));
@@ -270,20 +358,31 @@ pub fn read_table(dir: &Path, table: &str) -> Table {
                 t.rows.push(columns.iter().map(|c| c[i].clone()).collect());
             }
         }
-        t.files.push(f.file_name().unwrap().to_string_lossy().into_owned());
+        t.files
+            .push(f.file_name().unwrap().to_string_lossy().into_owned());
     }
     t
 }
 
 /// The tables of a campaign and the key columns that identify a row.
-pub const TABLES: [(&str, &[&str]); 6] = [
+pub const TABLES: [(&str, &[&str]); 9] = [
     ("runs", &["run_id"]),
     ("dsmc_species", &["run_id", "t", "species"]),
     ("dsmc_species_summary", &["point_id", "t", "species"]),
+    ("dsmc_tamsd", &["run_id", "species", "lag"]),
+    ("dsmc_tamsd_summary", &["point_id", "species", "lag"]),
     ("points", &["point_id"]),
     ("dsmc_theory", &["point_id", "t", "species"]),
     ("dsmc_theory_point", &["point_id"]),
+    ("dsmc_theory_tamsd", &["point_id", "species", "lag"]),
 ];
+
+/// Tables that have no part file in a campaign that does not record them (`dsmc_tamsd`
+/// without the observable `tamsd`).
+pub const MAY_BE_EMPTY: [&str; 1] = ["dsmc_tamsd"];
+
+/// Tables that exist only when their observable is recorded (absent = empty).
+pub const OPTIONAL: [&str; 3] = ["dsmc_tamsd", "dsmc_tamsd_summary", "dsmc_theory_tamsd"];
 
 pub type Tables = BTreeMap<String, Table>;
 
@@ -295,8 +394,20 @@ pub fn read_tables(dir: &Path) -> Tables {
         .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
         .collect();
     let known: BTreeSet<String> = TABLES.iter().map(|(t, _)| t.to_string()).collect();
-    assert_eq!(present, known, "{}: unexpected set of tables", dir.display());
-    TABLES.iter().map(|(t, _)| (t.to_string(), read_table(dir, t))).collect()
+    let required: BTreeSet<String> = known
+        .iter()
+        .filter(|t| !OPTIONAL.contains(&t.as_str()))
+        .cloned()
+        .collect();
+    assert!(
+        present.is_subset(&known) && required.is_subset(&present),
+        "{}: unexpected set of tables: {present:?}",
+        dir.display()
+    );
+    TABLES
+        .iter()
+        .map(|(t, _)| (t.to_string(), read_table(dir, t)))
+        .collect()
 }
 
 /// Columns excluded from bit-equality: `runs.wall_seconds` measures elapsed time (it differs
@@ -310,7 +421,14 @@ pub fn table_differences(a: &Tables, b: &Tables, ignore: &[(&str, &str)]) -> Vec
     for (name, keys) in TABLES {
         let (ta, tb) = (&a[name], &b[name]);
         if ta.columns != tb.columns {
-            diffs.push(format!("{name}: columns differ:\n  {:?}\n  {:?}", ta.columns, tb.columns));
+            diffs.push(format!(
+                "{name}: columns differ:\n  {:?}\n  {:?}",
+                ta.columns, tb.columns
+            ));
+            continue;
+        }
+        if ta.columns.is_empty() {
+            // Both without part files (see `MAY_BE_EMPTY`).
             continue;
         }
         let (ra, rb) = match (ta.sorted_by(keys), tb.sorted_by(keys)) {
@@ -325,7 +443,11 @@ pub fn table_differences(a: &Tables, b: &Tables, ignore: &[(&str, &str)]) -> Vec
             diffs.push(format!("{name}: {} rows vs {} rows", ra.len(), rb.len()));
             continue;
         }
-        let skip: Vec<bool> = ta.columns.iter().map(|(c, _)| ignore.contains(&(name, c.as_str()))).collect();
+        let skip: Vec<bool> = ta
+            .columns
+            .iter()
+            .map(|(c, _)| ignore.contains(&(name, c.as_str())))
+            .collect();
         let key_idx: Vec<usize> = keys.iter().map(|k| ta.col(k)).collect();
         let mut n = 0;
         for (x, y) in ra.iter().zip(&rb) {
@@ -334,7 +456,11 @@ pub fn table_differences(a: &Tables, b: &Tables, ignore: &[(&str, &str)]) -> Vec
                 if n <= 10 {
                     let kx: Vec<String> = key_idx.iter().map(|&j| x[j].to_string()).collect();
                     let ky: Vec<String> = key_idx.iter().map(|&j| y[j].to_string()).collect();
-                    diffs.push(format!("{name}: row keys differ: ({}) vs ({})", kx.join(", "), ky.join(", ")));
+                    diffs.push(format!(
+                        "{name}: row keys differ: ({}) vs ({})",
+                        kx.join(", "),
+                        ky.join(", ")
+                    ));
                 }
                 continue;
             }
@@ -342,8 +468,15 @@ pub fn table_differences(a: &Tables, b: &Tables, ignore: &[(&str, &str)]) -> Vec
                 if !skip[j] && cx != cy {
                     n += 1;
                     if n <= 10 {
-                        let key: Vec<String> = keys.iter().map(|k| format!("{k}={}", x[ta.col(k)])).collect();
-                        diffs.push(format!("{name} [{}] column {}: {cx} vs {cy}", key.join(", "), ta.columns[j].0));
+                        let key: Vec<String> = keys
+                            .iter()
+                            .map(|k| format!("{k}={}", x[ta.col(k)]))
+                            .collect();
+                        diffs.push(format!(
+                            "{name} [{}] column {}: {cx} vs {cy}",
+                            key.join(", "),
+                            ta.columns[j].0
+                        ));
                     }
                 }
             }
@@ -357,13 +490,24 @@ pub fn table_differences(a: &Tables, b: &Tables, ignore: &[(&str, &str)]) -> Vec
 
 pub fn assert_tables_identical(a: &Tables, b: &Tables, what: &str) {
     let diffs = table_differences(a, b, &NONDETERMINISTIC);
-    assert!(diffs.is_empty(), "{what}: tables differ ({} differences):\n{}", diffs.len(), diffs.join("\n"));
+    assert!(
+        diffs.is_empty(),
+        "{what}: tables differ ({} differences):\n{}",
+        diffs.len(),
+        diffs.join("\n")
+    );
 }
 
 /// `granular status DIR --json`, parsed.
 pub fn status_json(dir: &Path, log: &Path) -> Value {
     let (code, out) = run_capture(&["status", dir.to_str().unwrap(), "--json"], log);
-    assert_eq!(code, Some(0), "granular status {} --json failed; log:\n{}", dir.display(), log_text(log));
+    assert_eq!(
+        code,
+        Some(0),
+        "granular status {} --json failed; log:\n{}",
+        dir.display(),
+        log_text(log)
+    );
     serde_json::from_str(&out).unwrap_or_else(|e| panic!("status --json is not JSON ({e}):\n{out}"))
 }
 
