@@ -127,6 +127,8 @@ fn main() {
             let (mut acc_first, mut acc_min) = (f64::NAN, f64::INFINITY);
             let (mut last_trials, mut last_coll) = (0u64, 0u64);
             let mut error = None;
+            // A run that is merely slow (Bird with huge size ratios) is reported, not failed.
+            let mut incomplete: Option<String> = None;
             let chunk = 1u64 << 16;
             loop {
                 match sim.advance(chunk) {
@@ -158,7 +160,7 @@ fn main() {
                             break;
                         }
                         if started.elapsed().as_secs() > if quick { 20 } else { 120 } {
-                            error = Some("time budget exceeded".into());
+                            incomplete = Some(format!("stopped at t = {:.3e} of {:.0e}: time budget", sim.st.t, sys.t_end));
                             break;
                         }
                     }
@@ -170,7 +172,7 @@ fn main() {
             }
             // Theory for species 1 at the last output time reached.
             let rows = sim.take_rows();
-            let dev = if error.is_none() && m <= 60 {
+            let dev = if error.is_none() && incomplete.is_none() && m <= 60 {
                 let species = theory_species(&sys);
                 let r = theory_restitution(&sys.restitution, &sys.species);
                 let t0: Vec<f64> = sys.species.iter().map(|s| s.initial_temperature).collect();
