@@ -160,7 +160,10 @@ fn main() {
                             break;
                         }
                         if started.elapsed().as_secs() > if quick { 20 } else { 120 } {
-                            incomplete = Some(format!("stopped at t = {:.3e} of {:.0e}: time budget", sim.st.t, sys.t_end));
+                            incomplete = Some(format!(
+                                "stopped at t = {:.3e} of {:.0e}: time budget",
+                                sim.st.t, sys.t_end
+                            ));
                             break;
                         }
                     }
