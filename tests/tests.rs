@@ -4,12 +4,15 @@
 //! - `resume`: kill -9 / resume, thread count and sharding give bit-identical tables;
 //!   directory refusal, re-running a finished campaign, `status --json`.
 //! - `physics`: Haff's law, bitwise checkpoint/restore, conservation laws, low-rank vs Bird.
+//! - `interrupt`: Ctrl-C once checkpoints and stops (exit 130), resume is bit-identical;
+//!   twice exits at once.
 //! - `schema`: the committed JSON Schema matches the code; `jobs/*.json` validate.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
 
 mod it {
+    pub mod interrupt;
     pub mod manifests;
     pub mod physics;
     pub mod resume;
