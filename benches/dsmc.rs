@@ -22,7 +22,9 @@ fn trials(c: &mut Criterion) {
     g.sample_size(20);
     for method in ["low_rank", "bird"] {
         let mut sim = DsmcSim::new(system(method, 10_000), 7);
-        g.bench_function(method, |b| b.iter(|| sim.advance(100_000).expect("physics")));
+        g.bench_function(method, |b| {
+            b.iter(|| sim.advance(100_000).expect("physics"))
+        });
     }
     g.finish();
 }
