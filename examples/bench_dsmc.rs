@@ -1,6 +1,6 @@
 //! Single-threaded DSMC timing of the paper's Table I set-up (or a scaled one).
 //!
-//! `cargo run --release --example bench_dsmc -- [low_rank|bird] [N1] [t_end] [eps] [seed] [msd]`
+//! `cargo run --release --example bench_dsmc -- [low_rank|bird] [N1] [t_end] [eps] [seed] [msd|nomsd] [refresh_every]`
 //! prints wall time, trials, collisions, rates and sum m v^2 at t_end.
 
 use std::time::Instant;
@@ -17,12 +17,14 @@ fn main() {
     let eps: f64 = get(3, "0.5").parse().expect("eps");
     let seed: u64 = get(4, "1").parse().expect("seed");
     let msd = get(5, "nomsd") == "msd";
+    let refresh: f64 = get(6, "1").parse().expect("refresh_every");
     let params: DsmcParams = serde_json::from_value(serde_json::json!({
         "method": method,
         "species": {"power_law": {"n1": 0.1, "N1": n1, "theta": 3}},
         "restitution": {"constant": eps},
         "t_end": t_end,
         "observables": if msd { vec!["msd"] } else { vec![] },
+        "refresh_every": refresh,
     }))
     .expect("params");
     let sys = DsmcSystem::from_params(&params).expect("system");
