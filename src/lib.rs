@@ -23,6 +23,7 @@ pub mod manifest;
 pub mod memory;
 pub mod plan;
 pub mod plot;
+pub mod rfm;
 pub mod rng;
 pub mod store;
 pub mod theory;

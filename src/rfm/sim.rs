@@ -1,0 +1,543 @@
+//! [`RfmSim`]: the Random Force Model simulation (spec 1), one dimension chosen once at
+//! construction and dispatched to the const-generic core [`Core<D>`].
+//!
+//! State (everything a checkpoint holds, [`RfmState`]): positions, velocities, the reference
+//! positions of the last neighbour-list build and the largest displacement since, the random
+//! stream's position, and the step count. The neighbour list is rebuilt on restore from the
+//! reference positions, which reproduces it exactly, so a restored run continues bit for bit.
+
+use serde::{Deserialize, Serialize};
+
+use super::contact::ContactLaw;
+use super::integrate::PairPropagator;
+use super::neighbours::{wrap, NeighbourList};
+use super::noise::Kicks;
+use super::params::{InitialLayout, RfmConfig};
+use crate::rng::{RngPosition, RunRng};
+
+/// Skin of the 2D neighbour list, in diameters.
+pub const SKIN_DIAMETERS: f64 = 0.25;
+
+/// The checkpoint payload (postcard-encoded by [`RfmSim::state_bytes`]).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RfmState {
+    pub dim: u32,
+    pub step: u64,
+    /// Positions, N * dim, particle-major. 1D: unwrapped and ordered; 2D: not wrapped since
+    /// the last list build.
+    pub x: Vec<f64>,
+    pub v: Vec<f64>,
+    /// 2D: positions at the last neighbour-list build (wrapped); empty in 1D.
+    pub x_ref: Vec<f64>,
+    pub max_disp2: f64,
+    pub rng: RngPosition,
+}
+
+/// The dimension-generic simulation core.
+pub struct Core<const D: usize> {
+    pub l: f64,
+    pub d: f64,
+    pub h: f64,
+    prop: PairPropagator,
+    kicks: Kicks,
+    skin: f64,
+    pub x: Vec<[f64; D]>,
+    pub v: Vec<[f64; D]>,
+    x_ref: Vec<[f64; D]>,
+    max_disp2: f64,
+    pub rng: RunRng,
+    pub step: u64,
+    nl: NeighbourList<D>,
+    /// This step's pair corrections: (i, j, dx_i, dv_i); j gets the opposite.
+    corr: Vec<(u32, u32, [f64; D], [f64; D])>,
+    /// Neighbour-list builds so far (diagnostic, not part of the state).
+    pub builds: u64,
+}
+
+impl<const D: usize> Core<D> {
+    fn new(cfg: &RfmConfig, x: Vec<[f64; D]>, v: Vec<[f64; D]>, rng: RunRng) -> Self {
+        let h = cfg.dt();
+        let law = ContactLaw::from_config(cfg);
+        let mut c = Core {
+            l: cfg.box_length(),
+            d: cfg.diameter(),
+            h,
+            prop: PairPropagator::new(&law, cfg.reduced_mass(), h),
+            kicks: Kicks::new(cfg.noise_strength, cfg.mass, h),
+            skin: SKIN_DIAMETERS * cfg.diameter(),
+            x,
+            v,
+            x_ref: Vec::new(),
+            max_disp2: 0.0,
+            rng,
+            step: 0,
+            nl: NeighbourList::default(),
+            corr: Vec::new(),
+            builds: 0,
+        };
+        if D > 1 {
+            c.rebuild();
+        }
+        c
+    }
+
+    /// Wrap positions, take them as reference, build the list.
+    fn rebuild(&mut self) {
+        let l = self.l;
+        for p in self.x.iter_mut() {
+            for k in 0..D {
+                p[k] = wrap(p[k], l);
+            }
+        }
+        self.x_ref.clone_from(&self.x);
+        self.max_disp2 = 0.0;
+        self.build_from_ref();
+    }
+
+    fn build_from_ref(&mut self) {
+        self.nl.build(&self.x_ref, self.l, self.d + self.skin);
+        self.builds += 1;
+    }
+
+    /// Largest speed squared.
+    fn vmax2(&self) -> f64 {
+        self.v
+            .iter()
+            .map(|p| p.iter().map(|a| a * a).sum::<f64>())
+            .fold(0.0, f64::max)
+    }
+
+    /// One pair's contribution from separation r = x_i - x_j and g = v_i - v_j.
+    #[inline(always)]
+    fn pair(&mut self, i: usize, j: usize, r: [f64; D], g: [f64; D]) {
+        let rho2: f64 = r.iter().map(|a| a * a).sum();
+        let rho = rho2.sqrt();
+        let inv = 1.0 / rho;
+        let e: [f64; D] = std::array::from_fn(|k| r[k] * inv);
+        let gn: f64 = (0..D).map(|k| g[k] * e[k]).sum();
+        let Some(ns) = self.prop.normal(self.d - rho, -gn) else {
+            return;
+        };
+        let mut dx: [f64; D] = std::array::from_fn(|k| -0.5 * ns.ddelta * e[k]);
+        let mut dv: [f64; D] = std::array::from_fn(|k| -0.5 * ns.du * e[k]);
+        if D > 1 && self.prop.has_tangential() {
+            let gt: [f64; D] = std::array::from_fn(|k| g[k] - gn * e[k]);
+            let gt_abs = gt.iter().map(|a| a * a).sum::<f64>().sqrt();
+            let (a, b) = self.prop.tangential(gt_abs, &ns);
+            for k in 0..D {
+                dv[k] += 0.5 * a * gt[k];
+                dx[k] += 0.5 * b * gt[k];
+            }
+        }
+        self.corr.push((i as u32, j as u32, dx, dv));
+    }
+
+    /// Collect this step's pair corrections from the kicked state (list or ring).
+    fn pair_pass(&mut self, vmax: f64) {
+        self.corr.clear();
+        let n = self.x.len();
+        if D == 1 {
+            for i in 0..n {
+                let (j, wrap_l) = if i + 1 == n {
+                    (0, self.l)
+                } else {
+                    (i + 1, 0.0)
+                };
+                let gap = self.x[j][0] + wrap_l - self.x[i][0];
+                if gap >= self.d + 2.0 * self.h * (self.v[i][0] - self.v[j][0]).abs() {
+                    continue;
+                }
+                let mut r = [0.0; D];
+                r[0] = -gap;
+                let mut g = [0.0; D];
+                g[0] = self.v[i][0] - self.v[j][0];
+                self.pair(i, j, r, g);
+            }
+            return;
+        }
+        // A pair can touch within the step only if rho < d + |g| h <= d + 2 vmax h.
+        let cut = self.d + 2.5 * vmax * self.h;
+        let cut2 = cut * cut;
+        let pairs = std::mem::take(&mut self.nl.pairs);
+        for p in &pairs {
+            let (i, j) = (p.i as usize, p.j as usize);
+            let r: [f64; D] = std::array::from_fn(|k| self.x[i][k] - self.x[j][k] + p.shift[k]);
+            let rho2: f64 = r.iter().map(|a| a * a).sum();
+            if rho2 >= cut2 {
+                continue;
+            }
+            let g: [f64; D] = std::array::from_fn(|k| self.v[i][k] - self.v[j][k]);
+            self.pair(i, j, r, g);
+        }
+        self.nl.pairs = pairs;
+    }
+
+    fn step_once(&mut self) {
+        if self.kicks.active() {
+            self.kicks.apply(&mut self.rng, &mut self.v);
+        }
+        let vmax = if D > 1 { self.vmax2().sqrt() } else { 0.0 };
+        if D > 1 {
+            if 2.0 * self.max_disp2.sqrt() + 6.0 * vmax * self.h > self.skin {
+                self.rebuild();
+            }
+        }
+        self.pair_pass(vmax);
+        let h = self.h;
+        for (x, v) in self.x.iter_mut().zip(self.v.iter()) {
+            for k in 0..D {
+                x[k] += v[k] * h;
+            }
+        }
+        for &(i, j, dx, dv) in &self.corr {
+            let (i, j) = (i as usize, j as usize);
+            for k in 0..D {
+                self.x[i][k] += dx[k];
+                self.v[i][k] += dv[k];
+                self.x[j][k] -= dx[k];
+                self.v[j][k] -= dv[k];
+            }
+        }
+        if D > 1 {
+            let mut m = self.max_disp2;
+            for (x, x0) in self.x.iter().zip(self.x_ref.iter()) {
+                let d2: f64 = (0..D).map(|k| (x[k] - x0[k]) * (x[k] - x0[k])).sum();
+                m = m.max(d2);
+            }
+            self.max_disp2 = m;
+        }
+        self.step += 1;
+    }
+
+    pub fn advance(&mut self, steps: u64) {
+        for _ in 0..steps {
+            self.step_once();
+        }
+    }
+
+    pub fn mean_velocity(&self) -> [f64; D] {
+        let mut m = [0.0; D];
+        for v in &self.v {
+            for k in 0..D {
+                m[k] += v[k];
+            }
+        }
+        m.map(|a| a / self.v.len() as f64)
+    }
+
+    /// (2.19): (1/N) sum_i |v_i - <v>|^2.
+    pub fn temperature(&self) -> f64 {
+        let m = self.mean_velocity();
+        self.v
+            .iter()
+            .map(|v| (0..D).map(|k| (v[k] - m[k]).powi(2)).sum::<f64>())
+            .sum::<f64>()
+            / self.v.len() as f64
+    }
+
+    /// The pair corrections of one step from the current state, without the kicks
+    /// (test hook: list versus brute force).
+    #[cfg(test)]
+    fn corrections(&mut self, brute_force: bool) -> Vec<([f64; D], [f64; D])> {
+        let n = self.x.len();
+        if brute_force {
+            self.corr.clear();
+            for i in 0..n {
+                for j in i + 1..n {
+                    let r: [f64; D] = std::array::from_fn(|k| {
+                        super::neighbours::min_image(self.x[i][k] - self.x[j][k], self.l)
+                    });
+                    let g: [f64; D] = std::array::from_fn(|k| self.v[i][k] - self.v[j][k]);
+                    self.pair(i, j, r, g);
+                }
+            }
+        } else {
+            let vmax = self.vmax2().sqrt();
+            self.pair_pass(vmax);
+        }
+        let mut out = vec![([0.0; D], [0.0; D]); n];
+        for &(i, j, dx, dv) in &self.corr {
+            for k in 0..D {
+                out[i as usize].0[k] += dx[k];
+                out[i as usize].1[k] += dv[k];
+                out[j as usize].0[k] -= dx[k];
+                out[j as usize].1[k] -= dv[k];
+            }
+        }
+        out
+    }
+}
+
+enum Inner {
+    D1(Core<1>),
+    D2(Core<2>),
+}
+
+/// A Random Force Model run.
+pub struct RfmSim {
+    cfg: RfmConfig,
+    inner: Inner,
+}
+
+fn flatten<const D: usize>(a: &[[f64; D]]) -> Vec<f64> {
+    a.iter().flat_map(|p| p.iter().copied()).collect()
+}
+
+fn unflatten<const D: usize>(a: &[f64]) -> Vec<[f64; D]> {
+    a.chunks_exact(D)
+        .map(|c| std::array::from_fn(|k| c[k]))
+        .collect()
+}
+
+impl RfmSim {
+    /// A new run: validated config, the initial layout and velocities (spec 1.9: each
+    /// component 0.1 U(-0.5, 0.5) m/s, mean removed) drawn from the run's stream.
+    pub fn new(cfg: RfmConfig, seed: u64) -> Result<Self, String> {
+        cfg.validate().map_err(|e| e.join("; "))?;
+        for w in cfg.warnings() {
+            tracing::warn!("{w}");
+        }
+        let mut rng = RunRng::new(seed);
+        let n = cfg.n_particles;
+        let dim = cfg.dim as usize;
+        let x = initial_positions(&cfg, &mut rng)?;
+        let mut v: Vec<f64> = (0..n * dim).map(|_| 0.1 * (rng.f64() - 0.5)).collect();
+        for k in 0..dim {
+            let m = v.iter().skip(k).step_by(dim).sum::<f64>() / n as f64;
+            for a in v.iter_mut().skip(k).step_by(dim) {
+                *a -= m;
+            }
+        }
+        Self::assemble(cfg, x, v, rng)
+    }
+
+    /// A run from explicit positions and velocities (flat, particle-major; 1D positions must
+    /// be increasing within one period). For tests and special set-ups.
+    pub fn from_parts(cfg: RfmConfig, seed: u64, x: Vec<f64>, v: Vec<f64>) -> Result<Self, String> {
+        cfg.validate().map_err(|e| e.join("; "))?;
+        let n = cfg.n_particles * cfg.dim as usize;
+        if x.len() != n || v.len() != n {
+            return Err("from_parts: positions and velocities must have N * dim entries".into());
+        }
+        Self::assemble(cfg, x, v, RunRng::new(seed))
+    }
+
+    fn assemble(cfg: RfmConfig, x: Vec<f64>, v: Vec<f64>, rng: RunRng) -> Result<Self, String> {
+        let inner = match cfg.dim {
+            1 => Inner::D1(Core::new(&cfg, unflatten(&x), unflatten(&v), rng)),
+            _ => Inner::D2(Core::new(&cfg, unflatten(&x), unflatten(&v), rng)),
+        };
+        Ok(RfmSim { cfg, inner })
+    }
+
+    pub fn config(&self) -> &RfmConfig {
+        &self.cfg
+    }
+
+    /// Advance by `steps` time steps (any chunking gives the same trajectory).
+    pub fn advance(&mut self, steps: u64) {
+        match &mut self.inner {
+            Inner::D1(c) => c.advance(steps),
+            Inner::D2(c) => c.advance(steps),
+        }
+    }
+
+    pub fn step(&self) -> u64 {
+        match &self.inner {
+            Inner::D1(c) => c.step,
+            Inner::D2(c) => c.step,
+        }
+    }
+
+    pub fn time(&self) -> f64 {
+        self.step() as f64 * self.cfg.dt()
+    }
+
+    /// Granular temperature (2.19) in the centre-of-mass frame (m^2/s^2, no M/2).
+    pub fn temperature(&self) -> f64 {
+        match &self.inner {
+            Inner::D1(c) => c.temperature(),
+            Inner::D2(c) => c.temperature(),
+        }
+    }
+
+    /// Total momentum M sum_i v_i, one entry per component.
+    pub fn momentum(&self) -> Vec<f64> {
+        let m = self.cfg.mass * self.cfg.n_particles as f64;
+        match &self.inner {
+            Inner::D1(c) => c.mean_velocity().iter().map(|a| a * m).collect(),
+            Inner::D2(c) => c.mean_velocity().iter().map(|a| a * m).collect(),
+        }
+    }
+
+    /// Positions (flat, particle-major). 1D: unwrapped; 2D: wrapped at the last list build.
+    pub fn positions(&self) -> Vec<f64> {
+        match &self.inner {
+            Inner::D1(c) => flatten(&c.x),
+            Inner::D2(c) => flatten(&c.x),
+        }
+    }
+
+    /// Velocities (flat, particle-major).
+    pub fn velocities(&self) -> Vec<f64> {
+        match &self.inner {
+            Inner::D1(c) => flatten(&c.v),
+            Inner::D2(c) => flatten(&c.v),
+        }
+    }
+
+    /// Number of 2D neighbour-list builds so far (diagnostic).
+    pub fn list_builds(&self) -> u64 {
+        match &self.inner {
+            Inner::D1(_) => 0,
+            Inner::D2(c) => c.builds,
+        }
+    }
+
+    /// The checkpoint payload.
+    pub fn state_bytes(&self) -> Vec<u8> {
+        let st = match &self.inner {
+            Inner::D1(c) => RfmState {
+                dim: 1,
+                step: c.step,
+                x: flatten(&c.x),
+                v: flatten(&c.v),
+                x_ref: Vec::new(),
+                max_disp2: 0.0,
+                rng: c.rng.position(),
+            },
+            Inner::D2(c) => RfmState {
+                dim: 2,
+                step: c.step,
+                x: flatten(&c.x),
+                v: flatten(&c.v),
+                x_ref: flatten(&c.x_ref),
+                max_disp2: c.max_disp2,
+                rng: c.rng.position(),
+            },
+        };
+        postcard::to_stdvec(&st).expect("state serialises")
+    }
+
+    /// Rebuild a run from its config and a checkpoint payload.
+    pub fn from_state_bytes(cfg: RfmConfig, bytes: &[u8]) -> Result<Self, String> {
+        cfg.validate().map_err(|e| e.join("; "))?;
+        let st: RfmState = postcard::from_bytes(bytes)
+            .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
+        let n = cfg.n_particles * cfg.dim as usize;
+        if st.dim != cfg.dim || st.x.len() != n || st.v.len() != n {
+            return Err("checkpoint does not match the run's dimension or particle count".into());
+        }
+        let rng = RunRng::restore(&st.rng);
+        let inner = match cfg.dim {
+            1 => {
+                let mut c = Core::<1>::new(&cfg, unflatten(&st.x), unflatten(&st.v), rng);
+                c.step = st.step;
+                Inner::D1(c)
+            }
+            _ => {
+                if st.x_ref.len() != n {
+                    return Err("checkpoint lacks the neighbour-list reference".into());
+                }
+                let mut c = Core::<2>::new(&cfg, unflatten(&st.x_ref), unflatten(&st.v), rng);
+                c.x = unflatten(&st.x);
+                c.max_disp2 = st.max_disp2;
+                c.step = st.step;
+                c.builds = 0;
+                Inner::D2(c)
+            }
+        };
+        Ok(RfmSim { cfg, inner })
+    }
+}
+
+/// Initial positions (flat) for the configured layout (spec 1.9).
+fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, String> {
+    let n = cfg.n_particles;
+    let l = cfg.box_length();
+    let d = cfg.diameter();
+    if cfg.dim == 1 {
+        let s = l / n as f64;
+        return Ok((0..n).map(|i| (i as f64 + 0.5) * s).collect());
+    }
+    let sp = d * (1.0 + 1e-3);
+    let mut x = Vec::with_capacity(2 * n);
+    match cfg.initial_layout {
+        InitialLayout::Square | InitialLayout::Hexagonal => {
+            let hex = cfg.initial_layout == InitialLayout::Hexagonal;
+            let per_row = (l / sp).floor() as usize;
+            let pitch = if hex { sp * 3f64.sqrt() / 2.0 } else { sp };
+            let rows = (l / pitch).floor() as usize;
+            // Hex rows alternate offsets; an odd row count would put two offset rows face to
+            // face across the boundary, so use an even count there.
+            let rows = if hex { rows & !1 } else { rows };
+            if per_row * rows < n {
+                return Err(format!(
+                    "initial_layout: {n} particles do not fit a {:?} bed ({} sites)",
+                    cfg.initial_layout,
+                    per_row * rows
+                ));
+            }
+            let mut count = 0;
+            'outer: for r in 0..rows {
+                let off = if hex && r % 2 == 1 { 0.5 * sp } else { 0.0 };
+                for c in 0..per_row {
+                    if count == n {
+                        break 'outer;
+                    }
+                    x.push(0.5 * sp + off + c as f64 * sp);
+                    x.push(0.5 * sp + r as f64 * pitch);
+                    count += 1;
+                }
+            }
+            if count < n {
+                return Err(format!("initial_layout: {n} particles do not fit the bed"));
+            }
+        }
+        InitialLayout::Uniform => {
+            // Random sequential addition with a cell grid (cells >= d).
+            let nc = ((l / sp).floor() as usize)
+                .min((2.0 * (n as f64).sqrt()) as usize)
+                .max(1);
+            let side = l / nc as f64;
+            let mut cells: Vec<Vec<u32>> = vec![Vec::new(); nc * nc];
+            let mut tries = 0u64;
+            let max_tries = 10_000 * n as u64 + 100_000;
+            while x.len() < 2 * n {
+                tries += 1;
+                if tries > max_tries {
+                    return Err(
+                        "packing_fraction: too dense for the uniform (random) layout".into(),
+                    );
+                }
+                let p = [rng.f64() * l, rng.f64() * l];
+                let cx = ((p[0] / side) as usize).min(nc - 1);
+                let cy = ((p[1] / side) as usize).min(nc - 1);
+                let mut ok = true;
+                'search: for dy in -1isize..=1 {
+                    for dx in -1isize..=1 {
+                        let ix = (cx as isize + dx).rem_euclid(nc as isize) as usize;
+                        let iy = (cy as isize + dy).rem_euclid(nc as isize) as usize;
+                        for &q in &cells[iy * nc + ix] {
+                            let q = q as usize;
+                            let rx = super::neighbours::min_image(p[0] - x[2 * q], l);
+                            let ry = super::neighbours::min_image(p[1] - x[2 * q + 1], l);
+                            if rx * rx + ry * ry < sp * sp {
+                                ok = false;
+                                break 'search;
+                            }
+                        }
+                    }
+                }
+                if ok {
+                    cells[cy * nc + cx].push((x.len() / 2) as u32);
+                    x.extend_from_slice(&p);
+                }
+            }
+        }
+    }
+    Ok(x)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,341 @@
+//! Tests of the RFM simulation; each states its tolerance.
+
+use super::*;
+
+fn no_noise(dim: u32, eps_n: f64, eps_t: f64, dt: f64, l: f64) -> RfmConfig {
+    RfmConfig {
+        dim,
+        n_particles: 2,
+        box_length: Some(l),
+        noise_strength: 0.0,
+        restitution_normal: eps_n,
+        restitution_tangential: eps_t,
+        dt: Some(dt),
+        ..RfmConfig::default()
+    }
+}
+
+/// Two discs approaching with normal relative speed `gn` and tangential `gt` along the
+/// direction at angle `angle`; contact starts at fraction `phase` of a step. Returns the
+/// ratios (normal, tangential) of the relative velocity after / before.
+fn two_disc(dim: u32, eps_n: f64, eps_t: f64, dt: f64, phase: f64, gn: f64, gt: f64) -> (f64, f64) {
+    let cfg = no_noise(dim, eps_n, eps_t, dt, if dim == 1 { 1.0 } else { 0.1 });
+    let d = cfg.diameter();
+    let gap = d + gn * dt * (3.0 + phase);
+    let (x, v, e, t) = if dim == 1 {
+        (
+            vec![0.2, 0.2 + gap],
+            vec![0.5 * gn, -0.5 * gn],
+            [1.0, 0.0],
+            [0.0, 0.0],
+        )
+    } else {
+        let a: f64 = 0.5;
+        let e = [a.cos(), a.sin()];
+        let t = [-a.sin(), a.cos()];
+        let c = [0.05, 0.05];
+        (
+            vec![
+                c[0] - 0.5 * gap * e[0],
+                c[1] - 0.5 * gap * e[1],
+                c[0] + 0.5 * gap * e[0],
+                c[1] + 0.5 * gap * e[1],
+            ],
+            vec![
+                0.5 * (gn * e[0] + gt * t[0]),
+                0.5 * (gn * e[1] + gt * t[1]),
+                -0.5 * (gn * e[0] + gt * t[0]),
+                -0.5 * (gn * e[1] + gt * t[1]),
+            ],
+            e,
+            t,
+        )
+    };
+    let dimu = dim as usize;
+    let mut sim = RfmSim::from_parts(cfg, 1, x, v).unwrap();
+    let tc = sim.config().damped_contact_time();
+    sim.advance((2.0 * tc / dt) as u64 + 10);
+    let v = sim.velocities();
+    let g: Vec<f64> = (0..dimu).map(|k| v[k] - v[dimu + k]).collect();
+    let gn_after: f64 = (0..dimu).map(|k| g[k] * e[k]).sum();
+    let gt_after: f64 = (0..dimu).map(|k| g[k] * t[k]).sum();
+    (-gn_after / gn, if gt != 0.0 { gt_after / gt } else { 1.0 })
+}
+
+/// Effective normal restitution over 50 contact-start phases at dt = 1e-6, 1D and 2D: the
+/// phase average within 0.5% of nominal and every phase within 2% (issue 4's targets; the
+/// exact pair flow in fact gives round-off, checked at 1e-9).
+#[test]
+fn two_disc_restitution_every_phase() {
+    for dim in [1, 2] {
+        for eps in [0.1, 0.3, 0.6, 0.9] {
+            let r: Vec<f64> = (0..50)
+                .map(|p| two_disc(dim, eps, 1.0, 1e-6, (p as f64 + 0.5) / 50.0, 1.0, 0.0).0 / eps)
+                .collect();
+            let mean = r.iter().sum::<f64>() / 50.0;
+            assert!(
+                (mean - 1.0).abs() < 5e-3,
+                "dim {dim} eps {eps}: mean {mean}"
+            );
+            for (p, x) in r.iter().enumerate() {
+                assert!((x - 1.0).abs() < 2e-2, "dim {dim} eps {eps} phase {p}: {x}");
+                assert!((x - 1.0).abs() < 1e-9, "dim {dim} eps {eps} phase {p}: {x}");
+            }
+        }
+    }
+}
+
+/// The table of mod.rs docs: effective eps vs dt (mean and range over 50 phases). Asserts
+/// the documented bound |eps_eff/eps - 1| < 1e-9 (round-off of the overlap, which is the
+/// difference of positions ~0.05 m, over ~4-230 steps).
+#[test]
+fn restitution_table() {
+    for dt in [1e-7, 1e-6, 2e-6, 5e-6] {
+        for eps in [0.1, 0.3, 0.6, 0.9] {
+            let r: Vec<f64> = (0..50)
+                .map(|p| two_disc(2, eps, 1.0, dt, (p as f64 + 0.5) / 50.0, 1.0, 0.0).0)
+                .collect();
+            let mean = r.iter().sum::<f64>() / 50.0;
+            let lo = r.iter().cloned().fold(f64::MAX, f64::min);
+            let hi = r.iter().cloned().fold(f64::MIN, f64::max);
+            eprintln!("dt {dt:e} eps {eps}: mean {mean:.12} range {lo:.12}-{hi:.12}");
+            assert!((lo / eps - 1.0).abs() < 1e-9 && (hi / eps - 1.0).abs() < 1e-9);
+        }
+    }
+}
+
+/// Oblique 2D contact with eps_t < 1: the tangential relative velocity is multiplied by
+/// eps_t^(omega_0/omega_d) (what we implement, spec 6.7) within 2e-3 relative, and the
+/// normal one by eps_n within 1e-3. Small normal speed so the line of centres barely turns.
+#[test]
+fn oblique_tangential_restitution() {
+    for (en, et) in [(0.6, 0.6), (0.1, 0.1), (0.9, 0.3)] {
+        let c = RfmConfig {
+            restitution_normal: en,
+            restitution_tangential: et,
+            ..RfmConfig::default()
+        };
+        let want_t = c.effective_tangential_restitution();
+        for phase in [0.1, 0.5, 0.9] {
+            let (rn, rt) = two_disc(2, en, et, 1e-6, phase, 0.01, 0.004);
+            assert!((rn / en - 1.0).abs() < 1e-3, "{en} {et}: normal {rn}");
+            assert!(
+                (rt / want_t - 1.0).abs() < 2e-3,
+                "{en} {et}: tangential {rt} vs {want_t}"
+            );
+        }
+    }
+    // Sliding friction alone (eps_t = 1, mu set) reduces, never reverses, g_t.
+    let cfg = RfmConfig {
+        friction: Some(0.2),
+        ..no_noise(2, 0.6, 1.0, 1e-6, 0.1)
+    };
+    let d = cfg.diameter();
+    let mut sim = RfmSim::from_parts(
+        cfg,
+        1,
+        vec![0.05, 0.05, 0.05 + d + 1e-6, 0.05],
+        vec![0.5, 0.05, -0.5, -0.05],
+    )
+    .unwrap();
+    sim.advance(60);
+    let v = sim.velocities();
+    let gt_ratio = (v[1] - v[3]) / 0.1;
+    // Expected: 1 - mu (1 + eps_n) g_n / g_t = 1 - 0.2 * 1.6 * 1 / 0.1 < 0 => stops sliding;
+    // measured along the initial tangent, the line of centres turns by ~g_t t_c / d ~ 7e-4
+    // rad, leaking ~7e-4 * eps_n g_n into it: allow 1e-2 of g_t.
+    assert!(gt_ratio.abs() < 1e-2, "{gt_ratio}");
+}
+
+fn free_particles(dim: u32, n: usize) -> RfmSim {
+    // Particles 1 m apart: no contacts.
+    let side = (n as f64).sqrt().ceil() as usize;
+    let (cfg, x) = if dim == 1 {
+        (
+            RfmConfig {
+                n_particles: n,
+                ..RfmConfig::thesis_1d(n, 0.6)
+            },
+            (0..n)
+                .map(|i| i as f64 * (1.0 + 0.003))
+                .collect::<Vec<f64>>(),
+        )
+    } else {
+        (
+            RfmConfig {
+                n_particles: n,
+                box_length: Some(side as f64),
+                ..RfmConfig::default()
+            },
+            (0..n)
+                .flat_map(|i| [(i % side) as f64 + 0.5, (i / side) as f64 + 0.5])
+                .collect(),
+        )
+    };
+    let cfg = RfmConfig {
+        reduced_length: if dim == 1 { Some(n as f64) } else { None },
+        ..cfg
+    };
+    let v = vec![0.0; n * dim as usize];
+    RfmSim::from_parts(cfg, 9, x, v).unwrap()
+}
+
+/// Free particles, noise only: per-component velocity variance after t equals
+/// (1 - 1/N) 2 D t / M^2 (the (1 - 1/N) from the symmetrisation) within 3 standard errors
+/// (SE = var sqrt(2 / (N dim)) for the sample variance of N dim normal components).
+#[test]
+fn free_particle_velocity_variance() {
+    for dim in [1u32, 2] {
+        let n = 4000;
+        let mut sim = free_particles(dim, n);
+        let steps = 2000;
+        sim.advance(steps);
+        let c = sim.config();
+        let t = steps as f64 * c.dt();
+        let want = (1.0 - 1.0 / n as f64) * 2.0 * c.noise_strength * t / c.mass.powi(2);
+        let v = sim.velocities();
+        let m = v.len() as f64;
+        let got = v.iter().map(|a| a * a).sum::<f64>() / m;
+        let se = want * (2.0 / m).sqrt();
+        assert!(
+            (got - want).abs() < 3.0 * se,
+            "dim {dim}: {got} vs {want} (se {se})"
+        );
+    }
+}
+
+/// Total momentum stays zero to round-off (|P| / (M N v_rms) < 1e-12) over 20000 steps of
+/// noise and contacts, 1D and 2D; contacts did happen (temperature finite, list rebuilt).
+#[test]
+fn momentum_stays_zero() {
+    let cfgs = [
+        RfmConfig {
+            n_particles: 400,
+            box_length: None,
+            packing_fraction: Some(0.4),
+            ..RfmConfig::default()
+        },
+        RfmConfig {
+            reduced_length: Some(0.05),
+            ..RfmConfig::thesis_1d(200, 0.3)
+        },
+    ];
+    for cfg in cfgs {
+        let mut sim = RfmSim::new(cfg, 17).unwrap();
+        sim.advance(20_000);
+        let c = sim.config();
+        let t = sim.temperature();
+        assert!(t.is_finite() && t > 0.0);
+        let p: f64 = sim.momentum().iter().map(|a| a * a).sum::<f64>().sqrt();
+        let scale = c.mass * c.n_particles as f64 * t.sqrt();
+        assert!(p / scale < 1e-12, "dim {}: {p} vs {scale}", c.dim);
+        if c.dim == 1 {
+            // Ring order preserved: positions increasing, within one period.
+            let x = sim.positions();
+            assert!(x.windows(2).all(|w| w[1] - w[0] > 0.5 * c.diameter()));
+            assert!(x[0] + c.box_length() - x[x.len() - 1] > 0.5 * c.diameter());
+        } else {
+            assert!(sim.list_builds() > 1);
+        }
+    }
+}
+
+/// A run restored from its checkpoint bytes continues bit for bit (1D and 2D).
+#[test]
+fn checkpoint_restore_is_bit_identical() {
+    let cfgs = [
+        RfmConfig {
+            n_particles: 300,
+            box_length: None,
+            packing_fraction: Some(0.45),
+            restitution_tangential: 0.5,
+            ..RfmConfig::default()
+        },
+        RfmConfig {
+            reduced_length: Some(0.05),
+            ..RfmConfig::thesis_1d(100, 0.3)
+        },
+    ];
+    for cfg in cfgs {
+        let mut a = RfmSim::new(cfg.clone(), 5).unwrap();
+        a.advance(3000);
+        let bytes = a.state_bytes();
+        let mut b = RfmSim::from_state_bytes(cfg, &bytes).unwrap();
+        a.advance(4000);
+        b.advance(1234);
+        b.advance(2766);
+        assert_eq!(a.step(), b.step());
+        let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(a.positions()), bits(b.positions()));
+        assert_eq!(bits(a.velocities()), bits(b.velocities()));
+        assert_eq!(a.state_bytes(), b.state_bytes());
+    }
+}
+
+/// The neighbour list finds the same pair corrections as all pairs for a random dense,
+/// overlapping configuration (per-particle sums agree to 1e-12 of their largest value).
+#[test]
+fn neighbour_list_matches_brute_force() {
+    let cfg = RfmConfig {
+        n_particles: 600,
+        box_length: None,
+        packing_fraction: Some(0.5),
+        restitution_tangential: 0.4,
+        ..RfmConfig::default()
+    };
+    let l = cfg.box_length();
+    let mut rng = RunRng::new(4);
+    let x: Vec<[f64; 2]> = (0..600).map(|_| [rng.f64() * l, rng.f64() * l]).collect();
+    let v: Vec<[f64; 2]> = (0..600)
+        .map(|_| [rng.f64() - 0.5, rng.f64() - 0.5])
+        .collect();
+    let mut core = Core::<2>::new(&cfg, x, v, RunRng::new(1));
+    let list = core.corrections(false);
+    let brute = core.corrections(true);
+    let scale = brute
+        .iter()
+        .flat_map(|(dx, dv)| [dx[0].abs(), dx[1].abs(), dv[0].abs(), dv[1].abs()])
+        .fold(0.0, f64::max);
+    let touched = brute.iter().filter(|(_, dv)| dv[0] != 0.0).count();
+    assert!(touched > 300, "{touched}");
+    for (a, b) in list.iter().zip(&brute) {
+        for k in 0..2 {
+            assert!((a.1[k] - b.1[k]).abs() <= 1e-12 * scale);
+            assert!((a.0[k] - b.0[k]).abs() <= 1e-12 * scale);
+        }
+    }
+}
+
+/// Every initial layout places non-overlapping discs (min distance >= d) with zero mean
+/// velocity (to 1e-15 m/s).
+#[test]
+fn initial_layouts_do_not_overlap() {
+    for layout in [
+        InitialLayout::Uniform,
+        InitialLayout::Square,
+        InitialLayout::Hexagonal,
+    ] {
+        let cfg = RfmConfig {
+            n_particles: 500,
+            box_length: Some(0.1),
+            initial_layout: layout,
+            ..RfmConfig::default()
+        };
+        let sim = RfmSim::new(cfg.clone(), 2).unwrap();
+        let x = sim.positions();
+        let l = cfg.box_length();
+        let mut min = f64::MAX;
+        for i in 0..500 {
+            for j in i + 1..500 {
+                let dx = super::super::neighbours::min_image(x[2 * i] - x[2 * j], l);
+                let dy = super::super::neighbours::min_image(x[2 * i + 1] - x[2 * j + 1], l);
+                min = min.min((dx * dx + dy * dy).sqrt());
+            }
+        }
+        assert!(min >= cfg.diameter(), "{layout:?}: {min}");
+        assert!(sim
+            .momentum()
+            .iter()
+            .all(|p| p.abs() < 1e-15 * cfg.mass * 500.0));
+    }
+}
