@@ -3,6 +3,10 @@
 
 use crate::dsmc::{DsmcSim, DsmcSystem, PhysicsError, SpeciesRow, TamsdRow};
 use crate::plan::ModelParams;
+use crate::rfm::observe::{RfmOutput, RfmRun};
+
+/// Layout version of the RFM checkpoint payload.
+pub const RFM_STATE_FORMAT: &str = "rfm/1";
 
 /// Rows and counters a finished run hands to the writer.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -10,12 +14,17 @@ pub struct RunOutput {
     pub dsmc_species: Vec<SpeciesRow>,
     /// Time-averaged MSD per species and lag (empty unless `tamsd` is observed).
     pub dsmc_tamsd: Vec<TamsdRow>,
+    /// The rows of a Random Force Model run.
+    pub rfm: Option<RfmOutput>,
+    /// DSMC: accepted collisions; RFM: 0.
     pub collisions: u64,
+    /// DSMC: trials; RFM: time steps.
     pub trials: u64,
 }
 
 pub enum Engine {
     Dsmc(Box<DsmcSim>),
+    Rfm(Box<RfmRun>),
 }
 
 impl Engine {
@@ -25,6 +34,7 @@ impl Engine {
                 DsmcSystem::from_params(p)?,
                 seed,
             )))),
+            ModelParams::Rfm(p) => Ok(Engine::Rfm(Box::new(RfmRun::new(p, seed)?))),
         }
     }
 
@@ -34,19 +44,26 @@ impl Engine {
                 DsmcSystem::from_params(p)?,
                 bytes,
             )?))),
+            ModelParams::Rfm(p) => Ok(Engine::Rfm(Box::new(RfmRun::from_state_bytes(p, bytes)?))),
         }
     }
 
-    /// Advance by a bounded amount of work; `Ok(true)` when the run is complete.
+    /// Advance by a bounded amount of work (DSMC trials; RFM particle-steps); `Ok(true)`
+    /// when the run is complete.
     pub fn advance(&mut self, work: u64) -> Result<bool, PhysicsError> {
         match self {
             Engine::Dsmc(s) => s.advance(work),
+            Engine::Rfm(r) => {
+                let n = r.sim.config().n_particles.max(1) as u64;
+                r.advance((work / n).max(1))
+            }
         }
     }
 
     pub fn progress(&self) -> f64 {
         match self {
             Engine::Dsmc(s) => s.progress(),
+            Engine::Rfm(r) => r.progress(),
         }
     }
 
@@ -54,6 +71,7 @@ impl Engine {
     pub fn time(&self) -> f64 {
         match self {
             Engine::Dsmc(s) => s.st.t,
+            Engine::Rfm(r) => r.sim.time(),
         }
     }
 
@@ -61,12 +79,22 @@ impl Engine {
     pub fn state_format(&self) -> &'static str {
         match self {
             Engine::Dsmc(_) => crate::dsmc::STATE_FORMAT,
+            Engine::Rfm(_) => RFM_STATE_FORMAT,
+        }
+    }
+
+    /// The state format a checkpoint of this model must have.
+    pub fn expected_state_format(params: &ModelParams) -> &'static str {
+        match params {
+            ModelParams::Dsmc(_) => crate::dsmc::STATE_FORMAT,
+            ModelParams::Rfm(_) => RFM_STATE_FORMAT,
         }
     }
 
     pub fn state_bytes(&mut self) -> Vec<u8> {
         match self {
             Engine::Dsmc(s) => s.state_bytes(),
+            Engine::Rfm(r) => r.state_bytes(),
         }
     }
 
@@ -75,9 +103,18 @@ impl Engine {
             Engine::Dsmc(mut s) => RunOutput {
                 dsmc_tamsd: s.tamsd_rows(),
                 dsmc_species: s.take_rows(),
+                rfm: None,
                 collisions: s.st.collisions,
                 trials: s.st.trials,
             },
+            Engine::Rfm(r) => {
+                let steps = r.sim.step();
+                RunOutput {
+                    rfm: Some(r.finish()),
+                    trials: steps,
+                    ..RunOutput::default()
+                }
+            }
         }
     }
 }

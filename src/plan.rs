@@ -18,6 +18,7 @@ use crate::manifest::{Manifest, ModelKind};
 #[derive(Clone, Debug, PartialEq)]
 pub enum ModelParams {
     Dsmc(DsmcParams),
+    Rfm(crate::manifest::rfm::RfmParams),
 }
 
 #[derive(Clone, Debug)]
@@ -238,6 +239,18 @@ fn typed(
                 None
             }
         },
+        ModelKind::Rfm => {
+            match serde_json::from_value::<crate::manifest::rfm::RfmParams>(params.clone()) {
+                Ok(p) => {
+                    p.check(prefix, errors);
+                    Some(ModelParams::Rfm(p))
+                }
+                Err(e) => {
+                    errors.push((prefix.to_string(), e.to_string()));
+                    None
+                }
+            }
+        }
     }
 }
 
@@ -458,7 +471,9 @@ mod tests {
             p.points[3].values,
             vec![serde_json::json!("bird"), serde_json::json!(0.5)]
         );
-        let ModelParams::Dsmc(d) = &p.points[3].params;
+        let ModelParams::Dsmc(d) = &p.points[3].params else {
+            panic!("dsmc params")
+        };
         assert_eq!(d.method, crate::manifest::dsmc::DsmcMethod::Bird);
     }
 

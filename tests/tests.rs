@@ -6,6 +6,7 @@
 //! - `physics`: Haff's law, bitwise checkpoint/restore, conservation laws, low-rank vs Bird.
 //! - `interrupt`: Ctrl-C once checkpoints and stops (exit 130), resume is bit-identical;
 //!   twice exits at once.
+//! - `rfm`: a Random Force Model campaign, its tables, kill + resume bit-identity.
 //! - `schema`: the committed JSON Schema matches the code; `jobs/*.json` validate.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
@@ -16,6 +17,7 @@ mod it {
     pub mod manifests;
     pub mod physics;
     pub mod resume;
+    pub mod rfm;
     pub mod schema;
     pub mod util;
 }

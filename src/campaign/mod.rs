@@ -170,7 +170,28 @@ impl Campaign {
     pub fn observes_tamsd(&self) -> bool {
         self.plan.points.iter().any(|p| match &p.params {
             crate::plan::ModelParams::Dsmc(d) => d.wants_tamsd(),
+            crate::plan::ModelParams::Rfm(_) => false,
         })
+    }
+
+    /// The RFM tables this campaign has (raw and summaries), by the observables it records.
+    pub fn rfm_tables(&self) -> Vec<&'static str> {
+        use crate::manifest::rfm::RfmObservable as O;
+        use crate::store::tables as t;
+        let wants = |o: O| {
+            self.plan.points.iter().any(|p| match &p.params {
+                crate::plan::ModelParams::Rfm(r) => r.wants(o),
+                _ => false,
+            })
+        };
+        let mut v = vec![t::RFM_TIMESERIES, t::RFM_TIMESERIES_SUMMARY];
+        if wants(O::VelocityMoments) {
+            v.extend([t::RFM_MOMENTS, t::RFM_MOMENTS_SUMMARY]);
+        }
+        if wants(O::VelocityHistogram) {
+            v.extend([t::RFM_HISTOGRAMS, t::RFM_HISTOGRAMS_SUMMARY]);
+        }
+        v
     }
 
     pub fn checkpoint_dir(&self) -> PathBuf {

@@ -52,18 +52,14 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
                     None,
                 ));
             }
-            let format_ok = match params {
-                crate::plan::ModelParams::Dsmc(_) => {
-                    loaded.header.state_format == crate::dsmc::STATE_FORMAT
-                }
-            };
+            let format_ok = loaded.header.state_format == Engine::expected_state_format(params);
             let restored = if format_ok {
                 Engine::restore(params, &loaded.payload)
             } else {
                 Err(format!(
                     "state format {:?}, this granular writes {:?}",
                     loaded.header.state_format,
-                    crate::dsmc::STATE_FORMAT
+                    Engine::expected_state_format(params)
                 ))
             };
             match restored {

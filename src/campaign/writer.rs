@@ -24,19 +24,22 @@ pub struct Writer<'c> {
     runs: Vec<RunRow>,
     species: SpeciesBuffer,
     tamsd: TamsdBuffer,
+    rfm: tables::RfmBuffer,
     since: Option<Instant>,
 }
 
 impl<'c> Writer<'c> {
     pub fn new(c: &'c Campaign, tag: &str) -> Result<Self, StoreError> {
-        let mut names = vec![
-            tables::RUNS,
-            tables::POINTS,
-            tables::DSMC_SPECIES,
-            tables::DSMC_SPECIES_SUMMARY,
-            tables::DSMC_THEORY,
-            tables::DSMC_THEORY_POINT,
-        ];
+        let mut names = vec![tables::RUNS, tables::POINTS];
+        match c.plan.model {
+            crate::manifest::ModelKind::Dsmc => names.extend([
+                tables::DSMC_SPECIES,
+                tables::DSMC_SPECIES_SUMMARY,
+                tables::DSMC_THEORY,
+                tables::DSMC_THEORY_POINT,
+            ]),
+            crate::manifest::ModelKind::Rfm => names.extend(c.rfm_tables()),
+        }
         // Tables of an observable exist only when it is recorded (an empty dataset directory
         // is an error for DuckDB's globs).
         if c.observes_tamsd() {
@@ -60,6 +63,7 @@ impl<'c> Writer<'c> {
             runs: Vec::new(),
             species: SpeciesBuffer::default(),
             tamsd: TamsdBuffer::default(),
+            rfm: tables::RfmBuffer::default(),
             since: None,
         })
     }
@@ -84,6 +88,9 @@ impl<'c> Writer<'c> {
                 crate::plan::ModelParams::Dsmc(d) => {
                     canonical(&serde_json::to_value(d).expect("params serialise"))
                 }
+                crate::plan::ModelParams::Rfm(r) => {
+                    canonical(&serde_json::to_value(r).expect("params serialise"))
+                }
             })
             .collect();
         let batch = tables::points_batch(&self.c.plan, &self.cols, &params);
@@ -105,6 +112,9 @@ impl<'c> Writer<'c> {
                     .push(r.spec.run_id, r.spec.point_id, &out.dsmc_species);
                 self.tamsd
                     .push(r.spec.run_id, r.spec.point_id, &out.dsmc_tamsd);
+                if let Some(rfm) = &out.rfm {
+                    self.rfm.push(r.spec.run_id, r.spec.point_id, rfm);
+                }
                 (RunStatus::Done, None, None, out.collisions, out.trials)
             }
             RunEnd::Failed { reason, t } => {
@@ -132,7 +142,7 @@ impl<'c> Writer<'c> {
 
     pub fn due(&self, every: Duration) -> bool {
         !self.runs.is_empty()
-            && (self.species.rows + self.tamsd.rows >= FLUSH_ROWS
+            && (self.species.rows + self.tamsd.rows + self.rfm.rows() >= FLUSH_ROWS
                 || self.since.is_some_and(|s| s.elapsed() >= every))
     }
 
@@ -158,6 +168,7 @@ impl<'c> Writer<'c> {
         if self.tamsd.rows > 0 {
             batches.push((tables::DSMC_TAMSD, self.tamsd.finish()));
         }
+        batches.extend(self.rfm.finish());
         // 1. pending parts
         let mut written = Vec::new();
         for (table, batch) in &batches {
@@ -229,6 +240,9 @@ impl<'c> Writer<'c> {
 /// (a campaign directory of an older version gains the tables it lacks; existing ones are
 /// never rewritten).
 pub fn write_theory(c: &Campaign) -> Result<(), StoreError> {
+    if c.plan.model != crate::manifest::ModelKind::Dsmc {
+        return Ok(());
+    }
     use rayon::prelude::*;
     let dir = c.root.join("tables");
     let theory = dir.join(tables::DSMC_THEORY).join("theory.parquet");
@@ -260,6 +274,7 @@ pub fn write_theory(c: &Campaign) -> Result<(), StoreError> {
             crate::plan::ModelParams::Dsmc(d) => crate::dsmc::DsmcSystem::from_params(d)
                 .ok()
                 .map(|sys| (p.point_id, crate::dsmc::predict::predict(&sys))),
+            crate::plan::ModelParams::Rfm(_) => None,
         })
         .collect();
     let rows: Vec<(u32, crate::dsmc::predict::TheoryRow)> = preds

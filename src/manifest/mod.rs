@@ -3,6 +3,7 @@
 //! that reports every error at once with its JSON path ([`validate`]).
 
 pub mod dsmc;
+pub mod rfm;
 pub mod validate;
 
 use schemars::JsonSchema;
@@ -56,12 +57,15 @@ fn default_replicas() -> u32 {
 pub enum ModelKind {
     /// Direct simulation Monte Carlo of a polydisperse granular gas (homogeneous cooling).
     Dsmc,
+    /// Soft-sphere molecular dynamics of the Random Force Model (driven granular gas, 1D/2D).
+    Rfm,
 }
 
 impl ModelKind {
     pub fn as_str(self) -> &'static str {
         match self {
             ModelKind::Dsmc => "dsmc",
+            ModelKind::Rfm => "rfm",
         }
     }
 }
@@ -72,6 +76,7 @@ pub fn json_schema() -> Value {
     let mut generator = schemars::generate::SchemaSettings::draft2020_12().into_generator();
     let root = generator.root_schema_for::<Manifest>();
     let dsmc_ref = generator.subschema_for::<dsmc::DsmcParams>();
+    let rfm_ref = generator.subschema_for::<rfm::RfmParams>();
     let mut root = root.to_value();
     let defs = generator.take_definitions(true);
     let obj = root.as_object_mut().expect("schema is an object");
@@ -83,10 +88,16 @@ pub fn json_schema() -> Value {
     }
     obj.insert(
         "allOf".into(),
-        serde_json::json!([{
-            "if": {"properties": {"model": {"const": "dsmc"}}, "required": ["model"]},
-            "then": {"properties": {"params": dsmc_ref.to_value()}}
-        }]),
+        serde_json::json!([
+            {
+                "if": {"properties": {"model": {"const": "dsmc"}}, "required": ["model"]},
+                "then": {"properties": {"params": dsmc_ref.to_value()}}
+            },
+            {
+                "if": {"properties": {"model": {"const": "rfm"}}, "required": ["model"]},
+                "then": {"properties": {"params": rfm_ref.to_value()}}
+            }
+        ]),
     );
     root
 }
@@ -96,6 +107,7 @@ pub fn params_schema(model: ModelKind) -> Value {
     let mut generator = schemars::generate::SchemaSettings::draft2020_12().into_generator();
     let root = match model {
         ModelKind::Dsmc => generator.root_schema_for::<dsmc::DsmcParams>(),
+        ModelKind::Rfm => generator.root_schema_for::<rfm::RfmParams>(),
     };
     root.to_value()
 }

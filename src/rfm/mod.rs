@@ -40,6 +40,7 @@ pub mod contact;
 pub mod integrate;
 pub mod neighbours;
 pub mod noise;
+pub mod observe;
 pub mod params;
 pub mod sim;
 

@@ -3,6 +3,7 @@
 
 pub mod checkpoint;
 pub mod parquet_io;
+pub mod rfm_summary;
 pub mod summary;
 pub mod tables;
 

@@ -60,6 +60,16 @@ pub fn write_summaries(
     c: &Campaign,
     finished: &BTreeMap<u64, RunStatus>,
 ) -> Result<(), StoreError> {
+    match c.plan.model {
+        crate::manifest::ModelKind::Dsmc => write_dsmc_summaries(c, finished),
+        crate::manifest::ModelKind::Rfm => super::rfm_summary::write_rfm_summaries(c, finished),
+    }
+}
+
+fn write_dsmc_summaries(
+    c: &Campaign,
+    finished: &BTreeMap<u64, RunStatus>,
+) -> Result<(), StoreError> {
     let files = table_files(c, tables::DSMC_SPECIES)?;
     let replicas = c.plan.replicas as u64;
     let rows_per_point: u64 = c
@@ -73,6 +83,7 @@ pub fn write_summaries(
                     .unwrap_or(1) as u64;
                 species * d.output_times.resolve(d.t_end).len() as u64 * replicas
             }
+            crate::plan::ModelParams::Rfm(_) => 1,
         })
         .max()
         .unwrap_or(1)
@@ -176,7 +187,7 @@ pub fn write_summaries(
 }
 
 /// Write `tables/<table>/<name>` atomically (the whole table in one file).
-fn write_whole(
+pub(crate) fn write_whole(
     c: &Campaign,
     table: &str,
     name: &str,
@@ -215,6 +226,7 @@ fn write_tamsd_summary(
                 }
                 _ => 0,
             },
+            crate::plan::ModelParams::Rfm(_) => 0,
         })
         .max()
         .unwrap_or(1)

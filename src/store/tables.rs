@@ -479,3 +479,161 @@ pub fn theory_point_batch(points: &[(u32, f64, Vec<f64>)]) -> RecordBatch {
     ];
     RecordBatch::try_new(Arc::new(schema), arrays).expect("theory point batch matches its schema")
 }
+
+pub const RFM_TIMESERIES: &str = "rfm_timeseries";
+pub const RFM_MOMENTS: &str = "rfm_moments";
+pub const RFM_HISTOGRAMS: &str = "rfm_histograms";
+pub const RFM_TIMESERIES_SUMMARY: &str = "rfm_timeseries_summary";
+pub const RFM_MOMENTS_SUMMARY: &str = "rfm_moments_summary";
+pub const RFM_HISTOGRAMS_SUMMARY: &str = "rfm_histograms_summary";
+
+/// Buffered rows of the RFM tables.
+#[derive(Default)]
+pub struct RfmBuffer {
+    pub series: Vec<(u64, u32, crate::rfm::observe::TimeRow)>,
+    pub moments: Vec<(u64, u32, crate::rfm::observe::MomentRow)>,
+    pub hist: Vec<(u64, u32, crate::rfm::observe::HistRow)>,
+}
+
+impl RfmBuffer {
+    pub fn push(&mut self, run_id: u64, point_id: u32, out: &crate::rfm::observe::RfmOutput) {
+        self.series
+            .extend(out.timeseries.iter().map(|r| (run_id, point_id, r.clone())));
+        self.moments
+            .extend(out.moments.iter().map(|r| (run_id, point_id, r.clone())));
+        self.hist
+            .extend(out.histograms.iter().map(|r| (run_id, point_id, r.clone())));
+    }
+
+    pub fn rows(&self) -> usize {
+        self.series.len() + self.moments.len() + self.hist.len()
+    }
+
+    /// The non-empty tables as (name, batch); empties the buffer.
+    pub fn finish(&mut self) -> Vec<(&'static str, RecordBatch)> {
+        let mut out = Vec::new();
+        let ids = |v: &[(u64, u32)]| -> Vec<ArrayRef> {
+            vec![
+                Arc::new(v.iter().map(|r| r.0).collect::<arrow_array::UInt64Array>()),
+                Arc::new(v.iter().map(|r| r.1).collect::<arrow_array::UInt32Array>()),
+            ]
+        };
+        let id_fields = || {
+            vec![
+                Field::new("run_id", DataType::UInt64, false),
+                Field::new("point_id", DataType::UInt32, false),
+            ]
+        };
+        if !self.series.is_empty() {
+            let mut f = id_fields();
+            f.extend([
+                Field::new("t", DataType::Float64, false),
+                Field::new("temperature", DataType::Float64, false),
+            ]);
+            let mut a = ids(&self.series.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(Arc::new(
+                self.series
+                    .iter()
+                    .map(|r| r.2.t)
+                    .collect::<arrow_array::Float64Array>(),
+            ));
+            a.push(Arc::new(
+                self.series
+                    .iter()
+                    .map(|r| r.2.temperature)
+                    .collect::<arrow_array::Float64Array>(),
+            ));
+            out.push((
+                RFM_TIMESERIES,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("timeseries batch"),
+            ));
+        }
+        if !self.moments.is_empty() {
+            let mut f = id_fields();
+            f.extend([
+                Field::new("order", DataType::UInt32, false),
+                Field::new("value", DataType::Float64, false),
+                Field::new("sem", DataType::Float64, true),
+            ]);
+            let mut a = ids(&self.moments.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(Arc::new(
+                self.moments
+                    .iter()
+                    .map(|r| r.2.order)
+                    .collect::<arrow_array::UInt32Array>(),
+            ));
+            a.push(Arc::new(
+                self.moments
+                    .iter()
+                    .map(|r| r.2.value)
+                    .collect::<arrow_array::Float64Array>(),
+            ));
+            a.push(Arc::new(
+                self.moments
+                    .iter()
+                    .map(|r| r.2.sem)
+                    .collect::<arrow_array::Float64Array>(),
+            ));
+            out.push((
+                RFM_MOMENTS,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("moments batch"),
+            ));
+        }
+        if !self.hist.is_empty() {
+            let mut f = id_fields();
+            f.extend([
+                Field::new("kind", DataType::Utf8, false),
+                Field::new("h", DataType::UInt32, false),
+                Field::new("lo", DataType::Float64, false),
+                Field::new("hi", DataType::Float64, false),
+                Field::new("count", DataType::UInt64, false),
+                Field::new("density", DataType::Float64, true),
+            ]);
+            let mut a = ids(&self.hist.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(Arc::new(
+                self.hist
+                    .iter()
+                    .map(|r| Some(r.2.kind.as_str()))
+                    .collect::<arrow_array::StringArray>(),
+            ));
+            a.push(Arc::new(
+                self.hist
+                    .iter()
+                    .map(|r| r.2.h)
+                    .collect::<arrow_array::UInt32Array>(),
+            ));
+            a.push(Arc::new(
+                self.hist
+                    .iter()
+                    .map(|r| r.2.lo)
+                    .collect::<arrow_array::Float64Array>(),
+            ));
+            a.push(Arc::new(
+                self.hist
+                    .iter()
+                    .map(|r| r.2.hi)
+                    .collect::<arrow_array::Float64Array>(),
+            ));
+            a.push(Arc::new(
+                self.hist
+                    .iter()
+                    .map(|r| r.2.count)
+                    .collect::<arrow_array::UInt64Array>(),
+            ));
+            a.push(Arc::new(
+                self.hist
+                    .iter()
+                    .map(|r| r.2.density)
+                    .collect::<arrow_array::Float64Array>(),
+            ));
+            out.push((
+                RFM_HISTOGRAMS,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("histogram batch"),
+            ));
+        }
+        self.series.clear();
+        self.moments.clear();
+        self.hist.clear();
+        out
+    }
+}

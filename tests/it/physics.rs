@@ -20,7 +20,9 @@ fn dsmc_params(params: Value) -> DsmcParams {
     let m = json!({"name": "physics-test", "model": "dsmc", "seed": 1, "params": params});
     let (_, plan) = granular::manifest::parse_manifest(&m.to_string(), "inline")
         .unwrap_or_else(|e| panic!("{e}"));
-    let ModelParams::Dsmc(p) = plan.points[0].params.clone();
+    let ModelParams::Dsmc(p) = plan.points[0].params.clone() else {
+        panic!("dsmc params")
+    };
     p
 }
 
@@ -204,6 +206,7 @@ fn chunked(
     let state = e.state_bytes();
     let bound_raises = match &e {
         Engine::Dsmc(sim) => sim.st.bound_raises,
+        Engine::Rfm(_) => unreachable!("DSMC test"),
     };
     Finished {
         out: e.finish(),
@@ -540,6 +543,7 @@ fn mean_sem(x: &[f64]) -> (f64, f64) {
 fn ensemble(params: &ModelParams, seeds: &[u64]) -> Vec<(f64, f64)> {
     let t_end = match params {
         ModelParams::Dsmc(p) => p.t_end,
+        ModelParams::Rfm(_) => unreachable!("DSMC test"),
     };
     let one = |seed: u64| {
         let out = run_in_memory(params, seed).unwrap();

@@ -1,0 +1,239 @@
+//! Ensemble summaries of RFM campaigns over replicas (runs with `status = 'done'`), summed in
+//! replica order: `rfm_timeseries_summary` (point, t: temperature mean and sem),
+//! `rfm_moments_summary` (point, order: mean and sem of the runs' moments) and
+//! `rfm_histograms_summary` (point, kind, h, bin: counts summed, pooled density).
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use arrow_array::cast::AsArray;
+use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
+use arrow_array::{ArrayRef, RecordBatch};
+use arrow_schema::{DataType, Field, Schema};
+
+use super::parquet_io::{self, StoreError};
+use super::summary::{mean_sem, table_files, write_whole};
+use super::tables;
+use crate::campaign::ledger::RunStatus;
+use crate::campaign::Campaign;
+
+fn batches(c: &Campaign, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+    let mut out = Vec::new();
+    for f in table_files(c, table)? {
+        out.extend(parquet_io::read_file(&f, table)?);
+    }
+    Ok(out)
+}
+
+fn col<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a ArrayRef, StoreError> {
+    b.column_by_name(name)
+        .ok_or_else(|| StoreError::Corrupt(name.into(), "missing column".into()))
+}
+
+pub fn write_rfm_summaries(
+    c: &Campaign,
+    finished: &BTreeMap<u64, RunStatus>,
+) -> Result<(), StoreError> {
+    let replicas = c.plan.replicas as u64;
+    let done = |run: u64| finished.get(&run) == Some(&RunStatus::Done);
+    let present = c.rfm_tables();
+
+    // Time series: (point, t bits) -> [(replica, T)].
+    let mut ts: BTreeMap<(u32, u64), Vec<(u64, f64)>> = BTreeMap::new();
+    for b in batches(c, tables::RFM_TIMESERIES)? {
+        let (r, p, t, v) = (
+            col(&b, "run_id")?.as_primitive::<UInt64Type>(),
+            col(&b, "point_id")?.as_primitive::<UInt32Type>(),
+            col(&b, "t")?.as_primitive::<Float64Type>(),
+            col(&b, "temperature")?.as_primitive::<Float64Type>(),
+        );
+        for i in 0..b.num_rows() {
+            if done(r.value(i)) {
+                ts.entry((p.value(i), t.value(i).to_bits()))
+                    .or_default()
+                    .push((r.value(i) % replicas, v.value(i)));
+            }
+        }
+    }
+    let mut keys: Vec<(u32, u64)> = ts.keys().copied().collect();
+    keys.sort_by(|a, b| {
+        (a.0, f64::from_bits(a.1))
+            .partial_cmp(&(b.0, f64::from_bits(b.1)))
+            .expect("finite")
+    });
+    let (mut pc, mut tc, mut nc, mut mc, mut sc) = (vec![], vec![], vec![], vec![], vec![]);
+    for k in keys {
+        let mut v = ts.remove(&k).expect("key");
+        v.sort_by_key(|x| x.0);
+        let xs: Vec<f64> = v.iter().map(|x| x.1).collect();
+        let (m, s) = mean_sem(&xs);
+        pc.push(k.0);
+        tc.push(f64::from_bits(k.1));
+        nc.push(xs.len() as u32);
+        mc.push(m);
+        sc.push(s);
+    }
+    let batch = RecordBatch::try_new(
+        Arc::new(Schema::new(vec![
+            Field::new("point_id", DataType::UInt32, false),
+            Field::new("t", DataType::Float64, false),
+            Field::new("n_replicas", DataType::UInt32, false),
+            Field::new("temperature_mean", DataType::Float64, false),
+            Field::new("temperature_sem", DataType::Float64, true),
+        ])),
+        vec![
+            Arc::new(arrow_array::UInt32Array::from(pc)),
+            Arc::new(arrow_array::Float64Array::from(tc)),
+            Arc::new(arrow_array::UInt32Array::from(nc)),
+            Arc::new(arrow_array::Float64Array::from(mc)),
+            Arc::new(arrow_array::Float64Array::from(sc)),
+        ],
+    )
+    .expect("timeseries summary");
+    write_whole(c, tables::RFM_TIMESERIES_SUMMARY, "summary.parquet", &batch)?;
+
+    if present.contains(&tables::RFM_MOMENTS) {
+        let mut mo: BTreeMap<(u32, u32), Vec<(u64, f64)>> = BTreeMap::new();
+        for b in batches(c, tables::RFM_MOMENTS)? {
+            let (r, p, o, v) = (
+                col(&b, "run_id")?.as_primitive::<UInt64Type>(),
+                col(&b, "point_id")?.as_primitive::<UInt32Type>(),
+                col(&b, "order")?.as_primitive::<UInt32Type>(),
+                col(&b, "value")?.as_primitive::<Float64Type>(),
+            );
+            for i in 0..b.num_rows() {
+                if done(r.value(i)) {
+                    mo.entry((p.value(i), o.value(i)))
+                        .or_default()
+                        .push((r.value(i) % replicas, v.value(i)));
+                }
+            }
+        }
+        let (mut pc, mut oc, mut nc, mut mc, mut sc) = (vec![], vec![], vec![], vec![], vec![]);
+        for (k, mut v) in mo {
+            v.sort_by_key(|x| x.0);
+            let xs: Vec<f64> = v.iter().map(|x| x.1).collect();
+            let (m, s) = mean_sem(&xs);
+            pc.push(k.0);
+            oc.push(k.1);
+            nc.push(xs.len() as u32);
+            mc.push(m);
+            sc.push(s);
+        }
+        let batch = RecordBatch::try_new(
+            Arc::new(Schema::new(vec![
+                Field::new("point_id", DataType::UInt32, false),
+                Field::new("order", DataType::UInt32, false),
+                Field::new("n_replicas", DataType::UInt32, false),
+                Field::new("mean", DataType::Float64, false),
+                Field::new("sem", DataType::Float64, true),
+            ])),
+            vec![
+                Arc::new(arrow_array::UInt32Array::from(pc)),
+                Arc::new(arrow_array::UInt32Array::from(oc)),
+                Arc::new(arrow_array::UInt32Array::from(nc)),
+                Arc::new(arrow_array::Float64Array::from(mc)),
+                Arc::new(arrow_array::Float64Array::from(sc)),
+            ],
+        )
+        .expect("moments summary");
+        write_whole(c, tables::RFM_MOMENTS_SUMMARY, "summary.parquet", &batch)?;
+    }
+
+    if present.contains(&tables::RFM_HISTOGRAMS) {
+        // (point, kind, h, lo bits) -> (hi, summed count); totals per (point, kind, h).
+        type HKey = (u32, String, u32, u64);
+        let mut bins: BTreeMap<HKey, (f64, u64)> = BTreeMap::new();
+        let mut totals: BTreeMap<(u32, String, u32), u64> = BTreeMap::new();
+        for b in batches(c, tables::RFM_HISTOGRAMS)? {
+            let (r, p, kind, h, lo, hi, n) = (
+                col(&b, "run_id")?.as_primitive::<UInt64Type>(),
+                col(&b, "point_id")?.as_primitive::<UInt32Type>(),
+                col(&b, "kind")?.as_string::<i32>(),
+                col(&b, "h")?.as_primitive::<UInt32Type>(),
+                col(&b, "lo")?.as_primitive::<Float64Type>(),
+                col(&b, "hi")?.as_primitive::<Float64Type>(),
+                col(&b, "count")?.as_primitive::<UInt64Type>(),
+            );
+            for i in 0..b.num_rows() {
+                if !done(r.value(i)) {
+                    continue;
+                }
+                let k = (
+                    p.value(i),
+                    kind.value(i).to_string(),
+                    h.value(i),
+                    lo.value(i).to_bits(),
+                );
+                let e = bins.entry(k).or_insert((hi.value(i), 0));
+                e.1 += n.value(i);
+                *totals
+                    .entry((p.value(i), kind.value(i).to_string(), h.value(i)))
+                    .or_default() += n.value(i);
+            }
+        }
+        let mut rows: Vec<(HKey, (f64, u64))> = bins.into_iter().collect();
+        rows.sort_by(|a, b| {
+            (a.0 .0, &a.0 .1, a.0 .2, f64::from_bits(a.0 .3))
+                .partial_cmp(&(b.0 .0, &b.0 .1, b.0 .2, f64::from_bits(b.0 .3)))
+                .expect("ordered")
+        });
+        let density = |k: &HKey, v: &(f64, u64)| {
+            let lo = f64::from_bits(k.3);
+            let width = v.0 - lo;
+            let total = totals[&(k.0, k.1.clone(), k.2)];
+            (width.is_finite() && total > 0).then(|| v.1 as f64 / (total as f64 * width))
+        };
+        let batch = RecordBatch::try_new(
+            Arc::new(Schema::new(vec![
+                Field::new("point_id", DataType::UInt32, false),
+                Field::new("kind", DataType::Utf8, false),
+                Field::new("h", DataType::UInt32, false),
+                Field::new("lo", DataType::Float64, false),
+                Field::new("hi", DataType::Float64, false),
+                Field::new("count", DataType::UInt64, false),
+                Field::new("density", DataType::Float64, true),
+            ])),
+            vec![
+                Arc::new(
+                    rows.iter()
+                        .map(|r| r.0 .0)
+                        .collect::<arrow_array::UInt32Array>(),
+                ),
+                Arc::new(
+                    rows.iter()
+                        .map(|r| Some(r.0 .1.as_str()))
+                        .collect::<arrow_array::StringArray>(),
+                ),
+                Arc::new(
+                    rows.iter()
+                        .map(|r| r.0 .2)
+                        .collect::<arrow_array::UInt32Array>(),
+                ),
+                Arc::new(
+                    rows.iter()
+                        .map(|r| f64::from_bits(r.0 .3))
+                        .collect::<arrow_array::Float64Array>(),
+                ),
+                Arc::new(
+                    rows.iter()
+                        .map(|r| r.1 .0)
+                        .collect::<arrow_array::Float64Array>(),
+                ),
+                Arc::new(
+                    rows.iter()
+                        .map(|r| r.1 .1)
+                        .collect::<arrow_array::UInt64Array>(),
+                ),
+                Arc::new(
+                    rows.iter()
+                        .map(|r| density(&r.0, &r.1))
+                        .collect::<arrow_array::Float64Array>(),
+                ),
+            ],
+        )
+        .expect("histogram summary");
+        write_whole(c, tables::RFM_HISTOGRAMS_SUMMARY, "summary.parquet", &batch)?;
+    }
+    Ok(())
+}
