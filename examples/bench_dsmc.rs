@@ -1,6 +1,6 @@
 //! Single-threaded DSMC timing of the paper's Table I set-up (or a scaled one).
 //!
-//! `cargo run --release --example bench_dsmc -- [low_rank|bird] [N1] [t_end] [eps] [seed] [msd|nomsd] [refresh_every]`
+//! `cargo run --release --example bench_dsmc -- [low_rank|bird] [N1] [t_end] [eps] [seed] [msd|nomsd] [refresh_every] [theta]`
 //! prints wall time, trials, collisions, rates and sum m v^2 at t_end.
 
 use std::time::Instant;
@@ -18,9 +18,10 @@ fn main() {
     let seed: u64 = get(4, "1").parse().expect("seed");
     let msd = get(5, "nomsd") == "msd";
     let refresh: f64 = get(6, "1").parse().expect("refresh_every");
+    let theta: f64 = get(7, "3").parse().expect("theta");
     let params: DsmcParams = serde_json::from_value(serde_json::json!({
         "method": method,
-        "species": {"power_law": {"n1": 0.1, "N1": n1, "theta": 3}},
+        "species": {"power_law": {"n1": 0.1, "N1": n1, "theta": theta}},
         "restitution": {"constant": eps},
         "t_end": t_end,
         "observables": if msd { vec!["msd"] } else { vec![] },
