@@ -188,8 +188,17 @@ impl Campaign {
         if wants(O::VelocityMoments) {
             v.extend([t::RFM_MOMENTS, t::RFM_MOMENTS_SUMMARY]);
         }
-        if wants(O::VelocityHistogram) {
+        if wants(O::VelocityHistogram) || wants(O::NeighbourDistances) {
             v.extend([t::RFM_HISTOGRAMS, t::RFM_HISTOGRAMS_SUMMARY]);
+        }
+        if wants(O::NeighbourDistances) {
+            v.extend([t::RFM_NEIGHBOUR_MOMENTS, t::RFM_NEIGHBOUR_MOMENTS_SUMMARY]);
+        }
+        if wants(O::StructureFactor) {
+            v.extend([t::RFM_STRUCTURE_FACTOR, t::RFM_STRUCTURE_FACTOR_SUMMARY]);
+        }
+        if wants(O::RadialDistribution) {
+            v.extend([t::RFM_RADIAL, t::RFM_RADIAL_SUMMARY]);
         }
         v
     }

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::rfm::params::{
     InitialLayout, RfmConfig, THESIS_MASS, THESIS_NOISE, THESIS_RADIUS, THESIS_SPRING,
 };
+use crate::rfm::structure::{NeighbourConfig, RadialConfig, SkConfig};
 
 /// Parameters of a Random Force Model run.
 #[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
@@ -85,6 +86,15 @@ pub struct RfmParams {
     /// Histogram of the signed velocity components (with `velocity_histogram`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub velocity_histogram: Option<HistogramSpec>,
+    /// Settings of the 1D neighbour distances (with `neighbour_distances`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub neighbour_distances: Option<NeighbourSpec>,
+    /// Settings of the 2D structure factor (with `structure_factor`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub structure_factor: Option<StructureFactorSpec>,
+    /// Settings of the 2D radial distribution (with `radial_distribution`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radial_distribution: Option<RadialSpec>,
 }
 
 fn radius() -> f64 {
@@ -132,6 +142,128 @@ pub enum RfmObservable {
     VelocityMoments,
     /// Histogram of the signed velocity components (see `velocity_histogram`).
     VelocityHistogram,
+    /// 1D: h-th neighbour separations in reduced coordinates (spec 2.6), histograms with
+    /// log-spaced bins and moments <R^m>, m = 1..9 (see `neighbour_distances`).
+    NeighbourDistances,
+    /// 2D: structure factor S(k) on the k lattice, exact shells (spec 2.7; see
+    /// `structure_factor`).
+    StructureFactor,
+    /// 2D: radial distribution g(R) and cumulative count C(R) (spec 2.8; see
+    /// `radial_distribution`).
+    RadialDistribution,
+}
+
+impl RfmObservable {
+    /// The manifest name.
+    pub fn name(self) -> &'static str {
+        match self {
+            RfmObservable::Temperature => "temperature",
+            RfmObservable::VelocityMoments => "velocity_moments",
+            RfmObservable::VelocityHistogram => "velocity_histogram",
+            RfmObservable::NeighbourDistances => "neighbour_distances",
+            RfmObservable::StructureFactor => "structure_factor",
+            RfmObservable::RadialDistribution => "radial_distribution",
+        }
+    }
+}
+
+/// 1D neighbour distances R_{i,i+h} = |x_{i+h} - x_i - h d| (m), h = 1..h_max.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NeighbourSpec {
+    /// Highest neighbour order (every h = 1..h_max is recorded), default 3; below N.
+    #[serde(default = "three")]
+    #[schemars(range(min = 1))]
+    pub h_max: u32,
+    /// [R_min, R_max] (m) of the log-spaced bins, default [1e-7, L']; values outside are
+    /// counted in two extra rows.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<[f64; 2]>,
+    /// Bins per decade, default 20.
+    #[serde(default = "twenty")]
+    #[schemars(range(min = 1, max = 100000))]
+    pub bins_per_decade: u32,
+}
+
+/// 2D structure factor on the lattice k = 2 pi (n_x, n_y) / L.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct StructureFactorSpec {
+    /// Largest |k| in units of 2 pi / L: the lattice vectors with 0 < n_x^2 + n_y^2 <=
+    /// floor(k_max^2). Default: k d <= 20, i.e. floor(20 L / (2 pi d)) (the contact peaks at
+    /// k d ~ 2 pi, 4 pi, 6 pi are included). Cost per evaluation ~ N (pi/2) k_max^2
+    /// complex multiply-adds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(range(min = 1))]
+    pub k_max: Option<f64>,
+    /// Evaluate at every `every`-th snapshot (default 1).
+    #[serde(default = "one_u32")]
+    #[schemars(range(min = 1))]
+    pub every: u32,
+}
+
+/// 2D radial distribution g(R), 0 <= R < R_max, equal bins.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RadialSpec {
+    /// R_max (m), at most L/2; default L/2.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub r_max: Option<f64>,
+    /// Number of bins; default ceil(R_max / (d/20)) (spec 2.8: dR ~ d/20).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(range(min = 1, max = 10000000))]
+    pub bins: Option<u32>,
+    /// Evaluate at every `every`-th snapshot (default 1).
+    #[serde(default = "one_u32")]
+    #[schemars(range(min = 1))]
+    pub every: u32,
+}
+
+impl Default for NeighbourSpec {
+    fn default() -> Self {
+        NeighbourSpec {
+            h_max: three(),
+            range: None,
+            bins_per_decade: twenty(),
+        }
+    }
+}
+
+impl Default for StructureFactorSpec {
+    fn default() -> Self {
+        StructureFactorSpec {
+            k_max: None,
+            every: 1,
+        }
+    }
+}
+
+impl Default for RadialSpec {
+    fn default() -> Self {
+        RadialSpec {
+            r_max: None,
+            bins: None,
+            every: 1,
+        }
+    }
+}
+
+/// Default lower end of the neighbour-distance bins (m), spec 2.6 [REC].
+pub const NEIGHBOUR_R_MIN: f64 = 1e-7;
+/// Default largest k d of the structure factor.
+pub const SK_KD_MAX: f64 = 20.0;
+/// Default bins per diameter of g(R) (dR = d/20, spec 2.8).
+pub const RADIAL_BINS_PER_DIAMETER: f64 = 20.0;
+
+fn three() -> u32 {
+    3
+}
+fn twenty() -> u32 {
+    20
+}
+fn one_u32() -> u32 {
+    1
 }
 
 /// Bins of the velocity histogram (m/s); values outside are counted in two extra rows.
@@ -195,6 +327,195 @@ impl RfmParams {
         }
     }
 
+    /// Resolved neighbour-distance settings, when the observable is requested.
+    pub fn neighbour_config(&self) -> Option<NeighbourConfig> {
+        if !self.wants(RfmObservable::NeighbourDistances) {
+            return None;
+        }
+        let spec = self.neighbour_distances.clone().unwrap_or_default();
+        let cfg = self.config();
+        let reduced = cfg.box_length() - cfg.n_particles as f64 * cfg.diameter();
+        let [lo, hi] = spec.range.unwrap_or([NEIGHBOUR_R_MIN, reduced]);
+        Some(NeighbourConfig {
+            h_max: spec.h_max,
+            lo,
+            hi,
+            bins_per_decade: spec.bins_per_decade,
+        })
+    }
+
+    /// Resolved structure-factor settings, when the observable is requested.
+    pub fn structure_factor_config(&self) -> Option<SkConfig> {
+        if !self.wants(RfmObservable::StructureFactor) {
+            return None;
+        }
+        let spec = self.structure_factor.clone().unwrap_or_default();
+        let cfg = self.config();
+        let n_max = spec.k_max.unwrap_or_else(|| {
+            (SK_KD_MAX * cfg.box_length() / (2.0 * std::f64::consts::PI * cfg.diameter()))
+                .floor()
+                .max(1.0)
+        });
+        Some(SkConfig {
+            n_max,
+            every: spec.every,
+        })
+    }
+
+    /// Resolved g(R) settings, when the observable is requested.
+    pub fn radial_config(&self) -> Option<RadialConfig> {
+        if !self.wants(RfmObservable::RadialDistribution) {
+            return None;
+        }
+        let spec = self.radial_distribution.clone().unwrap_or_default();
+        let cfg = self.config();
+        let l = cfg.box_length();
+        let r_max = spec.r_max.unwrap_or(0.5 * l);
+        let bins = spec.bins.unwrap_or_else(|| {
+            (r_max / (cfg.diameter() / RADIAL_BINS_PER_DIAMETER))
+                .ceil()
+                .clamp(1.0, 1e7) as u32
+        });
+        Some(RadialConfig {
+            r_max,
+            bins,
+            every: spec.every,
+            n: self.n_particles,
+            l,
+        })
+    }
+
+    /// Cross-field rules of the structure observables.
+    fn check_structure(&self, path: &str, errors: &mut Vec<(String, String)>) {
+        use RfmObservable as O;
+        for (i, o) in self.observables.iter().enumerate() {
+            let need = match o {
+                O::NeighbourDistances => 1,
+                O::StructureFactor | O::RadialDistribution => 2,
+                _ => continue,
+            };
+            if self.dim != need {
+                errors.push((
+                    format!("{path}/observables/{i}"),
+                    format!(
+                        "\"{}\" is a {need}D observable (dim is {})",
+                        o.name(),
+                        self.dim
+                    ),
+                ));
+            }
+        }
+        for (given, o, key) in [
+            (
+                self.neighbour_distances.is_some(),
+                O::NeighbourDistances,
+                "neighbour_distances",
+            ),
+            (
+                self.structure_factor.is_some(),
+                O::StructureFactor,
+                "structure_factor",
+            ),
+            (
+                self.radial_distribution.is_some(),
+                O::RadialDistribution,
+                "radial_distribution",
+            ),
+        ] {
+            if given && !self.wants(o) {
+                errors.push((
+                    format!("{path}/{key}"),
+                    format!("given without the observable \"{key}\""),
+                ));
+            }
+        }
+        let cfg = self.config();
+        if cfg.validate().is_err() {
+            return;
+        }
+        let samples = cfg.duration_steps() / self.sample_every;
+        if let (Some(nc), 1) = (self.neighbour_config(), self.dim) {
+            let p = format!("{path}/neighbour_distances");
+            if nc.h_max as u64 >= self.n_particles {
+                errors.push((
+                    format!("{p}/h_max"),
+                    format!(
+                        "must be below n_particles ({}), got {}",
+                        self.n_particles, nc.h_max
+                    ),
+                ));
+            }
+            if !(nc.lo > 0.0 && nc.lo < nc.hi && nc.hi.is_finite()) {
+                errors.push((
+                    format!("{p}/range"),
+                    format!(
+                        "expected [R_min, R_max] with 0 < R_min < R_max (m), got [{}, {}]",
+                        nc.lo, nc.hi
+                    ),
+                ));
+            } else {
+                let bins = nc.edges().len() as u64 - 1;
+                if bins * nc.h_max as u64 > 10_000_000 {
+                    errors.push((
+                        p.clone(),
+                        format!("{bins} bins x h_max {} is more than 10^7 bins", nc.h_max),
+                    ));
+                }
+            }
+        }
+        if let (Some(sk), 2) = (self.structure_factor_config(), self.dim) {
+            let p = format!("{path}/structure_factor");
+            if !(sk.n_max.is_finite() && sk.n_max >= 1.0) {
+                errors.push((
+                    format!("{p}/k_max"),
+                    format!("must be at least 1 (units of 2 pi / L), got {}", sk.n_max),
+                ));
+            } else if sk.n_max > 5000.0 {
+                errors.push((
+                    format!("{p}/k_max"),
+                    format!(
+                        "{} (units of 2 pi / L) gives ~{:.1e} lattice vectors; at most 5000",
+                        sk.n_max,
+                        std::f64::consts::PI * sk.n_max * sk.n_max
+                    ),
+                ));
+            }
+            if samples >= 10 && sk.every as u64 > samples / 10 {
+                errors.push((
+                    format!("{p}/every"),
+                    format!(
+                        "must be at most samples / 10 = {} so that each of the 10 blocks has an evaluation, got {}",
+                        samples / 10,
+                        sk.every
+                    ),
+                ));
+            }
+        }
+        if let (Some(rc), 2) = (self.radial_config(), self.dim) {
+            let p = format!("{path}/radial_distribution");
+            if !(rc.r_max > 0.0 && rc.r_max <= 0.5 * rc.l * (1.0 + 1e-12)) {
+                errors.push((
+                    format!("{p}/r_max"),
+                    format!(
+                        "must lie in (0, L/2] = (0, {}] (m), got {}",
+                        0.5 * rc.l,
+                        rc.r_max
+                    ),
+                ));
+            }
+            if samples >= 10 && rc.every as u64 > samples / 10 {
+                errors.push((
+                    format!("{p}/every"),
+                    format!(
+                        "must be at most samples / 10 = {} so that each of the 10 blocks has an evaluation, got {}",
+                        samples / 10,
+                        rc.every
+                    ),
+                ));
+            }
+        }
+    }
+
     /// Checks the schema cannot express; `path` is the JSON pointer of this object.
     pub fn check(&self, path: &str, errors: &mut Vec<(String, String)>) {
         if let Err(es) = self.config().validate() {
@@ -235,6 +556,7 @@ impl RfmParams {
                 ));
             }
         }
+        self.check_structure(path, errors);
         let cfg = self.config();
         if cfg.validate().is_ok() {
             let samples = cfg.duration_steps() / self.sample_every;

@@ -10,7 +10,9 @@
 //!   superposed over pairs.
 //! - [`noise`]: bulk normals and the symmetrised kicks (variance 2 D dt / M^2 per component).
 //! - [`neighbours`]: 1D ring neighbours; 2D cell-built Verlet lists with a skin.
-//! - [`sim`]: [`RfmSim`], the state, initial layouts, observables, checkpoints.
+//! - [`sim`]: [`RfmSim`], the state, initial layouts, checkpoints.
+//! - [`observe`]: warm-up, snapshots and the accumulators of a run; [`structure`]: 1D
+//!   neighbour distances, 2D S(k), g(R) and C(R).
 //!
 //! No rotation, no gravity (spec 1.2). The physics never imports the campaign or the store.
 //!
@@ -43,6 +45,7 @@ pub mod noise;
 pub mod observe;
 pub mod params;
 pub mod sim;
+pub mod structure;
 
 pub use params::{InitialLayout, RfmConfig};
 pub use sim::{RfmSim, RfmState};

@@ -6,10 +6,15 @@
 //! - velocity moments <|v_c|^m>, m = 1..12, of the velocity components in the centre-of-mass
 //!   frame (pooled components, spec 2.2), with standard errors from 10 consecutive blocks of the
 //!   sampled time (the thesis's block protocol, spec 2.2);
-//! - histogram of the signed velocity components (spec 2.3), counts kept.
+//! - histogram of the signed velocity components (spec 2.3), counts kept;
+//! - structure ([`super::structure`]): 1D neighbour distances (spec 2.6), 2D S(k) (2.7),
+//!   2D g(R) and C(R) (2.8).
 
 use serde::{Deserialize, Serialize};
 
+use super::structure::{
+    NeighbourAcc, NeighbourMomentRow, RadialAcc, RadialRow, SkAcc, SkRow, SkWork,
+};
 use super::{RfmConfig, RfmSim};
 use crate::manifest::rfm::{HistogramSpec, RfmObservable, RfmParams};
 
@@ -59,6 +64,33 @@ pub struct Sampler {
     pub hist: Option<HistogramSpec>,
     /// bins + 2 (below, above).
     pub counts: Vec<u64>,
+    /// 1D neighbour distances.
+    pub neighbours: Option<NeighbourAcc>,
+    /// 2D structure factor.
+    pub sk: Option<SkAcc>,
+    /// 2D radial distribution.
+    pub radial: Option<RadialAcc>,
+}
+
+impl Sampler {
+    /// The block of the current sample.
+    fn block(&self) -> usize {
+        ((self.samples_done as usize * BLOCKS) / self.samples_total.max(1) as usize).min(BLOCKS - 1)
+    }
+
+    /// Same observables and settings (a checkpoint's sampler against a fresh one).
+    fn same_shape(&self, o: &Sampler) -> bool {
+        self.samples_total == o.samples_total
+            && self.counts.len() == o.counts.len()
+            && self.moments == o.moments
+            && self.hist == o.hist
+            && self.neighbours.as_ref().map(|a| (&a.cfg, a.counts.len()))
+                == o.neighbours.as_ref().map(|a| (&a.cfg, a.counts.len()))
+            && self.sk.as_ref().map(|a| (&a.cfg, a.block_sums.len()))
+                == o.sk.as_ref().map(|a| (&a.cfg, a.block_sums.len()))
+            && self.radial.as_ref().map(|a| (&a.cfg, a.counts.len()))
+                == o.radial.as_ref().map(|a| (&a.cfg, a.counts.len()))
+    }
 }
 
 /// The state of an RFM run beside the simulator's.
@@ -73,6 +105,10 @@ pub struct RfmRun {
     pub sampler: Sampler,
     warmup_steps: u64,
     sample_every: u64,
+    /// Scratch of the S(k) sums (derived from the settings, not checkpointed).
+    sk_work: Option<SkWork>,
+    /// Scratch of the g(R) pair loop.
+    pair_buf: Vec<f64>,
 }
 
 /// The run's output rows.
@@ -81,6 +117,9 @@ pub struct RfmOutput {
     pub timeseries: Vec<TimeRow>,
     pub moments: Vec<MomentRow>,
     pub histograms: Vec<HistRow>,
+    pub neighbour_moments: Vec<NeighbourMomentRow>,
+    pub structure_factor: Vec<SkRow>,
+    pub radial: Vec<RadialRow>,
 }
 
 impl RfmRun {
@@ -101,19 +140,31 @@ impl RfmRun {
                 .map(|h| vec![0; h.bins as usize + 2])
                 .unwrap_or_default(),
             hist,
+            neighbours: p.neighbour_config().map(NeighbourAcc::new),
+            sk: p.structure_factor_config().map(SkAcc::new),
+            radial: p.radial_config().map(RadialAcc::new),
+        }
+    }
+
+    fn assemble(sim: RfmSim, sampler: Sampler, cfg: &RfmConfig) -> Self {
+        RfmRun {
+            sim,
+            sk_work: sampler.sk.as_ref().map(SkAcc::work),
+            sampler,
+            warmup_steps: cfg.warmup_steps(),
+            sample_every: cfg.sample_every,
+            pair_buf: Vec::new(),
         }
     }
 
     pub fn new(p: &RfmParams, seed: u64) -> Result<Self, String> {
         let cfg = p.config();
         let sampler = Self::sampler_for(p, &cfg);
-        let (warmup_steps, sample_every) = (cfg.warmup_steps(), cfg.sample_every);
-        Ok(RfmRun {
-            sim: RfmSim::new(cfg, seed)?,
+        Ok(Self::assemble(
+            RfmSim::new(cfg.clone(), seed)?,
             sampler,
-            warmup_steps,
-            sample_every,
-        })
+            &cfg,
+        ))
     }
 
     pub fn state_bytes(&self) -> Vec<u8> {
@@ -128,20 +179,15 @@ impl RfmRun {
         let st: RunState = postcard::from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         let cfg = p.config();
-        let (warmup_steps, sample_every) = (cfg.warmup_steps(), cfg.sample_every);
         let fresh = Self::sampler_for(p, &cfg);
-        if fresh.samples_total != st.sampler.samples_total
-            || fresh.counts.len() != st.sampler.counts.len()
-            || fresh.moments != st.sampler.moments
-        {
+        if !fresh.same_shape(&st.sampler) {
             return Err("checkpoint does not match the run's observables".into());
         }
-        Ok(RfmRun {
-            sim: RfmSim::from_state_bytes(cfg, &st.sim)?,
-            sampler: st.sampler,
-            warmup_steps,
-            sample_every,
-        })
+        Ok(Self::assemble(
+            RfmSim::from_state_bytes(cfg.clone(), &st.sim)?,
+            st.sampler,
+            &cfg,
+        ))
     }
 
     pub fn is_done(&self) -> bool {
@@ -193,8 +239,7 @@ impl RfmRun {
             for m in mean.iter_mut().take(d) {
                 *m /= n as f64;
             }
-            let block = ((s.samples_done as usize * BLOCKS) / s.samples_total.max(1) as usize)
-                .min(BLOCKS - 1);
+            let block = s.block();
             for p in v.chunks_exact(d) {
                 for c in 0..d {
                     let x = p[c] - mean[c];
@@ -223,6 +268,31 @@ impl RfmRun {
             }
             if s.moments {
                 s.block_counts[block] += (n * d) as u64;
+            }
+        }
+        let block = s.block();
+        // S(k) and g(R) at every `every`-th snapshot.
+        let sk_now =
+            s.sk.as_ref()
+                .is_some_and(|a| s.samples_done.is_multiple_of(a.cfg.every as u64));
+        let radial_now = s
+            .radial
+            .as_ref()
+            .is_some_and(|a| s.samples_done.is_multiple_of(a.cfg.every as u64));
+        let want_x = s.neighbours.is_some() || sk_now || radial_now;
+        if want_x {
+            let x = self.sim.positions();
+            let cfg = self.sim.config();
+            let (l, d) = (cfg.box_length(), cfg.diameter());
+            if let Some(a) = &mut s.neighbours {
+                a.add(&x, l, d, block);
+            }
+            if let (Some(a), true) = (&mut s.sk, sk_now) {
+                let w = self.sk_work.as_mut().expect("S(k) scratch");
+                a.add(w, &x, l, block);
+            }
+            if let (Some(a), true) = (&mut s.radial, radial_now) {
+                a.add(&mut self.pair_buf, &x, block);
             }
         }
         s.samples_done += 1;
@@ -289,10 +359,24 @@ impl RfmRun {
                 density: None,
             });
         }
+        let mut neighbour_moments = Vec::new();
+        if let Some(a) = &s.neighbours {
+            let (h, m) = a.rows();
+            histograms.extend(h);
+            neighbour_moments = m;
+        }
+        let cfg = self.sim.config();
         RfmOutput {
             timeseries: s.series,
             moments,
             histograms,
+            neighbour_moments,
+            structure_factor: s
+                .sk
+                .as_ref()
+                .map(|a| a.rows(cfg.n_particles, cfg.box_length()))
+                .unwrap_or_default(),
+            radial: s.radial.as_ref().map(|a| a.rows()).unwrap_or_default(),
         }
     }
 }
@@ -320,12 +404,36 @@ mod tests {
         serde_json::from_value(v).unwrap()
     }
 
+    /// `params` with every structure observable of the dimension on.
+    fn params_all(dim: u32) -> RfmParams {
+        let mut p = params(dim);
+        if dim == 1 {
+            p.observables.push(RfmObservable::NeighbourDistances);
+            p.neighbour_distances = Some(crate::manifest::rfm::NeighbourSpec {
+                h_max: 4,
+                range: Some([1e-8, 0.5]),
+                bins_per_decade: 10,
+            });
+        } else {
+            p.observables.push(RfmObservable::StructureFactor);
+            p.observables.push(RfmObservable::RadialDistribution);
+            p.structure_factor = Some(crate::manifest::rfm::StructureFactorSpec {
+                k_max: Some(25.0),
+                every: 2,
+            });
+        }
+        p
+    }
+
     /// A run restored from a checkpoint taken at any point continues bit for bit: the same
     /// rows as the uninterrupted run (warm-up, mid-sampling, state after a sample).
     #[test]
     fn restore_is_bitwise() {
         for dim in [1, 2] {
-            let p = params(dim);
+            let p = params_all(dim);
+            let mut errors = Vec::new();
+            p.check("", &mut errors);
+            assert!(errors.is_empty(), "{errors:?}");
             let mut a = RfmRun::new(&p, 9).unwrap();
             while !a.advance(777).unwrap() {}
             let want = a.finish();
@@ -337,7 +445,121 @@ mod tests {
                 while !c.advance(1000).unwrap() {}
                 assert_eq!(c.finish(), want, "dim {dim}, restored at step {cut}");
             }
+            if dim == 1 {
+                assert_eq!(want.neighbour_moments.len(), 4 * 9);
+                assert!(want
+                    .histograms
+                    .iter()
+                    .any(|h| h.kind == "neighbour_distance"));
+            } else {
+                assert!(!want.structure_factor.is_empty() && !want.radial.is_empty());
+            }
+            // A checkpoint of other observables is refused.
+            let b = RfmRun::new(&p, 9).unwrap();
+            assert!(RfmRun::from_state_bytes(&params(dim), &b.state_bytes()).is_err());
         }
+    }
+
+    /// 1D engine (eps = 0.6, N = 300, L' = 0.5): the neighbour histograms hold N separations
+    /// per h and snapshot, <R_h> = h L'/N (the gaps sum to L'; soft overlaps counted with
+    /// |.| add a little), and the moments are non-degenerate (<R^2> >= <R>^2).
+    #[test]
+    fn neighbour_distances_in_the_engine() {
+        let p = params_all(1);
+        let mut r = RfmRun::new(&p, 5).unwrap();
+        while !r.advance(u64::MAX).unwrap() {}
+        let samples = r.sampler.samples_total;
+        let out = r.finish();
+        for h in 1..=4u32 {
+            let total: u64 = out
+                .histograms
+                .iter()
+                .filter(|x| x.kind == "neighbour_distance" && x.h == h)
+                .map(|x| x.count)
+                .sum();
+            assert_eq!(total, samples * 300);
+            let m: Vec<&_> = out.neighbour_moments.iter().filter(|x| x.h == h).collect();
+            let want = h as f64 * 0.5 / 300.0;
+            let rel = m[0].value / want - 1.0;
+            eprintln!(
+                "1D: <R_{h}> / (h L'/N) - 1 = {rel:.2e}, sem {:.2e}",
+                m[0].sem.unwrap()
+            );
+            assert!((0.0..1e-4).contains(&rel), "h {h}: {rel}");
+            assert!(m[1].value >= m[0].value * m[0].value);
+        }
+    }
+
+    fn elastic_gas() -> RfmParams {
+        serde_json::from_value(serde_json::json!({
+            "dim": 2,
+            "n_particles": 500,
+            "packing_fraction": 0.05,
+            "restitution_normal": 1.0,
+            "warmup": 0.05,
+            "duration": 0.1,
+            "sample_every": 5000,
+            "observables": ["structure_factor", "radial_distribution"],
+            "radial_distribution": {"bins": 400}
+        }))
+        .unwrap()
+    }
+
+    /// The elastic dilute gas (eps_n = eps_t = 1, phi = 0.05, N = 500, 20 snapshots): S(k) -> 1
+    /// at large k (k d in [10, 20]: mean within 0.01, every window of width 1 in k d within
+    /// 0.05), and g(R) = 0 inside the core (R < 0.95 d), -> 1 at large R (R in [3 d, L/2]: mean
+    /// within 0.02, every 20-bin window within 0.1), C(R) -> the ideal (N-1) pi R^2/L^2.
+    #[test]
+    fn elastic_gas_structure() {
+        let p = elastic_gas();
+        let cfg = p.config();
+        let (d, l) = (cfg.diameter(), cfg.box_length());
+        let mut r = RfmRun::new(&p, 21).unwrap();
+        let t0 = std::time::Instant::now();
+        while !r.advance(u64::MAX).unwrap() {}
+        let out = r.finish();
+        eprintln!("elastic gas run: {:.2} s", t0.elapsed().as_secs_f64());
+        let sk = &out.structure_factor;
+        assert!(sk.last().unwrap().k * d <= 20.0 && sk.last().unwrap().k * d > 19.9);
+        let window = |lo: f64, hi: f64| {
+            let (s, w) = sk
+                .iter()
+                .filter(|x| x.k * d >= lo && x.k * d < hi)
+                .fold((0.0, 0.0), |a, x| {
+                    (a.0 + x.s * x.n_vectors as f64, a.1 + x.n_vectors as f64)
+                });
+            s / w
+        };
+        let large = window(10.0, 20.0);
+        eprintln!(
+            "elastic gas: S(k d in [10, 20]) = {large:.4}, S(first shell) = {:.3}",
+            sk[0].s
+        );
+        assert!((large - 1.0).abs() < 0.01, "{large}");
+        for j in 5..20 {
+            let s = window(j as f64, j as f64 + 1.0);
+            assert!((s - 1.0).abs() < 0.05, "k d in [{j}, {}]: {s}", j + 1);
+        }
+        let g = &out.radial;
+        assert!(g.iter().filter(|x| x.r_hi < 0.95 * d).all(|x| x.count == 0));
+        let far: Vec<_> = g.iter().filter(|x| x.r_lo >= 3.0 * d).collect();
+        let mean = far.iter().map(|x| x.g).sum::<f64>() / far.len() as f64;
+        eprintln!(
+            "elastic gas: g(R >= 3d) = {mean:.4}, contact g = {:.3}",
+            g.iter().find(|x| x.r_lo >= d).unwrap().g
+        );
+        assert!((mean - 1.0).abs() < 0.02, "{mean}");
+        for w in far.chunks(20) {
+            let m = w.iter().map(|x| x.g).sum::<f64>() / w.len() as f64;
+            assert!((m - 1.0).abs() < 0.1, "g near R = {}: {m}", w[0].r_lo);
+        }
+        let last = g.last().unwrap();
+        let ideal = 499.0 * std::f64::consts::PI * last.r_hi.powi(2) / (l * l);
+        assert!(
+            (last.c / ideal - 1.0).abs() < 0.01,
+            "C(L/2) = {} vs {ideal}",
+            last.c
+        );
     }
 
     /// The tables agree with each other exactly: the time average of T (2.19), which sums the

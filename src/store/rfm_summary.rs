@@ -1,7 +1,10 @@
 //! Ensemble summaries of RFM campaigns over replicas (runs with `status = 'done'`), summed in
 //! replica order: `rfm_timeseries_summary` (point, t: temperature mean and sem),
 //! `rfm_moments_summary` (point, order: mean and sem of the runs' moments) and
-//! `rfm_histograms_summary` (point, kind, h, bin: counts summed, pooled density).
+//! `rfm_histograms_summary` (point, kind, h, bin: counts summed, pooled density),
+//! `rfm_neighbour_moments_summary` (point, h, order: mean and sem of the runs' moments),
+//! `rfm_structure_factor_summary` (point, shell: mean and sem of the runs' S(k)) and
+//! `rfm_radial_distribution_summary` (point, bin: pair counts summed, mean and sem of g and C).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -28,6 +31,212 @@ fn batches(c: &Campaign, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
 fn col<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a ArrayRef, StoreError> {
     b.column_by_name(name)
         .ok_or_else(|| StoreError::Corrupt(name.into(), "missing column".into()))
+}
+
+/// Per key: the replicas' values (each a fixed-length vector), sorted by replica.
+type Groups<K> = BTreeMap<K, Vec<(u64, Vec<f64>)>>;
+
+/// Mean and sem over replicas of each value column of a group (for columns that are the
+/// same in every replica, such as k or r_lo, the first replica's value is used).
+fn stats(mut v: Vec<(u64, Vec<f64>)>) -> (u32, Vec<(f64, Option<f64>)>) {
+    v.sort_by_key(|x| x.0);
+    let n = v.len() as u32;
+    let cols = v.first().map_or(0, |x| x.1.len());
+    let out = (0..cols)
+        .map(|j| {
+            let xs: Vec<f64> = v.iter().map(|x| x.1[j]).collect();
+            if xs.iter().all(|&a| a.to_bits() == xs[0].to_bits()) {
+                (xs[0], Some(0.0).filter(|_| xs.len() >= 2))
+            } else {
+                mean_sem(&xs)
+            }
+        })
+        .collect();
+    (n, out)
+}
+
+fn f64s(v: impl IntoIterator<Item = f64>) -> ArrayRef {
+    Arc::new(v.into_iter().collect::<arrow_array::Float64Array>())
+}
+fn opt_f64s(v: impl IntoIterator<Item = Option<f64>>) -> ArrayRef {
+    Arc::new(v.into_iter().collect::<arrow_array::Float64Array>())
+}
+fn u32s(v: impl IntoIterator<Item = u32>) -> ArrayRef {
+    Arc::new(v.into_iter().collect::<arrow_array::UInt32Array>())
+}
+fn u64s(v: impl IntoIterator<Item = u64>) -> ArrayRef {
+    Arc::new(v.into_iter().collect::<arrow_array::UInt64Array>())
+}
+
+fn write_structure_summaries(
+    c: &Campaign,
+    present: &[&str],
+    replicas: u64,
+    done: &dyn Fn(u64) -> bool,
+) -> Result<(), StoreError> {
+    if present.contains(&tables::RFM_NEIGHBOUR_MOMENTS) {
+        let mut g: Groups<(u32, u32, u32)> = BTreeMap::new();
+        for b in batches(c, tables::RFM_NEIGHBOUR_MOMENTS)? {
+            let (r, p, h, o, v) = (
+                col(&b, "run_id")?.as_primitive::<UInt64Type>(),
+                col(&b, "point_id")?.as_primitive::<UInt32Type>(),
+                col(&b, "h")?.as_primitive::<UInt32Type>(),
+                col(&b, "order")?.as_primitive::<UInt32Type>(),
+                col(&b, "value")?.as_primitive::<Float64Type>(),
+            );
+            for i in 0..b.num_rows() {
+                if done(r.value(i)) {
+                    g.entry((p.value(i), h.value(i), o.value(i)))
+                        .or_default()
+                        .push((r.value(i) % replicas, vec![v.value(i)]));
+                }
+            }
+        }
+        let rows: Vec<_> = g.into_iter().map(|(k, v)| (k, stats(v))).collect();
+        let batch = RecordBatch::try_new(
+            Arc::new(Schema::new(vec![
+                Field::new("point_id", DataType::UInt32, false),
+                Field::new("h", DataType::UInt32, false),
+                Field::new("order", DataType::UInt32, false),
+                Field::new("n_replicas", DataType::UInt32, false),
+                Field::new("mean", DataType::Float64, false),
+                Field::new("sem", DataType::Float64, true),
+            ])),
+            vec![
+                u32s(rows.iter().map(|r| r.0 .0)),
+                u32s(rows.iter().map(|r| r.0 .1)),
+                u32s(rows.iter().map(|r| r.0 .2)),
+                u32s(rows.iter().map(|r| r.1 .0)),
+                f64s(rows.iter().map(|r| r.1 .1[0].0)),
+                opt_f64s(rows.iter().map(|r| r.1 .1[0].1)),
+            ],
+        )
+        .expect("neighbour moments summary");
+        write_whole(
+            c,
+            tables::RFM_NEIGHBOUR_MOMENTS_SUMMARY,
+            "summary.parquet",
+            &batch,
+        )?;
+    }
+
+    if present.contains(&tables::RFM_STRUCTURE_FACTOR) {
+        // (point, n2) -> values [k, n_vectors, s].
+        let mut g: Groups<(u32, u64)> = BTreeMap::new();
+        for b in batches(c, tables::RFM_STRUCTURE_FACTOR)? {
+            let (r, p, n2, k, nv, s) = (
+                col(&b, "run_id")?.as_primitive::<UInt64Type>(),
+                col(&b, "point_id")?.as_primitive::<UInt32Type>(),
+                col(&b, "n2")?.as_primitive::<UInt64Type>(),
+                col(&b, "k")?.as_primitive::<Float64Type>(),
+                col(&b, "n_vectors")?.as_primitive::<UInt64Type>(),
+                col(&b, "s")?.as_primitive::<Float64Type>(),
+            );
+            for i in 0..b.num_rows() {
+                if done(r.value(i)) {
+                    g.entry((p.value(i), n2.value(i))).or_default().push((
+                        r.value(i) % replicas,
+                        vec![k.value(i), nv.value(i) as f64, s.value(i)],
+                    ));
+                }
+            }
+        }
+        let rows: Vec<_> = g.into_iter().map(|(k, v)| (k, stats(v))).collect();
+        let batch = RecordBatch::try_new(
+            Arc::new(Schema::new(vec![
+                Field::new("point_id", DataType::UInt32, false),
+                Field::new("n2", DataType::UInt64, false),
+                Field::new("k", DataType::Float64, false),
+                Field::new("n_vectors", DataType::UInt64, false),
+                Field::new("n_replicas", DataType::UInt32, false),
+                Field::new("s_mean", DataType::Float64, false),
+                Field::new("s_sem", DataType::Float64, true),
+            ])),
+            vec![
+                u32s(rows.iter().map(|r| r.0 .0)),
+                u64s(rows.iter().map(|r| r.0 .1)),
+                f64s(rows.iter().map(|r| r.1 .1[0].0)),
+                u64s(rows.iter().map(|r| r.1 .1[1].0 as u64)),
+                u32s(rows.iter().map(|r| r.1 .0)),
+                f64s(rows.iter().map(|r| r.1 .1[2].0)),
+                opt_f64s(rows.iter().map(|r| r.1 .1[2].1)),
+            ],
+        )
+        .expect("structure factor summary");
+        write_whole(
+            c,
+            tables::RFM_STRUCTURE_FACTOR_SUMMARY,
+            "summary.parquet",
+            &batch,
+        )?;
+    }
+
+    if present.contains(&tables::RFM_RADIAL) {
+        // (point, bin index from r_lo order) -> values [r_lo, r_hi, count, g, c].
+        let mut g: Groups<(u32, u64)> = BTreeMap::new();
+        for b in batches(c, tables::RFM_RADIAL)? {
+            let (r, p, lo, hi, n, gv, cv) = (
+                col(&b, "run_id")?.as_primitive::<UInt64Type>(),
+                col(&b, "point_id")?.as_primitive::<UInt32Type>(),
+                col(&b, "r_lo")?.as_primitive::<Float64Type>(),
+                col(&b, "r_hi")?.as_primitive::<Float64Type>(),
+                col(&b, "count")?.as_primitive::<UInt64Type>(),
+                col(&b, "g")?.as_primitive::<Float64Type>(),
+                col(&b, "c")?.as_primitive::<Float64Type>(),
+            );
+            for i in 0..b.num_rows() {
+                if done(r.value(i)) {
+                    // r_lo >= 0, so its bits order like the values.
+                    g.entry((p.value(i), lo.value(i).to_bits()))
+                        .or_default()
+                        .push((
+                            r.value(i) % replicas,
+                            vec![
+                                lo.value(i),
+                                hi.value(i),
+                                n.value(i) as f64,
+                                gv.value(i),
+                                cv.value(i),
+                            ],
+                        ));
+                }
+            }
+        }
+        let rows: Vec<_> = g
+            .into_iter()
+            .map(|(k, v)| {
+                let total: u64 = v.iter().map(|x| x.1[2] as u64).sum();
+                (k, total, stats(v))
+            })
+            .collect();
+        let batch = RecordBatch::try_new(
+            Arc::new(Schema::new(vec![
+                Field::new("point_id", DataType::UInt32, false),
+                Field::new("r_lo", DataType::Float64, false),
+                Field::new("r_hi", DataType::Float64, false),
+                Field::new("n_replicas", DataType::UInt32, false),
+                Field::new("count", DataType::UInt64, false),
+                Field::new("g_mean", DataType::Float64, false),
+                Field::new("g_sem", DataType::Float64, true),
+                Field::new("c_mean", DataType::Float64, false),
+                Field::new("c_sem", DataType::Float64, true),
+            ])),
+            vec![
+                u32s(rows.iter().map(|r| r.0 .0)),
+                f64s(rows.iter().map(|r| r.2 .1[0].0)),
+                f64s(rows.iter().map(|r| r.2 .1[1].0)),
+                u32s(rows.iter().map(|r| r.2 .0)),
+                u64s(rows.iter().map(|r| r.1)),
+                f64s(rows.iter().map(|r| r.2 .1[3].0)),
+                opt_f64s(rows.iter().map(|r| r.2 .1[3].1)),
+                f64s(rows.iter().map(|r| r.2 .1[4].0)),
+                opt_f64s(rows.iter().map(|r| r.2 .1[4].1)),
+            ],
+        )
+        .expect("radial distribution summary");
+        write_whole(c, tables::RFM_RADIAL_SUMMARY, "summary.parquet", &batch)?;
+    }
+    Ok(())
 }
 
 pub fn write_rfm_summaries(
@@ -235,5 +444,5 @@ pub fn write_rfm_summaries(
         .expect("histogram summary");
         write_whole(c, tables::RFM_HISTOGRAMS_SUMMARY, "summary.parquet", &batch)?;
     }
-    Ok(())
+    write_structure_summaries(c, &present, replicas, &done)
 }

@@ -486,6 +486,12 @@ pub const RFM_HISTOGRAMS: &str = "rfm_histograms";
 pub const RFM_TIMESERIES_SUMMARY: &str = "rfm_timeseries_summary";
 pub const RFM_MOMENTS_SUMMARY: &str = "rfm_moments_summary";
 pub const RFM_HISTOGRAMS_SUMMARY: &str = "rfm_histograms_summary";
+pub const RFM_NEIGHBOUR_MOMENTS: &str = "rfm_neighbour_moments";
+pub const RFM_NEIGHBOUR_MOMENTS_SUMMARY: &str = "rfm_neighbour_moments_summary";
+pub const RFM_STRUCTURE_FACTOR: &str = "rfm_structure_factor";
+pub const RFM_STRUCTURE_FACTOR_SUMMARY: &str = "rfm_structure_factor_summary";
+pub const RFM_RADIAL: &str = "rfm_radial_distribution";
+pub const RFM_RADIAL_SUMMARY: &str = "rfm_radial_distribution_summary";
 
 /// Buffered rows of the RFM tables.
 #[derive(Default)]
@@ -493,6 +499,22 @@ pub struct RfmBuffer {
     pub series: Vec<(u64, u32, crate::rfm::observe::TimeRow)>,
     pub moments: Vec<(u64, u32, crate::rfm::observe::MomentRow)>,
     pub hist: Vec<(u64, u32, crate::rfm::observe::HistRow)>,
+    pub neighbour_moments: Vec<(u64, u32, crate::rfm::structure::NeighbourMomentRow)>,
+    pub sk: Vec<(u64, u32, crate::rfm::structure::SkRow)>,
+    pub radial: Vec<(u64, u32, crate::rfm::structure::RadialRow)>,
+}
+
+fn f64_col<T>(v: &[T], f: impl Fn(&T) -> f64) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<arrow_array::Float64Array>())
+}
+fn opt_f64_col<T>(v: &[T], f: impl Fn(&T) -> Option<f64>) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<arrow_array::Float64Array>())
+}
+fn u32_col<T>(v: &[T], f: impl Fn(&T) -> u32) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<arrow_array::UInt32Array>())
+}
+fn u64_col<T>(v: &[T], f: impl Fn(&T) -> u64) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<arrow_array::UInt64Array>())
 }
 
 impl RfmBuffer {
@@ -503,10 +525,27 @@ impl RfmBuffer {
             .extend(out.moments.iter().map(|r| (run_id, point_id, r.clone())));
         self.hist
             .extend(out.histograms.iter().map(|r| (run_id, point_id, r.clone())));
+        self.neighbour_moments.extend(
+            out.neighbour_moments
+                .iter()
+                .map(|r| (run_id, point_id, r.clone())),
+        );
+        self.sk.extend(
+            out.structure_factor
+                .iter()
+                .map(|r| (run_id, point_id, r.clone())),
+        );
+        self.radial
+            .extend(out.radial.iter().map(|r| (run_id, point_id, r.clone())));
     }
 
     pub fn rows(&self) -> usize {
-        self.series.len() + self.moments.len() + self.hist.len()
+        self.series.len()
+            + self.moments.len()
+            + self.hist.len()
+            + self.neighbour_moments.len()
+            + self.sk.len()
+            + self.radial.len()
     }
 
     /// The non-empty tables as (name, batch); empties the buffer.
@@ -631,9 +670,75 @@ impl RfmBuffer {
                 RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("histogram batch"),
             ));
         }
+        if !self.neighbour_moments.is_empty() {
+            let v = &self.neighbour_moments;
+            let mut f = id_fields();
+            f.extend([
+                Field::new("h", DataType::UInt32, false),
+                Field::new("order", DataType::UInt32, false),
+                Field::new("value", DataType::Float64, false),
+                Field::new("sem", DataType::Float64, true),
+            ]);
+            let mut a = ids(&v.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(u32_col(v, |r| r.2.h));
+            a.push(u32_col(v, |r| r.2.order));
+            a.push(f64_col(v, |r| r.2.value));
+            a.push(opt_f64_col(v, |r| r.2.sem));
+            out.push((
+                RFM_NEIGHBOUR_MOMENTS,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("neighbour moments"),
+            ));
+        }
+        if !self.sk.is_empty() {
+            let v = &self.sk;
+            let mut f = id_fields();
+            f.extend([
+                Field::new("n2", DataType::UInt64, false),
+                Field::new("k", DataType::Float64, false),
+                Field::new("n_vectors", DataType::UInt64, false),
+                Field::new("s", DataType::Float64, false),
+                Field::new("sem", DataType::Float64, true),
+            ]);
+            let mut a = ids(&v.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(u64_col(v, |r| r.2.n2));
+            a.push(f64_col(v, |r| r.2.k));
+            a.push(u64_col(v, |r| r.2.n_vectors));
+            a.push(f64_col(v, |r| r.2.s));
+            a.push(opt_f64_col(v, |r| r.2.sem));
+            out.push((
+                RFM_STRUCTURE_FACTOR,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("structure factor"),
+            ));
+        }
+        if !self.radial.is_empty() {
+            let v = &self.radial;
+            let mut f = id_fields();
+            f.extend([
+                Field::new("r_lo", DataType::Float64, false),
+                Field::new("r_hi", DataType::Float64, false),
+                Field::new("count", DataType::UInt64, false),
+                Field::new("g", DataType::Float64, false),
+                Field::new("g_sem", DataType::Float64, true),
+                Field::new("c", DataType::Float64, false),
+            ]);
+            let mut a = ids(&v.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(f64_col(v, |r| r.2.r_lo));
+            a.push(f64_col(v, |r| r.2.r_hi));
+            a.push(u64_col(v, |r| r.2.count));
+            a.push(f64_col(v, |r| r.2.g));
+            a.push(opt_f64_col(v, |r| r.2.g_sem));
+            a.push(f64_col(v, |r| r.2.c));
+            out.push((
+                RFM_RADIAL,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("radial distribution"),
+            ));
+        }
         self.series.clear();
         self.moments.clear();
         self.hist.clear();
+        self.neighbour_moments.clear();
+        self.sk.clear();
+        self.radial.clear();
         out
     }
 }

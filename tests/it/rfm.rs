@@ -1,5 +1,6 @@
 //! The `rfm` model through the whole engine: a small 2D campaign runs, its tables are
-//! consistent, and an interrupted (SIGKILL) campaign resumes to identical tables.
+//! consistent, and an interrupted (SIGKILL) campaign resumes to identical tables; a small 1D
+//! campaign writes the neighbour-distance tables.
 
 use std::time::Duration;
 
@@ -22,22 +23,39 @@ fn manifest() -> serde_json::Value {
             "warmup": 0.05,
             "duration": 0.1,
             "sample_every": 1000,
-            "observables": ["velocity_moments", "velocity_histogram"],
-            "velocity_histogram": {"range": [-3, 3], "bins": 300}
+            "observables": ["velocity_moments", "velocity_histogram", "structure_factor", "radial_distribution"],
+            "velocity_histogram": {"range": [-3, 3], "bins": 300},
+            "structure_factor": {"k_max": 30, "every": 5}
         },
         "sweep": {"restitution_normal": [0.3, 0.9]}
     })
 }
 
-const TABLES: [(&str, &[&str]); 7] = [
+const TABLES: [(&str, &[&str]); 11] = [
     ("runs", &["run_id"]),
     ("rfm_timeseries", &["run_id", "t"]),
     ("rfm_moments", &["run_id", "order"]),
     ("rfm_histograms", &["run_id", "lo"]),
+    ("rfm_structure_factor", &["run_id", "n2"]),
+    ("rfm_radial_distribution", &["run_id", "r_lo"]),
     ("rfm_timeseries_summary", &["point_id", "t"]),
     ("rfm_moments_summary", &["point_id", "order"]),
     ("rfm_histograms_summary", &["point_id", "lo"]),
+    ("rfm_structure_factor_summary", &["point_id", "n2"]),
+    ("rfm_radial_distribution_summary", &["point_id", "r_lo"]),
 ];
+
+/// Number of shells n_x^2 + n_y^2 = s, 0 < s <= cut.
+fn shells(cut: i64) -> usize {
+    let m = (cut as f64).sqrt() as i64 + 1;
+    let mut v: Vec<i64> = (-m..=m)
+        .flat_map(|a| (-m..=m).map(move |b| a * a + b * b))
+        .filter(|&s| s > 0 && s <= cut)
+        .collect();
+    v.sort_unstable();
+    v.dedup();
+    v.len()
+}
 
 #[test]
 fn rfm_campaign_runs_and_resumes_identically() {
@@ -69,6 +87,25 @@ fn rfm_campaign_runs_and_resumes_identically() {
     assert_eq!(read_table(&a, "rfm_moments").rows.len(), 4 * 12);
     assert_eq!(read_table(&a, "rfm_histograms").rows.len(), 4 * 302);
     assert_eq!(read_table(&a, "rfm_moments_summary").rows.len(), 2 * 12);
+    // S(k): one row per shell |n|^2 <= 30^2; g(R): default R_max = L/2 in bins of d/20.
+    let n_shells = shells(900);
+    assert_eq!(
+        read_table(&a, "rfm_structure_factor").rows.len(),
+        4 * n_shells
+    );
+    assert_eq!(
+        read_table(&a, "rfm_structure_factor_summary").rows.len(),
+        2 * n_shells
+    );
+    let l = (400.0 * std::f64::consts::PI * 1.5e-3f64.powi(2) / 0.3).sqrt();
+    let bins = (0.5 * l / (3e-3 / 20.0)).ceil() as usize;
+    assert_eq!(
+        read_table(&a, "rfm_radial_distribution").rows.len(),
+        4 * bins
+    );
+    let gs = read_table(&a, "rfm_radial_distribution_summary");
+    assert_eq!(gs.rows.len(), 2 * bins);
+    assert!(gs.column("n_replicas").iter().all(|c| c.as_u64() == 2));
 
     // Interrupted twice with SIGKILL and resumed: the same tables, bit for bit.
     for delay in [300u64, 700] {
@@ -118,4 +155,68 @@ fn rfm_campaign_runs_and_resumes_identically() {
             }
         }
     }
+}
+
+/// A 1D campaign with neighbour distances: histograms per h (log bins + 2 out-of-range rows)
+/// in `rfm_histograms`, 9 moments per h in `rfm_neighbour_moments` and its summary.
+#[test]
+fn rfm_1d_neighbour_tables() {
+    let _g = heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("m.json");
+    write_json(
+        &m,
+        &json!({
+            "name": "rfm-1d-it",
+            "model": "rfm",
+            "seed": 5,
+            "replicas": 2,
+            "params": {
+                "dim": 1,
+                "n_particles": 200,
+                "reduced_length": 0.5,
+                "warmup": 0.02,
+                "duration": 0.05,
+                "sample_every": 1000,
+                "observables": ["neighbour_distances"],
+                "neighbour_distances": {"h_max": 2, "range": [1e-7, 0.5], "bins_per_decade": 10}
+            }
+        }),
+    );
+    let log = dir.path().join("log.txt");
+    let a = dir.path().join("A");
+    let code = run_granular(
+        &[
+            "run",
+            m.to_str().unwrap(),
+            "--out",
+            a.to_str().unwrap(),
+            "--threads",
+            "2",
+            "--quiet",
+        ],
+        &log,
+        Duration::from_secs(300),
+    );
+    assert_eq!(code, Some(0), "{}", log_text(&log));
+    // log10(0.5 / 1e-7) = 6.7 decades -> 67 bins, + 2 out-of-range rows, per h = 1, 2.
+    let hist = read_table(&a, "rfm_histograms");
+    assert_eq!(hist.rows.len(), 2 * 2 * 69);
+    assert!(hist
+        .column("kind")
+        .iter()
+        .all(|c| c.as_str() == "neighbour_distance"));
+    let total: u64 = hist.column("count").iter().map(|c| c.as_u64()).sum();
+    assert_eq!(
+        total,
+        2 * 2 * 50 * 200,
+        "N separations per h, snapshot and run"
+    );
+    assert_eq!(
+        read_table(&a, "rfm_neighbour_moments").rows.len(),
+        2 * 2 * 9
+    );
+    let s = read_table(&a, "rfm_neighbour_moments_summary");
+    assert_eq!(s.rows.len(), 2 * 9);
+    assert_eq!(read_table(&a, "rfm_histograms_summary").rows.len(), 2 * 69);
 }
