@@ -184,7 +184,10 @@ impl Campaign {
                 _ => false,
             })
         };
-        let mut v = vec![t::RFM_TIMESERIES, t::RFM_TIMESERIES_SUMMARY];
+        let mut v = vec![t::RFM_TIMESERIES, t::RFM_TIMESERIES_SUMMARY, t::RFM_TEMPERATURE_BLOCKS];
+        if wants(O::Snapshot) {
+            v.push(t::RFM_SNAPSHOTS);
+        }
         if wants(O::VelocityMoments) {
             v.extend([t::RFM_MOMENTS, t::RFM_MOMENTS_SUMMARY]);
         }

@@ -95,6 +95,19 @@ pub struct RfmParams {
     /// Settings of the 2D radial distribution (with `radial_distribution`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radial_distribution: Option<RadialSpec>,
+    /// Times of the configuration snapshots (with `snapshot`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub snapshot: Option<SnapshotSpec>,
+}
+
+/// Snapshots of every particle's position and velocity.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SnapshotSpec {
+    /// Simulated times (s) in [warmup, warmup + duration]; each snapshot is taken at the first
+    /// sample time at or after it (samples are every `sample_every` steps).
+    #[schemars(length(min = 1))]
+    pub times: Vec<f64>,
 }
 
 fn radius() -> f64 {
@@ -151,6 +164,8 @@ pub enum RfmObservable {
     /// 2D: radial distribution g(R) and cumulative count C(R) (spec 2.8; see
     /// `radial_distribution`).
     RadialDistribution,
+    /// Positions and velocities of every particle at given times (see `snapshot`).
+    Snapshot,
 }
 
 impl RfmObservable {
@@ -163,6 +178,7 @@ impl RfmObservable {
             RfmObservable::NeighbourDistances => "neighbour_distances",
             RfmObservable::StructureFactor => "structure_factor",
             RfmObservable::RadialDistribution => "radial_distribution",
+            RfmObservable::Snapshot => "snapshot",
         }
     }
 }
@@ -385,6 +401,23 @@ impl RfmParams {
         })
     }
 
+    /// Cross-field rules of the snapshot observable.
+    fn check_snapshot(&self, path: &str, errors: &mut Vec<(String, String)>) {
+        match (&self.snapshot, self.wants(RfmObservable::Snapshot)) {
+            (Some(_), false) => errors.push((format!("{path}/snapshot"), "given without the observable \"snapshot\"".into())),
+            (None, true) => errors.push((format!("{path}/snapshot"), "expected {\"times\": [..]} with the observable \"snapshot\"".into())),
+            (Some(s), true) => {
+                let (a, b) = (self.warmup, self.warmup + self.duration);
+                for (i, t) in s.times.iter().enumerate() {
+                    if !(*t >= a && *t <= b) {
+                        errors.push((format!("{path}/snapshot/times/{i}"), format!("expected a time in [warmup, warmup + duration] = [{a}, {b}], got {t}")));
+                    }
+                }
+            }
+            (None, false) => {}
+        }
+    }
+
     /// Cross-field rules of the structure observables.
     fn check_structure(&self, path: &str, errors: &mut Vec<(String, String)>) {
         use RfmObservable as O;
@@ -557,6 +590,7 @@ impl RfmParams {
             }
         }
         self.check_structure(path, errors);
+        self.check_snapshot(path, errors);
         let cfg = self.config();
         if cfg.validate().is_ok() {
             let samples = cfg.duration_steps() / self.sample_every;

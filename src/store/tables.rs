@@ -492,6 +492,8 @@ pub const RFM_STRUCTURE_FACTOR: &str = "rfm_structure_factor";
 pub const RFM_STRUCTURE_FACTOR_SUMMARY: &str = "rfm_structure_factor_summary";
 pub const RFM_RADIAL: &str = "rfm_radial_distribution";
 pub const RFM_RADIAL_SUMMARY: &str = "rfm_radial_distribution_summary";
+pub const RFM_TEMPERATURE_BLOCKS: &str = "rfm_temperature_blocks";
+pub const RFM_SNAPSHOTS: &str = "rfm_snapshots";
 
 /// Buffered rows of the RFM tables.
 #[derive(Default)]
@@ -502,6 +504,8 @@ pub struct RfmBuffer {
     pub neighbour_moments: Vec<(u64, u32, crate::rfm::structure::NeighbourMomentRow)>,
     pub sk: Vec<(u64, u32, crate::rfm::structure::SkRow)>,
     pub radial: Vec<(u64, u32, crate::rfm::structure::RadialRow)>,
+    pub tblocks: Vec<(u64, u32, crate::rfm::observe::TemperatureBlockRow)>,
+    pub snaps: Vec<(u64, u32, crate::rfm::observe::SnapshotRow)>,
 }
 
 fn f64_col<T>(v: &[T], f: impl Fn(&T) -> f64) -> ArrayRef {
@@ -537,6 +541,8 @@ impl RfmBuffer {
         );
         self.radial
             .extend(out.radial.iter().map(|r| (run_id, point_id, r.clone())));
+        self.tblocks.extend(out.temperature_blocks.iter().map(|r| (run_id, point_id, r.clone())));
+        self.snaps.extend(out.snapshots.iter().map(|r| (run_id, point_id, r.clone())));
     }
 
     pub fn rows(&self) -> usize {
@@ -546,6 +552,8 @@ impl RfmBuffer {
             + self.neighbour_moments.len()
             + self.sk.len()
             + self.radial.len()
+            + self.tblocks.len()
+            + self.snaps.len()
     }
 
     /// The non-empty tables as (name, batch); empties the buffer.
@@ -733,12 +741,52 @@ impl RfmBuffer {
                 RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("radial distribution"),
             ));
         }
+        if !self.tblocks.is_empty() {
+            let v = &self.tblocks;
+            let mut f = id_fields();
+            f.extend([
+                Field::new("block", DataType::UInt32, false),
+                Field::new("t_from", DataType::Float64, false),
+                Field::new("t_to", DataType::Float64, false),
+                Field::new("n_samples", DataType::UInt32, false),
+                Field::new("temperature", DataType::Float64, false),
+            ]);
+            let mut a = ids(&v.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(u32_col(v, |r| r.2.block));
+            a.push(f64_col(v, |r| r.2.t_from));
+            a.push(f64_col(v, |r| r.2.t_to));
+            a.push(u32_col(v, |r| r.2.n_samples));
+            a.push(f64_col(v, |r| r.2.temperature));
+            out.push((RFM_TEMPERATURE_BLOCKS, RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("temperature blocks")));
+        }
+        if !self.snaps.is_empty() {
+            let v = &self.snaps;
+            let mut f = id_fields();
+            f.extend([
+                Field::new("t", DataType::Float64, false),
+                Field::new("particle", DataType::UInt32, false),
+                Field::new("x", DataType::Float64, false),
+                Field::new("y", DataType::Float64, true),
+                Field::new("vx", DataType::Float64, false),
+                Field::new("vy", DataType::Float64, true),
+            ]);
+            let mut a = ids(&v.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(f64_col(v, |r| r.2.t));
+            a.push(u32_col(v, |r| r.2.particle));
+            a.push(f64_col(v, |r| r.2.x));
+            a.push(opt_f64_col(v, |r| r.2.y));
+            a.push(f64_col(v, |r| r.2.vx));
+            a.push(opt_f64_col(v, |r| r.2.vy));
+            out.push((RFM_SNAPSHOTS, RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("snapshots")));
+        }
         self.series.clear();
         self.moments.clear();
         self.hist.clear();
         self.neighbour_moments.clear();
         self.sk.clear();
         self.radial.clear();
+        self.tblocks.clear();
+        self.snaps.clear();
         out
     }
 }

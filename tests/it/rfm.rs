@@ -31,8 +31,9 @@ fn manifest() -> serde_json::Value {
     })
 }
 
-const TABLES: [(&str, &[&str]); 11] = [
+const TABLES: [(&str, &[&str]); 12] = [
     ("runs", &["run_id"]),
+    ("rfm_temperature_blocks", &["run_id", "block"]),
     ("rfm_timeseries", &["run_id", "t"]),
     ("rfm_moments", &["run_id", "order"]),
     ("rfm_histograms", &["run_id", "lo"]),
