@@ -184,7 +184,11 @@ impl Campaign {
                 _ => false,
             })
         };
-        let mut v = vec![t::RFM_TIMESERIES, t::RFM_TIMESERIES_SUMMARY, t::RFM_TEMPERATURE_BLOCKS];
+        let mut v = vec![
+            t::RFM_TIMESERIES,
+            t::RFM_TIMESERIES_SUMMARY,
+            t::RFM_TEMPERATURE_BLOCKS,
+        ];
         if wants(O::Snapshot) {
             v.push(t::RFM_SNAPSHOTS);
         }

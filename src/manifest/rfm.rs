@@ -404,8 +404,14 @@ impl RfmParams {
     /// Cross-field rules of the snapshot observable.
     fn check_snapshot(&self, path: &str, errors: &mut Vec<(String, String)>) {
         match (&self.snapshot, self.wants(RfmObservable::Snapshot)) {
-            (Some(_), false) => errors.push((format!("{path}/snapshot"), "given without the observable \"snapshot\"".into())),
-            (None, true) => errors.push((format!("{path}/snapshot"), "expected {\"times\": [..]} with the observable \"snapshot\"".into())),
+            (Some(_), false) => errors.push((
+                format!("{path}/snapshot"),
+                "given without the observable \"snapshot\"".into(),
+            )),
+            (None, true) => errors.push((
+                format!("{path}/snapshot"),
+                "expected {\"times\": [..]} with the observable \"snapshot\"".into(),
+            )),
             (Some(s), true) => {
                 let (a, b) = (self.warmup, self.warmup + self.duration);
                 for (i, t) in s.times.iter().enumerate() {

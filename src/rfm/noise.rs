@@ -4,19 +4,168 @@
 //! momentum then stays at its initial value (zero) up to round-off, in 1D and in 2D
 //! (spec 6.9).
 //!
-//! Normals come in bulk from the run's ChaCha8 stream ([`crate::rng::RunRng`]) by the
-//! ziggurat method (exact: a ziggurat sample is an exact normal up to the rounding of its
-//! 53-bit uniform). A step draws all its normals at once, so the stream position between
+//! Normals come in bulk from the run's ChaCha8 stream ([`crate::rng::RunRng`]) by a
+//! 256-layer ziggurat written over the raw 64-bit words (exact: a ziggurat sample is an
+//! exact normal up to the rounding of its 53-bit uniform; the tables are solved to
+//! round-off at start-up). A step draws all its normals at once, so the stream position between
 //! steps is a function of the step count alone (checkpoints restore it exactly).
 
-use crate::rng::RunRng;
+use std::sync::OnceLock;
 
-/// Fill `out` with independent standard normals.
-#[inline]
-pub fn fill_normals(rng: &mut RunRng, out: &mut [f64]) {
-    for z in out.iter_mut() {
-        *z = rng.normal();
+use super::stream::WordStream;
+
+/// Layers of the normal ziggurat (the layer index is the low 8 bits of a word, the sign
+/// bit 8, the value bits 11-63).
+const LAYERS: usize = 256;
+const SIGN_BIT: u64 = LAYERS as u64;
+
+/// Ziggurat tables for the half-normal density f(x) = exp(-x^2/2) (Marsaglia & Tsang 2000)
+/// with `LAYERS` layers of equal area `v`: `x[0] = v / f(r)` (the base strip, whose part
+/// beyond `x[1] = r` stands for the tail), `x[i]` decreasing to `x[LAYERS] = 0`, and
+/// `f[i] = f(x[i])`. `r` is solved (bisection on the top layer's area) so that all layers
+/// have area `v` to round-off; so the method is exact.
+struct Zig {
+    /// `x[i] * 2^-53`: the candidate of layer i is `(w >> 11) * xs[i]`, uniform on [0, x[i]).
+    xs: [f64; LAYERS],
+    x: [f64; LAYERS + 1],
+    f: [f64; LAYERS + 1],
+    r: f64,
+}
+
+/// Integral of f over [r, inf): f(r) times Mills' ratio (continued fraction, r > 3).
+fn tail_area(r: f64) -> f64 {
+    let mut t = r;
+    for k in (1..=400).rev() {
+        t = r + k as f64 / t;
     }
+    (-0.5 * r * r).exp() / t
+}
+
+impl Zig {
+    /// Layer boundaries for tail start `r`, and the top layer's area minus `v` (increasing
+    /// in r; -inf when the layers reach the mode before the last one).
+    fn layers(r: f64) -> ([f64; LAYERS + 1], f64) {
+        let f = |x: f64| (-0.5 * x * x).exp();
+        let v = r * f(r) + tail_area(r);
+        let mut x = [0.0; LAYERS + 1];
+        x[0] = v / f(r);
+        x[1] = r;
+        for i in 1..LAYERS - 1 {
+            let y = v / x[i] + f(x[i]);
+            if y >= 1.0 {
+                return (x, f64::NEG_INFINITY);
+            }
+            x[i + 1] = (-2.0 * y.ln()).sqrt();
+        }
+        let top = x[LAYERS - 1] * (1.0 - f(x[LAYERS - 1]));
+        (x, top - v)
+    }
+
+    fn new() -> Self {
+        // 256 layers: r = 3.6541528853610088 (Marsaglia & Tsang); 128: 3.442619855899.
+        let (mut lo, mut hi) = (3.2, 4.0);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if Self::layers(mid).1 < 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let r = 0.5 * (lo + hi);
+        let (x, _) = Self::layers(r);
+        let f = std::array::from_fn(|i| (-0.5 * x[i] * x[i]).exp());
+        let scale = 1.0 / (1u64 << 53) as f64;
+        Zig {
+            xs: std::array::from_fn(|i| x[i] * scale),
+            x,
+            f,
+            r,
+        }
+    }
+
+    fn get() -> &'static Zig {
+        static Z: OnceLock<Zig> = OnceLock::new();
+        Z.get_or_init(Zig::new)
+    }
+
+    /// The candidate of word `w` (layer: bits 0-7; sign: bit 8; value: bits 11-63) and
+    /// whether it lies inside its layer's inner rectangle (then it is the sample; else,
+    /// probability ~1.4%, [`normal_slow`](Self::normal_slow) finishes it).
+    #[inline(always)]
+    fn candidate(&self, w: u64) -> (f64, bool) {
+        let i = (w & (LAYERS as u64 - 1)) as usize;
+        let x = (w >> 11) as f64 * self.xs[i];
+        (signed(x, w), x < self.x[i + 1])
+    }
+
+    /// The wedges, the tail, and rejections (which restart with a fresh word).
+    #[cold]
+    #[inline(never)]
+    fn normal_slow(&self, rng: &mut WordStream, mut w: u64) -> f64 {
+        let mut i = (w & (LAYERS as u64 - 1)) as usize;
+        let mut x = (w >> 11) as f64 * self.xs[i];
+        loop {
+            if i == 0 {
+                // Tail beyond r (Marsaglia 1964).
+                loop {
+                    let a = -rng.f64_open0().ln() / self.r;
+                    let b = -rng.f64_open0().ln();
+                    if 2.0 * b > a * a {
+                        return signed(self.r + a, w);
+                    }
+                }
+            }
+            let y = self.f[i] + (self.f[i + 1] - self.f[i]) * rng.f64();
+            if y < (-0.5 * x * x).exp() {
+                return signed(x, w);
+            }
+            w = rng.u64();
+            i = (w & (LAYERS as u64 - 1)) as usize;
+            x = (w >> 11) as f64 * self.xs[i];
+            if x < self.x[i + 1] {
+                return signed(x, w);
+            }
+        }
+    }
+}
+
+/// `x >= 0` with the sign bit `SIGN_BIT` of `w`.
+#[inline(always)]
+fn signed(x: f64, w: u64) -> f64 {
+    f64::from_bits(x.to_bits() | ((w & SIGN_BIT) << (63 - SIGN_BIT.trailing_zeros())))
+}
+
+/// Fill `out` with independent standard normals (256-layer ziggurat): one 64-bit word
+/// each, in order, then more words for the ~1.4% of candidates outside their inner
+/// rectangle, in order of their slot. `words` and `rejected` are scratch space.
+pub fn fill_normals_with(
+    rng: &mut WordStream,
+    out: &mut [f64],
+    words: &mut Vec<u64>,
+    rejected: &mut Vec<u32>,
+) {
+    let n = out.len();
+    words.resize(n, 0);
+    rejected.resize(n, 0);
+    rng.fill(words);
+    let z = Zig::get();
+    // Branch-free pass: every slot gets its candidate; slots to finish are listed.
+    let mut cnt = 0;
+    for (j, (o, &w)) in out.iter_mut().zip(words.iter()).enumerate() {
+        let (x, ok) = z.candidate(w);
+        *o = x;
+        rejected[cnt] = j as u32;
+        cnt += !ok as usize;
+    }
+    for &j in &rejected[..cnt] {
+        out[j as usize] = z.normal_slow(rng, words[j as usize]);
+    }
+}
+
+/// [`fill_normals_with`] with its own scratch space.
+pub fn fill_normals(rng: &mut WordStream, out: &mut [f64]) {
+    fill_normals_with(rng, out, &mut Vec::new(), &mut Vec::new());
 }
 
 /// Generates the symmetrised kicks of one step.
@@ -24,6 +173,8 @@ pub struct Kicks {
     /// Standard deviation sqrt(2 D h) / M of one component.
     pub sigma: f64,
     buf: Vec<f64>,
+    words: Vec<u64>,
+    rejected: Vec<u32>,
 }
 
 impl Kicks {
@@ -31,6 +182,8 @@ impl Kicks {
         Kicks {
             sigma: (2.0 * noise_strength * h).sqrt() / mass,
             buf: Vec::new(),
+            words: Vec::new(),
+            rejected: Vec::new(),
         }
     }
 
@@ -39,28 +192,65 @@ impl Kicks {
         self.sigma > 0.0
     }
 
-    /// Add one step's symmetrised kicks to the velocities `v` (N particles of D components);
-    /// the normals are drawn particle by particle, components innermost.
-    pub fn apply<const D: usize>(&mut self, rng: &mut RunRng, v: &mut [[f64; D]]) {
+    /// Add one step's kicks `sigma z` to the velocities `v` (N particles of D components;
+    /// the normals are drawn particle by particle, components innermost) *without* the
+    /// symmetrisation, and return `(c, m)`: the common shift `c = sigma mean(z)` that the
+    /// caller must still subtract from every velocity (the symmetrised kick is
+    /// `sigma (z - mean(z))`), and the largest |v|^2 of the unshifted kicked velocities.
+    /// Pair flows depend on velocity differences only, so the caller may defer the shift.
+    pub fn kick<const D: usize>(
+        &mut self,
+        rng: &mut WordStream,
+        v: &mut [[f64; D]],
+    ) -> ([f64; D], f64) {
         let n = v.len();
         self.buf.resize(n * D, 0.0);
-        fill_normals(rng, &mut self.buf);
-        let mut mean = [0.0; D];
-        for (i, _) in v.iter().enumerate() {
-            for k in 0..D {
-                mean[k] += self.buf[i * D + k];
-            }
-        }
-        let mut shift = [0.0; D];
-        for k in 0..D {
-            shift[k] = mean[k] / n as f64;
-        }
+        fill_normals_with(rng, &mut self.buf, &mut self.words, &mut self.rejected);
         let s = self.sigma;
-        for (vi, z) in v.iter_mut().zip(self.buf.chunks_exact(D)) {
-            for k in 0..D {
-                vi[k] += s * (z[k] - shift[k]);
+        // Eight independent partial sums and (8 / D) partial maxima break the dependency
+        // chains; lane j of `acc` holds component j % D. Fixed order: deterministic.
+        const W: usize = 8;
+        let vf = v.as_flattened_mut();
+        let mut acc = [0.0; W];
+        let mut mx = [0.0; W];
+        let mut vc = vf.chunks_exact_mut(W);
+        let mut zc = self.buf.chunks_exact(W);
+        for (vv, zz) in (&mut vc).zip(&mut zc) {
+            for j in 0..W {
+                acc[j] += zz[j];
+                vv[j] += s * zz[j];
+            }
+            for p in 0..W / D {
+                let mut a2 = 0.0;
+                for k in 0..D {
+                    a2 += vv[p * D + k] * vv[p * D + k];
+                }
+                if a2 > mx[p] {
+                    mx[p] = a2;
+                }
             }
         }
+        for (vv, zz) in vc
+            .into_remainder()
+            .chunks_exact_mut(D)
+            .zip(zc.remainder().chunks_exact(D))
+        {
+            let mut a2 = 0.0;
+            for k in 0..D {
+                acc[k] += zz[k];
+                vv[k] += s * zz[k];
+                a2 += vv[k] * vv[k];
+            }
+            if a2 > mx[0] {
+                mx[0] = a2;
+            }
+        }
+        let mut sum = [0.0; D];
+        for j in 0..W {
+            sum[j % D] += acc[j];
+        }
+        let m = mx.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a });
+        (std::array::from_fn(|k| s * (sum[k] / n as f64)), m)
     }
 }
 
@@ -72,7 +262,7 @@ mod tests {
     /// (SE: 1e-3, 1.41e-3 and 9.8e-3 for 3).
     #[test]
     fn bulk_normals_have_normal_moments() {
-        let mut rng = RunRng::new(5);
+        let mut rng = WordStream::from_rng(&crate::rng::RunRng::new(5));
         let mut b = vec![0.0; 1_000_000];
         fill_normals(&mut rng, &mut b);
         let n = b.len() as f64;
@@ -85,5 +275,8 @@ mod tests {
         // Tail: P(|z| > 3) = 2.6998e-3, SE 5.2e-5.
         let tail = b.iter().filter(|z| z.abs() > 3.0).count() as f64 / n;
         assert!((tail - 2.6998e-3).abs() < 5.0 * 5.2e-5, "{tail}");
+        // Beyond the ziggurat's base strip (r = 3.654): P(|z| > 3.7) = 2.1564e-4, SE 1.47e-5.
+        let far = b.iter().filter(|z| z.abs() > 3.7).count() as f64 / n;
+        assert!((far - 2.1564e-4).abs() < 5.0 * 1.47e-5, "{far}");
     }
 }

@@ -174,7 +174,11 @@ impl RfmRun {
             snap_times: p
                 .wants(RfmObservable::Snapshot)
                 .then(|| {
-                    let mut t = p.snapshot.as_ref().map(|s| s.times.clone()).unwrap_or_default();
+                    let mut t = p
+                        .snapshot
+                        .as_ref()
+                        .map(|s| s.times.clone())
+                        .unwrap_or_default();
                     t.sort_by(f64::total_cmp);
                     t
                 })
@@ -265,7 +269,8 @@ impl RfmRun {
         let s = &mut self.sampler;
         s.series.push(TimeRow { t, temperature });
         if s.snap_next < s.snap_times.len() && s.snap_times[s.snap_next] <= t * (1.0 + 1e-12) {
-            while s.snap_next < s.snap_times.len() && s.snap_times[s.snap_next] <= t * (1.0 + 1e-12) {
+            while s.snap_next < s.snap_times.len() && s.snap_times[s.snap_next] <= t * (1.0 + 1e-12)
+            {
                 s.snap_next += 1;
             }
             let (x, v) = (self.sim.positions(), self.sim.velocities());
@@ -374,7 +379,13 @@ impl RfmRun {
             }
             for (b, a) in acc.into_iter().enumerate() {
                 if a.2 > 0 {
-                    temperature_blocks.push(TemperatureBlockRow { block: b as u32, t_from: a.0, t_to: a.1, n_samples: a.2, temperature: a.3 / a.2 as f64 });
+                    temperature_blocks.push(TemperatureBlockRow {
+                        block: b as u32,
+                        t_from: a.0,
+                        t_to: a.1,
+                        n_samples: a.2,
+                        temperature: a.3 / a.2 as f64,
+                    });
                 }
             }
         }
@@ -721,19 +732,44 @@ mod snapshot_tests {
             assert_eq!(ts.len(), 3, "dim {dim}: {ts:?}");
             assert_eq!(out.snapshots.len(), 3 * 200);
             // 0.01 is before the first sample (0.0105): snapped to it; 0.0153 -> 0.0155.
-            assert!((ts[0] - 0.0105).abs() < 1e-12 && (ts[1] - 0.0155).abs() < 1e-12 && (ts[2] - 0.03).abs() < 1e-12, "{ts:?}");
+            assert!(
+                (ts[0] - 0.0105).abs() < 1e-12
+                    && (ts[1] - 0.0155).abs() < 1e-12
+                    && (ts[2] - 0.03).abs() < 1e-12,
+                "{ts:?}"
+            );
             for &t in &ts {
                 let rows: Vec<&SnapshotRow> = out.snapshots.iter().filter(|s| s.t == t).collect();
                 let n = rows.len() as f64;
-                let (mx, my) = (rows.iter().map(|s| s.vx).sum::<f64>() / n, rows.iter().map(|s| s.vy.unwrap_or(0.0)).sum::<f64>() / n);
-                let temp = rows.iter().map(|s| (s.vx - mx).powi(2) + (s.vy.unwrap_or(0.0) - my).powi(2)).sum::<f64>() / n;
-                let want = out.timeseries.iter().find(|r| r.t == t).unwrap().temperature;
-                assert!((temp - want).abs() <= 1e-12 * want, "dim {dim} t {t}: {temp} vs {want}");
+                let (mx, my) = (
+                    rows.iter().map(|s| s.vx).sum::<f64>() / n,
+                    rows.iter().map(|s| s.vy.unwrap_or(0.0)).sum::<f64>() / n,
+                );
+                let temp = rows
+                    .iter()
+                    .map(|s| (s.vx - mx).powi(2) + (s.vy.unwrap_or(0.0) - my).powi(2))
+                    .sum::<f64>()
+                    / n;
+                let want = out
+                    .timeseries
+                    .iter()
+                    .find(|r| r.t == t)
+                    .unwrap()
+                    .temperature;
+                assert!(
+                    (temp - want).abs() <= 1e-12 * want,
+                    "dim {dim} t {t}: {temp} vs {want}"
+                );
             }
             let total: u32 = out.temperature_blocks.iter().map(|b| b.n_samples).sum();
             assert_eq!(total as usize, out.timeseries.len());
             assert_eq!(out.temperature_blocks.len(), BLOCKS);
-            let weighted = out.temperature_blocks.iter().map(|b| b.temperature * b.n_samples as f64).sum::<f64>() / total as f64;
+            let weighted = out
+                .temperature_blocks
+                .iter()
+                .map(|b| b.temperature * b.n_samples as f64)
+                .sum::<f64>()
+                / total as f64;
             let mean = out.timeseries.iter().map(|r| r.temperature).sum::<f64>() / total as f64;
             assert!((weighted - mean).abs() < 1e-12 * mean);
         }
@@ -745,6 +781,10 @@ mod snapshot_tests {
         let mut errors = Vec::new();
         p.check("/params", &mut errors);
         let paths: Vec<&str> = errors.iter().map(|e| e.0.as_str()).collect();
-        assert!(paths.contains(&"/params/snapshot/times/0") && paths.contains(&"/params/snapshot/times/1"), "{errors:?}");
+        assert!(
+            paths.contains(&"/params/snapshot/times/0")
+                && paths.contains(&"/params/snapshot/times/1"),
+            "{errors:?}"
+        );
     }
 }

@@ -13,6 +13,7 @@ use super::integrate::PairPropagator;
 use super::neighbours::{wrap, NeighbourList};
 use super::noise::Kicks;
 use super::params::{InitialLayout, RfmConfig};
+use super::stream::WordStream;
 use crate::rng::{RngPosition, RunRng};
 
 /// Skin of the 2D neighbour list, in diameters.
@@ -45,11 +46,14 @@ pub struct Core<const D: usize> {
     pub v: Vec<[f64; D]>,
     x_ref: Vec<[f64; D]>,
     max_disp2: f64,
-    pub rng: RunRng,
+    /// The run's stream (continues the [`RunRng`] that drew the initial state).
+    pub rng: WordStream,
     pub step: u64,
     nl: NeighbourList<D>,
     /// This step's pair corrections: (i, j, dx_i, dv_i); j gets the opposite.
     corr: Vec<(u32, u32, [f64; D], [f64; D])>,
+    /// 1D: this step's candidate ring pairs (scratch).
+    cand: Vec<u32>,
     /// Neighbour-list builds so far (diagnostic, not part of the state).
     pub builds: u64,
 }
@@ -69,10 +73,11 @@ impl<const D: usize> Core<D> {
             v,
             x_ref: Vec::new(),
             max_disp2: 0.0,
-            rng,
+            rng: WordStream::from_rng(&rng),
             step: 0,
             nl: NeighbourList::default(),
             corr: Vec::new(),
+            cand: Vec::new(),
             builds: 0,
         };
         if D > 1 {
@@ -137,22 +142,54 @@ impl<const D: usize> Core<D> {
         self.corr.clear();
         let n = self.x.len();
         if D == 1 {
-            for i in 0..n {
+            // Ring pairs (i, i+1) and (n-1, 0) that can touch within the step
+            // (gap < d + 2 h |g|): a branch-free test eight pairs at a time, then the few
+            // candidates in order.
+            let mut cand = std::mem::take(&mut self.cand);
+            cand.clear();
+            let (x, v) = (self.x.as_flattened(), self.v.as_flattened());
+            let (d, h2) = (self.d, 2.0 * self.h);
+            const W: usize = 8;
+            let m = n - 1;
+            let mut i0 = 0;
+            while i0 + W <= m {
+                let mut near = [false; W];
+                for j in 0..W {
+                    let i = i0 + j;
+                    near[j] = !(x[i + 1] - x[i] >= d + h2 * (v[i] - v[i + 1]).abs());
+                }
+                if near.iter().any(|&b| b) {
+                    for j in 0..W {
+                        if near[j] {
+                            cand.push((i0 + j) as u32);
+                        }
+                    }
+                }
+                i0 += W;
+            }
+            for i in i0..m {
+                if !(x[i + 1] - x[i] >= d + h2 * (v[i] - v[i + 1]).abs()) {
+                    cand.push(i as u32);
+                }
+            }
+            if !(x[0] + self.l - x[m] >= d + h2 * (v[m] - v[0]).abs()) {
+                cand.push(m as u32);
+            }
+            for &i in &cand {
+                let i = i as usize;
                 let (j, wrap_l) = if i + 1 == n {
                     (0, self.l)
                 } else {
                     (i + 1, 0.0)
                 };
                 let gap = self.x[j][0] + wrap_l - self.x[i][0];
-                if gap >= self.d + 2.0 * self.h * (self.v[i][0] - self.v[j][0]).abs() {
-                    continue;
-                }
                 let mut r = [0.0; D];
                 r[0] = -gap;
                 let mut g = [0.0; D];
                 g[0] = self.v[i][0] - self.v[j][0];
                 self.pair(i, j, r, g);
             }
+            self.cand = cand;
             return;
         }
         // A pair can touch within the step only if rho < d + |g| h <= d + 2 vmax h.
@@ -173,10 +210,19 @@ impl<const D: usize> Core<D> {
     }
 
     fn step_once(&mut self) {
-        if self.kicks.active() {
-            self.kicks.apply(&mut self.rng, &mut self.v);
-        }
-        let vmax = if D > 1 { self.vmax2().sqrt() } else { 0.0 };
+        // Kick without the symmetrising shift c (pair flows see velocity differences only);
+        // the shift is subtracted in the drift pass below.
+        let (c, vmax2) = if self.kicks.active() {
+            self.kicks.kick(&mut self.rng, &mut self.v)
+        } else {
+            ([0.0; D], if D > 1 { self.vmax2() } else { 0.0 })
+        };
+        let vmax = if D > 1 {
+            // Bound on the largest shifted speed.
+            vmax2.sqrt() + c.iter().map(|a| a * a).sum::<f64>().sqrt()
+        } else {
+            0.0
+        };
         if D > 1 {
             if 2.0 * self.max_disp2.sqrt() + 6.0 * vmax * self.h > self.skin {
                 self.rebuild();
@@ -184,27 +230,67 @@ impl<const D: usize> Core<D> {
         }
         self.pair_pass(vmax);
         let h = self.h;
-        for (x, v) in self.x.iter_mut().zip(self.v.iter()) {
-            for k in 0..D {
-                x[k] += v[k] * h;
-            }
-        }
+        // A pair's (dx, dv) enters as x += dx - dv h, v += dv now, so that the drift below
+        // with the corrected velocity gives x + (v - c) h + dx.
         for &(i, j, dx, dv) in &self.corr {
             let (i, j) = (i as usize, j as usize);
             for k in 0..D {
-                self.x[i][k] += dx[k];
+                let ex = dx[k] - dv[k] * h;
+                self.x[i][k] += ex;
                 self.v[i][k] += dv[k];
-                self.x[j][k] -= dx[k];
+                self.x[j][k] -= ex;
                 self.v[j][k] -= dv[k];
             }
         }
         if D > 1 {
-            let mut m = self.max_disp2;
-            for (x, x0) in self.x.iter().zip(self.x_ref.iter()) {
-                let d2: f64 = (0..D).map(|k| (x[k] - x0[k]) * (x[k] - x0[k])).sum();
-                m = m.max(d2);
+            // Drift and the largest displacement since the list build, four particles at a
+            // time (independent maxima).
+            let mut m = [self.max_disp2; 4];
+            let mut xs = self.x.chunks_exact_mut(4);
+            let mut vs = self.v.chunks_exact_mut(4);
+            let mut rs = self.x_ref.chunks_exact(4);
+            for ((x4, v4), r4) in (&mut xs).zip(&mut vs).zip(&mut rs) {
+                for p in 0..4 {
+                    let mut d2 = 0.0;
+                    for k in 0..D {
+                        let vk = v4[p][k] - c[k];
+                        v4[p][k] = vk;
+                        x4[p][k] += vk * h;
+                        let dd = x4[p][k] - r4[p][k];
+                        d2 += dd * dd;
+                    }
+                    if d2 > m[p] {
+                        m[p] = d2;
+                    }
+                }
             }
-            self.max_disp2 = m;
+            for ((x, v), r) in xs
+                .into_remainder()
+                .iter_mut()
+                .zip(vs.into_remainder().iter_mut())
+                .zip(rs.remainder())
+            {
+                let mut d2 = 0.0;
+                for k in 0..D {
+                    let vk = v[k] - c[k];
+                    v[k] = vk;
+                    x[k] += vk * h;
+                    let dd = x[k] - r[k];
+                    d2 += dd * dd;
+                }
+                if d2 > m[0] {
+                    m[0] = d2;
+                }
+            }
+            self.max_disp2 = m.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a });
+        } else {
+            for (x, v) in self.x.iter_mut().zip(self.v.iter_mut()) {
+                for k in 0..D {
+                    let vk = v[k] - c[k];
+                    v[k] = vk;
+                    x[k] += vk * h;
+                }
+            }
         }
         self.step += 1;
     }

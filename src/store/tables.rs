@@ -541,8 +541,13 @@ impl RfmBuffer {
         );
         self.radial
             .extend(out.radial.iter().map(|r| (run_id, point_id, r.clone())));
-        self.tblocks.extend(out.temperature_blocks.iter().map(|r| (run_id, point_id, r.clone())));
-        self.snaps.extend(out.snapshots.iter().map(|r| (run_id, point_id, r.clone())));
+        self.tblocks.extend(
+            out.temperature_blocks
+                .iter()
+                .map(|r| (run_id, point_id, r.clone())),
+        );
+        self.snaps
+            .extend(out.snapshots.iter().map(|r| (run_id, point_id, r.clone())));
     }
 
     pub fn rows(&self) -> usize {
@@ -757,7 +762,10 @@ impl RfmBuffer {
             a.push(f64_col(v, |r| r.2.t_to));
             a.push(u32_col(v, |r| r.2.n_samples));
             a.push(f64_col(v, |r| r.2.temperature));
-            out.push((RFM_TEMPERATURE_BLOCKS, RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("temperature blocks")));
+            out.push((
+                RFM_TEMPERATURE_BLOCKS,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("temperature blocks"),
+            ));
         }
         if !self.snaps.is_empty() {
             let v = &self.snaps;
@@ -777,7 +785,10 @@ impl RfmBuffer {
             a.push(opt_f64_col(v, |r| r.2.y));
             a.push(f64_col(v, |r| r.2.vx));
             a.push(opt_f64_col(v, |r| r.2.vy));
-            out.push((RFM_SNAPSHOTS, RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("snapshots")));
+            out.push((
+                RFM_SNAPSHOTS,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("snapshots"),
+            ));
         }
         self.series.clear();
         self.moments.clear();
