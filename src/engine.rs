@@ -6,7 +6,7 @@ use crate::plan::ModelParams;
 use crate::rfm::observe::{RfmOutput, RfmRun};
 
 /// Layout version of the RFM checkpoint payload.
-pub const RFM_STATE_FORMAT: &str = "rfm/3";
+pub const RFM_STATE_FORMAT: &str = "rfm/4";
 
 /// Rows and counters a finished run hands to the writer.
 #[derive(Debug, Clone, Default, PartialEq)]

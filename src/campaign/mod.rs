@@ -195,7 +195,11 @@ impl Campaign {
         if wants(O::VelocityMoments) {
             v.extend([t::RFM_MOMENTS, t::RFM_MOMENTS_SUMMARY]);
         }
-        if wants(O::VelocityHistogram) || wants(O::NeighbourDistances) {
+        if wants(O::VelocityHistogram)
+            || wants(O::NeighbourDistances)
+            || wants(O::FreePaths)
+            || wants(O::PostCollisionVelocity)
+        {
             v.extend([t::RFM_HISTOGRAMS, t::RFM_HISTOGRAMS_SUMMARY]);
         }
         if wants(O::NeighbourDistances) {
@@ -206,6 +210,9 @@ impl Campaign {
         }
         if wants(O::RadialDistribution) {
             v.extend([t::RFM_RADIAL, t::RFM_RADIAL_SUMMARY]);
+        }
+        if wants(O::FreePaths) {
+            v.extend([t::RFM_FREE_PATH_MOMENTS, t::RFM_FREE_PATH_MOMENTS_SUMMARY]);
         }
         v
     }

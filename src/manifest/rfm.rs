@@ -4,6 +4,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::rfm::freepath::FreePathConfig;
 use crate::rfm::params::{
     InitialLayout, RfmConfig, THESIS_MASS, THESIS_NOISE, THESIS_RADIUS, THESIS_SPRING,
 };
@@ -98,6 +99,37 @@ pub struct RfmParams {
     /// Times of the configuration snapshots (with `snapshot`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub snapshot: Option<SnapshotSpec>,
+    /// Bins of the free-path histogram (with `free_paths`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub free_paths: Option<FreePathSpec>,
+    /// Bins of the post-collision velocity histogram (with `post_collision_velocity`); default
+    /// the `velocity_histogram` settings, else [-5, 5] m/s in 2000 bins.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub post_collision_velocity: Option<HistogramSpec>,
+}
+
+/// Free-path lengths l (m), log-spaced bins.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FreePathSpec {
+    /// [l_min, l_max] (m) of the log-spaced bins, default [1e-6 l_0, 100 l_0] with the
+    /// mean-field mean free path l_0 = L^2/(2 d N) (2D, spec 1.8) or L'/N (1D, the mean gap);
+    /// values outside are counted in two extra rows.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<[f64; 2]>,
+    /// Bins per decade, default 20.
+    #[serde(default = "twenty")]
+    #[schemars(range(min = 1, max = 100000))]
+    pub bins_per_decade: u32,
+}
+
+impl Default for FreePathSpec {
+    fn default() -> Self {
+        FreePathSpec {
+            range: None,
+            bins_per_decade: twenty(),
+        }
+    }
 }
 
 /// Snapshots of every particle's position and velocity.
@@ -166,6 +198,15 @@ pub enum RfmObservable {
     RadialDistribution,
     /// Positions and velocities of every particle at given times (see `snapshot`).
     Snapshot,
+    /// Free paths l = |r(t_0 + tau) - r(t_0)| between a particle's contact count dropping to 0
+    /// and rising again (spec 2.9), evaluated every step; the paths that end (arrive at the next
+    /// contact) within the sampled window; histogram with log-spaced bins and <l^m>, m = 1..4
+    /// (see `free_paths`).
+    FreePaths,
+    /// Velocity components just after a collision (at the instant the contact count drops to
+    /// 0, spec 2.3), signed, lab frame, within the sampled window (see
+    /// `post_collision_velocity`).
+    PostCollisionVelocity,
 }
 
 impl RfmObservable {
@@ -179,6 +220,8 @@ impl RfmObservable {
             RfmObservable::StructureFactor => "structure_factor",
             RfmObservable::RadialDistribution => "radial_distribution",
             RfmObservable::Snapshot => "snapshot",
+            RfmObservable::FreePaths => "free_paths",
+            RfmObservable::PostCollisionVelocity => "post_collision_velocity",
         }
     }
 }
@@ -358,6 +401,104 @@ impl RfmParams {
             hi,
             bins_per_decade: spec.bins_per_decade,
         })
+    }
+
+    /// Mean-field mean free path l_0 (m): 2D L^2/(2 d N) (spec 1.8, (4.7)); 1D the mean gap
+    /// L'/N.
+    pub fn mean_free_path(&self) -> f64 {
+        let cfg = self.config();
+        let (l, d, n) = (cfg.box_length(), cfg.diameter(), cfg.n_particles as f64);
+        if self.dim == 1 {
+            (l - n * d) / n
+        } else {
+            l * l / (2.0 * d * n)
+        }
+    }
+
+    /// Resolved free-path / post-collision velocity settings, when either is requested.
+    pub fn free_path_config(&self) -> Option<FreePathConfig> {
+        let paths = self.wants(RfmObservable::FreePaths);
+        let vel = self.wants(RfmObservable::PostCollisionVelocity);
+        if !paths && !vel {
+            return None;
+        }
+        let spec = self.free_paths.clone().unwrap_or_default();
+        let l0 = self.mean_free_path();
+        let [lo, hi] = spec.range.unwrap_or([1e-6 * l0, 100.0 * l0]);
+        let velocity = vel.then(|| {
+            let h = self
+                .post_collision_velocity
+                .clone()
+                .or_else(|| self.velocity_histogram.clone())
+                .unwrap_or_default();
+            (h.range, h.bins)
+        });
+        let cfg = self.config();
+        Some(FreePathConfig {
+            paths,
+            lo,
+            hi,
+            bins_per_decade: spec.bins_per_decade,
+            velocity,
+            from_step: cfg.warmup_steps(),
+            window_steps: (cfg.duration_steps() / cfg.sample_every) * cfg.sample_every,
+        })
+    }
+
+    /// Cross-field rules of the free-path observables.
+    fn check_free_paths(&self, path: &str, errors: &mut Vec<(String, String)>) {
+        for (given, o, key) in [
+            (
+                self.free_paths.is_some(),
+                RfmObservable::FreePaths,
+                "free_paths",
+            ),
+            (
+                self.post_collision_velocity.is_some(),
+                RfmObservable::PostCollisionVelocity,
+                "post_collision_velocity",
+            ),
+        ] {
+            if given && !self.wants(o) {
+                errors.push((
+                    format!("{path}/{key}"),
+                    format!("given without the observable \"{key}\""),
+                ));
+            }
+        }
+        if let Some(h) = &self.post_collision_velocity {
+            if !(h.range[0] < h.range[1] && h.range[0].is_finite() && h.range[1].is_finite()) {
+                errors.push((
+                    format!("{path}/post_collision_velocity/range"),
+                    format!(
+                        "expected [v_min, v_max] with v_min < v_max, got {:?}",
+                        h.range
+                    ),
+                ));
+            }
+        }
+        if self.config().validate().is_err() {
+            return;
+        }
+        if let (Some(fc), true) = (
+            self.free_path_config(),
+            self.wants(RfmObservable::FreePaths),
+        ) {
+            if !(fc.lo > 0.0 && fc.lo < fc.hi && fc.hi.is_finite()) {
+                errors.push((
+                    format!("{path}/free_paths/range"),
+                    format!(
+                        "expected [l_min, l_max] with 0 < l_min < l_max (m), got [{}, {}]",
+                        fc.lo, fc.hi
+                    ),
+                ));
+            } else if fc.bins() > 1e7 {
+                errors.push((
+                    format!("{path}/free_paths"),
+                    format!("{} bins is more than 10^7", fc.bins()),
+                ));
+            }
+        }
     }
 
     /// Resolved structure-factor settings, when the observable is requested.
@@ -597,6 +738,7 @@ impl RfmParams {
         }
         self.check_structure(path, errors);
         self.check_snapshot(path, errors);
+        self.check_free_paths(path, errors);
         let cfg = self.config();
         if cfg.validate().is_ok() {
             let samples = cfg.duration_steps() / self.sample_every;

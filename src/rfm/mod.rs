@@ -13,7 +13,8 @@
 //! - [`neighbours`]: 1D ring neighbours; 2D cell-built Verlet lists with a skin.
 //! - [`sim`]: [`RfmSim`], the state, initial layouts, checkpoints.
 //! - [`observe`]: warm-up, snapshots and the accumulators of a run; [`structure`]: 1D
-//!   neighbour distances, 2D S(k), g(R) and C(R).
+//!   neighbour distances, 2D S(k), g(R) and C(R); [`freepath`]: free paths and
+//!   post-collision velocities from per-particle contact counts (tracked inside the step).
 //!
 //! No rotation, no gravity (spec 1.2). The physics never imports the campaign or the store.
 //!
@@ -40,6 +41,7 @@
 //! 0.6; [`RfmConfig::effective_tangential_restitution`] gives it.
 
 pub mod contact;
+pub mod freepath;
 pub mod integrate;
 pub mod neighbours;
 pub mod noise;

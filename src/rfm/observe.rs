@@ -12,6 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::freepath::FreePathMomentRow;
 use super::structure::{
     NeighbourAcc, NeighbourMomentRow, RadialAcc, RadialRow, SkAcc, SkRow, SkWork,
 };
@@ -148,6 +149,7 @@ pub struct RfmOutput {
     pub radial: Vec<RadialRow>,
     pub temperature_blocks: Vec<TemperatureBlockRow>,
     pub snapshots: Vec<SnapshotRow>,
+    pub free_path_moments: Vec<FreePathMomentRow>,
 }
 
 impl RfmRun {
@@ -202,11 +204,11 @@ impl RfmRun {
     pub fn new(p: &RfmParams, seed: u64) -> Result<Self, String> {
         let cfg = p.config();
         let sampler = Self::sampler_for(p, &cfg);
-        Ok(Self::assemble(
-            RfmSim::new(cfg.clone(), seed)?,
-            sampler,
-            &cfg,
-        ))
+        let mut sim = RfmSim::new(cfg.clone(), seed)?;
+        if let Some(fc) = p.free_path_config() {
+            sim.track_free_paths(fc);
+        }
+        Ok(Self::assemble(sim, sampler, &cfg))
     }
 
     pub fn state_bytes(&self) -> Vec<u8> {
@@ -225,11 +227,11 @@ impl RfmRun {
         if !fresh.same_shape(&st.sampler) {
             return Err("checkpoint does not match the run's observables".into());
         }
-        Ok(Self::assemble(
-            RfmSim::from_state_bytes(cfg.clone(), &st.sim)?,
-            st.sampler,
-            &cfg,
-        ))
+        let sim = RfmSim::from_state_bytes(cfg.clone(), &st.sim)?;
+        if sim.free_path_config() != p.free_path_config().as_ref() {
+            return Err("checkpoint does not match the run's observables".into());
+        }
+        Ok(Self::assemble(sim, st.sampler, &cfg))
     }
 
     pub fn is_done(&self) -> bool {
@@ -452,6 +454,8 @@ impl RfmRun {
             histograms.extend(h);
             neighbour_moments = m;
         }
+        let (fp_hist, free_path_moments) = self.sim.free_path_rows();
+        histograms.extend(fp_hist);
         let cfg = self.sim.config();
         RfmOutput {
             timeseries: s.series,
@@ -466,6 +470,7 @@ impl RfmRun {
             radial: s.radial.as_ref().map(|a| a.rows()).unwrap_or_default(),
             temperature_blocks,
             snapshots: s.snapshots,
+            free_path_moments,
         }
     }
 }
@@ -493,9 +498,12 @@ mod tests {
         serde_json::from_value(v).unwrap()
     }
 
-    /// `params` with every structure observable of the dimension on.
+    /// `params` with every structure observable of the dimension on, and the free paths and
+    /// post-collision velocities.
     fn params_all(dim: u32) -> RfmParams {
         let mut p = params(dim);
+        p.observables.push(RfmObservable::FreePaths);
+        p.observables.push(RfmObservable::PostCollisionVelocity);
         if dim == 1 {
             p.observables.push(RfmObservable::NeighbourDistances);
             p.neighbour_distances = Some(crate::manifest::rfm::NeighbourSpec {
@@ -543,6 +551,15 @@ mod tests {
             } else {
                 assert!(!want.structure_factor.is_empty() && !want.radial.is_empty());
             }
+            let n_paths = want.free_path_moments[0].n_paths;
+            let n_v: u64 = want
+                .histograms
+                .iter()
+                .filter(|h| h.kind == "post_collision_velocity")
+                .map(|h| h.count)
+                .sum();
+            eprintln!("dim {dim}: {n_paths} free paths, {n_v} post-collision components");
+            assert!(n_paths > 100 && n_v > 100 * dim as u64);
             // A checkpoint of other observables is refused.
             let b = RfmRun::new(&p, 9).unwrap();
             assert!(RfmRun::from_state_bytes(&params(dim), &b.state_bytes()).is_err());
@@ -651,6 +668,97 @@ mod tests {
             "C(L/2) = {} vs {ideal}",
             last.c
         );
+    }
+
+    /// Dilute elastic gas (2D, eps_n = eps_t = 1, phi = 0.01, N = 1000, L = 0.84 m): the mean
+    /// free path against kinetic theory l_kin = 1/(2 sqrt(2) n d) = pi d/(8 sqrt(2) phi)
+    /// (Maxwellian, relative-speed factor sqrt 2), with the Enskog contact value of the pair
+    /// correlation chi = (1 - 7 phi/16)/(1 - phi)^2 = 1.016 as the finite-density correction:
+    /// expect <l> = l_kin/chi. Started from the random layout with Maxwellian velocities
+    /// (2 m/s per component) and weak noise (D = 1e-10: the velocity diffuses by < 0.2% over a
+    /// free time, so flights are straight), 0.2 s (~6 mean free times) to relax and to open
+    /// every particle's path history (with a shorter warm-up the first blocks under-count
+    /// long paths: 0.05 s gave block means rising from 0.057 to 0.08 m), paths arriving in the
+    /// next 0.3 s (~9 mean free times, ~9000 paths). Tolerance 3 sem (10 blocks) + 1% (Enskog is itself
+    /// approximate at this order; soft contacts).
+    #[test]
+    fn dilute_gas_mean_free_path() {
+        let cfg = RfmConfig {
+            n_particles: 1000,
+            box_length: None,
+            packing_fraction: Some(0.01),
+            noise_strength: 1e-10,
+            restitution_normal: 1.0,
+            restitution_tangential: 1.0,
+            warmup: 0.2,
+            duration: 0.3,
+            ..RfmConfig::default()
+        };
+        let x = RfmSim::new(cfg.clone(), 13).unwrap().positions();
+        let mut rng = crate::rng::RunRng::new(14);
+        let mut v: Vec<f64> = (0..2000).map(|_| 2.0 * rng.normal()).collect();
+        for k in 0..2 {
+            let m = v.iter().skip(k).step_by(2).sum::<f64>() / 1000.0;
+            for a in v.iter_mut().skip(k).step_by(2) {
+                *a -= m;
+            }
+        }
+        let mut sim = RfmSim::from_parts(cfg.clone(), 15, x, v).unwrap();
+        let (warm, window) = (cfg.warmup_steps(), cfg.duration_steps());
+        sim.track_free_paths(crate::rfm::freepath::FreePathConfig {
+            paths: true,
+            lo: 1e-6,
+            hi: 10.0,
+            bins_per_decade: 20,
+            velocity: Some(([-10.0, 10.0], 200)),
+            from_step: warm,
+            window_steps: window,
+        });
+        let d = cfg.diameter();
+        let phi = 0.01;
+        let l_kin = std::f64::consts::PI * d / (8.0 * 2f64.sqrt() * phi);
+        let chi = (1.0 - 7.0 * phi / 16.0) / (1.0 - phi).powi(2);
+        let t0 = std::time::Instant::now();
+        sim.advance(warm + window);
+        let (hist, m) = sim.free_path_rows();
+        let acc = sim.free_path_acc().unwrap();
+        eprintln!(
+            "dilute gas: block means {:?}",
+            acc.block_sums
+                .iter()
+                .zip(&acc.block_counts)
+                .map(|(s, &c)| format!("{:.4} ({c})", s[0] / c as f64))
+                .collect::<Vec<_>>()
+        );
+        let (mean, sem) = (m[0].value, m[0].sem.unwrap());
+        let want = l_kin / chi;
+        eprintln!(
+            "dilute gas ({:.1} s, T = {:.3} m^2/s^2): <l> = {mean:.5} +- {sem:.5} m over {} paths; \
+             l_kin = {l_kin:.5}, l_kin/chi = {want:.5}, ratio {:.4}; <l^2>/(2<l>^2) = {:.4}",
+            t0.elapsed().as_secs_f64(),
+            sim.temperature(),
+            m[0].n_paths,
+            mean / want,
+            m[1].value / (2.0 * mean * mean)
+        );
+        assert!(m[0].n_paths > 5000);
+        assert!(
+            (mean - want).abs() < 3.0 * sem + 0.01 * want,
+            "<l> = {mean} +- {sem}, want {want}"
+        );
+        // Post-collision velocities: two components per path start in the window, zero mean.
+        let pcv: Vec<&HistRow> = hist
+            .iter()
+            .filter(|h| h.kind == "post_collision_velocity" && h.density.is_some())
+            .collect();
+        let n: u64 = pcv.iter().map(|h| h.count).sum();
+        let mean_v = pcv
+            .iter()
+            .map(|h| 0.5 * (h.lo + h.hi) * h.count as f64)
+            .sum::<f64>()
+            / n as f64;
+        eprintln!("dilute gas: {n} post-collision components, mean {mean_v:.4} m/s");
+        assert!(n > 10000 && mean_v.abs() < 0.1);
     }
 
     /// The tables agree with each other exactly: the time average of T (2.19), which sums the
@@ -772,6 +880,58 @@ mod snapshot_tests {
                 / total as f64;
             let mean = out.timeseries.iter().map(|r| r.temperature).sum::<f64>() / total as f64;
             assert!((weighted - mean).abs() < 1e-12 * mean);
+        }
+    }
+
+    /// Free-path settings: without their observables, bad ranges (JSON paths); both
+    /// observables are valid in 1D and 2D, and the defaults follow l_0 (spec 1.8).
+    #[test]
+    fn free_path_settings_are_validated() {
+        for dim in [1u32, 2] {
+            let mut p = params(dim, &[0.015]);
+            p.free_paths = Some(crate::manifest::rfm::FreePathSpec {
+                range: Some([1e-3, 1e-4]),
+                bins_per_decade: 10,
+            });
+            p.post_collision_velocity = Some(HistogramSpec {
+                range: [1.0, -1.0],
+                bins: 10,
+            });
+            let mut errors = Vec::new();
+            p.check("/params", &mut errors);
+            let paths: Vec<&str> = errors.iter().map(|e| e.0.as_str()).collect();
+            assert!(
+                paths.contains(&"/params/free_paths")
+                    && paths.contains(&"/params/post_collision_velocity")
+                    && paths.contains(&"/params/post_collision_velocity/range"),
+                "{errors:?}"
+            );
+            p.observables.push(RfmObservable::FreePaths);
+            p.observables.push(RfmObservable::PostCollisionVelocity);
+            let mut errors = Vec::new();
+            p.check("/params", &mut errors);
+            let paths: Vec<&str> = errors.iter().map(|e| e.0.as_str()).collect();
+            assert_eq!(
+                paths,
+                [
+                    "/params/post_collision_velocity/range",
+                    "/params/free_paths/range"
+                ],
+                "{errors:?}"
+            );
+            p.free_paths = None;
+            p.post_collision_velocity = None;
+            let mut errors = Vec::new();
+            p.check("/params", &mut errors);
+            assert!(errors.is_empty(), "dim {dim}: {errors:?}");
+            let fc = p.free_path_config().unwrap();
+            let l0 = p.mean_free_path();
+            assert!(
+                (fc.lo / (1e-6 * l0) - 1.0).abs() < 1e-12
+                    && (fc.hi / (100.0 * l0) - 1.0).abs() < 1e-12
+            );
+            assert_eq!(fc.velocity, Some(([-5.0, 5.0], 2000)));
+            assert_eq!(fc.from_step, 10_000);
         }
     }
 

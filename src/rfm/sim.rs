@@ -9,9 +9,11 @@
 use serde::{Deserialize, Serialize};
 
 use super::contact::ContactLaw;
+use super::freepath::{FreePathAcc, FreePathConfig, FreePathMomentRow, FreePaths};
 use super::integrate::PairPropagator;
 use super::neighbours::{wrap, NeighbourList};
 use super::noise::Kicks;
+use super::observe::HistRow;
 use super::params::{InitialLayout, RfmConfig};
 use super::stream::WordStream;
 use crate::rng::{RngPosition, RunRng};
@@ -32,6 +34,8 @@ pub struct RfmState {
     pub x_ref: Vec<f64>,
     pub max_disp2: f64,
     pub rng: RngPosition,
+    /// Free-path tracking (contact counts, open paths, accumulators) when requested.
+    pub free_paths: Option<FreePathAcc>,
 }
 
 /// The dimension-generic simulation core.
@@ -56,6 +60,8 @@ pub struct Core<const D: usize> {
     cand: Vec<u32>,
     /// Neighbour-list builds so far (diagnostic, not part of the state).
     pub builds: u64,
+    /// Free-path / post-collision velocity tracking (None: no work in the step).
+    fp: Option<Box<FreePaths<D>>>,
 }
 
 impl<const D: usize> Core<D> {
@@ -79,6 +85,7 @@ impl<const D: usize> Core<D> {
             corr: Vec::new(),
             cand: Vec::new(),
             builds: 0,
+            fp: None,
         };
         if D > 1 {
             c.rebuild();
@@ -89,9 +96,19 @@ impl<const D: usize> Core<D> {
     /// Wrap positions, take them as reference, build the list.
     fn rebuild(&mut self) {
         let l = self.l;
-        for p in self.x.iter_mut() {
-            for k in 0..D {
-                p[k] = wrap(p[k], l);
+        if let Some(fp) = self.fp.as_mut() {
+            for (i, p) in self.x.iter_mut().enumerate() {
+                for k in 0..D {
+                    let w = wrap(p[k], l);
+                    fp.shift(i, k, w - p[k]);
+                    p[k] = w;
+                }
+            }
+        } else {
+            for p in self.x.iter_mut() {
+                for k in 0..D {
+                    p[k] = wrap(p[k], l);
+                }
             }
         }
         self.x_ref.clone_from(&self.x);
@@ -112,6 +129,16 @@ impl<const D: usize> Core<D> {
             .fold(0.0, f64::max)
     }
 
+    /// Free-path tracking: record one contacting pair's in-step contact interval (kept out of
+    /// line so that the untracked pair loop stays as it was).
+    #[cold]
+    #[inline(never)]
+    fn track_pair(&mut self, i: usize, j: usize, t_on: f64, t_off: f64) {
+        if let Some(fp) = self.fp.as_mut() {
+            fp.push(i, j, t_on, t_off, &self.x, &self.v);
+        }
+    }
+
     /// One pair's contribution from separation r = x_i - x_j and g = v_i - v_j.
     #[inline(always)]
     fn pair(&mut self, i: usize, j: usize, r: [f64; D], g: [f64; D]) {
@@ -123,6 +150,9 @@ impl<const D: usize> Core<D> {
         let Some(ns) = self.prop.normal(self.d - rho, -gn) else {
             return;
         };
+        if self.fp.is_some() {
+            self.track_pair(i, j, ns.t_on, ns.t_off);
+        }
         let mut dx: [f64; D] = std::array::from_fn(|k| -0.5 * ns.ddelta * e[k]);
         let mut dv: [f64; D] = std::array::from_fn(|k| -0.5 * ns.du * e[k]);
         if D > 1 && self.prop.has_tangential() {
@@ -228,6 +258,9 @@ impl<const D: usize> Core<D> {
                 self.rebuild();
             }
         }
+        if let Some(fp) = self.fp.as_mut() {
+            fp.c = c;
+        }
         self.pair_pass(vmax);
         let h = self.h;
         // A pair's (dx, dv) enters as x += dx - dv h, v += dv now, so that the drift below
@@ -291,6 +324,9 @@ impl<const D: usize> Core<D> {
                     x[k] += vk * h;
                 }
             }
+        }
+        if let Some(fp) = self.fp.as_mut() {
+            fp.post(&self.x, &self.v, h, self.step);
         }
         self.step += 1;
     }
@@ -480,6 +516,38 @@ impl RfmSim {
         }
     }
 
+    /// Start tracking contact counts for free paths and post-collision velocities (spec 2.9,
+    /// 2.3; [`super::freepath`]). Call before the first step.
+    pub fn track_free_paths(&mut self, cfg: FreePathConfig) {
+        let (n, dim) = (self.cfg.n_particles, self.cfg.dim);
+        let acc = FreePathAcc::new(cfg, n, dim);
+        match &mut self.inner {
+            Inner::D1(c) => c.fp = Some(Box::new(FreePaths::new(acc))),
+            Inner::D2(c) => c.fp = Some(Box::new(FreePaths::new(acc))),
+        }
+    }
+
+    /// The free-path settings being tracked, if any.
+    pub fn free_path_config(&self) -> Option<&FreePathConfig> {
+        match &self.inner {
+            Inner::D1(c) => c.fp.as_ref().map(|f| &f.acc.cfg),
+            Inner::D2(c) => c.fp.as_ref().map(|f| &f.acc.cfg),
+        }
+    }
+
+    /// The free-path tracker's state, if any (tests and diagnostics).
+    pub fn free_path_acc(&self) -> Option<&FreePathAcc> {
+        match &self.inner {
+            Inner::D1(c) => c.fp.as_ref().map(|f| &f.acc),
+            Inner::D2(c) => c.fp.as_ref().map(|f| &f.acc),
+        }
+    }
+
+    /// Histogram rows ("free_path", "post_collision_velocity") and free-path moments.
+    pub fn free_path_rows(&self) -> (Vec<HistRow>, Vec<FreePathMomentRow>) {
+        self.free_path_acc().map(|a| a.rows()).unwrap_or_default()
+    }
+
     /// The checkpoint payload.
     pub fn state_bytes(&self) -> Vec<u8> {
         let st = match &self.inner {
@@ -491,6 +559,7 @@ impl RfmSim {
                 x_ref: Vec::new(),
                 max_disp2: 0.0,
                 rng: c.rng.position(),
+                free_paths: c.fp.as_ref().map(|f| f.acc.clone()),
             },
             Inner::D2(c) => RfmState {
                 dim: 2,
@@ -500,6 +569,7 @@ impl RfmSim {
                 x_ref: flatten(&c.x_ref),
                 max_disp2: c.max_disp2,
                 rng: c.rng.position(),
+                free_paths: c.fp.as_ref().map(|f| f.acc.clone()),
             },
         };
         postcard::to_stdvec(&st).expect("state serialises")
@@ -514,11 +584,17 @@ impl RfmSim {
         if st.dim != cfg.dim || st.x.len() != n || st.v.len() != n {
             return Err("checkpoint does not match the run's dimension or particle count".into());
         }
+        if let Some(a) = &st.free_paths {
+            if a.in_contact.len() != cfg.n_particles || a.start.len() != n || a.dim != cfg.dim {
+                return Err("checkpoint's free-path state does not match the run".into());
+            }
+        }
         let rng = RunRng::restore(&st.rng);
         let inner = match cfg.dim {
             1 => {
                 let mut c = Core::<1>::new(&cfg, unflatten(&st.x), unflatten(&st.v), rng);
                 c.step = st.step;
+                c.fp = st.free_paths.map(|a| Box::new(FreePaths::new(a)));
                 Inner::D1(c)
             }
             _ => {
@@ -530,6 +606,7 @@ impl RfmSim {
                 c.max_disp2 = st.max_disp2;
                 c.step = st.step;
                 c.builds = 0;
+                c.fp = st.free_paths.map(|a| Box::new(FreePaths::new(a)));
                 Inner::D2(c)
             }
         };

@@ -3,6 +3,8 @@
 //! `rfm_moments_summary` (point, order: mean and sem of the runs' moments) and
 //! `rfm_histograms_summary` (point, kind, h, bin: counts summed, pooled density),
 //! `rfm_neighbour_moments_summary` (point, h, order: mean and sem of the runs' moments),
+//! `rfm_free_path_moments_summary` (point, order: mean and sem of the runs' <l^m>, paths
+//! summed),
 //! `rfm_structure_factor_summary` (point, shell: mean and sem of the runs' S(k)) and
 //! `rfm_radial_distribution_summary` (point, bin: pair counts summed, mean and sem of g and C).
 
@@ -74,6 +76,57 @@ fn write_structure_summaries(
     replicas: u64,
     done: &dyn Fn(u64) -> bool,
 ) -> Result<(), StoreError> {
+    if present.contains(&tables::RFM_FREE_PATH_MOMENTS) {
+        let mut g: Groups<(u32, u32)> = BTreeMap::new();
+        for b in batches(c, tables::RFM_FREE_PATH_MOMENTS)? {
+            let (r, p, o, v, n) = (
+                col(&b, "run_id")?.as_primitive::<UInt64Type>(),
+                col(&b, "point_id")?.as_primitive::<UInt32Type>(),
+                col(&b, "order")?.as_primitive::<UInt32Type>(),
+                col(&b, "value")?.as_primitive::<Float64Type>(),
+                col(&b, "n_paths")?.as_primitive::<UInt64Type>(),
+            );
+            for i in 0..b.num_rows() {
+                if done(r.value(i)) {
+                    g.entry((p.value(i), o.value(i)))
+                        .or_default()
+                        .push((r.value(i) % replicas, vec![v.value(i), n.value(i) as f64]));
+                }
+            }
+        }
+        let rows: Vec<_> = g
+            .into_iter()
+            .map(|(k, v)| {
+                let paths: f64 = v.iter().map(|x| x.1[1]).sum();
+                (k, stats(v), paths as u64)
+            })
+            .collect();
+        let batch = RecordBatch::try_new(
+            Arc::new(Schema::new(vec![
+                Field::new("point_id", DataType::UInt32, false),
+                Field::new("order", DataType::UInt32, false),
+                Field::new("n_replicas", DataType::UInt32, false),
+                Field::new("mean", DataType::Float64, false),
+                Field::new("sem", DataType::Float64, true),
+                Field::new("n_paths", DataType::UInt64, false),
+            ])),
+            vec![
+                u32s(rows.iter().map(|r| r.0 .0)),
+                u32s(rows.iter().map(|r| r.0 .1)),
+                u32s(rows.iter().map(|r| r.1 .0)),
+                f64s(rows.iter().map(|r| r.1 .1[0].0)),
+                opt_f64s(rows.iter().map(|r| r.1 .1[0].1)),
+                u64s(rows.iter().map(|r| r.2)),
+            ],
+        )
+        .expect("free-path moments summary");
+        write_whole(
+            c,
+            tables::RFM_FREE_PATH_MOMENTS_SUMMARY,
+            "summary.parquet",
+            &batch,
+        )?;
+    }
     if present.contains(&tables::RFM_NEIGHBOUR_MOMENTS) {
         let mut g: Groups<(u32, u32, u32)> = BTreeMap::new();
         for b in batches(c, tables::RFM_NEIGHBOUR_MOMENTS)? {

@@ -494,6 +494,8 @@ pub const RFM_RADIAL: &str = "rfm_radial_distribution";
 pub const RFM_RADIAL_SUMMARY: &str = "rfm_radial_distribution_summary";
 pub const RFM_TEMPERATURE_BLOCKS: &str = "rfm_temperature_blocks";
 pub const RFM_SNAPSHOTS: &str = "rfm_snapshots";
+pub const RFM_FREE_PATH_MOMENTS: &str = "rfm_free_path_moments";
+pub const RFM_FREE_PATH_MOMENTS_SUMMARY: &str = "rfm_free_path_moments_summary";
 
 /// Buffered rows of the RFM tables.
 #[derive(Default)]
@@ -506,6 +508,7 @@ pub struct RfmBuffer {
     pub radial: Vec<(u64, u32, crate::rfm::structure::RadialRow)>,
     pub tblocks: Vec<(u64, u32, crate::rfm::observe::TemperatureBlockRow)>,
     pub snaps: Vec<(u64, u32, crate::rfm::observe::SnapshotRow)>,
+    pub free_path_moments: Vec<(u64, u32, crate::rfm::freepath::FreePathMomentRow)>,
 }
 
 fn f64_col<T>(v: &[T], f: impl Fn(&T) -> f64) -> ArrayRef {
@@ -548,6 +551,11 @@ impl RfmBuffer {
         );
         self.snaps
             .extend(out.snapshots.iter().map(|r| (run_id, point_id, r.clone())));
+        self.free_path_moments.extend(
+            out.free_path_moments
+                .iter()
+                .map(|r| (run_id, point_id, r.clone())),
+        );
     }
 
     pub fn rows(&self) -> usize {
@@ -559,6 +567,7 @@ impl RfmBuffer {
             + self.radial.len()
             + self.tblocks.len()
             + self.snaps.len()
+            + self.free_path_moments.len()
     }
 
     /// The non-empty tables as (name, batch); empties the buffer.
@@ -790,6 +799,26 @@ impl RfmBuffer {
                 RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("snapshots"),
             ));
         }
+        if !self.free_path_moments.is_empty() {
+            let v = &self.free_path_moments;
+            let mut f = id_fields();
+            f.extend([
+                Field::new("order", DataType::UInt32, false),
+                Field::new("value", DataType::Float64, false),
+                Field::new("sem", DataType::Float64, true),
+                Field::new("n_paths", DataType::UInt64, false),
+            ]);
+            let mut a = ids(&v.iter().map(|r| (r.0, r.1)).collect::<Vec<_>>());
+            a.push(u32_col(v, |r| r.2.order));
+            a.push(f64_col(v, |r| r.2.value));
+            a.push(opt_f64_col(v, |r| r.2.sem));
+            a.push(u64_col(v, |r| r.2.n_paths));
+            out.push((
+                RFM_FREE_PATH_MOMENTS,
+                RecordBatch::try_new(Arc::new(Schema::new(f)), a).expect("free-path moments"),
+            ));
+        }
+        self.free_path_moments.clear();
         self.series.clear();
         self.moments.clear();
         self.hist.clear();

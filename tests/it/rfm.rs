@@ -23,25 +23,28 @@ fn manifest() -> serde_json::Value {
             "warmup": 0.05,
             "duration": 0.1,
             "sample_every": 1000,
-            "observables": ["velocity_moments", "velocity_histogram", "structure_factor", "radial_distribution"],
+            "observables": ["velocity_moments", "velocity_histogram", "structure_factor", "radial_distribution", "free_paths", "post_collision_velocity"],
             "velocity_histogram": {"range": [-3, 3], "bins": 300},
-            "structure_factor": {"k_max": 30, "every": 5}
+            "structure_factor": {"k_max": 30, "every": 5},
+            "free_paths": {"range": [1e-7, 0.1], "bins_per_decade": 10}
         },
         "sweep": {"restitution_normal": [0.3, 0.9]}
     })
 }
 
-const TABLES: [(&str, &[&str]); 12] = [
+const TABLES: [(&str, &[&str]); 14] = [
     ("runs", &["run_id"]),
     ("rfm_temperature_blocks", &["run_id", "block"]),
     ("rfm_timeseries", &["run_id", "t"]),
     ("rfm_moments", &["run_id", "order"]),
-    ("rfm_histograms", &["run_id", "lo"]),
+    ("rfm_histograms", &["run_id", "kind", "lo"]),
+    ("rfm_free_path_moments", &["run_id", "order"]),
     ("rfm_structure_factor", &["run_id", "n2"]),
     ("rfm_radial_distribution", &["run_id", "r_lo"]),
     ("rfm_timeseries_summary", &["point_id", "t"]),
     ("rfm_moments_summary", &["point_id", "order"]),
-    ("rfm_histograms_summary", &["point_id", "lo"]),
+    ("rfm_histograms_summary", &["point_id", "kind", "lo"]),
+    ("rfm_free_path_moments_summary", &["point_id", "order"]),
     ("rfm_structure_factor_summary", &["point_id", "n2"]),
     ("rfm_radial_distribution_summary", &["point_id", "r_lo"]),
 ];
@@ -81,12 +84,44 @@ fn rfm_campaign_runs_and_resumes_identically() {
     );
     assert_eq!(code, Some(0), "{}", log_text(&log));
 
-    // Row counts: 4 runs; 100 samples per run (0.1 s / (1e-6 s x 1000)); 12 moments; 302 bins.
+    // Row counts: 4 runs; 100 samples per run (0.1 s / (1e-6 s x 1000)); 12 moments; 302
+    // velocity bins, as many post-collision velocity bins (its default is the velocity
+    // histogram's), 60 + 2 free-path bins (6 decades x 10).
     let runs = read_table(&a, "runs");
     assert_eq!(runs.rows.len(), 4);
     assert_eq!(read_table(&a, "rfm_timeseries").rows.len(), 4 * 100);
     assert_eq!(read_table(&a, "rfm_moments").rows.len(), 4 * 12);
-    assert_eq!(read_table(&a, "rfm_histograms").rows.len(), 4 * 302);
+    let hist = read_table(&a, "rfm_histograms");
+    assert_eq!(hist.rows.len(), 4 * (302 + 302 + 62));
+    let kinds = hist.column("kind");
+    let counts = hist.column("count");
+    let of_kind = |k: &str| -> u64 {
+        kinds
+            .iter()
+            .zip(&counts)
+            .filter(|(c, _)| c.as_str() == k)
+            .map(|(_, n)| n.as_u64())
+            .sum()
+    };
+    // Every path start (contact end) in the window gives 2 components; every recorded path
+    // ends with a contact start, so the counts are of the same order.
+    let (n_paths, n_v) = (of_kind("free_path"), of_kind("post_collision_velocity"));
+    eprintln!("rfm campaign: {n_paths} free paths, {n_v} post-collision components");
+    assert!(n_paths > 1000 && n_v % 2 == 0 && n_v / 2 > n_paths / 2 && n_v / 2 < 2 * n_paths);
+    let fpm = read_table(&a, "rfm_free_path_moments");
+    assert_eq!(fpm.rows.len(), 4 * 4);
+    let total: u64 = fpm
+        .column("n_paths")
+        .iter()
+        .zip(fpm.column("order"))
+        .filter(|(_, o)| o.as_u64() == 1)
+        .map(|(n, _)| n.as_u64())
+        .sum();
+    assert_eq!(total, n_paths, "moments and histogram hold the same paths");
+    assert_eq!(
+        read_table(&a, "rfm_free_path_moments_summary").rows.len(),
+        2 * 4
+    );
     assert_eq!(read_table(&a, "rfm_moments_summary").rows.len(), 2 * 12);
     // S(k): one row per shell |n|^2 <= 30^2; g(R): default R_max = L/2 in bins of d/20.
     let n_shells = shells(900);
