@@ -4,14 +4,16 @@
 //! [`RunRng`] serves 64-bit words from a buffer filled in bulk (the ChaCha block function is
 //! vectorised), and its position can be saved and restored exactly for checkpoints.
 
-use rand::{RngCore, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::RngCore;
+
 use serde::{Deserialize, Serialize};
 
 const BUF: usize = 256;
 
 pub struct RunRng {
-    core: ChaCha8Rng,
+    /// The ChaCha8 block function in bulk (16 blocks at a time, vectorised; the same words as
+    /// `rand_chacha::ChaCha8Rng`, checked by `words_are_rand_chacha_chacha8`).
+    core: crate::rfm::stream::WordStream,
     /// Word position of `core` when `buf` was filled (in 32-bit words).
     filled_at: u128,
     buf: Box<[u64; BUF]>,
@@ -29,9 +31,19 @@ pub struct RngPosition {
 
 impl RunRng {
     pub fn new(seed: u64) -> Self {
+        Self::at(seed, 0)
+    }
+
+    /// The stream of `seed` from word position `filled_at` (in 32-bit words), buffer filled.
+    fn at(seed: u64, filled_at: u128) -> Self {
+        let core = crate::rfm::stream::WordStream::at(&RngPosition {
+            seed,
+            filled_at,
+            idx: 0,
+        });
         let mut r = RunRng {
-            core: ChaCha8Rng::seed_from_u64(seed),
-            filled_at: 0,
+            core,
+            filled_at,
             buf: Box::new([0; BUF]),
             idx: BUF,
             seed,
@@ -41,13 +53,8 @@ impl RunRng {
     }
 
     fn refill(&mut self) {
-        self.filled_at = self.core.get_word_pos();
-        let bytes: &mut [u8; BUF * 8] =
-            unsafe { &mut *(self.buf.as_mut_ptr() as *mut [u8; BUF * 8]) };
-        self.core.fill_bytes(bytes);
-        for w in self.buf.iter_mut() {
-            *w = u64::from_le(*w);
-        }
+        self.filled_at = self.core.position().filled_at;
+        self.core.fill(&mut self.buf[..]);
         self.idx = 0;
     }
 
@@ -130,9 +137,7 @@ impl RunRng {
     }
 
     pub fn restore(pos: &RngPosition) -> Self {
-        let mut r = RunRng::new(pos.seed);
-        r.core.set_word_pos(pos.filled_at);
-        r.refill();
+        let mut r = RunRng::at(pos.seed, pos.filled_at);
         r.idx = (pos.idx as usize).min(BUF);
         r
     }
@@ -170,6 +175,8 @@ impl RngCore for RunRng {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
 
     #[test]
     fn restore_continues_the_same_stream() {
@@ -202,6 +209,24 @@ mod tests {
         // Lemire rejection: with n = 3 * 2^30 a quarter of the 32-bit values are rejected.
         assert_eq!(lemire32(0, 3 << 30), None);
         assert_eq!(lemire32(u32::MAX, 3 << 30), Some((3 << 30) - 1));
+    }
+
+    /// The words are rand_chacha's ChaCha8 stream (seed_from_u64, little-endian pairs of
+    /// 32-bit words), from the start and from a restored position.
+    #[test]
+    fn words_are_rand_chacha_chacha8() {
+        for seed in [0u64, 1, 42, u64::MAX] {
+            let mut reference = ChaCha8Rng::seed_from_u64(seed);
+            let mut r = RunRng::new(seed);
+            for i in 0..5000 {
+                assert_eq!(r.u64(), reference.next_u64(), "seed {seed} word {i}");
+            }
+            let pos = r.position();
+            let mut t = RunRng::restore(&pos);
+            for _ in 0..1000 {
+                assert_eq!(t.u64(), reference.next_u64());
+            }
+        }
     }
 
     #[test]
