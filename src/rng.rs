@@ -114,13 +114,6 @@ impl RunRng {
         (a as usize, b as usize)
     }
 
-    /// Standard exponential variate (ziggurat).
-    #[inline(always)]
-    pub fn exp1(&mut self) -> f64 {
-        use rand_distr::Distribution;
-        rand_distr::Exp1.sample(self)
-    }
-
     /// Standard normal variate (ziggurat).
     #[inline(always)]
     pub fn normal(&mut self) -> f64 {

@@ -17,7 +17,7 @@ use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
 
 use super::parquet_io::{self, StoreError};
-use super::summary::{mean_sem, table_files, write_whole};
+use super::summary::{mean_sem, replica_mean_sem, table_files, write_whole};
 use super::tables;
 use crate::campaign::ledger::RunStatus;
 use crate::campaign::Campaign;
@@ -325,13 +325,10 @@ pub fn write_rfm_summaries(
     });
     let (mut pc, mut tc, mut nc, mut mc, mut sc) = (vec![], vec![], vec![], vec![], vec![]);
     for k in keys {
-        let mut v = ts.remove(&k).expect("key");
-        v.sort_by_key(|x| x.0);
-        let xs: Vec<f64> = v.iter().map(|x| x.1).collect();
-        let (m, s) = mean_sem(&xs);
+        let (n, m, s) = replica_mean_sem(ts.remove(&k).expect("key"));
         pc.push(k.0);
         tc.push(f64::from_bits(k.1));
-        nc.push(xs.len() as u32);
+        nc.push(n);
         mc.push(m);
         sc.push(s);
     }
@@ -372,13 +369,11 @@ pub fn write_rfm_summaries(
             }
         }
         let (mut pc, mut oc, mut nc, mut mc, mut sc) = (vec![], vec![], vec![], vec![], vec![]);
-        for (k, mut v) in mo {
-            v.sort_by_key(|x| x.0);
-            let xs: Vec<f64> = v.iter().map(|x| x.1).collect();
-            let (m, s) = mean_sem(&xs);
+        for (k, v) in mo {
+            let (n, m, s) = replica_mean_sem(v);
             pc.push(k.0);
             oc.push(k.1);
-            nc.push(xs.len() as u32);
+            nc.push(n);
             mc.push(m);
             sc.push(s);
         }

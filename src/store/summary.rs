@@ -23,6 +23,16 @@ use crate::fsutil;
 const CHUNK_ROWS: u64 = 4_000_000;
 
 /// Mean and standard error of the mean (None for fewer than two values).
+/// (replicas, mean, sem) of (replica, value) pairs, summed in replica order so the result does
+/// not depend on the order in which runs finished; a replica counts once.
+pub fn replica_mean_sem<R: Ord + Copy>(mut v: Vec<(R, f64)>) -> (u32, f64, Option<f64>) {
+    v.sort_by_key(|x| x.0);
+    v.dedup_by_key(|x| x.0);
+    let xs: Vec<f64> = v.iter().map(|x| x.1).collect();
+    let (mean, sem) = mean_sem(&xs);
+    (xs.len() as u32, mean, sem)
+}
+
 pub fn mean_sem(x: &[f64]) -> (f64, Option<f64>) {
     let n = x.len() as f64;
     let mean = x.iter().sum::<f64>() / n;
@@ -282,15 +292,11 @@ fn write_tamsd_summary(
                 .expect("finite lags")
         });
         for key in order {
-            let mut v = acc.remove(&key).expect("key");
-            v.sort_by_key(|x| x.0);
-            v.dedup_by_key(|x| x.0);
-            let x: Vec<f64> = v.iter().map(|x| x.1).collect();
-            let (mean, sem) = mean_sem(&x);
+            let (n, mean, sem) = replica_mean_sem(acc.remove(&key).expect("key"));
             cols.point.push(key.0);
             cols.species.push(key.1);
             cols.lag.push(f64::from_bits(key.2));
-            cols.n.push(v.len() as u32);
+            cols.n.push(n);
             cols.mean.push(mean);
             cols.sem.push(sem);
             cols.theory.push(theory.get(&key).copied());
