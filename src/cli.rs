@@ -69,6 +69,69 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Run a campaign as a SLURM job array (array task i = shard i+1 of N), with a
+    /// compaction job chained by afterok; or resubmit its unfinished shards (`--missing DIR`).
+    Submit {
+        /// The manifest (a first submission, with --out) or, with --missing, the campaign
+        /// directory.
+        target: PathBuf,
+        /// Campaign directory of a first submission.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Resubmit only the shards with unfinished runs that no task is working on.
+        #[arg(long)]
+        missing: bool,
+        /// Submit to SLURM (the only scheduler; accepted for clarity).
+        #[arg(long)]
+        slurm: bool,
+        /// Array tasks running at once (the array's % throttle).
+        #[arg(long)]
+        tasks: Option<u32>,
+        /// Runs per array task (more are packed per task if the array would exceed
+        /// the cluster's MaxArraySize).
+        #[arg(long)]
+        per_task_runs: Option<u64>,
+        /// Time limit of each task, e.g. 02:00:00.
+        #[arg(long)]
+        time: Option<String>,
+        #[arg(long)]
+        partition: Option<String>,
+        /// Extra #SBATCH argument (repeatable), e.g. --sbatch-arg=--account=abc.
+        #[arg(long = "sbatch-arg", allow_hyphen_values = true)]
+        sbatch_arg: Vec<String>,
+        /// Worker threads per task (--cpus-per-task).
+        #[arg(long)]
+        cpus_per_task: Option<u32>,
+        /// No compaction job after the array.
+        #[arg(long)]
+        no_compact: bool,
+        /// Print the scripts and the sbatch commands; write and submit nothing.
+        #[arg(long)]
+        dry_run: bool,
+    },
+    /// Run one SLURM array task (used by the scripts `granular submit` writes).
+    #[command(hide = true)]
+    SlurmTask {
+        dir: PathBuf,
+        #[arg(long)]
+        shards: u32,
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+        /// Array index (default: $SLURM_ARRAY_TASK_ID).
+        #[arg(long)]
+        index: Option<u32>,
+    },
+    /// Merge a campaign's small Parquet parts into large files (readers never see missing or
+    /// doubled rows) and fold its commit records into one ledger index.
+    Compact {
+        dir: PathBuf,
+        /// Size of a merged file, e.g. 100MB, 1GB, 500kB.
+        #[arg(long, default_value = "100MB", value_parser = parse_size)]
+        target_size: u64,
+    },
+    /// Check every table file of a campaign (readable, this campaign's, right table and
+    /// format) and that the runs table holds each committed run exactly once.
+    Verify { dir: PathBuf },
     /// Draw the standard figures (PNG and SVG) of a campaign's summary tables.
     Plot {
         dir: PathBuf,
@@ -163,6 +226,122 @@ pub fn main() -> i32 {
                     }
                 }
             }
+            Err(e) => report_error(e),
+        },
+        Command::Submit {
+            target,
+            out,
+            missing,
+            slurm: _,
+            tasks,
+            per_task_runs,
+            time,
+            partition,
+            sbatch_arg,
+            cpus_per_task,
+            no_compact,
+            dry_run,
+        } => submit_command(SubmitArgs {
+            target,
+            out,
+            missing,
+            tasks,
+            per_task_runs,
+            time,
+            partition,
+            sbatch_arg,
+            cpus_per_task,
+            no_compact,
+            dry_run,
+        }),
+        Command::SlurmTask {
+            dir,
+            shards,
+            threads,
+            index,
+        } => {
+            let index = match index.or_else(|| {
+                std::env::var("SLURM_ARRAY_TASK_ID")
+                    .ok()
+                    .and_then(|v| v.parse().ok())
+            }) {
+                Some(i) if i < shards => i,
+                other => {
+                    eprintln!("error: slurm-task needs an array index below --shards {shards} (--index or SLURM_ARRAY_TASK_ID), got {other:?}");
+                    return exit_codes::INVALID_INPUT;
+                }
+            };
+            match Campaign::open(&dir) {
+                Ok(c) => {
+                    let rt = Runtime {
+                        threads,
+                        checkpoint_every: 300.0,
+                        shard: Shard {
+                            index: index + 1,
+                            count: shards,
+                        },
+                        flush_every: 30.0,
+                        quiet: true,
+                    };
+                    match execute(&c, &rt) {
+                        // Failed runs are finished runs (recorded in the runs table): the task
+                        // succeeded, so the afterok compaction still runs.
+                        exit_codes::RUNS_FAILED => exit_codes::OK,
+                        code => code,
+                    }
+                }
+                Err(e) => report_error(e),
+            }
+        }
+        Command::Compact { dir, target_size } => match Campaign::open(&dir) {
+            Ok(c) => {
+                let opts = campaign::compact::CompactOptions {
+                    target_bytes: target_size,
+                };
+                match campaign::compact::compact(&c, &opts) {
+                    Ok(r) => {
+                        for n in &r.notes {
+                            tracing::warn!("{n}");
+                        }
+                        for t in &r.tables {
+                            println!(
+                                "{:<34} {:>6} -> {:>4} files  {:>10} rows  {:>12} -> {:>12} bytes  generation {}",
+                                t.table, t.files_before, t.files_after, t.rows, t.bytes_before, t.bytes_after, t.generation
+                            );
+                        }
+                        println!(
+                            "ledger: {} commit record(s) folded into ledger/index.json",
+                            r.commits_folded
+                        );
+                        exit_codes::OK
+                    }
+                    Err(e) => report_error(e),
+                }
+            }
+            Err(e) => report_error(e),
+        },
+        Command::Verify { dir } => match Campaign::open(&dir) {
+            Ok(c) => match campaign::verify::verify(&c) {
+                Ok(r) => {
+                    for (t, files, rows) in &r.tables {
+                        println!("{t:<34} {files:>6} files {rows:>12} rows");
+                    }
+                    for p in &r.problems {
+                        eprintln!("error: {p}");
+                    }
+                    if r.problems.is_empty() {
+                        println!("{}: all table files check out; {} committed runs, each once in the runs table", dir.display(), r.committed_runs);
+                        exit_codes::OK
+                    } else {
+                        eprintln!("{}: {} problem(s)", dir.display(), r.problems.len());
+                        exit_codes::DIRECTORY_REFUSED
+                    }
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    exit_codes::DIRECTORY_REFUSED
+                }
+            },
             Err(e) => report_error(e),
         },
         Command::Schema => {
@@ -419,5 +598,223 @@ impl Reporter for CliReporter {
             },
         }
         self.update();
+    }
+}
+
+/// `100MB`, `1GB`, `500kB`, `4096` (bytes; powers of 1024).
+fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let x: f64 = num
+        .parse()
+        .map_err(|_| format!("{s:?}: expected a size such as 100MB"))?;
+    let mult = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1u64,
+        "k" | "kb" | "kib" => 1 << 10,
+        "m" | "mb" | "mib" => 1 << 20,
+        "g" | "gb" | "gib" => 1 << 30,
+        u => return Err(format!("{s:?}: unknown unit {u:?} (use B, kB, MB or GB)")),
+    };
+    let v = (x * mult as f64) as u64;
+    if v == 0 {
+        return Err(format!("{s:?}: must be positive"));
+    }
+    Ok(v)
+}
+
+struct SubmitArgs {
+    target: PathBuf,
+    out: Option<PathBuf>,
+    missing: bool,
+    tasks: Option<u32>,
+    per_task_runs: Option<u64>,
+    time: Option<String>,
+    partition: Option<String>,
+    sbatch_arg: Vec<String>,
+    cpus_per_task: Option<u32>,
+    no_compact: bool,
+    dry_run: bool,
+}
+
+fn submit_command(a: SubmitArgs) -> i32 {
+    use campaign::slurm;
+    let invalid = |m: String| {
+        eprintln!("error: {m}");
+        exit_codes::INVALID_INPUT
+    };
+    if let Some(t) = &a.time {
+        if let Err(e) = slurm::check_time(t) {
+            return invalid(e);
+        }
+    }
+    let binary = match std::env::current_exe().and_then(|p| p.canonicalize()) {
+        Ok(p) => p.display().to_string(),
+        Err(e) => return invalid(format!("cannot locate the granular binary: {e}")),
+    };
+    // The campaign (created unless --dry-run) and its absolute directory.
+    let (c, root) = if a.missing {
+        if a.out.is_some() {
+            return invalid(
+                "--missing takes the campaign directory as its argument, not --out".into(),
+            );
+        }
+        match Campaign::open(&a.target) {
+            Ok(c) => {
+                let root = a.target.canonicalize().unwrap_or(a.target.clone());
+                (c, root)
+            }
+            Err(e) => return report_error(e),
+        }
+    } else {
+        let Some(out) = a.out.clone() else {
+            return invalid("a first submission needs --out DIR (or use --missing DIR)".into());
+        };
+        let mut missing_flags = Vec::new();
+        if a.time.is_none() {
+            missing_flags.push("--time");
+        }
+        if a.tasks.is_none() {
+            missing_flags.push("--tasks");
+        }
+        if a.per_task_runs.is_none() {
+            missing_flags.push("--per-task-runs");
+        }
+        if !missing_flags.is_empty() {
+            return invalid(format!(
+                "a first submission needs {}",
+                missing_flags.join(", ")
+            ));
+        }
+        if a.dry_run {
+            match crate::manifest::load_manifest(&a.target) {
+                Ok((manifest, plan)) => {
+                    let value = serde_json::to_value(&manifest).expect("manifest serialises");
+                    let c = Campaign {
+                        root: out.clone(),
+                        manifest,
+                        plan,
+                        manifest_json: crate::plan::canonical(&value),
+                    };
+                    let root = std::path::absolute(&out).unwrap_or(out);
+                    (c, root)
+                }
+                Err(e) => return report_error(CampaignError::Manifest(e)),
+            }
+        } else {
+            match Campaign::create_or_open(&a.target, &out) {
+                Ok(c) => {
+                    let root = out.canonicalize().unwrap_or(out);
+                    (c, root)
+                }
+                Err(e) => return report_error(e),
+            }
+        }
+    };
+    let previous = match slurm::read_record(&root) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return exit_codes::DIRECTORY_REFUSED;
+        }
+    };
+    let base = previous.as_ref().map(|r| r.options.clone());
+    let options = if a.missing && base.is_some() {
+        let mut o = base.clone().expect("options");
+        if let Some(t) = a.tasks {
+            o.throttle = t;
+        }
+        if let Some(t) = &a.time {
+            o.time = t.clone();
+        }
+        if a.partition.is_some() {
+            o.partition = a.partition.clone();
+        }
+        if !a.sbatch_arg.is_empty() {
+            o.sbatch_args = a.sbatch_arg.clone();
+        }
+        if let Some(n) = a.cpus_per_task {
+            o.cpus_per_task = n;
+        }
+        if a.no_compact {
+            o.compact = false;
+        }
+        Some(o)
+    } else if a.missing {
+        None
+    } else {
+        Some(slurm::SlurmOptions {
+            throttle: a.tasks.unwrap_or(1),
+            per_task_runs: a.per_task_runs.unwrap_or(1),
+            time: a.time.clone().unwrap_or_default(),
+            partition: a.partition.clone(),
+            sbatch_args: a.sbatch_arg.clone(),
+            cpus_per_task: a.cpus_per_task.unwrap_or(1),
+            compact: !a.no_compact,
+        })
+    };
+    let (max_array, note) = slurm::max_array_size();
+    if let Some(n) = note {
+        tracing::info!("{n}");
+    }
+    let plan = match slurm::plan(&c, &root, options, a.missing, &binary, max_array) {
+        Ok(p) => p,
+        Err(e) => return report_error(e),
+    };
+    for n in &plan.notes {
+        tracing::warn!("{n}");
+    }
+    let sub = plan.record.submissions.last().cloned().expect("submission");
+    if plan.indices.is_empty() {
+        println!(
+            "{}: nothing to submit: every shard is finished, queued or running",
+            root.display()
+        );
+        return exit_codes::OK;
+    }
+    if a.dry_run {
+        println!(
+            "# {} (would be written to {})",
+            sub.script,
+            root.join(&sub.script).display()
+        );
+        print!("{}", plan.script);
+        if let (Some(rel), Some(text)) = (&sub.compact_script, &plan.compact_script) {
+            println!("# {rel}");
+            print!("{text}");
+        }
+        println!(
+            "# would run: sbatch --parsable {}",
+            root.join(&sub.script).display()
+        );
+        if let Some(rel) = &sub.compact_script {
+            println!(
+                "# then: sbatch --parsable --dependency=afterok:<array job id> {}",
+                root.join(rel).display()
+            );
+        }
+        return exit_codes::OK;
+    }
+    match slurm::submit(&root, plan) {
+        Ok(p) => {
+            let s = p.record.submissions.last().expect("submission");
+            println!(
+                "submitted {} array task(s) ({} shards of about {} runs, array {}) as job {}{}",
+                p.indices.len(),
+                p.record.shards,
+                p.record.runs_per_shard,
+                s.array,
+                s.array_job.as_deref().unwrap_or("?"),
+                s.compact_job
+                    .as_deref()
+                    .map(|j| format!(", compaction job {j} (afterok)"))
+                    .unwrap_or_default()
+            );
+            println!("script: {}", root.join(&s.script).display());
+            exit_codes::OK
+        }
+        Err(e) => report_error(e),
     }
 }

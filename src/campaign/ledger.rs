@@ -58,9 +58,136 @@ pub fn pending_path(final_path: &Path) -> PathBuf {
     final_path.with_file_name(format!(".{name}.pending"))
 }
 
-/// Every commit of every shard, ordered by (shard, seq).
+/// The folded ledger written by `granular compact`: every run committed by the commit records
+/// it replaced, so that `status` and `resume` read one file instead of one per flush.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
+pub struct LedgerIndex {
+    pub format_version: u32,
+    /// Always "granular.ledger_index".
+    pub kind: String,
+    /// Per shard tag, the highest commit sequence number folded in (commit records of that
+    /// shard up to it are ignored if still present: a compaction stopped before deleting them).
+    pub folded: BTreeMap<String, u64>,
+    /// Runs finished as done, as inclusive ranges of run ids.
+    pub done: Vec<(u64, u64)>,
+    /// Runs finished as failed.
+    pub failed: Vec<u64>,
+}
+
+pub const INDEX_KIND: &str = "granular.ledger_index";
+
+pub fn index_path(root: &Path) -> PathBuf {
+    root.join("ledger").join("index.json")
+}
+
+pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
+    let p = index_path(root);
+    let text = match fs::read_to_string(&p) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("{}: {e}", p.display())),
+    };
+    let ix: LedgerIndex = serde_json::from_str(&text)
+        .map_err(|e| format!("{}: corrupt ledger index: {e}", p.display()))?;
+    if ix.kind != INDEX_KIND || ix.format_version != FORMAT_VERSION {
+        return Err(format!(
+            "{}: not a ledger index of format {FORMAT_VERSION} (kind {:?}, format {})",
+            p.display(),
+            ix.kind,
+            ix.format_version
+        ));
+    }
+    Ok(Some(ix))
+}
+
+impl LedgerIndex {
+    /// Build the index of `commits` (the first commit of a run wins).
+    pub fn fold(commits: &[Commit]) -> LedgerIndex {
+        let finished = finished_runs(commits);
+        let mut folded: BTreeMap<String, u64> = BTreeMap::new();
+        for c in commits {
+            if c.shard == INDEX_SHARD {
+                continue;
+            }
+            let e = folded.entry(c.shard.clone()).or_insert(0);
+            *e = (*e).max(c.seq);
+        }
+        let mut done: Vec<(u64, u64)> = Vec::new();
+        let mut failed = Vec::new();
+        for (&r, &st) in &finished {
+            match st {
+                RunStatus::Done => match done.last_mut() {
+                    Some((_, hi)) if *hi + 1 == r => *hi = r,
+                    _ => done.push((r, r)),
+                },
+                RunStatus::Failed => failed.push(r),
+            }
+        }
+        LedgerIndex {
+            format_version: FORMAT_VERSION,
+            kind: INDEX_KIND.into(),
+            folded,
+            done,
+            failed,
+        }
+    }
+
+    /// The index as one commit (shard `index`, no files), placed before all others.
+    fn as_commit(&self) -> Commit {
+        let mut runs: Vec<CommittedRun> = self
+            .done
+            .iter()
+            .flat_map(|&(a, b)| a..=b)
+            .map(|run_id| CommittedRun {
+                run_id,
+                status: RunStatus::Done,
+            })
+            .chain(self.failed.iter().map(|&run_id| CommittedRun {
+                run_id,
+                status: RunStatus::Failed,
+            }))
+            .collect();
+        runs.sort_by_key(|r| r.run_id);
+        Commit {
+            format_version: FORMAT_VERSION,
+            shard: INDEX_SHARD.into(),
+            seq: 0,
+            runs,
+            files: Vec::new(),
+        }
+    }
+}
+
+/// The shard name of the folded index in `read_commits`' output.
+pub const INDEX_SHARD: &str = "index";
+
+/// Commit record files of a shard directory with their sequence numbers, sorted.
+fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
+    let mut files: Vec<(u64, PathBuf)> = fs::read_dir(dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let n = e.file_name().to_string_lossy().into_owned();
+            let seq = n
+                .strip_prefix("commit-")?
+                .strip_suffix(".json")?
+                .parse::<u64>()
+                .ok()?;
+            Some((seq, e.path()))
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// Every commit: the folded index first (if any), then every shard's commit records not
+/// folded into it, ordered by (shard, seq).
 pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
     let mut out = Vec::new();
+    let index = read_index(root)?;
+    if let Some(ix) = &index {
+        out.push(ix.as_commit());
+    }
     let dir = root.join("ledger");
     let Ok(entries) = fs::read_dir(&dir) else {
         return Ok(out);
@@ -72,19 +199,18 @@ pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
         .collect();
     tags.sort();
     for tag in tags {
-        let mut files: Vec<PathBuf> = fs::read_dir(&tag)
-            .map_err(|e| format!("{}: {e}", tag.display()))?
-            .filter_map(|e| e.ok())
-            .map(|e| e.path())
-            .filter(|p| {
-                p.file_name().is_some_and(|n| {
-                    n.to_string_lossy().starts_with("commit-")
-                        && n.to_string_lossy().ends_with(".json")
-                })
-            })
-            .collect();
-        files.sort();
-        for f in files {
+        let name = tag
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let folded = index
+            .as_ref()
+            .and_then(|ix| ix.folded.get(&name).copied())
+            .unwrap_or(0);
+        for (seq, f) in commit_files(&tag)? {
+            if seq <= folded {
+                continue;
+            }
             let text = fs::read_to_string(&f).map_err(|e| format!("{}: {e}", f.display()))?;
             let c: Commit = serde_json::from_str(&text)
                 .map_err(|e| format!("{}: corrupt commit record: {e}", f.display()))?;
@@ -101,6 +227,33 @@ pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
     Ok(out)
 }
 
+/// Fold every commit record into `ledger/index.json` and delete the records folded in. Only
+/// for a campaign no process is writing to (`granular compact` holds the compaction lock) and
+/// after `recover` (every commit's parts renamed into place). Returns the records removed.
+pub fn fold_into_index(root: &Path) -> Result<usize, String> {
+    let commits = read_commits(root)?;
+    let ix = LedgerIndex::fold(&commits);
+    let p = index_path(root);
+    fsutil::write_atomic(&p, &serde_json::to_vec(&ix).expect("index serialises"))
+        .map_err(|e| format!("{}: {e}", p.display()))?;
+    let mut removed = 0;
+    for c in &commits {
+        if c.shard == INDEX_SHARD {
+            continue;
+        }
+        let f = commit_path(root, &c.shard, c.seq);
+        if fs::remove_file(&f).is_ok() {
+            removed += 1;
+        }
+    }
+    if let Ok(entries) = fs::read_dir(root.join("ledger")) {
+        for d in entries.filter_map(|e| e.ok()).filter(|e| e.path().is_dir()) {
+            let _ = fsutil::sync_dir(&d.path());
+        }
+    }
+    Ok(removed)
+}
+
 /// run_id -> status of every committed run (the first commit wins).
 pub fn finished_runs(commits: &[Commit]) -> BTreeMap<u64, RunStatus> {
     let mut m = BTreeMap::new();
@@ -113,21 +266,16 @@ pub fn finished_runs(commits: &[Commit]) -> BTreeMap<u64, RunStatus> {
 }
 
 pub fn next_seq(root: &Path, tag: &str) -> u64 {
-    let Ok(entries) = fs::read_dir(ledger_dir(root, tag)) else {
-        return 1;
-    };
-    entries
-        .filter_map(|e| e.ok())
-        .filter_map(|e| {
-            let n = e.file_name().to_string_lossy().into_owned();
-            n.strip_prefix("commit-")?
-                .strip_suffix(".json")?
-                .parse::<u64>()
-                .ok()
-        })
-        .max()
-        .unwrap_or(0)
-        + 1
+    let files = commit_files(&ledger_dir(root, tag))
+        .ok()
+        .and_then(|f| f.last().map(|(s, _)| *s))
+        .unwrap_or(0);
+    let folded = read_index(root)
+        .ok()
+        .flatten()
+        .and_then(|ix| ix.folded.get(tag).copied())
+        .unwrap_or(0);
+    files.max(folded) + 1
 }
 
 /// Roll forward committed parts and roll back uncommitted ones, for every shard whose lock
@@ -196,6 +344,8 @@ fn remove_stale_temporaries(root: &Path) -> Vec<String> {
         root.to_path_buf(),
         root.join("checkpoints"),
         root.join("locks"),
+        root.join("tables"),
+        root.join("ledger"),
     ];
     for sub in ["tables", "ledger"] {
         if let Ok(it) = fs::read_dir(root.join(sub)) {
@@ -269,9 +419,31 @@ pub fn pid_alive(pid: u32) -> bool {
     }
 }
 
-fn lock_is_live(l: &LockInfo) -> bool {
-    // A lock of another host cannot be checked from here: treat it as live.
-    l.host != hostname() || pid_alive(l.pid)
+/// A lock of another host (a cluster node) whose heartbeat is older than this is stale: its
+/// process is taken to be gone (node failure). Heartbeats are written every 2 s.
+pub const REMOTE_STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(600);
+
+/// The lock's tag of a compaction (`granular compact`).
+pub const COMPACT_TAG: &str = "compact";
+
+fn lock_is_live(root: &Path, l: &LockInfo) -> bool {
+    if l.host == hostname() {
+        return pid_alive(l.pid);
+    }
+    // Another host's process cannot be checked from here: it is live while its heartbeat (or,
+    // before the first heartbeat, its lock file) is recent.
+    let locks = root.join("locks");
+    let newest = [
+        locks.join(format!("{}.running.json", l.shard_tag)),
+        locks.join(format!("{}.lock", l.shard_tag)),
+    ]
+    .iter()
+    .filter_map(|p| fs::metadata(p).ok()?.modified().ok())
+    .max();
+    match newest {
+        Some(t) => t.elapsed().map_or(true, |age| age < REMOTE_STALE_AFTER),
+        None => false,
+    }
 }
 
 /// Locks of live processes.
@@ -283,8 +455,102 @@ pub fn live_locks(root: &Path) -> Vec<LockInfo> {
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().ends_with(".lock"))
         .filter_map(|e| serde_json::from_str::<LockInfo>(&fs::read_to_string(e.path()).ok()?).ok())
-        .filter(lock_is_live)
+        .filter(|l| lock_is_live(root, l))
         .collect()
+}
+
+/// Create `locks/<tag>.lock` exclusively (O_EXCL, which NFS v3+ honours), replacing a stale
+/// one; `Err` names the live holder.
+fn take_lock_file(root: &Path, info: &LockInfo) -> Result<PathBuf, String> {
+    let dir = root.join("locks");
+    fsutil::create_dir_durable(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let path = dir.join(format!("{}.lock", info.shard_tag));
+    for _ in 0..2 {
+        match fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+        {
+            Ok(mut f) => {
+                use std::io::Write;
+                f.write_all(serde_json::to_string(info).expect("lock info").as_bytes())
+                    .and_then(|_| f.sync_all())
+                    .map_err(|e| format!("{}: {e}", path.display()))?;
+                let _ = fsutil::sync_dir(&dir);
+                return Ok(path);
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                let holder = fs::read_to_string(&path)
+                    .ok()
+                    .and_then(|s| serde_json::from_str::<LockInfo>(&s).ok());
+                match holder {
+                    Some(h) if lock_is_live(root, &h) => {
+                        return Err(format!(
+                            "{} is in use: {} is being run by process {} on {} (lock {})",
+                            root.display(),
+                            if h.shard_tag == COMPACT_TAG {
+                                "a compaction".to_string()
+                            } else {
+                                format!("shard {}", h.shard)
+                            },
+                            h.pid,
+                            h.host,
+                            path.display()
+                        ))
+                    }
+                    _ => {
+                        // Stale (its process is gone) or unreadable (crashed while writing).
+                        let _ = fs::remove_file(&path);
+                    }
+                }
+            }
+            Err(e) => return Err(format!("{}: {e}", path.display())),
+        }
+    }
+    Err(format!("{}: could not take the lock", path.display()))
+}
+
+/// An exclusive claim on a campaign directory for `granular compact`: no shard may run while
+/// it is held, and it is refused while any shard runs. Released on drop.
+pub struct CompactLock {
+    path: PathBuf,
+}
+
+impl CompactLock {
+    pub fn acquire(root: &Path) -> Result<CompactLock, String> {
+        let info = LockInfo {
+            pid: std::process::id(),
+            host: hostname(),
+            shard: COMPACT_TAG.into(),
+            shard_tag: COMPACT_TAG.into(),
+            shard_count: 0,
+        };
+        let path = take_lock_file(root, &info)?;
+        let lock = CompactLock { path };
+        // Take, then check (shards do the same the other way round): of two processes
+        // starting at once, at least one sees the other.
+        let running: Vec<LockInfo> = live_locks(root)
+            .into_iter()
+            .filter(|l| l.shard_tag != COMPACT_TAG)
+            .collect();
+        if let Some(l) = running.first() {
+            return Err(format!(
+                "{} is in use: shard {} is being run by process {} on {} ({} shard(s) running); compact when no shard runs",
+                root.display(),
+                l.shard,
+                l.pid,
+                l.host,
+                running.len()
+            ));
+        }
+        Ok(lock)
+    }
+}
+
+impl Drop for CompactLock {
+    fn drop(&mut self) {
+        let _ = fs::remove_file(&self.path);
+    }
 }
 
 /// An exclusive claim on one shard of a campaign directory, released on drop.
@@ -294,10 +560,24 @@ pub struct ShardLock {
 
 impl ShardLock {
     pub fn acquire(root: &Path, shard: Shard) -> Result<ShardLock, String> {
-        let dir = root.join("locks");
-        fsutil::create_dir_durable(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let compacting = |root: &Path| {
+            live_locks(root)
+                .into_iter()
+                .find(|l| l.shard_tag == COMPACT_TAG)
+                .map(|l| {
+                    format!(
+                        "{} is being compacted by process {} on {}; run or resume when `granular compact` has finished",
+                        root.display(),
+                        l.pid,
+                        l.host
+                    )
+                })
+        };
+        if let Some(e) = compacting(root) {
+            return Err(e);
+        }
         for other in live_locks(root) {
-            if other.shard_count != shard.count {
+            if other.shard_tag != COMPACT_TAG && other.shard_count != shard.count {
                 return Err(format!(
                     "{} is in use by process {} on {} running shard {} (a different shard layout than {shard})",
                     root.display(),
@@ -307,7 +587,6 @@ impl ShardLock {
                 ));
             }
         }
-        let path = dir.join(format!("{}.lock", shard.tag()));
         let info = LockInfo {
             pid: std::process::id(),
             host: hostname(),
@@ -315,45 +594,12 @@ impl ShardLock {
             shard_tag: shard.tag(),
             shard_count: shard.count,
         };
-        for _ in 0..2 {
-            match fs::OpenOptions::new()
-                .write(true)
-                .create_new(true)
-                .open(&path)
-            {
-                Ok(mut f) => {
-                    use std::io::Write;
-                    f.write_all(serde_json::to_string(&info).expect("lock info").as_bytes())
-                        .and_then(|_| f.sync_all())
-                        .map_err(|e| format!("{}: {e}", path.display()))?;
-                    let _ = fsutil::sync_dir(&dir);
-                    return Ok(ShardLock { path });
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let holder = fs::read_to_string(&path)
-                        .ok()
-                        .and_then(|s| serde_json::from_str::<LockInfo>(&s).ok());
-                    match holder {
-                        Some(h) if lock_is_live(&h) => {
-                            return Err(format!(
-                                "{} is in use: shard {} is being run by process {} on {} (lock {})",
-                                root.display(),
-                                h.shard,
-                                h.pid,
-                                h.host,
-                                path.display()
-                            ))
-                        }
-                        _ => {
-                            // Stale (its process is gone) or unreadable (crashed while writing).
-                            let _ = fs::remove_file(&path);
-                        }
-                    }
-                }
-                Err(e) => return Err(format!("{}: {e}", path.display())),
-            }
+        let path = take_lock_file(root, &info)?;
+        let lock = ShardLock { path };
+        if let Some(e) = compacting(root) {
+            return Err(e);
         }
-        Err(format!("{}: could not take the lock", path.display()))
+        Ok(lock)
     }
 }
 

@@ -12,8 +12,11 @@
 //! <out>/tables/<table>/*.parquet one dataset per table
 //! ```
 
+pub mod compact;
 pub mod ledger;
+pub mod slurm;
 pub mod status;
+pub mod verify;
 pub mod worker;
 pub mod writer;
 

@@ -50,8 +50,8 @@ impl<'c> Writer<'c> {
             ]);
         }
         for t in names {
-            let d = c.root.join("tables").join(t);
-            fsutil::create_dir_durable(&d).map_err(|e| StoreError::io(&d, e))?;
+            crate::store::layout::ensure_table_dir(&c.root, t)
+                .map_err(|e| StoreError::io(&c.root.join("tables").join(t), e))?;
         }
         let d = ledger::ledger_dir(&c.root, tag);
         fsutil::create_dir_durable(&d).map_err(|e| StoreError::io(&d, e))?;
@@ -256,15 +256,13 @@ pub fn write_theory(c: &Campaign) -> Result<(), StoreError> {
     if theory.exists() && per_point.exists() && (tamsd.exists() || !with_tamsd) {
         return Ok(());
     }
-    let mut dirs = vec![
-        theory.parent().expect("dir"),
-        per_point.parent().expect("dir"),
-    ];
+    let mut names = vec![tables::DSMC_THEORY, tables::DSMC_THEORY_POINT];
     if with_tamsd {
-        dirs.push(tamsd.parent().expect("dir"));
+        names.push(tables::DSMC_THEORY_TAMSD);
     }
-    for d in dirs {
-        fsutil::create_dir_durable(d).map_err(|e| StoreError::io(d, e))?;
+    for t in names {
+        crate::store::layout::ensure_table_dir(&c.root, t)
+            .map_err(|e| StoreError::io(&dir.join(t), e))?;
     }
     let preds: Vec<(u32, crate::dsmc::predict::Prediction)> = c
         .plan

@@ -2,6 +2,7 @@
 //! The store knows table schemas, not physics.
 
 pub mod checkpoint;
+pub mod layout;
 pub mod parquet_io;
 pub mod rfm_summary;
 pub mod summary;

@@ -57,16 +57,38 @@ pub fn write_file(
     table: &str,
     manifest_json: &str,
 ) -> Result<(), StoreError> {
-    let schema = schema_with_metadata(batch.schema().as_ref(), table, manifest_json);
-    let batch = batch
-        .clone()
-        .with_schema(schema.clone())
-        .map_err(|e| StoreError::Arrow(e.to_string()))?;
+    write_batches(tmp, std::slice::from_ref(batch), table, manifest_json)
+}
+
+/// Write `batches` (one schema) as one Parquet file at `tmp` (fsynced).
+pub fn write_batches(
+    tmp: &Path,
+    batches: &[RecordBatch],
+    table: &str,
+    manifest_json: &str,
+) -> Result<(), StoreError> {
+    let Some(first) = batches.first() else {
+        return Err(StoreError::Arrow(format!(
+            "{}: no batches to write",
+            tmp.display()
+        )));
+    };
+    let schema = schema_with_metadata(first.schema().as_ref(), table, manifest_json);
     let file = File::create(tmp).map_err(|e| StoreError::io(tmp, e))?;
-    let mut w = ArrowWriter::try_new(file, schema, Some(writer_properties(table, manifest_json)))
-        .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
-    w.write(&batch)
-        .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
+    let mut w = ArrowWriter::try_new(
+        file,
+        schema.clone(),
+        Some(writer_properties(table, manifest_json)),
+    )
+    .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
+    for batch in batches {
+        let batch = batch
+            .clone()
+            .with_schema(schema.clone())
+            .map_err(|e| StoreError::Arrow(e.to_string()))?;
+        w.write(&batch)
+            .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
+    }
     let file = w
         .into_inner()
         .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
@@ -74,13 +96,27 @@ pub fn write_file(
     Ok(())
 }
 
-/// Read every batch of a table file, checking that it is one of ours and of this format.
-pub fn read_file(path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+/// What a table file says about itself (footer only; the data pages are not read).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PartInfo {
+    pub table: String,
+    pub format_version: Option<u32>,
+    /// Canonical JSON of the campaign manifest the file was written for.
+    pub manifest: Option<String>,
+    pub code_version: Option<String>,
+    pub rows: u64,
+}
+
+/// Open a table file and read its footer: a truncated file, a file that is not Parquet, or a
+/// Parquet file not written by granular is an error naming the file.
+pub fn inspect(
+    path: &Path,
+) -> Result<(PartInfo, ParquetRecordBatchReaderBuilder<File>), StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| {
         StoreError::Corrupt(
             path.display().to_string(),
-            format!("not a readable Parquet file: {e}"),
+            format!("not a readable Parquet file (truncated or foreign?): {e}"),
         )
     })?;
     let kv = builder
@@ -90,30 +126,72 @@ pub fn read_file(path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreErro
         .cloned()
         .unwrap_or_default();
     let get = |k: &str| kv.iter().find(|x| x.key == k).and_then(|x| x.value.clone());
-    match get("granular.table") {
-        Some(t) if t == table => {}
-        Some(t) => {
-            return Err(StoreError::Corrupt(
-                path.display().to_string(),
-                format!("holds table {t:?}, expected {table:?}"),
-            ))
-        }
-        None => {
-            return Err(StoreError::Corrupt(
-                path.display().to_string(),
-                "is not a granular table file".into(),
-            ))
+    let Some(table) = get("granular.table") else {
+        return Err(StoreError::Corrupt(
+            path.display().to_string(),
+            "is not a granular table file (no granular.table metadata)".into(),
+        ));
+    };
+    let info = PartInfo {
+        table,
+        format_version: get("granular.format_version").and_then(|v| v.parse().ok()),
+        manifest: get("granular.manifest"),
+        code_version: get("granular.code_version"),
+        rows: builder.metadata().file_metadata().num_rows().max(0) as u64,
+    };
+    Ok((info, builder))
+}
+
+/// Check a file's footer against the expected table (and campaign, when given).
+pub fn check_part(
+    path: &Path,
+    info: &PartInfo,
+    table: &str,
+    manifest_json: Option<&str>,
+) -> Result<(), StoreError> {
+    let bad = |why: String| Err(StoreError::Corrupt(path.display().to_string(), why));
+    if info.table != table {
+        return bad(format!("holds table {:?}, expected {table:?}", info.table));
+    }
+    if info.format_version != Some(FORMAT_VERSION) {
+        return bad(format!(
+            "has format version {:?}; this granular reads {FORMAT_VERSION}",
+            info.format_version
+        ));
+    }
+    if let Some(m) = manifest_json {
+        if info.manifest.as_deref() != Some(m) {
+            return bad(
+                "belongs to another campaign (its granular.manifest differs from campaign.json)"
+                    .into(),
+            );
         }
     }
-    match get("granular.format_version").and_then(|v| v.parse::<u32>().ok()) {
-        Some(FORMAT_VERSION) => {}
-        other => {
-            return Err(StoreError::Corrupt(
-                path.display().to_string(),
-                format!("has format version {other:?}; this granular reads {FORMAT_VERSION}"),
-            ))
-        }
-    }
+    Ok(())
+}
+
+/// Read every batch of a table file of the campaign whose canonical manifest is
+/// `manifest_json`: a file of another table, format or campaign is an error, never data.
+pub fn read_campaign_file(
+    path: &Path,
+    table: &str,
+    manifest_json: &str,
+) -> Result<Vec<RecordBatch>, StoreError> {
+    read_checked(path, table, Some(manifest_json))
+}
+
+/// Read every batch of a table file, checking that it is one of ours and of this format.
+pub fn read_file(path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+    read_checked(path, table, None)
+}
+
+fn read_checked(
+    path: &Path,
+    table: &str,
+    manifest_json: Option<&str>,
+) -> Result<Vec<RecordBatch>, StoreError> {
+    let (info, builder) = inspect(path)?;
+    check_part(path, &info, table, manifest_json)?;
     let reader = builder
         .build()
         .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))?;

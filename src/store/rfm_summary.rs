@@ -25,7 +25,7 @@ use crate::campaign::Campaign;
 fn batches(c: &Campaign, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
     let mut out = Vec::new();
     for f in table_files(c, table)? {
-        out.extend(parquet_io::read_file(&f, table)?);
+        out.extend(parquet_io::read_campaign_file(&f, table, &c.manifest_json)?);
     }
     Ok(out)
 }

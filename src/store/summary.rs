@@ -109,7 +109,7 @@ fn write_dsmc_summaries(
         // (point, t, species) -> [(replica, temperature, msd)]
         let mut acc: BTreeMap<Key, Vec<(u32, f64, Option<f64>)>> = BTreeMap::new();
         for f in &files {
-            for b in parquet_io::read_file(f, tables::DSMC_SPECIES)? {
+            for b in parquet_io::read_campaign_file(f, tables::DSMC_SPECIES, &c.manifest_json)? {
                 let col = |name: &str| {
                     b.column_by_name(name).cloned().ok_or_else(|| {
                         StoreError::Corrupt(
@@ -204,8 +204,7 @@ pub(crate) fn write_whole(
     batch: &RecordBatch,
 ) -> Result<(), StoreError> {
     let path = c.root.join("tables").join(table).join(name);
-    fsutil::create_dir_durable(path.parent().expect("dir"))
-        .map_err(|e| StoreError::io(&path, e))?;
+    crate::store::layout::ensure_table_dir(&c.root, table).map_err(|e| StoreError::io(&path, e))?;
     let tmp = fsutil::temp_path(&path);
     parquet_io::write_file(&tmp, batch, table, &c.manifest_json)?;
     std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
@@ -251,7 +250,7 @@ fn write_tamsd_summary(
         // (point, species, lag) -> [(replica, tamsd)]
         let mut acc: BTreeMap<TamsdKey, Vec<(u32, f64)>> = BTreeMap::new();
         for f in &files {
-            for b in parquet_io::read_file(f, tables::DSMC_TAMSD)? {
+            for b in parquet_io::read_campaign_file(f, tables::DSMC_TAMSD, &c.manifest_json)? {
                 let col = |name: &str| {
                     b.column_by_name(name).cloned().ok_or_else(|| {
                         StoreError::Corrupt(
@@ -315,7 +314,7 @@ fn write_tamsd_summary(
 fn read_tamsd_theory(c: &Campaign) -> Result<BTreeMap<TamsdKey, f64>, StoreError> {
     let mut out = BTreeMap::new();
     for f in table_files(c, tables::DSMC_THEORY_TAMSD)? {
-        for b in parquet_io::read_file(&f, tables::DSMC_THEORY_TAMSD)? {
+        for b in parquet_io::read_campaign_file(&f, tables::DSMC_THEORY_TAMSD, &c.manifest_json)? {
             let col = |name: &str| {
                 b.column_by_name(name).cloned().ok_or_else(|| {
                     StoreError::Corrupt(f.display().to_string(), format!("has no column {name}"))
@@ -410,7 +409,7 @@ fn deviations(
 fn read_theory(c: &Campaign) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreError> {
     let mut out = BTreeMap::new();
     for f in table_files(c, tables::DSMC_THEORY)? {
-        for b in parquet_io::read_file(&f, tables::DSMC_THEORY)? {
+        for b in parquet_io::read_campaign_file(&f, tables::DSMC_THEORY, &c.manifest_json)? {
             let col = |name: &str| {
                 b.column_by_name(name).cloned().ok_or_else(|| {
                     StoreError::Corrupt(f.display().to_string(), format!("has no column {name}"))

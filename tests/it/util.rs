@@ -127,6 +127,16 @@ pub fn snapshot(dir: &Path) -> BTreeMap<PathBuf, (Vec<u8>, SystemTime)> {
             if md.is_dir() {
                 out.insert(p.clone(), (Vec::new(), md.modified().expect("mtime")));
                 stack.push(p);
+            } else if md.file_type().is_symlink() {
+                // A table's link to its current generation: its target is its content.
+                let target = fs::read_link(&p).expect("read_link");
+                out.insert(
+                    p.clone(),
+                    (
+                        target.to_string_lossy().as_bytes().to_vec(),
+                        md.modified().expect("mtime"),
+                    ),
+                );
             } else {
                 out.insert(
                     p.clone(),
@@ -392,6 +402,7 @@ pub fn read_tables(dir: &Path) -> Tables {
     let present: BTreeSet<String> = fs::read_dir(dir.join("tables"))
         .expect("tables dir")
         .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.starts_with('.'))
         .collect();
     let known: BTreeSet<String> = TABLES.iter().map(|(t, _)| t.to_string()).collect();
     let required: BTreeSet<String> = known

@@ -1,0 +1,570 @@
+//! `granular submit --slurm`: a campaign as a SLURM job array. SLURM places the work;
+//! granular only shards it. Array task `i` runs shard `i+1` of `N` (`--shard (i+1)/N`, runs with
+//! `run_id % N == i`), which is idempotent: finished runs are skipped, running ones resume from
+//! their checkpoints, the shard lock refuses a second process. A compaction job follows the
+//! array with `afterok`.
+//!
+//! Files (under the campaign directory):
+//! ```text
+//! slurm/submission.json         the shard layout, the options, every submission's job ids
+//! slurm/array-<k>.sh            the k-th array script (readable, resubmittable with sbatch)
+//! slurm/compact-<k>.sh          its compaction job
+//! slurm/logs/<job>_<task>.out   task output
+//! ```
+//! The commands `sbatch`, `squeue` and `scontrol` can be replaced through the environment
+//! variables `GRANULAR_SBATCH`, `GRANULAR_SQUEUE` and `GRANULAR_SCONTROL` (tests, wrappers).
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde::{Deserialize, Serialize};
+
+use super::ledger;
+use super::{Campaign, CampaignError};
+use crate::fsutil;
+use crate::store::FORMAT_VERSION;
+
+pub const SUBMISSION_KIND: &str = "granular.slurm_submission";
+
+/// SLURM's default `MaxArraySize` (indices 0..=1000).
+pub const DEFAULT_MAX_ARRAY_SIZE: u64 = 1001;
+
+/// The options of `granular submit` (all but the first submission's may be overridden by
+/// `--missing`).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct SlurmOptions {
+    /// Array tasks running at once (the `%` throttle).
+    pub throttle: u32,
+    /// Runs per array task (before packing to respect MaxArraySize).
+    pub per_task_runs: u64,
+    /// `--time` of each task (and of the compaction job).
+    pub time: String,
+    pub partition: Option<String>,
+    /// Extra `#SBATCH` arguments, verbatim.
+    pub sbatch_args: Vec<String>,
+    /// Worker threads per task (`--cpus-per-task`).
+    pub cpus_per_task: u32,
+    /// Chain a `granular compact` job after the array (afterok).
+    pub compact: bool,
+}
+
+/// One `sbatch` of an array (and its compaction job).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct Submission {
+    pub number: u32,
+    /// Relative to the campaign directory.
+    pub script: String,
+    /// The `--array` value, throttle included.
+    pub array: String,
+    pub array_job: Option<String>,
+    pub compact_script: Option<String>,
+    pub compact_job: Option<String>,
+    /// Array indices (shard index - 1) of this submission.
+    pub indices: Vec<u64>,
+}
+
+/// `slurm/submission.json`.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct SubmissionRecord {
+    pub format_version: u32,
+    pub kind: String,
+    /// N of the shard layout `--shard I/N`; fixed by the first submission.
+    pub shards: u64,
+    pub runs_per_shard: u64,
+    pub options: SlurmOptions,
+    /// The granular binary the scripts run.
+    pub binary: String,
+    pub submissions: Vec<Submission>,
+}
+
+/// What `submit` did or would do.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub record: SubmissionRecord,
+    pub script: String,
+    pub compact_script: Option<String>,
+    pub indices: Vec<u64>,
+    pub notes: Vec<String>,
+}
+
+fn record_path(root: &Path) -> PathBuf {
+    root.join("slurm").join("submission.json")
+}
+
+pub fn read_record(root: &Path) -> Result<Option<SubmissionRecord>, String> {
+    let p = record_path(root);
+    let text = match std::fs::read_to_string(&p) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("{}: {e}", p.display())),
+    };
+    let r: SubmissionRecord = serde_json::from_str(&text)
+        .map_err(|e| format!("{}: corrupt submission record: {e}", p.display()))?;
+    if r.kind != SUBMISSION_KIND || r.format_version != FORMAT_VERSION {
+        return Err(format!(
+            "{}: not a submission record of format {FORMAT_VERSION}",
+            p.display()
+        ));
+    }
+    Ok(Some(r))
+}
+
+/// Check a SLURM time limit: `M`, `M:S`, `H:M:S`, `D-H`, `D-H:M`, `D-H:M:S`.
+pub fn check_time(t: &str) -> Result<(), String> {
+    let num = |s: &str| !s.is_empty() && s.len() <= 4 && s.bytes().all(|b| b.is_ascii_digit());
+    let (days, rest) = match t.split_once('-') {
+        Some((d, r)) => (Some(d), r),
+        None => (None, t),
+    };
+    let parts: Vec<&str> = rest.split(':').collect();
+    let ok = days.is_none_or(num)
+        && parts.iter().all(|p| num(p))
+        && match days {
+            Some(_) => (1..=3).contains(&parts.len()),
+            None => (1..=3).contains(&parts.len()),
+        };
+    if ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "--time {t:?}: expected a SLURM time limit (MM, MM:SS, HH:MM:SS, D-HH, D-HH:MM or D-HH:MM:SS)"
+        ))
+    }
+}
+
+/// `0-4,7,9-12` from sorted indices.
+pub fn ranges(indices: &[u64]) -> String {
+    let mut out: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < indices.len() {
+        let mut j = i;
+        while j + 1 < indices.len() && indices[j + 1] == indices[j] + 1 {
+            j += 1;
+        }
+        out.push(if i == j {
+            indices[i].to_string()
+        } else {
+            format!("{}-{}", indices[i], indices[j])
+        });
+        i = j + 1;
+    }
+    out.join(",")
+}
+
+/// Shards (N) and runs per shard for `n_runs` runs, `per_task` runs per task and at most
+/// `max_array` array indices: packs more runs per task when the array would be too large.
+pub fn layout(n_runs: u64, per_task: u64, max_array: u64) -> (u64, u64) {
+    let per_task = per_task.max(1);
+    let mut shards = n_runs.div_ceil(per_task).max(1);
+    let mut per = per_task;
+    if shards > max_array {
+        per = n_runs.div_ceil(max_array);
+        shards = n_runs.div_ceil(per);
+    }
+    (shards, per)
+}
+
+fn tool(var: &str, default: &str) -> String {
+    std::env::var(var).unwrap_or_else(|_| default.to_string())
+}
+
+/// `MaxArraySize` of the cluster (`scontrol show config`), or SLURM's default.
+pub fn max_array_size() -> (u64, Option<String>) {
+    let out = Command::new(tool("GRANULAR_SCONTROL", "scontrol"))
+        .args(["show", "config"])
+        .output();
+    match out {
+        Ok(o) if o.status.success() => {
+            let text = String::from_utf8_lossy(&o.stdout);
+            for line in text.lines() {
+                let mut it = line.splitn(2, '=');
+                if it.next().map(str::trim) == Some("MaxArraySize") {
+                    if let Some(v) = it.next().and_then(|v| v.trim().parse::<u64>().ok()) {
+                        return (v.max(1), None);
+                    }
+                }
+            }
+            (
+                DEFAULT_MAX_ARRAY_SIZE,
+                Some("scontrol show config has no MaxArraySize; assuming 1001".into()),
+            )
+        }
+        _ => (
+            DEFAULT_MAX_ARRAY_SIZE,
+            Some("scontrol not available; assuming MaxArraySize = 1001".into()),
+        ),
+    }
+}
+
+fn quote(s: &str) -> String {
+    format!("'{}'", s.replace('\'', "'\\''"))
+}
+
+fn job_name(c: &Campaign) -> String {
+    let n: String = c
+        .manifest
+        .name
+        .chars()
+        .map(|ch| {
+            if ch.is_ascii_alphanumeric() || ch == '-' || ch == '_' {
+                ch
+            } else {
+                '_'
+            }
+        })
+        .take(40)
+        .collect();
+    format!("granular-{n}")
+}
+
+/// The array script of submission `number`.
+pub fn array_script(
+    c: &Campaign,
+    root: &Path,
+    rec: &SubmissionRecord,
+    array: &str,
+    number: u32,
+) -> String {
+    let o = &rec.options;
+    let mut s = String::new();
+    s.push_str("#!/bin/bash\n");
+    s.push_str(&format!(
+        "# granular campaign {:?}: {} runs as {} shards of about {} runs (array task i = shard i+1/{}).\n",
+        c.manifest.name,
+        c.plan.n_runs(),
+        rec.shards,
+        rec.runs_per_shard,
+        rec.shards
+    ));
+    s.push_str(&format!(
+        "# Submission {number}, written by `granular submit`. Resubmitting this script is safe:\n\
+         # finished runs are skipped and running ones resume from their checkpoints.\n\
+         # Unfinished work only: granular submit --missing {}\n",
+        root.display()
+    ));
+    s.push_str(&format!("#SBATCH --job-name={}\n", job_name(c)));
+    s.push_str(&format!("#SBATCH --array={array}\n"));
+    s.push_str(&format!("#SBATCH --time={}\n", o.time));
+    s.push_str(&format!("#SBATCH --cpus-per-task={}\n", o.cpus_per_task));
+    s.push_str("#SBATCH --ntasks=1\n");
+    s.push_str(&format!(
+        "#SBATCH --output={}/slurm/logs/%A_%a.out\n",
+        root.display()
+    ));
+    s.push_str("#SBATCH --open-mode=append\n");
+    if let Some(p) = &o.partition {
+        s.push_str(&format!("#SBATCH --partition={p}\n"));
+    }
+    for a in &o.sbatch_args {
+        s.push_str(&format!("#SBATCH {a}\n"));
+    }
+    s.push_str("set -u\n");
+    s.push_str(&format!(
+        "exec {} slurm-task {} --shards {} --threads \"${{SLURM_CPUS_PER_TASK:-{}}}\"\n",
+        quote(&rec.binary),
+        quote(&root.display().to_string()),
+        rec.shards,
+        o.cpus_per_task
+    ));
+    s
+}
+
+fn compact_script(c: &Campaign, root: &Path, rec: &SubmissionRecord) -> String {
+    let o = &rec.options;
+    let mut s = String::new();
+    s.push_str("#!/bin/bash\n");
+    s.push_str(&format!(
+        "# granular campaign {:?}: merge the table parts after the array (afterok).\n",
+        c.manifest.name
+    ));
+    s.push_str(&format!("#SBATCH --job-name={}-compact\n", job_name(c)));
+    s.push_str(&format!("#SBATCH --time={}\n", o.time));
+    s.push_str("#SBATCH --ntasks=1\n");
+    s.push_str(&format!(
+        "#SBATCH --output={}/slurm/logs/compact-%j.out\n",
+        root.display()
+    ));
+    if let Some(p) = &o.partition {
+        s.push_str(&format!("#SBATCH --partition={p}\n"));
+    }
+    for a in &o.sbatch_args {
+        s.push_str(&format!("#SBATCH {a}\n"));
+    }
+    s.push_str(&format!(
+        "exec {} compact {}\n",
+        quote(&rec.binary),
+        quote(&root.display().to_string())
+    ));
+    s
+}
+
+/// Array tasks of earlier submissions still queued or running, by array index
+/// (`squeue -r`); `None` when squeue cannot be asked.
+fn queued_indices(rec: &SubmissionRecord) -> Option<BTreeSet<u64>> {
+    let jobs: Vec<String> = rec
+        .submissions
+        .iter()
+        .filter_map(|s| s.array_job.clone())
+        .collect();
+    if jobs.is_empty() {
+        return Some(BTreeSet::new());
+    }
+    let out = Command::new(tool("GRANULAR_SQUEUE", "squeue"))
+        .args(["-h", "-r", "-o", "%F %K %T", "-j", &jobs.join(",")])
+        .output()
+        .ok()?;
+    if !out.status.success() {
+        // squeue fails for job ids it no longer knows: then nothing of them is queued.
+        let err = String::from_utf8_lossy(&out.stderr);
+        return if err.contains("Invalid job id") {
+            Some(BTreeSet::new())
+        } else {
+            None
+        };
+    }
+    let mut set = BTreeSet::new();
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        if f.len() >= 3 && jobs.iter().any(|j| j == f[0]) {
+            // %K is an index, or a range spec for a pending array remainder ("3-9%2").
+            let spec = f[1].split('%').next().unwrap_or("");
+            for part in spec.split(',') {
+                match part.split_once('-') {
+                    Some((a, b)) => {
+                        if let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) {
+                            set.extend(a..=b);
+                        }
+                    }
+                    None => {
+                        if let Ok(i) = part.parse::<u64>() {
+                            set.insert(i);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Some(set)
+}
+
+/// Work out a submission: all shards for the first one, the shards with unfinished runs that
+/// no live task is working on for `--missing`.
+pub fn plan(
+    c: &Campaign,
+    root: &Path,
+    options: Option<SlurmOptions>,
+    missing: bool,
+    binary: &str,
+    max_array: u64,
+) -> Result<Plan, CampaignError> {
+    let existing = read_record(root).map_err(CampaignError::Refused)?;
+    let mut notes = Vec::new();
+    let mut rec = match (&existing, missing) {
+        (Some(_), false) => {
+            return Err(CampaignError::Refused(format!(
+                "{} was already submitted to SLURM (slurm/submission.json); resubmit unfinished work with `granular submit --missing {}`",
+                root.display(),
+                root.display()
+            )))
+        }
+        (None, true) => {
+            return Err(CampaignError::Refused(format!(
+                "{} has no SLURM submission (slurm/submission.json); submit it first with `granular submit MANIFEST --out {} --slurm ...`",
+                root.display(),
+                root.display()
+            )))
+        }
+        (Some(r), true) => {
+            let mut r = r.clone();
+            if let Some(o) = options {
+                r.options = o;
+            }
+            r.binary = binary.to_string();
+            r
+        }
+        (None, false) => {
+            let o = options.expect("options of a first submission");
+            let (shards, per) = layout(c.plan.n_runs(), o.per_task_runs, max_array);
+            if per != o.per_task_runs.max(1) {
+                notes.push(format!(
+                    "{} runs at {} per task would need {} array tasks, more than MaxArraySize = {max_array}: packed {per} runs per task into {shards} tasks",
+                    c.plan.n_runs(),
+                    o.per_task_runs,
+                    c.plan.n_runs().div_ceil(o.per_task_runs.max(1)),
+                ));
+            }
+            SubmissionRecord {
+                format_version: FORMAT_VERSION,
+                kind: SUBMISSION_KIND.into(),
+                shards,
+                runs_per_shard: per,
+                options: o,
+                binary: binary.to_string(),
+                submissions: Vec::new(),
+            }
+        }
+    };
+    check_time(&rec.options.time).map_err(CampaignError::Refused)?;
+    let n = rec.shards;
+    let indices: Vec<u64> = if !missing {
+        (0..n).collect()
+    } else {
+        let commits = ledger::read_commits(root).map_err(CampaignError::Refused)?;
+        let finished = ledger::finished_runs(&commits);
+        let mut unfinished = BTreeSet::new();
+        for r in 0..c.plan.n_runs() {
+            if !finished.contains_key(&r) {
+                unfinished.insert(r % n);
+            }
+        }
+        let live: BTreeSet<u64> = ledger::live_locks(root)
+            .into_iter()
+            .filter(|l| l.shard_count as u64 == n && l.shard_tag != ledger::COMPACT_TAG)
+            .filter_map(|l| {
+                l.shard
+                    .split('/')
+                    .next()
+                    .and_then(|i| i.parse::<u64>().ok())
+                    .map(|i| i - 1)
+            })
+            .collect();
+        let queued = match queued_indices(&rec) {
+            Some(q) => q,
+            None => {
+                notes.push(
+                    "squeue not available: only shard locks tell which tasks still run".into(),
+                );
+                BTreeSet::new()
+            }
+        };
+        let busy: Vec<u64> = unfinished
+            .iter()
+            .filter(|i| live.contains(i) || queued.contains(i))
+            .copied()
+            .collect();
+        if !busy.is_empty() {
+            notes.push(format!(
+                "{} shard(s) with unfinished runs are still queued or running and are not resubmitted: {}",
+                busy.len(),
+                ranges(&busy)
+            ));
+        }
+        unfinished
+            .into_iter()
+            .filter(|i| !busy.contains(i))
+            .collect()
+    };
+    let number = rec.submissions.len() as u32 + 1;
+    let array = format!("{}%{}", ranges(&indices), rec.options.throttle.max(1));
+    let script = array_script(c, root, &rec, &array, number);
+    let compact = rec.options.compact.then(|| compact_script(c, root, &rec));
+    rec.submissions.push(Submission {
+        number,
+        script: format!("slurm/array-{number:03}.sh"),
+        array,
+        array_job: None,
+        compact_script: compact
+            .as_ref()
+            .map(|_| format!("slurm/compact-{number:03}.sh")),
+        compact_job: None,
+        indices: indices.clone(),
+    });
+    Ok(Plan {
+        record: rec,
+        script,
+        compact_script: compact,
+        indices,
+        notes,
+    })
+}
+
+fn sbatch(args: &[&str]) -> Result<String, String> {
+    let cmd = tool("GRANULAR_SBATCH", "sbatch");
+    let out = Command::new(&cmd)
+        .args(args)
+        .output()
+        .map_err(|e| format!("cannot run {cmd}: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "{cmd} {} failed ({}): {}",
+            args.join(" "),
+            out.status,
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    // --parsable prints "jobid" or "jobid;cluster".
+    let id = text.trim().split(';').next().unwrap_or("").to_string();
+    if id.is_empty() || !id.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(format!("{cmd} printed {text:?}, expected a job id"));
+    }
+    Ok(id)
+}
+
+/// Write the scripts and the record, then submit the array and its compaction job.
+pub fn submit(root: &Path, mut p: Plan) -> Result<Plan, CampaignError> {
+    let io = |path: &Path, e: std::io::Error| CampaignError::Io(format!("{}: {e}", path.display()));
+    let logs = root.join("slurm").join("logs");
+    fsutil::create_dir_durable(&logs).map_err(|e| io(&logs, e))?;
+    let sub = p.record.submissions.last().cloned().expect("a submission");
+    let script_path = root.join(&sub.script);
+    fsutil::write_atomic(&script_path, p.script.as_bytes()).map_err(|e| io(&script_path, e))?;
+    if let (Some(rel), Some(text)) = (&sub.compact_script, &p.compact_script) {
+        let path = root.join(rel);
+        fsutil::write_atomic(&path, text.as_bytes()).map_err(|e| io(&path, e))?;
+    }
+    let rp = record_path(root);
+    let save = |rec: &SubmissionRecord| {
+        fsutil::write_atomic(&rp, &serde_json::to_vec_pretty(rec).expect("record"))
+            .map_err(|e| io(&rp, e))
+    };
+    if p.indices.is_empty() {
+        return Ok(p);
+    }
+    let array_job =
+        sbatch(&["--parsable", &script_path.display().to_string()]).map_err(CampaignError::Io)?;
+    p.record.submissions.last_mut().expect("sub").array_job = Some(array_job.clone());
+    save(&p.record)?;
+    if let Some(rel) = &sub.compact_script {
+        let dep = format!("--dependency=afterok:{array_job}");
+        let path = root.join(rel).display().to_string();
+        let job = sbatch(&["--parsable", &dep, &path]).map_err(CampaignError::Io)?;
+        p.record.submissions.last_mut().expect("sub").compact_job = Some(job);
+        save(&p.record)?;
+    }
+    Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_compress_consecutive_indices() {
+        assert_eq!(ranges(&[0, 1, 2, 3, 4, 7, 9, 10, 11, 12]), "0-4,7,9-12");
+        assert_eq!(ranges(&[5]), "5");
+        assert_eq!(ranges(&[]), "");
+    }
+
+    #[test]
+    fn layout_packs_runs_to_respect_max_array_size() {
+        assert_eq!(layout(1280, 20, 1001), (64, 20));
+        assert_eq!(layout(1281, 20, 1001), (65, 20));
+        // 100 000 runs at 20 per task would be 5000 tasks: packed to 100 per task.
+        assert_eq!(layout(100_000, 20, 1001), (1000, 100));
+        assert_eq!(layout(100_001, 20, 1001), (1001, 100));
+        assert_eq!(layout(3, 20, 1001), (1, 20));
+        assert!(layout(100_001, 20, 1001).0 <= 1001);
+    }
+
+    #[test]
+    fn time_limits() {
+        for ok in ["30", "90:00", "02:00:00", "1-12", "1-12:30", "2-00:00:00"] {
+            assert!(check_time(ok).is_ok(), "{ok}");
+        }
+        for bad in ["", "2h", "1:2:3:4", "-1", "1-", "a:00"] {
+            assert!(check_time(bad).is_err(), "{bad}");
+        }
+    }
+}

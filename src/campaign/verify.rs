@@ -1,0 +1,143 @@
+//! `granular verify`: every table file of a campaign is readable, of this campaign, table and
+//! format; uncommitted (`.pending`) parts of dead writers are reported; the `runs` table holds
+//! every committed run exactly once (nothing lost, nothing doubled).
+
+use std::collections::BTreeMap;
+
+use arrow_array::cast::AsArray;
+use arrow_array::types::UInt64Type;
+
+use super::{ledger, Campaign};
+use crate::store::{layout, parquet_io, tables};
+
+#[derive(Debug, Default)]
+pub struct VerifyReport {
+    /// (table, files, rows)
+    pub tables: Vec<(String, usize, u64)>,
+    pub committed_runs: usize,
+    pub problems: Vec<String>,
+}
+
+pub fn verify(c: &Campaign) -> Result<VerifyReport, String> {
+    let mut r = VerifyReport::default();
+    let commits = ledger::read_commits(&c.root)?;
+    let finished = ledger::finished_runs(&commits);
+    r.committed_runs = finished.len();
+    let live = !ledger::live_locks(&c.root).is_empty();
+    let mut run_counts: BTreeMap<u64, u32> = BTreeMap::new();
+    for table in layout::table_names(&c.root).map_err(|e| e.to_string())? {
+        let dir = c.root.join("tables").join(&table);
+        let mut files = 0;
+        let mut rows = 0u64;
+        let mut entries: Vec<_> = std::fs::read_dir(&dir)
+            .map_err(|e| format!("{}: {e}", dir.display()))?
+            .filter_map(|e| e.ok())
+            .collect();
+        entries.sort_by_key(|e| e.file_name());
+        for e in entries {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let path = e.path();
+            if name.ends_with(".pending") {
+                if !live {
+                    r.problems.push(format!(
+                        "{}: an uncommitted part of a stopped writer (`granular resume` removes or completes it)",
+                        path.display()
+                    ));
+                }
+                continue;
+            }
+            if name.starts_with('.') {
+                continue;
+            }
+            if !name.ends_with(".parquet") {
+                r.problems.push(format!(
+                    "{}: not a table file (readers globbing *.parquet skip it, but it does not belong here)",
+                    path.display()
+                ));
+                continue;
+            }
+            files += 1;
+            let checked = parquet_io::inspect(&path).and_then(|(info, _)| {
+                parquet_io::check_part(&path, &info, &table, Some(&c.manifest_json))?;
+                Ok(info)
+            });
+            match checked {
+                Ok(info) => rows += info.rows,
+                Err(e) => {
+                    r.problems.push(e.to_string());
+                    continue;
+                }
+            }
+            if table == tables::RUNS {
+                match parquet_io::read_campaign_file(&path, &table, &c.manifest_json) {
+                    Ok(batches) => {
+                        for b in batches {
+                            let Some(col) = b.column_by_name("run_id") else {
+                                r.problems
+                                    .push(format!("{}: no run_id column", path.display()));
+                                break;
+                            };
+                            let Some(ids) = col.as_primitive_opt::<UInt64Type>() else {
+                                r.problems.push(format!(
+                                    "{}: run_id is not an unsigned 64-bit column",
+                                    path.display()
+                                ));
+                                break;
+                            };
+                            for id in ids.iter().flatten() {
+                                *run_counts.entry(id).or_default() += 1;
+                            }
+                        }
+                    }
+                    Err(e) => r.problems.push(e.to_string()),
+                }
+            }
+        }
+        r.tables.push((table, files, rows));
+    }
+    let doubled: Vec<u64> = run_counts
+        .iter()
+        .filter(|(_, &n)| n > 1)
+        .map(|(&id, _)| id)
+        .collect();
+    let missing: Vec<u64> = finished
+        .keys()
+        .filter(|id| !run_counts.contains_key(id))
+        .copied()
+        .collect();
+    let extra: Vec<u64> = run_counts
+        .keys()
+        .filter(|id| !finished.contains_key(id))
+        .copied()
+        .collect();
+    let show = |v: &[u64]| {
+        let s: Vec<String> = v.iter().take(10).map(|x| x.to_string()).collect();
+        format!(
+            "{}{}",
+            s.join(", "),
+            if v.len() > 10 { ", ..." } else { "" }
+        )
+    };
+    if !doubled.is_empty() {
+        r.problems.push(format!(
+            "runs table: {} run(s) appear more than once: {}",
+            doubled.len(),
+            show(&doubled)
+        ));
+    }
+    if !missing.is_empty() {
+        r.problems.push(format!(
+            "runs table: {} committed run(s) missing: {}",
+            missing.len(),
+            show(&missing)
+        ));
+    }
+    if !extra.is_empty() {
+        r.problems.push(format!(
+            "runs table: {} run(s) not in any commit record: {}",
+            extra.len(),
+            show(&extra)
+        ));
+    }
+    Ok(r)
+}
