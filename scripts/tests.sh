@@ -43,4 +43,13 @@ bin=target/release/granular
 
 echo "== table check"
 .venv/bin/python scripts/check_tables.py "$tmp/runs"
+
+echo "== compaction while readers read, then the tables again"
+.venv/bin/python scripts/compact_readers.py "$bin" "$tmp/tiny.json" "$tmp/compact"
+"$bin" compact "$tmp/runs"
+"$bin" verify "$tmp/runs"
+.venv/bin/python scripts/check_tables.py "$tmp/runs"
+
+echo "== SLURM (a real one-node cluster)"
+bash scripts/slurm-test.sh
 echo "tests: all passed"

@@ -86,6 +86,8 @@ pub struct Plan {
     pub compact_script: Option<String>,
     pub indices: Vec<u64>,
     pub notes: Vec<String>,
+    /// Array jobs of earlier submissions with tasks still queued or running.
+    pub still_queued_arrays: Vec<String>,
 }
 
 fn record_path(root: &Path) -> PathBuf {
@@ -279,6 +281,8 @@ fn compact_script(c: &Campaign, root: &Path, rec: &SubmissionRecord) -> String {
         c.manifest.name
     ));
     s.push_str(&format!("#SBATCH --job-name={}-compact\n", job_name(c)));
+    // Removed by SLURM when a task of the array fails (then `submit --missing` chains a new one).
+    s.push_str("#SBATCH --kill-on-invalid-dep=yes\n");
     s.push_str(&format!("#SBATCH --time={}\n", o.time));
     s.push_str("#SBATCH --ntasks=1\n");
     s.push_str(&format!(
@@ -301,14 +305,14 @@ fn compact_script(c: &Campaign, root: &Path, rec: &SubmissionRecord) -> String {
 
 /// Array tasks of earlier submissions still queued or running, by array index
 /// (`squeue -r`); `None` when squeue cannot be asked.
-fn queued_indices(rec: &SubmissionRecord) -> Option<BTreeSet<u64>> {
+fn queued_indices(rec: &SubmissionRecord) -> Option<(BTreeSet<u64>, BTreeSet<String>)> {
     let jobs: Vec<String> = rec
         .submissions
         .iter()
         .filter_map(|s| s.array_job.clone())
         .collect();
     if jobs.is_empty() {
-        return Some(BTreeSet::new());
+        return Some(Default::default());
     }
     let out = Command::new(tool("GRANULAR_SQUEUE", "squeue"))
         .args(["-h", "-r", "-o", "%F %K %T", "-j", &jobs.join(",")])
@@ -318,15 +322,17 @@ fn queued_indices(rec: &SubmissionRecord) -> Option<BTreeSet<u64>> {
         // squeue fails for job ids it no longer knows: then nothing of them is queued.
         let err = String::from_utf8_lossy(&out.stderr);
         return if err.contains("Invalid job id") {
-            Some(BTreeSet::new())
+            Some(Default::default())
         } else {
             None
         };
     }
     let mut set = BTreeSet::new();
+    let mut arrays = BTreeSet::new();
     for line in String::from_utf8_lossy(&out.stdout).lines() {
         let f: Vec<&str> = line.split_whitespace().collect();
         if f.len() >= 3 && jobs.iter().any(|j| j == f[0]) {
+            arrays.insert(f[0].to_string());
             // %K is an index, or a range spec for a pending array remainder ("3-9%2").
             let spec = f[1].split('%').next().unwrap_or("");
             for part in spec.split(',') {
@@ -345,7 +351,7 @@ fn queued_indices(rec: &SubmissionRecord) -> Option<BTreeSet<u64>> {
             }
         }
     }
-    Some(set)
+    Some((set, arrays))
 }
 
 /// Work out a submission: all shards for the first one, the shards with unfinished runs that
@@ -407,6 +413,7 @@ pub fn plan(
     };
     check_time(&rec.options.time).map_err(CampaignError::Refused)?;
     let n = rec.shards;
+    let mut still_queued_arrays = Vec::new();
     let indices: Vec<u64> = if !missing {
         (0..n).collect()
     } else {
@@ -430,7 +437,10 @@ pub fn plan(
             })
             .collect();
         let queued = match queued_indices(&rec) {
-            Some(q) => q,
+            Some((q, arrays)) => {
+                still_queued_arrays = arrays.into_iter().collect();
+                q
+            }
             None => {
                 notes.push(
                     "squeue not available: only shard locks tell which tasks still run".into(),
@@ -476,6 +486,7 @@ pub fn plan(
         compact_script: compact,
         indices,
         notes,
+        still_queued_arrays,
     })
 }
 
@@ -527,7 +538,11 @@ pub fn submit(root: &Path, mut p: Plan) -> Result<Plan, CampaignError> {
     p.record.submissions.last_mut().expect("sub").array_job = Some(array_job.clone());
     save(&p.record)?;
     if let Some(rel) = &sub.compact_script {
-        let dep = format!("--dependency=afterok:{array_job}");
+        // After this array succeeds, and after earlier arrays still queued or running end.
+        let mut dep = format!("--dependency=afterok:{array_job}");
+        for j in &p.still_queued_arrays {
+            dep.push_str(&format!(",afterany:{j}"));
+        }
         let path = root.join(rel).display().to_string();
         let job = sbatch(&["--parsable", &dep, &path]).map_err(CampaignError::Io)?;
         p.record.submissions.last_mut().expect("sub").compact_job = Some(job);
