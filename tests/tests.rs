@@ -8,16 +8,21 @@
 //!   twice exits at once.
 //! - `rfm`: a Random Force Model campaign, its tables, kill + resume bit-identity.
 //! - `schema`: the committed JSON Schema matches the code; `jobs/*.json` validate.
+//! - `drills`: a second process on a running shard, corrupted checkpoints, truncated and
+//!   foreign Parquet parts, a full disk, compaction in the middle of a campaign.
+//! - `slurm`: `granular submit --slurm` with stand-in sbatch/squeue/scontrol.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
 
 mod it {
+    pub mod drills;
     pub mod interrupt;
     pub mod manifests;
     pub mod physics;
     pub mod resume;
     pub mod rfm;
     pub mod schema;
+    pub mod slurm;
     pub mod util;
 }

@@ -60,8 +60,22 @@ pub fn write_file(
     write_batches(tmp, std::slice::from_ref(batch), table, manifest_json)
 }
 
-/// Write `batches` (one schema) as one Parquet file at `tmp` (fsynced).
+/// Write `batches` (one schema) as one Parquet file at `tmp` (fsynced). On failure (a full
+/// disk, say) the partial file is removed.
 pub fn write_batches(
+    tmp: &Path,
+    batches: &[RecordBatch],
+    table: &str,
+    manifest_json: &str,
+) -> Result<(), StoreError> {
+    let r = write_batches_inner(tmp, batches, table, manifest_json);
+    if r.is_err() {
+        let _ = std::fs::remove_file(tmp);
+    }
+    r
+}
+
+fn write_batches_inner(
     tmp: &Path,
     batches: &[RecordBatch],
     table: &str,

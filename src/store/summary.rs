@@ -206,7 +206,10 @@ pub(crate) fn write_whole(
     let path = c.root.join("tables").join(table).join(name);
     crate::store::layout::ensure_table_dir(&c.root, table).map_err(|e| StoreError::io(&path, e))?;
     let tmp = fsutil::temp_path(&path);
-    parquet_io::write_file(&tmp, batch, table, &c.manifest_json)?;
+    if let Err(e) = parquet_io::write_file(&tmp, batch, table, &c.manifest_json) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
     std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
     fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))
 }
