@@ -381,6 +381,25 @@ pub fn main() -> i32 {
                         for l in &s.live_shards {
                             let _ = writeln!(out, "  live shard {l}");
                         }
+                        for sub in &s.slurm {
+                            let queue = match &sub.queue {
+                                Some(q) if q.is_empty() => "nothing queued".to_string(),
+                                Some(q) => q
+                                    .iter()
+                                    .map(|(k, n)| format!("{k}: {n}"))
+                                    .collect::<Vec<_>>()
+                                    .join(", "),
+                                None => "squeue not available".to_string(),
+                            };
+                            let _ = writeln!(
+                                out,
+                                "  slurm submission {}: array {} job {}, compaction job {} ({queue})",
+                                sub.number,
+                                sub.array,
+                                sub.array_job.as_deref().unwrap_or("-"),
+                                sub.compact_job.as_deref().unwrap_or("-")
+                            );
+                        }
                         for p in &s.points {
                             let _ = writeln!(
                                 out,

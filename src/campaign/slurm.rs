@@ -354,6 +354,75 @@ fn queued_indices(rec: &SubmissionRecord) -> Option<(BTreeSet<u64>, BTreeSet<Str
     Some((set, arrays))
 }
 
+/// A submission as `granular status` shows it.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct SubmissionStatus {
+    pub number: u32,
+    pub array: String,
+    pub array_job: Option<String>,
+    pub compact_job: Option<String>,
+    /// SLURM states of this submission's jobs now (`squeue`), e.g. {"RUNNING": 2, "PENDING": 5};
+    /// `None` when squeue could not be asked.
+    pub queue: Option<std::collections::BTreeMap<String, u64>>,
+}
+
+/// The submissions of a campaign with their jobs' current SLURM states.
+pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, String> {
+    let Some(rec) = read_record(root)? else {
+        return Ok(Vec::new());
+    };
+    let ids: Vec<String> = rec
+        .submissions
+        .iter()
+        .flat_map(|s| [s.array_job.clone(), s.compact_job.clone()])
+        .flatten()
+        .collect();
+    let states: Option<Vec<(String, String)>> = if ids.is_empty() {
+        Some(Vec::new())
+    } else {
+        Command::new(tool("GRANULAR_SQUEUE", "squeue"))
+            .args(["-h", "-r", "-o", "%F %T", "-j", &ids.join(",")])
+            .output()
+            .ok()
+            .filter(|o| {
+                o.status.success() || String::from_utf8_lossy(&o.stderr).contains("Invalid job id")
+            })
+            .map(|o| {
+                String::from_utf8_lossy(&o.stdout)
+                    .lines()
+                    .filter_map(|l| {
+                        let mut f = l.split_whitespace();
+                        Some((f.next()?.to_string(), f.next()?.to_string()))
+                    })
+                    .collect()
+            })
+    };
+    Ok(rec
+        .submissions
+        .iter()
+        .map(|s| SubmissionStatus {
+            number: s.number,
+            array: s.array.clone(),
+            array_job: s.array_job.clone(),
+            compact_job: s.compact_job.clone(),
+            queue: states.as_ref().map(|st| {
+                let mut m = std::collections::BTreeMap::new();
+                for (job, state) in st {
+                    let what = if Some(job) == s.array_job.as_ref() {
+                        "tasks"
+                    } else if Some(job) == s.compact_job.as_ref() {
+                        "compaction"
+                    } else {
+                        continue;
+                    };
+                    *m.entry(format!("{what} {state}")).or_insert(0) += 1;
+                }
+                m
+            }),
+        })
+        .collect())
+}
+
 /// Work out a submission: all shards for the first one, the shards with unfinished runs that
 /// no live task is working on for `--missing`.
 pub fn plan(

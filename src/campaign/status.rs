@@ -37,6 +37,9 @@ pub struct CampaignStatus {
     pub counts: Counts,
     pub live_shards: Vec<String>,
     pub points: Vec<PointStatus>,
+    /// SLURM submissions (`granular submit`), with their jobs' states when squeue answers.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub slurm: Vec<super::slurm::SubmissionStatus>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -142,5 +145,6 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
             .map(|l| format!("{} (pid {} on {})", l.shard, l.pid, l.host))
             .collect(),
         points,
+        slurm: super::slurm::submission_status(&c.root)?,
     })
 }

@@ -199,6 +199,19 @@ fn submit_packs_chains_and_resubmits_missing_shards() {
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     let (code, out) = submit(t, &["--missing", s(&c)], &log);
     assert_eq!((code, out.contains("nothing to submit")), (Some(0), true));
+    // status lists both submissions and asks squeue for their jobs.
+    let out = Command::new(bin())
+        .args(["status", s(&c)])
+        .env("GRANULAR_SQUEUE", t.join("squeue"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(
+            "slurm submission 1: array 0-2%2 job 101, compaction job 102 (nothing queued)"
+        ) && text.contains("slurm submission 2: array 1%2 job 103, compaction job 104"),
+        "{text}"
+    );
 
     // The tables equal a single-machine run's.
     let r = t.join("R");
