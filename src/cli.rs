@@ -102,6 +102,9 @@ enum Command {
         /// Worker threads per task (--cpus-per-task).
         #[arg(long)]
         cpus_per_task: Option<u32>,
+        /// Seconds between checkpoints of each running simulation in a task (default 300).
+        #[arg(long)]
+        checkpoint_every: Option<f64>,
         /// No compaction job after the array.
         #[arg(long)]
         no_compact: bool,
@@ -117,6 +120,8 @@ enum Command {
         shards: u32,
         #[arg(long, default_value_t = 1)]
         threads: usize,
+        #[arg(long, default_value_t = 300.0)]
+        checkpoint_every: f64,
         /// Array index (default: $SLURM_ARRAY_TASK_ID).
         #[arg(long)]
         index: Option<u32>,
@@ -239,6 +244,7 @@ pub fn main() -> i32 {
             partition,
             sbatch_arg,
             cpus_per_task,
+            checkpoint_every,
             no_compact,
             dry_run,
         } => submit_command(SubmitArgs {
@@ -251,6 +257,7 @@ pub fn main() -> i32 {
             partition,
             sbatch_arg,
             cpus_per_task,
+            checkpoint_every,
             no_compact,
             dry_run,
         }),
@@ -258,6 +265,7 @@ pub fn main() -> i32 {
             dir,
             shards,
             threads,
+            checkpoint_every,
             index,
         } => {
             let index = match index.or_else(|| {
@@ -275,7 +283,7 @@ pub fn main() -> i32 {
                 Ok(c) => {
                     let rt = Runtime {
                         threads,
-                        checkpoint_every: 300.0,
+                        checkpoint_every,
                         shard: Shard {
                             index: index + 1,
                             count: shards,
@@ -654,6 +662,7 @@ struct SubmitArgs {
     partition: Option<String>,
     sbatch_arg: Vec<String>,
     cpus_per_task: Option<u32>,
+    checkpoint_every: Option<f64>,
     no_compact: bool,
     dry_run: bool,
 }
@@ -667,6 +676,13 @@ fn submit_command(a: SubmitArgs) -> i32 {
     if let Some(t) = &a.time {
         if let Err(e) = slurm::check_time(t) {
             return invalid(e);
+        }
+    }
+    if let Some(x) = a.checkpoint_every {
+        if !(x.is_finite() && x > 0.0) {
+            return invalid(format!(
+                "--checkpoint-every {x}: expected a positive number of seconds"
+            ));
         }
     }
     let binary = match std::env::current_exe().and_then(|p| p.canonicalize()) {
@@ -757,6 +773,9 @@ fn submit_command(a: SubmitArgs) -> i32 {
         if let Some(n) = a.cpus_per_task {
             o.cpus_per_task = n;
         }
+        if let Some(x) = a.checkpoint_every {
+            o.checkpoint_every = x;
+        }
         if a.no_compact {
             o.compact = false;
         }
@@ -771,6 +790,7 @@ fn submit_command(a: SubmitArgs) -> i32 {
             partition: a.partition.clone(),
             sbatch_args: a.sbatch_arg.clone(),
             cpus_per_task: a.cpus_per_task.unwrap_or(1),
+            checkpoint_every: a.checkpoint_every.unwrap_or(300.0),
             compact: !a.no_compact,
         })
     };

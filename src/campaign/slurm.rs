@@ -45,8 +45,16 @@ pub struct SlurmOptions {
     pub sbatch_args: Vec<String>,
     /// Worker threads per task (`--cpus-per-task`).
     pub cpus_per_task: u32,
+    /// Seconds between checkpoints of a running simulation in a task (what a node failure,
+    /// SIGKILL without the SIGTERM of a time limit or scancel, can lose).
+    #[serde(default = "default_checkpoint_every")]
+    pub checkpoint_every: f64,
     /// Chain a `granular compact` job after the array (afterok).
     pub compact: bool,
+}
+
+fn default_checkpoint_every() -> f64 {
+    300.0
 }
 
 /// One `sbatch` of an array (and its compaction job).
@@ -263,11 +271,12 @@ pub fn array_script(
     }
     s.push_str("set -u\n");
     s.push_str(&format!(
-        "exec {} slurm-task {} --shards {} --threads \"${{SLURM_CPUS_PER_TASK:-{}}}\"\n",
+        "exec {} slurm-task {} --shards {} --threads \"${{SLURM_CPUS_PER_TASK:-{}}}\" --checkpoint-every {}\n",
         quote(&rec.binary),
         quote(&root.display().to_string()),
         rec.shards,
-        o.cpus_per_task
+        o.cpus_per_task,
+        o.checkpoint_every
     ));
     s
 }

@@ -150,6 +150,7 @@ fn submit_packs_chains_and_resubmits_missing_shards() {
         "#SBATCH --account=abc",
         "slurm-task",
         "--shards 3",
+        "--checkpoint-every 300",
     ] {
         assert!(script.contains(want), "script lacks {want}:\n{script}");
     }
