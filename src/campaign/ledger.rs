@@ -181,8 +181,23 @@ fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
 }
 
 /// Every commit: the folded index first (if any), then every shard's commit records not
-/// folded into it, ordered by (shard, seq).
+/// folded into it, ordered by (shard, seq). A record that vanishes while being read (a
+/// compaction folding it into the index at that moment) makes the whole read start again.
 pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
+    let mut last = String::new();
+    for _ in 0..20 {
+        match read_commits_once(root) {
+            Ok(Some(v)) => return Ok(v),
+            Ok(None) => std::thread::sleep(std::time::Duration::from_millis(50)),
+            Err(e) => return Err(e),
+        }
+        last = "commit records kept vanishing while being read (a compaction running?)".into();
+    }
+    Err(format!("{}: {last}", root.display()))
+}
+
+/// `Ok(None)`: a commit record listed was gone when opened.
+fn read_commits_once(root: &Path) -> Result<Option<Vec<Commit>>, String> {
     let mut out = Vec::new();
     let index = read_index(root)?;
     if let Some(ix) = &index {
@@ -190,7 +205,7 @@ pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
     }
     let dir = root.join("ledger");
     let Ok(entries) = fs::read_dir(&dir) else {
-        return Ok(out);
+        return Ok(Some(out));
     };
     let mut tags: Vec<PathBuf> = entries
         .filter_map(|e| e.ok())
@@ -211,7 +226,11 @@ pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
             if seq <= folded {
                 continue;
             }
-            let text = fs::read_to_string(&f).map_err(|e| format!("{}: {e}", f.display()))?;
+            let text = match fs::read_to_string(&f) {
+                Ok(t) => t,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+                Err(e) => return Err(format!("{}: {e}", f.display())),
+            };
             let c: Commit = serde_json::from_str(&text)
                 .map_err(|e| format!("{}: corrupt commit record: {e}", f.display()))?;
             if c.format_version != FORMAT_VERSION {
@@ -224,7 +243,7 @@ pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
             out.push(c);
         }
     }
-    Ok(out)
+    Ok(Some(out))
 }
 
 /// Fold every commit record into `ledger/index.json` and delete the records folded in. Only
