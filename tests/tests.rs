@@ -8,11 +8,14 @@
 //!   twice exits at once.
 //! - `rfm`: a Random Force Model campaign, its tables, kill + resume bit-identity.
 //! - `schema`: the committed JSON Schema matches the code; `jobs/*.json` validate.
+//! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
+//!   kill + resume bit-identity of their tables.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
 
 mod it {
+    pub mod aux_models;
     pub mod interrupt;
     pub mod manifests;
     pub mod physics;

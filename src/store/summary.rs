@@ -73,6 +73,10 @@ pub fn write_summaries(
     match c.plan.model {
         crate::manifest::ModelKind::Dsmc => write_dsmc_summaries(c, finished),
         crate::manifest::ModelKind::Rfm => super::rfm_summary::write_rfm_summaries(c, finished),
+        // The auxiliary models' tables carry their statistics over realisations per run.
+        crate::manifest::ModelKind::Bisection
+        | crate::manifest::ModelKind::Cascade
+        | crate::manifest::ModelKind::Spm => Ok(()),
     }
 }
 
@@ -93,7 +97,7 @@ fn write_dsmc_summaries(
                     .unwrap_or(1) as u64;
                 species * d.output_times.resolve(d.t_end).len() as u64 * replicas
             }
-            crate::plan::ModelParams::Rfm(_) => 1,
+            _ => 1,
         })
         .max()
         .unwrap_or(1)
@@ -236,7 +240,7 @@ fn write_tamsd_summary(
                 }
                 _ => 0,
             },
-            crate::plan::ModelParams::Rfm(_) => 0,
+            _ => 0,
         })
         .max()
         .unwrap_or(1)
