@@ -191,6 +191,10 @@ pub struct SummaryRow {
     /// ln P = a - K |v|^alpha fitted to the tail of `density` (window `tail_fit`).
     pub alpha_measured: Option<f64>,
     pub k_measured: Option<f64>,
+    /// The same fit of ln P - h ln|v| (the predicted prefactor H(v) ~ |v|^h of (5.30)-(5.31)
+    /// divided out), when a prediction exists.
+    pub alpha_measured_h: Option<f64>,
+    pub k_measured_h: Option<f64>,
     pub tail_v_lo: Option<f64>,
     pub tail_v_hi: Option<f64>,
 }
@@ -486,7 +490,7 @@ impl SpmRun {
             .iter()
             .filter(|m| m.2 > 0 && m.1 >= ra * peak && m.1 <= rb * peak)
             .collect();
-        let (mut am, mut km) = (None, None);
+        let (mut am, mut km, mut amh, mut kmh) = (None, None, None, None);
         if tail.len() >= 5 {
             let v: Vec<f64> = tail.iter().map(|m| m.0).collect();
             let lp: Vec<f64> = tail.iter().map(|m| m.1.ln()).collect();
@@ -494,6 +498,14 @@ impl SpmRun {
             if let Some((a, k, _)) = super::fit::stretched_exponential(&v, &lp, &w, 0.3, 3.0) {
                 am = Some(a);
                 km = Some(k);
+            }
+            // (5.31): with the predicted prefactor H(v) ~ v^h divided out.
+            if let Some(h) = pred.map(|p| p.2) {
+                let lph: Vec<f64> = v.iter().zip(&lp).map(|(v, l)| l - h * v.ln()).collect();
+                if let Some((a, k, _)) = super::fit::stretched_exponential(&v, &lph, &w, 0.3, 3.0) {
+                    amh = Some(a);
+                    kmh = Some(k);
+                }
             }
         }
         let samples = 2 * self.st.steps;
@@ -519,6 +531,8 @@ impl SpmRun {
             h_predicted: pred.map(|p| p.2),
             alpha_measured: am,
             k_measured: km,
+            alpha_measured_h: amh,
+            k_measured_h: kmh,
             tail_v_lo: tail.first().map(|m| m.0),
             tail_v_hi: tail.last().map(|m| m.0),
         };
@@ -630,6 +644,66 @@ mod tests {
             (df - d_f).abs() < 0.02 && (cf - c).abs() < 0.05 * c,
             "{df} {cf}"
         );
+    }
+
+    #[test]
+    fn table_mode_samples_the_table_and_fits_its_tail() {
+        // A table of the exact bin averages of (4.25) (D_f = 1.63, C = 121): the run draws
+        // from it (mean free path = the table's mean, 5 sigma) and the summary's D_f, C and
+        // predicted alpha come from the tail fit.
+        let (c, d_f) = (121.0f64, 1.63f64);
+        let beta = d_f - 1.0;
+        let edges: Vec<f64> = (0..=60)
+            .map(|j| 1e-6 * 10f64.powf(j as f64 / 10.0))
+            .collect();
+        let prob =
+            |k: usize| (-c * edges[k].powf(beta)).exp() - (-c * edges[k + 1].powf(beta)).exp();
+        let density: Vec<f64> = (0..60)
+            .map(|k| prob(k) / (edges[k + 1] - edges[k]))
+            .collect();
+        let total: f64 = (0..60).map(prob).sum();
+        let mean: f64 = (0..60)
+            .map(|k| prob(k) * 0.5 * (edges[k] + edges[k + 1]))
+            .sum::<f64>()
+            / total;
+        let second: f64 = (0..60)
+            .map(|k| {
+                prob(k) * (edges[k].powi(2) + edges[k] * edges[k + 1] + edges[k + 1].powi(2)) / 3.0
+            })
+            .sum::<f64>()
+            / total;
+        let walks = 3000u64;
+        let mut run = SpmRun::new(
+            cfg(
+                FreePath::Table {
+                    edges: edges.clone(),
+                    density,
+                    d_f: None,
+                    fit_below: 1.0,
+                },
+                walks,
+            ),
+            2,
+        );
+        while !run.advance(1 << 20) {}
+        let out = run.finish();
+        let s = &out.summary;
+        let sem = ((second - mean * mean) / walks as f64).sqrt();
+        assert!(
+            (s.mean_free_path - mean).abs() < 5.0 * sem,
+            "{} vs {mean}",
+            s.mean_free_path
+        );
+        let (df, cf) = (s.d_f.unwrap(), s.c.unwrap());
+        assert!(
+            (df - d_f).abs() < 0.02 && (cf - c).abs() < 0.05 * c,
+            "{df} {cf}"
+        );
+        // alpha = 6 (D_f - 1)/(3 D_f - 1) at the fitted D_f; d alpha/d D_f = 0.79 here.
+        let a = s.alpha_predicted.unwrap();
+        assert!((a - 6.0 * (df - 1.0) / (3.0 * df - 1.0)).abs() < 1e-12);
+        assert!((a - 0.972).abs() < 0.02, "{a} (D_f {df})");
+        assert_eq!(s.mode, "table");
     }
 
     #[test]
