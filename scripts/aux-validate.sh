@@ -3,8 +3,8 @@
 #  1. jobs/aux-bisection.json: moments <x^m> against (1+m)^-9 (uniform) and <a^m>^9 (concave),
 #     in standard errors (measured here: all |z| <= 2.7). ~20 s.
 #  2. jobs/aux-cascade.json: D_f per process against T 6.2 (measured here: UCP 1.587 +- 0.010
-#     vs 1.602 +- 0.066; UnonCP 1.589; Meakin 1-4 1.288, 1.615, 1.906, 1.717). ~10 s.
-#  3. jobs/aux-cascade-placement.json: 2500 discs placed (F 6.3). ~2 s.
+#     vs 1.602 +- 0.066; UnonCP 1.589; Meakin 1-4 1.288, 1.615, 1.906, 1.717). ~3 s.
+#  3. jobs/aux-cascade-placement.json: 2500 discs placed (F 6.3). ~1 s.
 #  4. jobs/aux-spm.json: Q(v, l) Gaussian coefficient (0.913 here vs 0.98) and the P(v) tail
 #     exponent from (4.25) (0.98-1.13 here, predicted 0.972). ~45 s.
 # Needs the .venv of scripts/setup.sh (pyarrow).   scripts/aux-validate.sh [1] [2] [3] [4]

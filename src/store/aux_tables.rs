@@ -14,6 +14,7 @@ use crate::plan::{ModelParams, Plan};
 pub const BISECTION_HISTOGRAM: &str = "bisection_histogram";
 pub const BISECTION_MOMENTS: &str = "bisection_moments";
 pub const CASCADE_STRUCTURE_FACTOR: &str = "cascade_structure_factor";
+pub const CASCADE_STRUCTURE_FACTOR_SUMMARY: &str = "cascade_structure_factor_summary";
 pub const CASCADE_FIT: &str = "cascade_fit";
 pub const CASCADE_PLACEMENT: &str = "cascade_placement";
 pub const SPM_VELOCITY_HISTOGRAM: &str = "spm_velocity_histogram";
@@ -24,7 +25,11 @@ pub fn aux_tables(plan: &Plan) -> Vec<&'static str> {
     match plan.model {
         ModelKind::Bisection => vec![BISECTION_HISTOGRAM, BISECTION_MOMENTS],
         ModelKind::Cascade => {
-            let mut v = vec![CASCADE_STRUCTURE_FACTOR, CASCADE_FIT];
+            let mut v = vec![
+                CASCADE_STRUCTURE_FACTOR,
+                CASCADE_STRUCTURE_FACTOR_SUMMARY,
+                CASCADE_FIT,
+            ];
             if plan
                 .points
                 .iter()
@@ -41,7 +46,7 @@ pub fn aux_tables(plan: &Plan) -> Vec<&'static str> {
 
 type Ids = (u64, u32);
 
-/// Buffered rows of the auxiliary tables.
+/// Buffered rows of the auxiliary tables (the summary is written by `store::aux_summary`).
 #[derive(Default)]
 pub struct AuxBuffer {
     bis_hist: Vec<(Ids, bisection::HistRow)>,

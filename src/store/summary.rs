@@ -73,10 +73,11 @@ pub fn write_summaries(
     match c.plan.model {
         crate::manifest::ModelKind::Dsmc => write_dsmc_summaries(c, finished),
         crate::manifest::ModelKind::Rfm => super::rfm_summary::write_rfm_summaries(c, finished),
-        // The auxiliary models' tables carry their statistics over realisations per run.
+        // The auxiliary models' tables carry their statistics over realisations per run; the
+        // cascade's S(k) also gets a replica summary (fitted like the RFM's).
         crate::manifest::ModelKind::Bisection
         | crate::manifest::ModelKind::Cascade
-        | crate::manifest::ModelKind::Spm => Ok(()),
+        | crate::manifest::ModelKind::Spm => super::aux_summary::write_aux_summaries(c, finished),
     }
 }
 

@@ -205,6 +205,13 @@ fn cascade_fractal_dimension_weights_and_placement() {
     // S(k) rows: every shell 0 < p^2 + q^2 <= 128^2, shell-mean >= 0, k = 2 pi sqrt(n2)/L.
     let sk = read_table(&out, "cascade_structure_factor");
     let (n2, k, s) = (sk.column("n2"), fcol(&sk, "k"), fcol(&sk, "s_mean"));
+    // One replica: the summary is the run's S(k) with its error.
+    let sum = read_table(&out, "cascade_structure_factor_summary");
+    assert_eq!(sum.rows.len(), sk.rows.len());
+    let total: f64 = s.iter().sum();
+    let total_sum: f64 = fcol(&sum, "s_mean").iter().sum();
+    assert!((total - total_sum).abs() < 1e-12 * total);
+    assert!(sum.column("n_replicas").iter().all(|c| c.as_u64() == 1));
     assert_eq!(sk.rows.len() % 2, 0);
     for i in 0..sk.rows.len() {
         let n = n2[i].as_u64();
@@ -381,6 +388,10 @@ fn aux_models_resume_identically() {
             &[
                 ("cascade_structure_factor", &["run_id", "source", "n2"]),
                 ("cascade_fit", &["run_id", "source"]),
+                (
+                    "cascade_structure_factor_summary",
+                    &["point_id", "source", "n2"],
+                ),
                 ("cascade_placement", &["run_id", "particle"]),
             ],
         ),
