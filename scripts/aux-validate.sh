@@ -49,7 +49,7 @@ elif part in ("2", "3"):
 else:
     for r in table("spm_summary"):
         if r["mode"] == "fixed":
-            print(f"Q(v,l={r['mean_free_path']}): Gaussian coefficient {r['gaussian_coefficient']:.3f} +- {r['gaussian_coefficient_err']:.3f} (thesis 0.98); {r['gaussian_tail_si']:.2f} vs {r['gaussian_tail_si_thesis']:.3f} s^2/m^2")
+            print(f"Q(v,l={r['mean_free_path']:.4g} m): Gaussian coefficient {r['gaussian_coefficient']:.3f} +- {r['gaussian_coefficient_err']:.3f} (thesis 0.98); {r['gaussian_tail_si']:.2f} vs {r['gaussian_tail_si_thesis']:.3f} s^2/m^2")
         else:
             print(f"P(v), C = {r['c']}: alpha measured {r['alpha_measured']:.3f} ({r['alpha_measured_h']:.3f} with H divided out), predicted {r['alpha_predicted']:.3f}; K {r['k_measured']:.2f} ({r['k_measured_h']:.2f}), predicted {r['k_predicted']:.2f}")
 PY
