@@ -5,6 +5,7 @@
 //!   reports every error at once with its JSON path.
 //! - [`plan`]: expands a manifest's sweep into points and runs with stable ids and seeds.
 //! - [`dsmc`]: the DSMC simulators (low-rank and Bird) of polydisperse granular gases.
+//! - [`aux_models`]: the thesis's auxiliary models (bisection, cascade, single particle).
 //! - [`theory`]: kinetic theory (pure functions, usable without simulating).
 //! - [`store`]: Parquet tables, atomic part files, checkpoints.
 //! - [`campaign`]: the engine: worker pool, dispatcher, ledger, locks, resume, status.
@@ -13,6 +14,7 @@
 //! The physics never imports the campaign or the store: a simulator hands rows and
 //! checkpoint bytes to whoever drives it.
 
+pub mod aux_models;
 pub mod campaign;
 pub mod cli;
 pub mod dsmc;

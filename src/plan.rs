@@ -19,6 +19,43 @@ use crate::manifest::{Manifest, ModelKind};
 pub enum ModelParams {
     Dsmc(DsmcParams),
     Rfm(crate::manifest::rfm::RfmParams),
+    Bisection(crate::manifest::aux_models::BisectionParams),
+    Cascade(crate::manifest::aux_models::CascadeParams),
+    Spm(crate::manifest::aux_models::SpmParams),
+}
+
+impl ModelParams {
+    /// The params as canonical JSON (the `points` table).
+    pub fn to_value(&self) -> Value {
+        match self {
+            ModelParams::Dsmc(p) => serde_json::to_value(p),
+            ModelParams::Rfm(p) => serde_json::to_value(p),
+            ModelParams::Bisection(p) => serde_json::to_value(p),
+            ModelParams::Cascade(p) => serde_json::to_value(p),
+            ModelParams::Spm(p) => serde_json::to_value(p),
+        }
+        .expect("params serialise")
+    }
+}
+
+/// Deserialize typed params and run their `check`.
+fn typed_as<T: serde::de::DeserializeOwned>(
+    params: &Value,
+    prefix: &str,
+    errors: &mut Vec<(String, String)>,
+    check: impl Fn(&T, &str, &mut Vec<(String, String)>),
+    wrap: impl Fn(T) -> ModelParams,
+) -> Option<ModelParams> {
+    match serde_json::from_value::<T>(params.clone()) {
+        Ok(p) => {
+            check(&p, prefix, errors);
+            Some(wrap(p))
+        }
+        Err(e) => {
+            errors.push((prefix.to_string(), e.to_string()));
+            None
+        }
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -251,6 +288,27 @@ fn typed(
                 }
             }
         }
+        ModelKind::Bisection => typed_as(
+            params,
+            prefix,
+            errors,
+            crate::manifest::aux_models::BisectionParams::check,
+            ModelParams::Bisection,
+        ),
+        ModelKind::Cascade => typed_as(
+            params,
+            prefix,
+            errors,
+            crate::manifest::aux_models::CascadeParams::check,
+            ModelParams::Cascade,
+        ),
+        ModelKind::Spm => typed_as(
+            params,
+            prefix,
+            errors,
+            crate::manifest::aux_models::SpmParams::check,
+            ModelParams::Spm,
+        ),
     }
 }
 

@@ -11,11 +11,14 @@
 //! - `drills`: a second process on a running shard, corrupted checkpoints, truncated and
 //!   foreign Parquet parts, a full disk, compaction in the middle of a campaign.
 //! - `slurm`: `granular submit --slurm` with stand-in sbatch/squeue/scontrol.
+//! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
+//!   kill + resume bit-identity of their tables.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
 
 mod it {
+    pub mod aux_models;
     pub mod drills;
     pub mod interrupt;
     pub mod manifests;

@@ -173,7 +173,7 @@ impl Campaign {
     pub fn observes_tamsd(&self) -> bool {
         self.plan.points.iter().any(|p| match &p.params {
             crate::plan::ModelParams::Dsmc(d) => d.wants_tamsd(),
-            crate::plan::ModelParams::Rfm(_) => false,
+            _ => false,
         })
     }
 

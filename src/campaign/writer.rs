@@ -25,6 +25,7 @@ pub struct Writer<'c> {
     species: SpeciesBuffer,
     tamsd: TamsdBuffer,
     rfm: tables::RfmBuffer,
+    aux: crate::store::aux_tables::AuxBuffer,
     since: Option<Instant>,
 }
 
@@ -39,6 +40,11 @@ impl<'c> Writer<'c> {
                 tables::DSMC_THEORY_POINT,
             ]),
             crate::manifest::ModelKind::Rfm => names.extend(c.rfm_tables()),
+            crate::manifest::ModelKind::Bisection
+            | crate::manifest::ModelKind::Cascade
+            | crate::manifest::ModelKind::Spm => {
+                names.extend(crate::store::aux_tables::aux_tables(&c.plan))
+            }
         }
         // Tables of an observable exist only when it is recorded (an empty dataset directory
         // is an error for DuckDB's globs).
@@ -64,6 +70,7 @@ impl<'c> Writer<'c> {
             species: SpeciesBuffer::default(),
             tamsd: TamsdBuffer::default(),
             rfm: tables::RfmBuffer::default(),
+            aux: Default::default(),
             since: None,
         })
     }
@@ -84,14 +91,7 @@ impl<'c> Writer<'c> {
             .plan
             .points
             .iter()
-            .map(|p| match &p.params {
-                crate::plan::ModelParams::Dsmc(d) => {
-                    canonical(&serde_json::to_value(d).expect("params serialise"))
-                }
-                crate::plan::ModelParams::Rfm(r) => {
-                    canonical(&serde_json::to_value(r).expect("params serialise"))
-                }
-            })
+            .map(|p| canonical(&p.params.to_value()))
             .collect();
         let batch = tables::points_batch(&self.c.plan, &self.cols, &params);
         let tmp = fsutil::temp_path(&path);
@@ -114,6 +114,9 @@ impl<'c> Writer<'c> {
                     .push(r.spec.run_id, r.spec.point_id, &out.dsmc_tamsd);
                 if let Some(rfm) = &out.rfm {
                     self.rfm.push(r.spec.run_id, r.spec.point_id, rfm);
+                }
+                if let Some(aux) = &out.aux {
+                    self.aux.push(r.spec.run_id, r.spec.point_id, aux);
                 }
                 (RunStatus::Done, None, None, out.collisions, out.trials)
             }
@@ -142,7 +145,8 @@ impl<'c> Writer<'c> {
 
     pub fn due(&self, every: Duration) -> bool {
         !self.runs.is_empty()
-            && (self.species.rows + self.tamsd.rows + self.rfm.rows() >= FLUSH_ROWS
+            && (self.species.rows + self.tamsd.rows + self.rfm.rows() + self.aux.rows()
+                >= FLUSH_ROWS
                 || self.since.is_some_and(|s| s.elapsed() >= every))
     }
 
@@ -169,6 +173,7 @@ impl<'c> Writer<'c> {
             batches.push((tables::DSMC_TAMSD, self.tamsd.finish()));
         }
         batches.extend(self.rfm.finish());
+        batches.extend(self.aux.finish());
         // 1. pending parts
         let mut written = Vec::new();
         for (table, batch) in &batches {
@@ -272,7 +277,7 @@ pub fn write_theory(c: &Campaign) -> Result<(), StoreError> {
             crate::plan::ModelParams::Dsmc(d) => crate::dsmc::DsmcSystem::from_params(d)
                 .ok()
                 .map(|sys| (p.point_id, crate::dsmc::predict::predict(&sys))),
-            crate::plan::ModelParams::Rfm(_) => None,
+            _ => None,
         })
         .collect();
     let rows: Vec<(u32, crate::dsmc::predict::TheoryRow)> = preds

@@ -2,6 +2,7 @@
 //! `untagged`/`flatten`), the JSON Schema generated from them, and loading with validation
 //! that reports every error at once with its JSON path ([`validate`]).
 
+pub mod aux_models;
 pub mod dsmc;
 pub mod rfm;
 pub mod validate;
@@ -59,6 +60,12 @@ pub enum ModelKind {
     Dsmc,
     /// Soft-sphere molecular dynamics of the Random Force Model (driven granular gas, 1D/2D).
     Rfm,
+    /// Multiplicative bisection of [0, 1] (thesis sec. 3.4; spec 3.1).
+    Bisection,
+    /// Multiplicative cascade on a 2^n x 2^n grid, S(k), D_f, particle placement (ch. 6).
+    Cascade,
+    /// Single particle model: Q(v, l) and P(v) from a free-path distribution (sec. 5.2-5.3).
+    Spm,
 }
 
 impl ModelKind {
@@ -66,6 +73,9 @@ impl ModelKind {
         match self {
             ModelKind::Dsmc => "dsmc",
             ModelKind::Rfm => "rfm",
+            ModelKind::Bisection => "bisection",
+            ModelKind::Cascade => "cascade",
+            ModelKind::Spm => "spm",
         }
     }
 }
@@ -77,6 +87,9 @@ pub fn json_schema() -> Value {
     let root = generator.root_schema_for::<Manifest>();
     let dsmc_ref = generator.subschema_for::<dsmc::DsmcParams>();
     let rfm_ref = generator.subschema_for::<rfm::RfmParams>();
+    let bisection_ref = generator.subschema_for::<aux_models::BisectionParams>();
+    let cascade_ref = generator.subschema_for::<aux_models::CascadeParams>();
+    let spm_ref = generator.subschema_for::<aux_models::SpmParams>();
     let mut root = root.to_value();
     let defs = generator.take_definitions(true);
     let obj = root.as_object_mut().expect("schema is an object");
@@ -96,6 +109,18 @@ pub fn json_schema() -> Value {
             {
                 "if": {"properties": {"model": {"const": "rfm"}}, "required": ["model"]},
                 "then": {"properties": {"params": rfm_ref.to_value()}}
+            },
+            {
+                "if": {"properties": {"model": {"const": "bisection"}}, "required": ["model"]},
+                "then": {"properties": {"params": bisection_ref.to_value()}}
+            },
+            {
+                "if": {"properties": {"model": {"const": "cascade"}}, "required": ["model"]},
+                "then": {"properties": {"params": cascade_ref.to_value()}}
+            },
+            {
+                "if": {"properties": {"model": {"const": "spm"}}, "required": ["model"]},
+                "then": {"properties": {"params": spm_ref.to_value()}}
             }
         ]),
     );
@@ -108,6 +133,9 @@ pub fn params_schema(model: ModelKind) -> Value {
     let root = match model {
         ModelKind::Dsmc => generator.root_schema_for::<dsmc::DsmcParams>(),
         ModelKind::Rfm => generator.root_schema_for::<rfm::RfmParams>(),
+        ModelKind::Bisection => generator.root_schema_for::<aux_models::BisectionParams>(),
+        ModelKind::Cascade => generator.root_schema_for::<aux_models::CascadeParams>(),
+        ModelKind::Spm => generator.root_schema_for::<aux_models::SpmParams>(),
     };
     root.to_value()
 }

@@ -1,6 +1,8 @@
 //! Storage: Parquet tables written as atomic part files, checkpoints, ensemble summaries.
 //! The store knows table schemas, not physics.
 
+pub mod aux_summary;
+pub mod aux_tables;
 pub mod checkpoint;
 pub mod layout;
 pub mod parquet_io;

@@ -73,6 +73,11 @@ pub fn write_summaries(
     match c.plan.model {
         crate::manifest::ModelKind::Dsmc => write_dsmc_summaries(c, finished),
         crate::manifest::ModelKind::Rfm => super::rfm_summary::write_rfm_summaries(c, finished),
+        // The auxiliary models' tables carry their statistics over realisations per run; the
+        // cascade's S(k) also gets a replica summary (fitted like the RFM's).
+        crate::manifest::ModelKind::Bisection
+        | crate::manifest::ModelKind::Cascade
+        | crate::manifest::ModelKind::Spm => super::aux_summary::write_aux_summaries(c, finished),
     }
 }
 
@@ -93,7 +98,7 @@ fn write_dsmc_summaries(
                     .unwrap_or(1) as u64;
                 species * d.output_times.resolve(d.t_end).len() as u64 * replicas
             }
-            crate::plan::ModelParams::Rfm(_) => 1,
+            _ => 1,
         })
         .max()
         .unwrap_or(1)
@@ -238,7 +243,7 @@ fn write_tamsd_summary(
                 }
                 _ => 0,
             },
-            crate::plan::ModelParams::Rfm(_) => 0,
+            _ => 0,
         })
         .max()
         .unwrap_or(1)

@@ -206,7 +206,7 @@ fn chunked(
     let state = e.state_bytes();
     let bound_raises = match &e {
         Engine::Dsmc(sim) => sim.st.bound_raises,
-        Engine::Rfm(_) => unreachable!("DSMC test"),
+        _ => unreachable!("DSMC test"),
     };
     Finished {
         out: e.finish(),
@@ -543,7 +543,7 @@ fn mean_sem(x: &[f64]) -> (f64, f64) {
 fn ensemble(params: &ModelParams, seeds: &[u64]) -> Vec<(f64, f64)> {
     let t_end = match params {
         ModelParams::Dsmc(p) => p.t_end,
-        ModelParams::Rfm(_) => unreachable!("DSMC test"),
+        _ => unreachable!("DSMC test"),
     };
     let one = |seed: u64| {
         let out = run_in_memory(params, seed).unwrap();
