@@ -13,6 +13,7 @@
 //! The physics never imports the campaign or the store: a simulator hands rows and
 //! checkpoint bytes to whoever drives it.
 
+pub mod analysis;
 pub mod campaign;
 pub mod cli;
 pub mod dsmc;
