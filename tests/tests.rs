@@ -7,12 +7,14 @@
 //! - `interrupt`: Ctrl-C once checkpoints and stops (exit 130), resume is bit-identical;
 //!   twice exits at once.
 //! - `rfm`: a Random Force Model campaign, its tables, kill + resume bit-identity.
+//! - `analyze`: `granular analyze` end to end on tiny 1D/2D RFM campaigns; refusals.
 //! - `schema`: the committed JSON Schema matches the code; `jobs/*.json` validate.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
 
 mod it {
+    pub mod analyze;
     pub mod interrupt;
     pub mod manifests;
     pub mod physics;

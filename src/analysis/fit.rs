@@ -74,9 +74,24 @@ fn finish(params: Vec<f64>, cov: Vec<f64>, chi2: f64, n: usize, weighted: bool) 
     } else {
         chi2 / dof as f64
     };
+    // Unweighted with no degree of freedom: no error estimate (NaN).
+    let scale = if !weighted && dof == 0 {
+        f64::NAN
+    } else {
+        scale
+    };
     let cov: Vec<f64> = cov.iter().map(|c| c * scale).collect();
-    let errors: Vec<f64> = (0..p).map(|i| cov[i * p + i].max(0.0).sqrt()).collect();
-    if !params.iter().chain(&errors).all(|v| v.is_finite()) {
+    let errors: Vec<f64> = (0..p)
+        .map(|i| {
+            let v = cov[i * p + i];
+            if v.is_nan() {
+                v
+            } else {
+                v.max(0.0).sqrt()
+            }
+        })
+        .collect();
+    if !params.iter().all(|v| v.is_finite()) {
         return None;
     }
     Some(Fit {
@@ -284,6 +299,9 @@ pub(crate) mod tests {
         // var(b) = sigma^2 / sum (x - xm)^2 = 0.25 / 5.
         assert!((f.errors[1] - (0.25f64 / 5.0).sqrt()).abs() < 1e-12);
         assert!(linear(&[1.0, 1.0], &[1.0, 2.0], None).is_none());
+        // Two points, unweighted: exact line, no error estimate.
+        let g = linear(&[1.0, 2.0], &[1.0, 3.0], None).unwrap();
+        assert!(g.errors[1].is_nan() && g.chi2_reduced.is_none());
     }
 
     /// y = A x^-a with Gaussian noise of known sigma: the fitted exponent scatters around
