@@ -220,11 +220,83 @@ fn analyze_end_to_end() {
     assert!(fits.values().all(|v| v.0.is_finite()));
     assert!(std::fs::read_dir(out_dir.join("figures")).unwrap().count() >= 4);
 
+    // A cascade_structure_factor table (the cascade model's; columns as
+    // rfm_structure_factor_summary) is fitted when present: S = 2 k^-1.6 on the lattice
+    // shells, window k L / 2 pi <= 2^(8-3) (default n = 8, L = 1).
+    write_cascade_table(&b);
+    let (code, out) = run_capture(&["analyze", b_s, "--out", out_dir.to_str().unwrap()], &log);
+    assert_eq!(code, Some(0), "{out}\n{}", log_text(&log));
+    let fits = read_fits(&out_dir.join("analysis_fits.parquet"));
+    let cas = fits
+        .iter()
+        .find(|(k, _)| k.0 == "D_f_cascade")
+        .expect("cascade D_f row");
+    assert!((cas.1 .0 - 1.6).abs() < 1e-9, "cascade D_f {}", cas.1 .0);
+    assert!(cas.0 .1.starts_with("variant="), "{}", cas.0 .1);
+    // Shells n^2 = a^2 + b^2 in (0, 1024]: every one is in the window.
+    let shells = (0..=32i64)
+        .flat_map(|a| (0..=32i64).map(move |b| a * a + b * b))
+        .filter(|&s| s > 0 && s <= 1024)
+        .collect::<std::collections::BTreeSet<_>>()
+        .len();
+    assert_eq!(cas.1 .3 as usize, shells);
+
     // A missing table: refused (exit 3), not a panic.
     std::fs::remove_dir_all(b.join("tables").join("rfm_structure_factor")).unwrap();
     let (code, _) = run_capture(&["analyze", b_s], &log);
     assert_eq!(code, Some(3), "{}", log_text(&log));
     assert!(log_text(&log).contains("rfm_structure_factor is missing"));
+}
+
+fn write_cascade_table(campaign: &Path) {
+    use std::sync::Arc;
+    let mut shells: Vec<i64> = (0..=40i64)
+        .flat_map(|a| (0..=40i64).map(move |b| a * a + b * b))
+        .filter(|&s| s > 0 && s <= 1600)
+        .collect();
+    shells.sort_unstable();
+    shells.dedup();
+    let k: Vec<f64> = shells
+        .iter()
+        .map(|&s| 2.0 * std::f64::consts::PI * (s as f64).sqrt())
+        .collect();
+    let s: Vec<f64> = k.iter().map(|k| 2.0 * k.powf(-1.6)).collect();
+    let n = shells.len();
+    let schema = arrow_schema::Schema::new(vec![
+        arrow_schema::Field::new("point_id", arrow_schema::DataType::UInt32, false),
+        arrow_schema::Field::new("n2", arrow_schema::DataType::UInt64, false),
+        arrow_schema::Field::new("k", arrow_schema::DataType::Float64, false),
+        arrow_schema::Field::new("n_vectors", arrow_schema::DataType::UInt64, false),
+        arrow_schema::Field::new("n_replicas", arrow_schema::DataType::UInt32, false),
+        arrow_schema::Field::new("s_mean", arrow_schema::DataType::Float64, false),
+        arrow_schema::Field::new("s_sem", arrow_schema::DataType::Float64, true),
+    ]);
+    let batch = arrow_array::RecordBatch::try_new(
+        Arc::new(schema),
+        vec![
+            Arc::new(arrow_array::UInt32Array::from(vec![0u32; n])),
+            Arc::new(arrow_array::UInt64Array::from(
+                shells.iter().map(|&s| s as u64).collect::<Vec<_>>(),
+            )),
+            Arc::new(arrow_array::Float64Array::from(k.clone())),
+            Arc::new(arrow_array::UInt64Array::from(vec![4u64; n])),
+            Arc::new(arrow_array::UInt32Array::from(vec![10u32; n])),
+            Arc::new(arrow_array::Float64Array::from(s.clone())),
+            Arc::new(arrow_array::Float64Array::from(
+                s.iter().map(|v| 0.01 * v).collect::<Vec<_>>(),
+            )),
+        ],
+    )
+    .unwrap();
+    let dir = campaign.join("tables").join("cascade_structure_factor");
+    std::fs::create_dir_all(&dir).unwrap();
+    granular::store::parquet_io::write_file(
+        &dir.join("summary.parquet"),
+        &batch,
+        "cascade_structure_factor",
+        "{}",
+    )
+    .unwrap();
 }
 
 #[test]
