@@ -913,7 +913,7 @@ fn structure_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                     fractal::SkPoint {
                         k: *k,
                         s,
-                        err: if v.len() >= 2 { e } else { None },
+                        err: e,
                     }
                 })
                 .collect();
