@@ -910,11 +910,7 @@ fn structure_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             d.sk.range((p, 0)..(p, u64::MAX))
                 .map(|(_, (k, v))| {
                     let (s, e) = replica_stat(v);
-                    fractal::SkPoint {
-                        k: *k,
-                        s,
-                        err: e,
-                    }
+                    fractal::SkPoint { k: *k, s, err: e }
                 })
                 .collect();
         if !shells.is_empty() {
@@ -1053,8 +1049,36 @@ fn structure_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
     }
 }
 
-/// Velocity tails: alpha window, crossover (5.32), Moon plot (5.6).
+/// Velocity tails: alpha window, crossover (5.32), Moon plot (5.6); with several points, the
+/// inverse-variance mean of their accepted alphas (the thesis's summary of T 5.1, 1.163 +-
+/// 0.017 over its bold entries).
 fn tail_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
+    tail_fits_per_point(ctx, rfm, d);
+    let alphas: Vec<(f64, f64)> = ctx
+        .report
+        .fits
+        .iter()
+        .filter(|f| f.quantity == "alpha")
+        .filter_map(|f| f.error.map(|e| (f.value, e)))
+        .collect();
+    if alphas.len() >= 2 {
+        let (v, e): (Vec<f64>, Vec<f64>) = alphas.iter().copied().unzip();
+        if let Some((m, err, chi)) = fit::weighted_mean(&v, &e) {
+            ctx.fit(
+                "alpha_weighted_mean",
+                "all points with an accepted alpha",
+                m,
+                Some(err),
+                chi,
+                v.len(),
+                "inverse-variance mean of the accepted ranges (centre, half-width)",
+                None,
+            );
+        }
+    }
+}
+
+fn tail_fits_per_point(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
     for &(p, r) in rfm {
         let Some(bins) = d.hist.get(&(p, "velocity".to_string())) else {
             continue;
