@@ -281,7 +281,10 @@ pub fn stretched_exp_counts(v: &[f64], counts: &[f64], alpha: f64, factor: f64) 
 /// Inverse-variance weighted mean: (mean, its standard error, chi^2/(n-1) of the values
 /// about it). `None` without values or with a non-positive error.
 pub fn weighted_mean(values: &[f64], errors: &[f64]) -> Option<(f64, f64, Option<f64>)> {
-    if values.is_empty() || values.len() != errors.len() || errors.iter().any(|e| !(*e > 0.0)) {
+    if values.is_empty()
+        || values.len() != errors.len()
+        || errors.iter().any(|e| e.is_nan() || *e <= 0.0)
+    {
         return None;
     }
     let w: Vec<f64> = errors.iter().map(|e| 1.0 / (e * e)).collect();

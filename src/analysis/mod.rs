@@ -198,19 +198,24 @@ fn done_runs(c: &Campaign) -> Result<BTreeMap<u64, u32>, StoreError> {
     Ok(out)
 }
 
+/// Per run: a value and its own (block) error.
+type PerRun = Vec<(f64, Option<f64>)>;
+/// Histogram bins by the bits of their lower edge: (lo, hi, count).
+type Bins = BTreeMap<u64, (f64, f64, f64)>;
+
 /// Per-point data of an RFM campaign, from the finished runs.
 #[derive(Default)]
 struct RfmData {
     /// (point, order) -> [(value, block sem)] per run.
-    moments: BTreeMap<(u32, u32), Vec<(f64, Option<f64>)>>,
+    moments: BTreeMap<(u32, u32), PerRun>,
     /// (point, order) of h = 1.
-    neighbour: BTreeMap<(u32, u32), Vec<(f64, Option<f64>)>>,
+    neighbour: BTreeMap<(u32, u32), PerRun>,
     /// (point, kind) -> lo bits -> (lo, hi, count) summed over runs (h = 0 / 1 only).
-    hist: BTreeMap<(u32, String), BTreeMap<u64, (f64, f64, f64)>>,
+    hist: BTreeMap<(u32, String), Bins>,
     /// (point, n2) -> (k, [S per run]).
-    sk: BTreeMap<(u32, u64), (f64, Vec<(f64, Option<f64>)>)>,
+    sk: BTreeMap<(u32, u64), (f64, PerRun)>,
     /// (point, r_lo bits) -> (r_lo, r_hi, [C per run]).
-    radial: BTreeMap<(u32, u64), (f64, f64, Vec<(f64, Option<f64>)>)>,
+    radial: BTreeMap<(u32, u64), (f64, f64, PerRun)>,
 }
 
 fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreError> {
