@@ -49,6 +49,21 @@ fn tr(v: f64, log: bool) -> Option<f64> {
     }
 }
 
+/// Label of a log-axis tick at log10 value `v`: two significant digits.
+fn log_tick(v: f64) -> String {
+    let r = 10f64.powf(v);
+    if !(1e-2..1e4).contains(&r) {
+        return format!("{r:.1e}");
+    }
+    let decimals = (1 - v.floor() as i32).max(0) as usize;
+    let s = format!("{r:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, p: &Plot) -> Result<(), String> {
     let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
     let fig = &p.fig;
@@ -101,8 +116,8 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, p: &Plot) -> Result<()
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(e)?;
     let (lx, ly) = (p.log_x, p.log_y);
-    let fx = move |v: &f64| if lx { tick(10f64.powf(*v)) } else { tick(*v) };
-    let fy = move |v: &f64| if ly { tick(10f64.powf(*v)) } else { tick(*v) };
+    let fx = move |v: &f64| if lx { log_tick(*v) } else { tick(*v) };
+    let fy = move |v: &f64| if ly { log_tick(*v) } else { tick(*v) };
     chart
         .configure_mesh()
         .x_desc(&fig.x_label)
