@@ -15,6 +15,9 @@ pub struct Plot {
     pub fig: Figure,
     pub log_x: bool,
     pub log_y: bool,
+    /// Series from this index on are reference lines (theory, guides) with their own colours
+    /// rather than fits drawn in the colour of the data before them.
+    pub references_from: Option<usize>,
 }
 
 impl Plot {
@@ -23,6 +26,7 @@ impl Plot {
             fig,
             log_x: true,
             log_y: true,
+            references_from: None,
         }
     }
     pub fn linear(fig: Figure) -> Self {
@@ -30,6 +34,7 @@ impl Plot {
             fig,
             log_x: false,
             log_y: false,
+            references_from: None,
         }
     }
     pub fn semilog_y(fig: Figure) -> Self {
@@ -37,7 +42,13 @@ impl Plot {
             fig,
             log_x: false,
             log_y: true,
+            references_from: None,
         }
+    }
+    /// Mark the series from index `i` on as reference lines.
+    pub fn with_references_from(mut self, i: usize) -> Self {
+        self.references_from = Some(i);
+        self
     }
 }
 
@@ -49,13 +60,13 @@ fn tr(v: f64, log: bool) -> Option<f64> {
     }
 }
 
-/// Label of a log-axis tick at log10 value `v`: two significant digits.
+/// Label of a log-axis tick at log10 value `v`: three significant digits.
 fn log_tick(v: f64) -> String {
     let r = 10f64.powf(v);
     if !(1e-2..1e4).contains(&r) {
         return format!("{r:.1e}");
     }
-    let decimals = (1 - v.floor() as i32).max(0) as usize;
+    let decimals = (2 - v.floor() as i32).max(0) as usize;
     let s = format!("{r:.decimals$}");
     if s.contains('.') {
         s.trim_end_matches('0').trim_end_matches('.').to_string()
@@ -136,7 +147,8 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, p: &Plot) -> Result<()
             continue;
         }
         // A fitted line takes the colour of the data series just before it.
-        let follows_data = s.line && j > 0 && !fig.series[j - 1].line;
+        let reference = p.references_from.is_some_and(|r| j >= r);
+        let follows_data = s.line && !reference && j > 0 && !fig.series[j - 1].line;
         if !follows_data && j > 0 {
             colour_index += 1;
         }

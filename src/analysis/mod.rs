@@ -860,16 +860,21 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
     }
     if !xim_series.is_empty() {
         let mut s = xim_series;
+        let r = s.len();
         s.push(Series {
             label: "mean field 1/3".into(),
             points: vec![(1.0, 1.0 / 3.0, 0.0), (12.0, 1.0 / 3.0, 0.0)],
             line: true,
         });
         let f = fig(ctx.title("xi_m / m (3.14)"), "m", "xi_m / m", s);
-        ctx.figure("xi-m".into(), figures::Plot::linear(f));
+        ctx.figure(
+            "xi-m".into(),
+            figures::Plot::linear(f).with_references_from(r),
+        );
     }
     if !zeta_series.is_empty() {
         let mut s = zeta_series;
+        let r = s.len();
         s.push(Series {
             label: "uniform bisection ln(1+m)/(m ln 2)".into(),
             points: (1..=9)
@@ -878,7 +883,10 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             line: true,
         });
         let f = fig(ctx.title("zeta_m / m (3.20)"), "m", "zeta_m / m", s);
-        ctx.figure("zeta-m".into(), figures::Plot::linear(f));
+        ctx.figure(
+            "zeta-m".into(),
+            figures::Plot::linear(f).with_references_from(r),
+        );
     }
     if !collapse.is_empty() {
         let s = collapse
@@ -1241,6 +1249,7 @@ fn tail_fits_per_point(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             });
         }
         // Reference lines f = -alpha_T x + C through the first tail point.
+        let r = moon.len();
         if let Some(first) = moon
             .first()
             .and_then(|s| s.points.iter().find(|p| p.0 >= 2f64.ln()))
@@ -1261,7 +1270,10 @@ fn tail_fits_per_point(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             "-ln(-ln(P / P'))",
             moon,
         );
-        ctx.figure(format!("moon-{}", slug(&key)), figures::Plot::linear(fg));
+        ctx.figure(
+            format!("moon-{}", slug(&key)),
+            figures::Plot::linear(fg).with_references_from(r),
+        );
     }
 }
 
