@@ -521,6 +521,7 @@ pub fn analyze(c: &Campaign, out: &Path, opts: &Options) -> Result<Report, Analy
             .filter(|(p, _)| points_done.contains(p))
             .collect();
         multiscaling_fits(&mut ctx, &rfm, &data);
+        bisection_comparison(&mut ctx, &rfm, &data);
         structure_fits(&mut ctx, &rfm, &data);
         tail_fits(&mut ctx, &rfm, &data);
         free_path_fits(&mut ctx, &rfm, &data);
@@ -907,6 +908,83 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             s,
         );
         ctx.figure("collapse".into(), figures::Plot::loglog(f));
+    }
+}
+
+/// 1D: G_1(R; N) (neighbour-distance histogram, h = 1) beside the uniform bisection P_n(x),
+/// n = log2 N, with x = R/L' (F 3.16; no fit parameter). Figure and curves only.
+fn bisection_comparison(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
+    for &(p, r) in rfm {
+        if r.dim != 1 {
+            continue;
+        }
+        let Some(bins) = d.hist.get(&(p, "neighbour_distance".to_string())) else {
+            continue;
+        };
+        let cfg = r.config();
+        let lr = cfg.box_length() - cfg.n_particles as f64 * cfg.diameter();
+        let total: f64 = bins.values().map(|b| b.2).sum();
+        let n = (r.n_particles as f64).log2();
+        let data: Vec<(f64, f64, f64)> = bins
+            .values()
+            .filter(|b| b.0 > 0.0 && b.1.is_finite() && b.1 > b.0 && b.2 > 0.0)
+            .map(|&(lo, hi, c)| {
+                // G_1 as a density of x = R / L'.
+                let dens = c / (total * (hi - lo)) * lr;
+                ((lo * hi).sqrt() / lr, dens, dens / c.sqrt())
+            })
+            .collect();
+        if data.is_empty() {
+            continue;
+        }
+        let key = rfm_key(ctx.c, p, r, true);
+        // rms of ln(G_1 / P_n) over the well-sampled bins (X >= 10 <=> sigma <= 0.32 dens).
+        let logs: Vec<f64> = data
+            .iter()
+            .filter(|q| q.2 <= 0.32 * q.1 && q.0 < 1.0)
+            .map(|q| (q.1 / multiscaling::bisection_density(q.0, n)).ln())
+            .filter(|v| v.is_finite())
+            .collect();
+        if !logs.is_empty() {
+            let rms = (logs.iter().map(|v| v * v).sum::<f64>() / logs.len() as f64).sqrt();
+            ctx.fit(
+                "G_1_vs_bisection_rms_log_ratio",
+                &key,
+                rms,
+                None,
+                None,
+                logs.len(),
+                format!(
+                    "rms of ln(G_1(R; N) / P_n(R/L')), n = log2 N = {n:.3}, bins with X >= 10 \
+                     (no fit parameter; 0 = identical)"
+                ),
+                Some(0.0),
+            );
+        }
+        let (x0, x1) = (data[0].0, data[data.len() - 1].0.min(0.999));
+        let series = vec![
+            Series {
+                label: "G_1(R; N), x = R/L'".into(),
+                points: data,
+                line: false,
+            },
+            line(
+                format!("uniform bisection P_n(x), n = log2 N = {n:.2}"),
+                x0,
+                x1,
+                move |x| multiscaling::bisection_density(x, n),
+            ),
+        ];
+        let fg = fig(
+            ctx.title(&format!("G_1 vs bisection (F 3.16) [{key}]")),
+            "x = R / L'",
+            "density",
+            series,
+        );
+        ctx.figure(
+            format!("g1-bisection-{}", slug(&key)),
+            figures::Plot::loglog(fg).with_references_from(1),
+        );
     }
 }
 

@@ -55,6 +55,16 @@ pub fn bisection_zeta(m: u32) -> f64 {
     (1.0 + m as f64).ln() / std::f64::consts::LN_2
 }
 
+/// Uniform bisection after n levels (3.36): the density of a partition length,
+/// P_n(x) = (-ln x)^(n-1) / Gamma(n) on (0, 1) (n non-integer allowed, spec 2.6 [REC]); the
+/// parameter-free comparison for G_1(R; N = 2^n) at L' = 1 (F 3.16).
+pub fn bisection_density(x: f64, n: f64) -> f64 {
+    if !(x > 0.0 && x < 1.0) {
+        return 0.0;
+    }
+    (-x.ln()).powf(n - 1.0) / crate::theory::quad::gamma(n)
+}
+
 /// The collapse variable of F 3.3: <v^2> N^xi_2 (D L'/M^2)^(-2/3).
 pub fn collapse_value(
     v2: f64,
@@ -125,6 +135,27 @@ mod tests {
             .collect();
         assert!(exponent_vs_n(&pts, 0.0).unwrap().exponent > 0.56);
         assert!((exponent_vs_n(&pts, 398.0).unwrap().exponent - 0.53).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bisection_density_is_normalised_with_the_right_moments() {
+        // Integrate on a log grid: int P_9 = 1, <x> = 2^-9, <x^2> = 3^-9 (3.37).
+        let n = 9.0;
+        let (mut z, mut m1, mut m2) = (0.0, 0.0, 0.0);
+        let k = 200_000;
+        for j in 0..k {
+            // x = exp(-u), u in (0, 60): dx = x du.
+            let u = 60.0 * (j as f64 + 0.5) / k as f64;
+            let x = (-u).exp();
+            let w = bisection_density(x, n) * x * 60.0 / k as f64;
+            z += w;
+            m1 += w * x;
+            m2 += w * x * x;
+        }
+        assert!((z - 1.0).abs() < 1e-6, "{z}");
+        assert!((m1 * 512.0 - 1.0).abs() < 1e-6, "{m1}");
+        assert!((m2 * 3f64.powi(9) - 1.0).abs() < 1e-6, "{m2}");
+        assert_eq!(bisection_density(1.5, n), 0.0);
     }
 
     #[test]

@@ -178,6 +178,15 @@ fn analyze_end_to_end() {
     assert!((z2.5.unwrap() - 3f64.ln() / 2f64.ln()).abs() < 1e-12);
     assert!(z2.0 > 1.0 && z2.0 < 3.0, "zeta_2 = {}", z2.0);
     assert!(fits.contains_key(&("lambda".to_string(), key.clone())));
+    // G_1 beside the closed-form uniform bisection P_n, n = log2 N.
+    let g = &fits[&(
+        "G_1_vs_bisection_rms_log_ratio".to_string(),
+        format!("{key},N=120"),
+    )];
+    assert!(g.0.is_finite() && g.0 >= 0.0 && g.3 > 0);
+    assert!(a
+        .join("analysis/figures/g1-bisection-eps_0.5_L__1_N_120.png")
+        .is_file());
     // Every order of the velocity moments has its exponent.
     assert!((1..=12).all(|m| fits.contains_key(&(format!("xi_{m}"), key.clone()))));
     let figs = a.join("analysis").join("figures");
