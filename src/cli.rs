@@ -144,6 +144,31 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Fit the thesis's observables of an rfm campaign (xi_m, zeta_m, D_f, alpha, (5.32),
+    /// (4.25), ...) into the table analysis_fits, the figure data analysis_curves and figures.
+    /// Uses the finished runs (warns if some are missing).
+    Analyze {
+        dir: PathBuf,
+        /// Where to write analysis_fits.parquet, analysis_curves.parquet and figures/
+        /// (default: DIR/analysis).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Smallest N of the velocity-moment exponent fits across N (the thesis drops N < 398).
+        #[arg(long, default_value_t = 398.0)]
+        n_min: f64,
+        /// Count errors s = FACTOR sqrt(X) in the alpha windows (2 for the thesis's dagger entries).
+        #[arg(long, default_value_t = 1.0)]
+        count_error_factor: f64,
+        /// Accept alpha when the reduced chi^2 is below this.
+        #[arg(long, default_value_t = 1.2)]
+        chi2_accept: f64,
+        /// D_f of the fixed-D_f free-path fit (4.25).
+        #[arg(long, default_value_t = 1.63)]
+        fixed_df: f64,
+        /// Write the tables only.
+        #[arg(long)]
+        no_figures: bool,
+    },
 }
 
 #[derive(Args, Clone)]
@@ -352,6 +377,28 @@ pub fn main() -> i32 {
             },
             Err(e) => report_error(e),
         },
+        Command::Analyze {
+            dir,
+            out,
+            n_min,
+            count_error_factor,
+            chi2_accept,
+            fixed_df,
+            no_figures,
+        } => match Campaign::open(&dir) {
+            Ok(c) => {
+                let out = out.unwrap_or_else(|| dir.join("analysis"));
+                let opts = crate::analysis::Options {
+                    n_min,
+                    count_error_factor,
+                    chi2_accept,
+                    fixed_df,
+                    figures: !no_figures,
+                };
+                analyze(&c, &out, &opts)
+            }
+            Err(e) => report_error(e),
+        },
         Command::Schema => {
             println!(
                 "{}",
@@ -425,6 +472,49 @@ pub fn main() -> i32 {
             },
             Err(e) => report_error(e),
         },
+    }
+}
+
+fn analyze(c: &Campaign, out: &std::path::Path, opts: &crate::analysis::Options) -> i32 {
+    use crate::analysis::AnalysisError;
+    match crate::analysis::analyze(c, out, opts) {
+        Ok(r) => {
+            use std::io::Write;
+            let mut o = std::io::stdout().lock();
+            let _ = writeln!(
+                o,
+                "{}: {} fits from {} of {} runs; {} files in {}",
+                c.manifest.name,
+                r.fits.len(),
+                r.runs_done,
+                r.runs_total,
+                r.files.len(),
+                out.display()
+            );
+            for f in &r.fits {
+                let err = f.error.map_or("".into(), |e| format!(" +- {e:.4}"));
+                let chi = f
+                    .chi2_reduced
+                    .map_or("".into(), |x| format!("  chi2_r {x:.2}"));
+                let reference = f
+                    .reference
+                    .map_or("".into(), |x| format!("  (reference {x:.4})"));
+                let _ = writeln!(
+                    o,
+                    "  {:<22} {:<40} {:>10.4}{err}{chi}  n {}{reference}",
+                    f.quantity, f.key, f.value, f.n_points
+                );
+            }
+            exit_codes::OK
+        }
+        Err(AnalysisError::NotAnalysable(m)) => {
+            eprintln!("error: {m}");
+            exit_codes::DIRECTORY_REFUSED
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            exit_codes::IO_ERROR
+        }
     }
 }
 

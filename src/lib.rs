@@ -14,6 +14,7 @@
 //! The physics never imports the campaign or the store: a simulator hands rows and
 //! checkpoint bytes to whoever drives it.
 
+pub mod analysis;
 pub mod aux_models;
 pub mod campaign;
 pub mod cli;

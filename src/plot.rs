@@ -17,7 +17,7 @@ use crate::store::parquet_io::{self, StoreError};
 use crate::store::summary::table_files;
 use crate::store::tables;
 
-static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+pub(crate) static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 /// One curve: (x, y, error) points.
 #[derive(Clone, Debug, Default)]
@@ -308,7 +308,7 @@ pub fn figures(c: &Campaign) -> Result<Vec<(String, Figure)>, StoreError> {
 }
 
 /// Axis tick text: plain numbers in [1e-2, 1e4), powers of ten outside.
-fn tick(v: f64) -> String {
+pub(crate) fn tick(v: f64) -> String {
     let a = v.abs();
     if a == 0.0 {
         "0".into()
@@ -320,7 +320,7 @@ fn tick(v: f64) -> String {
     }
 }
 
-const COLORS: [RGBColor; 8] = [
+pub(crate) const COLORS: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),

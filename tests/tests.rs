@@ -7,6 +7,7 @@
 //! - `interrupt`: Ctrl-C once checkpoints and stops (exit 130), resume is bit-identical;
 //!   twice exits at once.
 //! - `rfm`: a Random Force Model campaign, its tables, kill + resume bit-identity.
+//! - `analyze`: `granular analyze` end to end on tiny 1D/2D RFM campaigns; refusals.
 //! - `schema`: the committed JSON Schema matches the code; `jobs/*.json` validate.
 //! - `drills`: a second process on a running shard, corrupted checkpoints, truncated and
 //!   foreign Parquet parts, a full disk, compaction in the middle of a campaign.
@@ -18,6 +19,7 @@
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
 
 mod it {
+    pub mod analyze;
     pub mod aux_models;
     pub mod drills;
     pub mod interrupt;
