@@ -131,11 +131,9 @@ fn bins(parts: &[Part], target: u64) -> Vec<Vec<usize>> {
     for (i, p) in parts.iter().enumerate() {
         let big = p.bytes >= target / 2;
         let same_schema = cur.first().is_none_or(|&j| parts[j].schema == p.schema);
-        if big || !same_schema || (size + p.bytes > target && !cur.is_empty()) {
-            if !cur.is_empty() {
-                out.push(std::mem::take(&mut cur));
-                size = 0;
-            }
+        if (big || !same_schema || size + p.bytes > target) && !cur.is_empty() {
+            out.push(std::mem::take(&mut cur));
+            size = 0;
         }
         if big {
             out.push(vec![i]);
