@@ -35,7 +35,7 @@ use crate::manifest::rfm::RfmParams;
 use crate::plan::ModelParams;
 use crate::plot::{Figure, Series};
 use crate::store::parquet_io::{self, StoreError};
-use crate::store::summary::table_files;
+use crate::store::summary::campaign_batches as batches;
 use crate::store::tables;
 
 /// The fits table.
@@ -123,14 +123,6 @@ pub enum AnalysisError {
 
 fn corrupt(table: &str, what: &str) -> StoreError {
     StoreError::Corrupt(table.into(), what.into())
-}
-
-fn batches(c: &Campaign, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
-    let mut out = Vec::new();
-    for f in table_files(c, table)? {
-        out.extend(parquet_io::read_campaign_file(&f, table, &c.manifest_json)?);
-    }
-    Ok(out)
 }
 
 fn col<'a>(b: &'a RecordBatch, table: &str, name: &str) -> Result<&'a ArrayRef, StoreError> {

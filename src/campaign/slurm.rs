@@ -312,49 +312,68 @@ fn compact_script(c: &Campaign, root: &Path, rec: &SubmissionRecord) -> String {
     s
 }
 
-/// Array tasks of earlier submissions still queued or running, by array index
-/// (`squeue -r`); `None` when squeue cannot be asked.
-fn queued_indices(rec: &SubmissionRecord) -> Option<(BTreeSet<u64>, BTreeSet<String>)> {
-    let jobs: Vec<String> = rec
-        .submissions
-        .iter()
-        .filter_map(|s| s.array_job.clone())
-        .collect();
+/// One line of `squeue -h -r -o "%F %K %T"`: array job id, task index (or the range spec of a
+/// pending remainder, "3-9%2"; "N/A" for a plain job), state.
+struct Queued {
+    job: String,
+    index: String,
+    state: String,
+}
+
+/// The queued and running jobs among `jobs` (array tasks one per line); `None` when squeue
+/// cannot be asked. squeue fails for job ids it no longer knows: then none of them is queued.
+fn squeue(jobs: &[String]) -> Option<Vec<Queued>> {
     if jobs.is_empty() {
-        return Some(Default::default());
+        return Some(Vec::new());
     }
     let out = Command::new(tool("GRANULAR_SQUEUE", "squeue"))
         .args(["-h", "-r", "-o", "%F %K %T", "-j", &jobs.join(",")])
         .output()
         .ok()?;
     if !out.status.success() {
-        // squeue fails for job ids it no longer knows: then nothing of them is queued.
-        let err = String::from_utf8_lossy(&out.stderr);
-        return if err.contains("Invalid job id") {
-            Some(Default::default())
-        } else {
-            None
-        };
+        return String::from_utf8_lossy(&out.stderr)
+            .contains("Invalid job id")
+            .then(Vec::new);
     }
+    Some(
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter_map(|line| {
+                let mut f = line.split_whitespace();
+                let q = Queued {
+                    job: f.next()?.to_string(),
+                    index: f.next()?.to_string(),
+                    state: f.next()?.to_string(),
+                };
+                jobs.contains(&q.job).then_some(q)
+            })
+            .collect(),
+    )
+}
+
+/// Array tasks of earlier submissions still queued or running, by array index, and the array
+/// jobs they belong to; `None` when squeue cannot be asked.
+fn queued_indices(rec: &SubmissionRecord) -> Option<(BTreeSet<u64>, BTreeSet<String>)> {
+    let jobs: Vec<String> = rec
+        .submissions
+        .iter()
+        .filter_map(|s| s.array_job.clone())
+        .collect();
     let mut set = BTreeSet::new();
     let mut arrays = BTreeSet::new();
-    for line in String::from_utf8_lossy(&out.stdout).lines() {
-        let f: Vec<&str> = line.split_whitespace().collect();
-        if f.len() >= 3 && jobs.iter().any(|j| j == f[0]) {
-            arrays.insert(f[0].to_string());
-            // %K is an index, or a range spec for a pending array remainder ("3-9%2").
-            let spec = f[1].split('%').next().unwrap_or("");
-            for part in spec.split(',') {
-                match part.split_once('-') {
-                    Some((a, b)) => {
-                        if let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) {
-                            set.extend(a..=b);
-                        }
+    for q in squeue(&jobs)? {
+        arrays.insert(q.job);
+        let spec = q.index.split('%').next().unwrap_or("");
+        for part in spec.split(',') {
+            match part.split_once('-') {
+                Some((a, b)) => {
+                    if let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) {
+                        set.extend(a..=b);
                     }
-                    None => {
-                        if let Ok(i) = part.parse::<u64>() {
-                            set.insert(i);
-                        }
+                }
+                None => {
+                    if let Ok(i) = part.parse::<u64>() {
+                        set.insert(i);
                     }
                 }
             }
@@ -386,26 +405,7 @@ pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, String> {
         .flat_map(|s| [s.array_job.clone(), s.compact_job.clone()])
         .flatten()
         .collect();
-    let states: Option<Vec<(String, String)>> = if ids.is_empty() {
-        Some(Vec::new())
-    } else {
-        Command::new(tool("GRANULAR_SQUEUE", "squeue"))
-            .args(["-h", "-r", "-o", "%F %T", "-j", &ids.join(",")])
-            .output()
-            .ok()
-            .filter(|o| {
-                o.status.success() || String::from_utf8_lossy(&o.stderr).contains("Invalid job id")
-            })
-            .map(|o| {
-                String::from_utf8_lossy(&o.stdout)
-                    .lines()
-                    .filter_map(|l| {
-                        let mut f = l.split_whitespace();
-                        Some((f.next()?.to_string(), f.next()?.to_string()))
-                    })
-                    .collect()
-            })
-    };
+    let states = squeue(&ids);
     Ok(rec
         .submissions
         .iter()
@@ -416,15 +416,15 @@ pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, String> {
             compact_job: s.compact_job.clone(),
             queue: states.as_ref().map(|st| {
                 let mut m = std::collections::BTreeMap::new();
-                for (job, state) in st {
-                    let what = if Some(job) == s.array_job.as_ref() {
+                for q in st {
+                    let what = if Some(&q.job) == s.array_job.as_ref() {
                         "tasks"
-                    } else if Some(job) == s.compact_job.as_ref() {
+                    } else if Some(&q.job) == s.compact_job.as_ref() {
                         "compaction"
                     } else {
                         continue;
                     };
-                    *m.entry(format!("{what} {state}")).or_insert(0) += 1;
+                    *m.entry(format!("{what} {}", q.state)).or_insert(0) += 1;
                 }
                 m
             }),

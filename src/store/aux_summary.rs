@@ -17,6 +17,7 @@ use arrow_schema::{DataType, Field, Schema};
 use super::aux_tables::{CASCADE_STRUCTURE_FACTOR, CASCADE_STRUCTURE_FACTOR_SUMMARY};
 use super::parquet_io::{self, StoreError};
 use super::summary::{table_files, write_whole};
+use super::tables::cols;
 use crate::campaign::ledger::RunStatus;
 use crate::campaign::Campaign;
 use crate::manifest::ModelKind;
@@ -112,51 +113,15 @@ pub fn write_aux_summaries(
             Field::new("s_sem", DataType::Float64, true),
         ])),
         vec![
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.0 .0)
-                    .collect::<arrow_array::UInt32Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| Some(r.0 .1.as_str()))
-                    .collect::<arrow_array::StringArray>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.0 .2)
-                    .collect::<arrow_array::UInt64Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.1)
-                    .collect::<arrow_array::Float64Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.2)
-                    .collect::<arrow_array::UInt64Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.3)
-                    .collect::<arrow_array::UInt32Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.4)
-                    .collect::<arrow_array::UInt64Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.5)
-                    .collect::<arrow_array::Float64Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.6)
-                    .collect::<arrow_array::Float64Array>(),
-            ),
+            cols::u32s(&rows, |r| r.0 .0),
+            cols::strs(&rows, |r| r.0 .1.as_str()),
+            cols::u64s(&rows, |r| r.0 .2),
+            cols::f64s(&rows, |r| r.1),
+            cols::u64s(&rows, |r| r.2),
+            cols::u32s(&rows, |r| r.3),
+            cols::u64s(&rows, |r| r.4),
+            cols::f64s(&rows, |r| r.5),
+            cols::opt_f64s(&rows, |r| r.6),
         ],
     )
     .expect("cascade structure factor summary");

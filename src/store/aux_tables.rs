@@ -7,6 +7,7 @@ use std::sync::Arc;
 use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
 
+use super::tables::cols::{f64s, opt_f64s, opt_u64s, strs, u32s, u64s};
 use crate::aux_models::{bisection, cascade, spm, AuxOutput};
 use crate::manifest::ModelKind;
 use crate::plan::{ModelParams, Plan};
@@ -56,29 +57,6 @@ pub struct AuxBuffer {
     place: Vec<(Ids, cascade::PlacementRow)>,
     spm_hist: Vec<(Ids, spm::HistRow)>,
     spm_sum: Vec<(Ids, spm::SummaryRow)>,
-}
-
-fn f64s<T>(v: &[T], f: impl Fn(&T) -> f64) -> ArrayRef {
-    Arc::new(v.iter().map(f).collect::<arrow_array::Float64Array>())
-}
-fn opt_f64s<T>(v: &[T], f: impl Fn(&T) -> Option<f64>) -> ArrayRef {
-    Arc::new(v.iter().map(f).collect::<arrow_array::Float64Array>())
-}
-fn u32s<T>(v: &[T], f: impl Fn(&T) -> u32) -> ArrayRef {
-    Arc::new(v.iter().map(f).collect::<arrow_array::UInt32Array>())
-}
-fn u64s<T>(v: &[T], f: impl Fn(&T) -> u64) -> ArrayRef {
-    Arc::new(v.iter().map(f).collect::<arrow_array::UInt64Array>())
-}
-fn opt_u64s<T>(v: &[T], f: impl Fn(&T) -> Option<u64>) -> ArrayRef {
-    Arc::new(v.iter().map(f).collect::<arrow_array::UInt64Array>())
-}
-fn strs<T>(v: &[T], f: impl Fn(&T) -> &str) -> ArrayRef {
-    Arc::new(
-        v.iter()
-            .map(|r| Some(f(r)))
-            .collect::<arrow_array::StringArray>(),
-    )
 }
 
 fn f(name: &str, t: DataType, nullable: bool) -> Field {

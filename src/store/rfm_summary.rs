@@ -16,19 +16,12 @@ use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
 use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
 
-use super::parquet_io::{self, StoreError};
-use super::summary::{mean_sem, replica_mean_sem, table_files, write_whole};
+use super::parquet_io::StoreError;
+use super::summary::{campaign_batches as batches, mean_sem, replica_mean_sem, write_whole};
 use super::tables;
+use super::tables::cols;
 use crate::campaign::ledger::RunStatus;
 use crate::campaign::Campaign;
-
-fn batches(c: &Campaign, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
-    let mut out = Vec::new();
-    for f in table_files(c, table)? {
-        out.extend(parquet_io::read_campaign_file(&f, table, &c.manifest_json)?);
-    }
-    Ok(out)
-}
 
 fn col<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a ArrayRef, StoreError> {
     b.column_by_name(name)
@@ -452,41 +445,13 @@ pub fn write_rfm_summaries(
                 Field::new("density", DataType::Float64, true),
             ])),
             vec![
-                Arc::new(
-                    rows.iter()
-                        .map(|r| r.0 .0)
-                        .collect::<arrow_array::UInt32Array>(),
-                ),
-                Arc::new(
-                    rows.iter()
-                        .map(|r| Some(r.0 .1.as_str()))
-                        .collect::<arrow_array::StringArray>(),
-                ),
-                Arc::new(
-                    rows.iter()
-                        .map(|r| r.0 .2)
-                        .collect::<arrow_array::UInt32Array>(),
-                ),
-                Arc::new(
-                    rows.iter()
-                        .map(|r| f64::from_bits(r.0 .3))
-                        .collect::<arrow_array::Float64Array>(),
-                ),
-                Arc::new(
-                    rows.iter()
-                        .map(|r| r.1 .0)
-                        .collect::<arrow_array::Float64Array>(),
-                ),
-                Arc::new(
-                    rows.iter()
-                        .map(|r| r.1 .1)
-                        .collect::<arrow_array::UInt64Array>(),
-                ),
-                Arc::new(
-                    rows.iter()
-                        .map(|r| density(&r.0, &r.1))
-                        .collect::<arrow_array::Float64Array>(),
-                ),
+                cols::u32s(&rows, |r| r.0 .0),
+                cols::strs(&rows, |r| r.0 .1.as_str()),
+                cols::u32s(&rows, |r| r.0 .2),
+                cols::f64s(&rows, |r| f64::from_bits(r.0 .3)),
+                cols::f64s(&rows, |r| r.1 .0),
+                cols::u64s(&rows, |r| r.1 .1),
+                cols::opt_f64s(&rows, |r| density(&r.0, &r.1)),
             ],
         )
         .expect("histogram summary");

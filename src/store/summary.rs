@@ -43,6 +43,16 @@ pub fn mean_sem(x: &[f64]) -> (f64, Option<f64>) {
     (mean, Some((var / n).sqrt()))
 }
 
+/// Every batch of every part of `table` (only this campaign's parts; see
+/// `parquet_io::read_campaign_file`).
+pub fn campaign_batches(c: &Campaign, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+    let mut out = Vec::new();
+    for f in table_files(c, table)? {
+        out.extend(parquet_io::read_campaign_file(&f, table, &c.manifest_json)?);
+    }
+    Ok(out)
+}
+
 pub fn table_files(c: &Campaign, table: &str) -> Result<Vec<PathBuf>, StoreError> {
     let dir = c.root.join("tables").join(table);
     let mut files: Vec<PathBuf> = match std::fs::read_dir(&dir) {

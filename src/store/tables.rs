@@ -830,3 +830,33 @@ impl RfmBuffer {
         out
     }
 }
+
+/// Column builders: one Arrow array from a field of every row (`cols::f64s(&rows, |r| r.t)`).
+pub(crate) mod cols {
+    use std::sync::Arc;
+
+    use arrow_array::ArrayRef;
+
+    pub(crate) fn f64s<T>(v: &[T], f: impl Fn(&T) -> f64) -> ArrayRef {
+        Arc::new(v.iter().map(f).collect::<arrow_array::Float64Array>())
+    }
+    pub(crate) fn opt_f64s<T>(v: &[T], f: impl Fn(&T) -> Option<f64>) -> ArrayRef {
+        Arc::new(v.iter().map(f).collect::<arrow_array::Float64Array>())
+    }
+    pub(crate) fn u32s<T>(v: &[T], f: impl Fn(&T) -> u32) -> ArrayRef {
+        Arc::new(v.iter().map(f).collect::<arrow_array::UInt32Array>())
+    }
+    pub(crate) fn u64s<T>(v: &[T], f: impl Fn(&T) -> u64) -> ArrayRef {
+        Arc::new(v.iter().map(f).collect::<arrow_array::UInt64Array>())
+    }
+    pub(crate) fn opt_u64s<T>(v: &[T], f: impl Fn(&T) -> Option<u64>) -> ArrayRef {
+        Arc::new(v.iter().map(f).collect::<arrow_array::UInt64Array>())
+    }
+    pub(crate) fn strs<T>(v: &[T], f: impl Fn(&T) -> &str) -> ArrayRef {
+        Arc::new(
+            v.iter()
+                .map(|r| Some(f(r)))
+                .collect::<arrow_array::StringArray>(),
+        )
+    }
+}
