@@ -78,13 +78,15 @@ impl Alias {
         let idx = (m >> 64) as usize;
         let frac = m as u64;
         // SAFETY: idx < n because x < 2^64.
-        unsafe {
-            if frac < *self.threshold.get_unchecked(idx) {
-                idx
-            } else {
-                *self.alias.get_unchecked(idx) as usize
-            }
-        }
+        let (thr, alias) = unsafe {
+            (
+                *self.threshold.get_unchecked(idx),
+                *self.alias.get_unchecked(idx) as usize,
+            )
+        };
+        // Branch-free select (the coin is unpredictable).
+        let take_alias = ((frac >= thr) as usize).wrapping_neg();
+        idx ^ ((idx ^ alias) & take_alias)
     }
 }
 

@@ -61,6 +61,7 @@ impl DsmcSim {
                         a: a as u32,
                         b: b as u32,
                         u,
+                        gap: 0.0,
                     });
                 }
             }

@@ -73,15 +73,18 @@ pub struct Candidate {
     pub k: u32,
     pub a: u32,
     pub b: u32,
-    /// The trial's acceptance uniform, drawn with the pair.
+    /// The trial's acceptance uniform, drawn with the pair (low-rank: already multiplied by
+    /// vmax_i + vmax_k, the bound the pair was proposed with).
     pub u: f64,
+    /// Low-rank: the trial's uniform in (0, 1] for the exponential gap before it.
+    pub gap: f64,
 }
 
 /// How many trials ahead candidates are drawn, so their velocities can be prefetched: the
 /// ring is refilled in batches of `PIPELINE_DEPTH / 2` whenever half of it is used.
 pub const PIPELINE_DEPTH: usize = 32;
 /// Layout version of [`DsmcState`] in checkpoints.
-pub const STATE_FORMAT: &str = "dsmc/3";
+pub const STATE_FORMAT: &str = "dsmc/4";
 
 /// A raised speed bound gets this much head-room, so that it is not raised again at once.
 pub const RAISE_SLACK: f64 = 1.05;
@@ -99,6 +102,8 @@ pub struct DsmcState {
     /// Bird: bound on ((sigma_j + sigma_M)/2)^2 |v_j|.
     pub bird_bound: f64,
     pub rng: RngPosition,
+    /// Low-rank: the stream of impact directions (see [`geom_seed`]).
+    pub geom: RngPosition,
     pub trials: u64,
     pub collisions: u64,
     pub species_collisions: Vec<u64>,
@@ -127,6 +132,8 @@ pub struct DsmcSim {
     pub sys: DsmcSystem,
     pub st: DsmcState,
     rng: RunRng,
+    /// Low-rank: impact directions (a stream of its own, see [`geom_seed`]).
+    geom: RunRng,
     /// Low-rank: alias over (term r, species i) with weights W_r u_i^(r).
     pair_i: Alias,
     /// Low-rank: static alias over species k for each term r.
@@ -144,8 +151,17 @@ pub struct DsmcSim {
     /// Slot j of the (r, i) table -> (term r, species i), so decoding needs no division.
     slot_term: Vec<u8>,
     slot_species: Vec<u32>,
-    /// Candidates drawn ahead (saved in `st.pipeline` at checkpoints).
+    /// Bird: candidates drawn ahead (saved in `st.pipeline` at checkpoints).
     ring: Ring,
+    /// Low-rank: the candidates of the current batch not yet tried (saved in `st.pipeline`).
+    batch: Vec<Candidate>,
+    /// Low-rank: scratch for the batch filter.
+    scratch: low_rank::BatchScratch,
+    /// Low-rank: per-particle speed levels (see [`low_rank::SpeedLadder`]); derived.
+    sq: Vec<u8>,
+    ladder: low_rank::SpeedLadder,
+    /// Low-rank: candidates tried in the last batch (how far the pipeline moved).
+    last_tried: usize,
     /// Evaluates eps for a colliding pair.
     eps: EpsModel,
     /// Per particle, an f32 upper bound (rounded up with margin) on its speed (low-rank) or on
@@ -224,6 +240,7 @@ impl DsmcSim {
             vmax: vec![0.0; m],
             bird_bound: 0.0,
             rng: rng.position(),
+            geom: RunRng::new(geom_seed(seed)).position(),
             trials: 0,
             collisions: 0,
             species_collisions: vec![0; m],
@@ -248,21 +265,25 @@ impl DsmcSim {
     }
 
     fn assemble(sys: DsmcSystem, st: DsmcState, rng: RunRng) -> Self {
+        let geom = RunRng::restore(&st.geom);
         let mut off = Vec::with_capacity(sys.species.len() + 1);
         off.push(0);
         for s in &sys.species {
             off.push(off.last().unwrap() + s.count as usize);
         }
         let pair_k = low_rank::static_tables(&sys);
-        let ring = Ring::from_slice(&st.pipeline);
-        let mut speed = crate::memory::huge_vec(st.vel.len(), 0f32);
-        let sig_max = sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
-        for (k, sp) in sys.species.iter().enumerate() {
-            for j in off[k]..off[k + 1] {
-                speed[j] = match sys.method {
-                    DsmcMethod::LowRank => speed_bound(&st.vel[j]),
-                    DsmcMethod::Bird => bird::bird_weight(&st.vel[j], sp.diameter, sig_max),
-                };
+        let (ring, batch) = match sys.method {
+            DsmcMethod::LowRank => (Ring::default(), st.pipeline.clone()),
+            DsmcMethod::Bird => (Ring::from_slice(&st.pipeline), Vec::new()),
+        };
+        let mut speed = Vec::new();
+        if sys.method == DsmcMethod::Bird {
+            speed = crate::memory::huge_vec(st.vel.len(), 0f32);
+            let sig_max = sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
+            for (k, sp) in sys.species.iter().enumerate() {
+                for j in off[k]..off[k + 1] {
+                    speed[j] = bird::bird_weight(&st.vel[j], sp.diameter, sig_max);
+                }
             }
         }
         let m = sys.species.len();
@@ -277,6 +298,7 @@ impl DsmcSim {
             sys,
             st,
             rng,
+            geom,
             pair_i: Alias::default(),
             pair_k,
             off,
@@ -286,8 +308,17 @@ impl DsmcSim {
             slot_term,
             slot_species,
             ring,
+            batch,
+            scratch: low_rank::BatchScratch::default(),
+            last_tried: 0,
             speed,
+            sq: Vec::new(),
+            ladder: low_rank::SpeedLadder::new(0.0),
         };
+        if sim.sys.method == DsmcMethod::LowRank {
+            sim.sq = crate::memory::huge_vec(sim.st.vel.len(), 255u8);
+            sim.requantize();
+        }
         sim.rebuild_rates();
         sim.update_next_event();
         sim
@@ -296,7 +327,11 @@ impl DsmcSim {
     /// Serialise the state (the run's checkpoint payload).
     pub fn state_bytes(&mut self) -> Vec<u8> {
         self.st.rng = self.rng.position();
-        self.st.pipeline = self.ring.to_vec();
+        self.st.geom = self.geom.position();
+        self.st.pipeline = match self.sys.method {
+            DsmcMethod::LowRank => self.batch.clone(),
+            DsmcMethod::Bird => self.ring.to_vec(),
+        };
         postcard::to_stdvec(&self.st).expect("state serialises")
     }
 
@@ -306,6 +341,14 @@ impl DsmcSim {
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         if st.vel.len() != sys.n_particles() || st.vmax.len() != sys.species.len() {
             return Err("checkpoint does not match the run's species".into());
+        }
+        let (n, m) = (st.vel.len(), sys.species.len());
+        if st.pipeline.len() > PIPELINE_DEPTH.max(low_rank::AHEAD)
+            || st.pipeline.iter().any(|c| {
+                c.a as usize >= n || c.b as usize >= n || c.i as usize >= m || c.k as usize >= m
+            })
+        {
+            return Err("checkpoint's candidate pipeline does not match the run".into());
         }
         if st.disp.len() != if sys.displacements() { st.vel.len() } else { 0 } {
             return Err("checkpoint does not match the run's observables (displacements)".into());
@@ -442,7 +485,19 @@ impl DsmcSim {
         self.rebuild_rates();
         if self.sys.method == DsmcMethod::LowRank {
             // Candidates drawn from the old tables are void.
-            self.ring.clear();
+            self.batch.clear();
+            if !self.sq.is_empty() {
+                self.requantize();
+            }
+        }
+    }
+
+    /// Low-rank: anchor the speed ladder at the current bounds and recompute every level.
+    fn requantize(&mut self) {
+        let vtop = self.st.vmax.iter().copied().fold(0.0, f64::max);
+        self.ladder = low_rank::SpeedLadder::new(vtop);
+        for (q, v) in self.sq.iter_mut().zip(&self.st.vel) {
+            *q = self.ladder.level(v);
         }
     }
 
@@ -465,10 +520,16 @@ impl DsmcSim {
     /// exponential gaps of rate `rate`, and their sum is -ln(prod U) / rate. Resets the product.
     #[inline(always)]
     fn gap_time(&mut self) -> f64 {
+        self.gap_time_from(self.st.t)
+    }
+
+    /// [`gap_time`](Self::gap_time) after a collision at `t_last`.
+    #[inline(always)]
+    fn gap_time_from(&mut self, t_last: f64) -> f64 {
         let s = -(self.st.gap_log + self.st.gap_prod.ln());
         self.st.gap_prod = 1.0;
         self.st.gap_log = 0.0;
-        self.st.t + s / self.rate
+        t_last + s / self.rate
     }
 
     /// With a zero trial rate (every particle at rest) nothing happens until t_end.
@@ -668,6 +729,16 @@ impl EpsModel {
             EpsModel::Viscoelastic { table, a_pair, m } => table.eps_pair(a_pair[k * m + i], g_n),
         }
     }
+}
+
+/// Seed of a run's impact-direction stream (low-rank): a fixed bijective mix of the run's
+/// seed (the splitmix64 finaliser), so the stream derives from the run's identity like the
+/// main one and is independent of it.
+pub fn geom_seed(seed: u64) -> u64 {
+    let mut z = seed ^ 0x6a09_e667_f3bc_c909;
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
 }
 
 /// An f32 upper bound on |v|: relative margin 1e-7 (far above f64 rounding), rounded up.
