@@ -99,6 +99,11 @@ pub struct DsmcState {
     pub disp: Vec<[f64; 4]>,
     /// Low-rank: per-species speed bounds.
     pub vmax: Vec<f64>,
+    /// Low-rank: each species' slow and fast speed groups (see [`low_rank`]).
+    pub groups: Vec<low_rank::SpeciesGroups>,
+    /// Low-rank with TAMSD: the original index of the particle at each position (particles
+    /// change places between the speed groups); empty otherwise.
+    pub ids: Vec<u32>,
     /// Bird: bound on ((sigma_j + sigma_M)/2)^2 |v_j|.
     pub bird_bound: f64,
     pub rng: RngPosition,
@@ -148,9 +153,14 @@ pub struct DsmcSim {
     next_event: f64,
     /// Refresh the bounds after this many collisions.
     refresh_collisions: u64,
-    /// Slot j of the (r, i) table -> (term r, species i), so decoding needs no division.
+    /// Slot j of the (r, i, g) table -> term r and species i (with the group g in the top
+    /// bit), so decoding needs no division.
     slot_term: Vec<u8>,
     slot_species: Vec<u32>,
+    /// Low-rank with TAMSD: the position of each tracer (derived from `st.ids`).
+    tracer_pos: Vec<u32>,
+    /// Low-rank: a refresh is due at the end of the current batch.
+    refresh_pending: bool,
     /// Bird: candidates drawn ahead (saved in `st.pipeline` at checkpoints).
     ring: Ring,
     /// Low-rank: the candidates of the current batch not yet tried (saved in `st.pipeline`).
@@ -238,6 +248,12 @@ impl DsmcSim {
                 Vec::new()
             },
             vmax: vec![0.0; m],
+            groups: Vec::new(),
+            ids: if sys.method == DsmcMethod::LowRank && sys.tamsd.is_some() {
+                (0..n as u32).collect()
+            } else {
+                Vec::new()
+            },
             bird_bound: 0.0,
             rng: rng.position(),
             geom: RunRng::new(geom_seed(seed)).position(),
@@ -290,8 +306,15 @@ impl DsmcSim {
         let refresh_collisions = (sys.refresh_every * sys.n_particles() as f64)
             .ceil()
             .max(1.0) as u64;
-        let slot_term = (0..3 * m).map(|j| (j / m) as u8).collect();
-        let slot_species = (0..3 * m).map(|j| (j % m) as u32).collect();
+        let (slot_term, slot_species) = low_rank::slot_tables(m);
+        let mut st = st;
+        if sys.method == DsmcMethod::LowRank && st.groups.is_empty() {
+            st.groups = sys
+                .species
+                .iter()
+                .map(|sp| low_rank::SpeciesGroups::single(sp.count))
+                .collect();
+        }
         let eps = EpsModel::new(&sys);
         let mut sim = DsmcSim {
             eps,
@@ -307,6 +330,8 @@ impl DsmcSim {
             refresh_collisions,
             slot_term,
             slot_species,
+            tracer_pos: Vec::new(),
+            refresh_pending: false,
             ring,
             batch,
             scratch: low_rank::BatchScratch::default(),
@@ -318,6 +343,7 @@ impl DsmcSim {
         if sim.sys.method == DsmcMethod::LowRank {
             sim.sq = crate::memory::huge_vec(sim.st.vel.len(), 255u8);
             sim.requantize();
+            sim.tracer_pos = sim.tracer_positions();
         }
         sim.rebuild_rates();
         sim.update_next_event();
@@ -343,12 +369,22 @@ impl DsmcSim {
             return Err("checkpoint does not match the run's species".into());
         }
         let (n, m) = (st.vel.len(), sys.species.len());
+        let foreign = |c: &Candidate| {
+            let i = match sys.method {
+                DsmcMethod::LowRank => (c.i & !low_rank::GROUP_BIT) as usize,
+                DsmcMethod::Bird => c.i as usize,
+            };
+            c.a as usize >= n || c.b as usize >= n || i >= m || c.k as usize >= m
+        };
         if st.pipeline.len() > PIPELINE_DEPTH.max(low_rank::AHEAD)
-            || st.pipeline.iter().any(|c| {
-                c.a as usize >= n || c.b as usize >= n || c.i as usize >= m || c.k as usize >= m
-            })
+            || st.pipeline.iter().any(foreign)
         {
             return Err("checkpoint's candidate pipeline does not match the run".into());
+        }
+        if let Err(e) = low_rank::check_groups(&sys, &st) {
+            return Err(format!(
+                "checkpoint's speed groups do not match the run: {e}"
+            ));
         }
         if st.disp.len() != if sys.displacements() { st.vel.len() } else { 0 } {
             return Err("checkpoint does not match the run's observables (displacements)".into());
@@ -449,7 +485,12 @@ impl DsmcSim {
     fn rebuild_rates(&mut self) {
         match self.sys.method {
             DsmcMethod::LowRank => {
-                let w = low_rank::dynamic_weights(&self.sys, &self.st.vmax, &self.pair_k);
+                let w = low_rank::dynamic_weights(
+                    &self.sys,
+                    &self.st.vmax,
+                    &self.st.groups,
+                    &self.pair_k,
+                );
                 self.pair_i.rebuild(&w);
                 self.rate = self.sys.rate_scale * self.pair_i.total();
             }
@@ -482,14 +523,15 @@ impl DsmcSim {
         }
         self.st.bird_bound = bound;
         self.st.collisions_at_refresh = self.st.collisions;
-        self.rebuild_rates();
         if self.sys.method == DsmcMethod::LowRank {
             // Candidates drawn from the old tables are void.
             self.batch.clear();
             if !self.sq.is_empty() {
                 self.requantize();
+                self.regroup();
             }
         }
+        self.rebuild_rates();
     }
 
     /// Low-rank: anchor the speed ladder at the current bounds and recompute every level.
@@ -615,6 +657,16 @@ impl DsmcSim {
     /// modifying the stored ones).
     fn record_tracks(&mut self, t: f64) {
         let Some(plan) = &self.sys.tamsd else { return };
+        if !self.st.ids.is_empty() {
+            for &p in &self.tracer_pos {
+                let (v, d) = (self.st.vel[p as usize], self.st.disp[p as usize]);
+                let dt = t - d[3];
+                self.st
+                    .tracks
+                    .push([d[0] + v[0] * dt, d[1] + v[1] * dt, d[2] + v[2] * dt]);
+            }
+            return;
+        }
         for (s, &m) in plan.tracers.iter().enumerate() {
             let range = self.off[s]..self.off[s] + m;
             for (v, d) in self.st.vel[range.clone()].iter().zip(&self.st.disp[range]) {

@@ -622,9 +622,10 @@ fn low_rank_and_bird_agree() {
 
 /// Grid times are handled exactly like output times: with every particle a tracer and output
 /// times on the grid, the mean of |R(t_j)|^2 over a species' recorded tracer positions is the
-/// `msd` row at t_j, bit for bit (the same extrapolation of the same state, summed in the
-/// same order). A grid point recorded after the collision that follows it, or at a
-/// neighbouring grid time, would differ in most digits.
+/// `msd` row at t_j (the same extrapolation of the same state; bit for bit for Bird, to 1e-12
+/// for low-rank, whose particles change places between speed groups so that the row sums
+/// them in another order than the tracers). A grid point recorded after the collision that
+/// follows it, or at a neighbouring grid time, would differ in most digits.
 #[test]
 fn tamsd_grid_records_the_state_like_outputs() {
     let _g = heavy();
@@ -680,12 +681,15 @@ fn tamsd_grid_records_the_state_like_outputs() {
             }
             let from_tracks = r2 / count as f64;
             let msd = r.msd.expect("msd");
-            assert_eq!(
-                from_tracks.to_bits(),
-                msd.to_bits(),
+            let same = if method == "bird" {
+                from_tracks.to_bits() == msd.to_bits()
+            } else {
+                (from_tracks - msd).abs() <= 1e-12 * msd.abs()
+            };
+            assert!(
+                same,
                 "{method}: species {} at t = {}: tracks give {from_tracks:e}, msd row {msd:e}",
-                r.species,
-                r.t
+                r.species, r.t
             );
             compared += 1;
         }
