@@ -25,7 +25,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::alias::Alias;
-use super::collision::{collide, impact_direction};
+use super::collision::{collide_impulse, impact_impulse};
 use super::{prefetch, Candidate, DsmcSim, DsmcState, DsmcSystem, PhysicsError, RAISE_SLACK};
 use crate::manifest::dsmc::DsmcMethod;
 
@@ -42,34 +42,63 @@ pub fn static_tables(sys: &DsmcSystem) -> [Alias; 3] {
 
 /// Species with fewer particles keep one group (bounded by vmax).
 pub const GROUP_MIN: u64 = 64;
-/// The slow group's bound, in units of the species' rms speed at the refresh: 1.6 v_rms
-/// (~2.8 standard deviations of a Maxwell component, ~5 % of the particles fast) was the
-/// fastest of 1.3-2.0 for the Table I gas (`scripts/bench-dsmc.sh`; flat within 3 % from 1.5
-/// to 1.75).
-pub const SLOW_FACTOR: f64 = 1.6;
-/// Bit of a candidate's `i` that holds the proposed group.
-pub const GROUP_BIT: u32 = 1 << 31;
+/// Speed groups per species.
+pub const GROUPS: usize = 2;
+/// Upper speed bounds of the groups below the top one, in units of the species' rms speed at
+/// the refresh (the top group is bounded by vmax). For a Maxwell gas these minimise the mean
+/// bound, 0.76 of the two-group optimum (0.98 v_rms = 1.7 and 1.59 v_rms = 2.75 standard
+/// deviations of a component: ~60 %, ~33 % and ~7 % of the particles).
+pub const GROUP_FACTORS: [f64; GROUPS - 1] = [1.6];
+/// Candidate's `i` holds the proposed group from this bit on.
+pub const GROUP_SHIFT: u32 = 30;
+/// Mask of the species in a candidate's `i`.
+pub const SPECIES_MASK: u32 = (1 << GROUP_SHIFT) - 1;
 
-/// A species' two speed groups (positions off..off + n_slow are slow, the rest fast).
+/// A species' speed groups: group g holds the n[g] particles after those of the groups below
+/// it (the species' range is ordered by group).
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
 pub struct SpeciesGroups {
-    /// Particles in the slow group.
-    pub n_slow: u64,
-    /// Proposal capacities of the slow and the fast group (at least their sizes).
-    pub cap: [u64; 2],
-    /// Speed bound of the slow group; negative: one group (every particle is fast).
-    pub thr: f64,
+    /// Particles in each group.
+    pub n: [u64; GROUPS],
+    /// Proposal capacities of the groups (at least their sizes).
+    pub cap: [u64; GROUPS],
+    /// Speed bounds of the groups below the top one (nondecreasing); negative: one group
+    /// (every particle in the top group).
+    pub thr: [f64; GROUPS - 1],
 }
 
 impl SpeciesGroups {
-    /// One group: all `count` particles fast.
+    /// One group: all `count` particles in the top group.
     pub fn single(count: u64) -> Self {
+        let mut n = [0; GROUPS];
+        n[GROUPS - 1] = count;
         SpeciesGroups {
-            n_slow: 0,
-            cap: [0, count],
-            thr: -1.0,
+            n,
+            cap: n,
+            thr: [-1.0; GROUPS - 1],
         }
     }
+
+    /// Whether the species is split.
+    pub fn split(&self) -> bool {
+        self.thr[0] >= 0.0
+    }
+
+    /// The group a squared speed belongs to.
+    #[inline(always)]
+    pub fn group_of(&self, s2: f64) -> usize {
+        self.thr.iter().filter(|&&t| s2 > t * t).count()
+    }
+}
+
+/// A group as the hot loop reads it (derived from the species' [`SpeciesGroups`], offsets
+/// and vmax; index 2 i + g).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GroupInfo {
+    pub start: u32,
+    pub n: u32,
+    pub cap: u32,
+    pub bound: f64,
 }
 
 /// Proposal capacity of a group of `n` particles: head-room so that particles moving in
@@ -78,13 +107,15 @@ fn capacity(n: u64) -> u64 {
     n + (n / 32).max(16)
 }
 
-/// Slot j of the u table -> (term r, species i | group << 31), r-major, then species, group.
+/// Slot j of the u table -> (term r, species i | group << GROUP_SHIFT), r-major, then
+/// species, then group.
 pub fn slot_tables(m: usize) -> (Vec<u8>, Vec<u32>) {
-    let term = (0..6 * m).map(|j| (j / (2 * m)) as u8).collect();
-    let species = (0..6 * m)
+    let per_term = GROUPS * m;
+    let term = (0..3 * per_term).map(|j| (j / per_term) as u8).collect();
+    let species = (0..3 * per_term)
         .map(|j| {
-            let rem = j % (2 * m);
-            (rem / 2) as u32 | if rem % 2 == 1 { GROUP_BIT } else { 0 }
+            let rem = j % per_term;
+            (rem / GROUPS) as u32 | ((rem % GROUPS) as u32) << GROUP_SHIFT
         })
         .collect();
     (term, species)
@@ -98,15 +129,21 @@ pub fn dynamic_weights(
     k_tables: &[Alias; 3],
 ) -> Vec<f64> {
     let m = sys.species.len();
-    let mut w = Vec::with_capacity(6 * m);
+    let mut w = Vec::with_capacity(3 * GROUPS * m);
     let factors = [|s: f64| s * s, |s: f64| 2.0 * s, |_s: f64| 1.0];
     for (r, f) in factors.iter().enumerate() {
         let wr = k_tables[r].total();
         for (i, sp) in sys.species.iter().enumerate() {
-            let g = &groups[i];
+            let gr = &groups[i];
             let fs = wr * f(sp.diameter);
-            w.push(fs * g.cap[0] as f64 * g.thr.max(0.0));
-            w.push(fs * g.cap[1] as f64 * vmax[i]);
+            for g in 0..GROUPS {
+                let bound = if g + 1 < GROUPS {
+                    gr.thr[g].max(0.0)
+                } else {
+                    vmax[i]
+                };
+                w.push(fs * gr.cap[g] as f64 * bound);
+            }
         }
     }
     w
@@ -126,13 +163,15 @@ pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), String> {
             return Err("one entry per species expected".into());
         }
         for (g, sp) in st.groups.iter().zip(&sys.species) {
-            if g.n_slow > sp.count
-                || g.cap[0] < g.n_slow
-                || g.cap[1] < sp.count - g.n_slow
-                || !g.thr.is_finite()
-                || (g.thr < 0.0 && g.n_slow > 0)
-            {
-                return Err(format!("inconsistent group {g:?}"));
+            let total = g.n.iter().try_fold(0u64, |a, &n| a.checked_add(n));
+            let ok = total == Some(sp.count)
+                && g.cap.iter().zip(&g.n).all(|(c, n)| c >= n)
+                && g.cap.iter().all(|&c| c <= u32::MAX as u64)
+                && g.thr.iter().all(|t| t.is_finite())
+                && g.thr.windows(2).all(|w| w[0] <= w[1])
+                && (g.split() || g.n[..GROUPS - 1].iter().all(|&n| n == 0));
+            if !ok {
+                return Err(format!("inconsistent groups {g:?}"));
             }
         }
     }
@@ -299,16 +338,22 @@ impl DsmcSim {
                 *self.slot_species.get_unchecked(ri),
             )
         };
-        let i = (ig & !GROUP_BIT) as usize;
-        let g = (ig >> 31) as usize;
+        let i = (ig & SPECIES_MASK) as usize;
+        let g = (ig >> GROUP_SHIFT) as usize;
         let k = unsafe { self.pair_k.get_unchecked(r) }.sample(self.rng.u64());
-        let cap = self.st.groups[i].cap[g] as usize;
-        let (ja, db) = self.rng.below_pair(cap, self.off[k + 1] - self.off[k]);
+        let ga = self.gtab[GROUPS * i + g];
+        let (ja, db) = self
+            .rng
+            .below_pair(ga.cap as usize, self.off[k + 1] - self.off[k]);
         let b = self.off[k] + db;
         let u = self.rng.f64();
         let gap = self.rng.f64_open0();
-        let (start, _) = self.group_range(i, g);
-        prefetch(self.sq.as_ptr().wrapping_add(start + ja));
+        let pa = if g + 1 == GROUPS {
+            (ga.start + ga.n) as usize - 1 - ja.min(ga.n as usize)
+        } else {
+            ga.start as usize + ja
+        };
+        prefetch(self.sq.as_ptr().wrapping_add(pa));
         prefetch(self.sq.as_ptr().wrapping_add(b));
         Candidate {
             i: ig,
@@ -320,26 +365,23 @@ impl DsmcSim {
         }
     }
 
-    /// First position and size of group g of species i.
-    #[inline(always)]
-    fn group_range(&self, i: usize, g: usize) -> (usize, usize) {
-        let gr = &self.st.groups[i];
-        let n_slow = gr.n_slow as usize;
-        let lo = self.off[i];
-        if g == 0 {
-            (lo, n_slow)
-        } else {
-            (lo + n_slow, self.off[i + 1] - lo - n_slow)
-        }
-    }
-
-    /// Bound of group g of species i.
-    #[inline(always)]
-    fn group_bound(&self, i: usize, g: usize) -> f64 {
-        if g == 0 {
-            self.st.groups[i].thr
-        } else {
-            self.st.vmax[i]
+    /// Recompute the hot-loop view of species s's groups.
+    pub(super) fn sync_groups(&mut self, s: usize) {
+        let gr = self.st.groups[s];
+        let mut start = self.off[s];
+        for g in 0..GROUPS {
+            let bound = if g + 1 < GROUPS {
+                gr.thr[g]
+            } else {
+                self.st.vmax[s]
+            };
+            self.gtab[GROUPS * s + g] = GroupInfo {
+                start: start as u32,
+                n: gr.n[g] as u32,
+                cap: gr.cap[g] as u32,
+                bound,
+            };
+            start += gr.n[g] as usize;
         }
     }
 
@@ -347,15 +389,23 @@ impl DsmcSim {
     /// past its group's size) and u (b_a + b_b).
     #[inline(always)]
     fn resolve(&self, c: &Candidate) -> (Option<usize>, f64) {
-        let i = (c.i & !GROUP_BIT) as usize;
-        let g = (c.i >> 31) as usize;
+        let i = (c.i & SPECIES_MASK) as usize;
+        let g = (c.i >> GROUP_SHIFT) as usize;
         let k = c.k as usize;
-        let (start, n) = self.group_range(i, g);
-        let b = c.b as usize;
-        let gb = (b >= self.off[k] + self.st.groups[k].n_slow as usize) as usize;
-        let ub = c.u * (self.group_bound(i, g) + self.group_bound(k, gb));
-        let ja = c.a as usize;
-        ((ja < n).then_some(start + ja), ub)
+        let ga = self.gtab[GROUPS * i + g];
+        let gk = &self.gtab[GROUPS * k..GROUPS * k + GROUPS];
+        let b = c.b;
+        let gb = gk[1..].iter().filter(|x| b >= x.start).count();
+        let ub = c.u * (ga.bound + gk[gb].bound);
+        // The top group's slots count down from the end of the species' range, which never
+        // moves, so that positions prefetched a batch ahead stay right when group sizes change.
+        let ja = c.a;
+        let pos = if g + 1 == GROUPS {
+            (ga.start + ga.n).wrapping_sub(1).wrapping_sub(ja)
+        } else {
+            ga.start.wrapping_add(ja)
+        };
+        ((ja < ga.n).then_some(pos as usize), ub)
     }
 
     /// Fill the candidate buffer to [`AHEAD`] candidates, resolve those of the current batch
@@ -432,12 +482,12 @@ impl DsmcSim {
             let va = self.st.vel[a];
             let vb = self.st.vel[b];
             let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
-            let gn = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-            let (e, gne) = impact_direction(g, gn, &mut self.geom);
+            let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+            let (w, gne) = impact_impulse(g, g2, &mut self.geom);
             let (ma, mb) = (self.sys.species[i].mass, self.sys.species[k].mass);
             let (mut na, mut nb) = (va, vb);
             let eps = self.eps.eps(i, k, gne);
-            collide(&mut na, &mut nb, ma, mb, eps, e, gne);
+            collide_impulse(&mut na, &mut nb, ma, mb, eps, w);
             let t = p.t[q];
             if msd {
                 for (j, v) in [(a, va), (b, vb)] {
@@ -468,6 +518,8 @@ impl DsmcSim {
             }
             if void {
                 self.st.bound_raises += 1;
+                self.sync_groups(i);
+                self.sync_groups(k);
                 self.rebuild_rates();
             }
             if self.refresh_due() {
@@ -533,8 +585,9 @@ impl DsmcSim {
     }
 
     /// Move the particles of the applied collisions of a batch into the group their speed
-    /// belongs to (one swap with the particle at the group boundary). Returns whether a group
-    /// outgrew its proposal capacity (the capacities are then reset and the rates rebuilt).
+    /// belongs to (one swap with the particle at each group boundary crossed). Returns
+    /// whether a group outgrew its proposal capacity (the capacities are then reset and the
+    /// rates rebuilt).
     fn relocate(&mut self, p: &Accepted) -> bool {
         let mut list = [(0usize, 0usize); 2 * PENDING];
         let mut n = 0;
@@ -545,38 +598,52 @@ impl DsmcSim {
         }
         let mut overflow = false;
         for q in 0..n {
-            let (x, s) = list[q];
+            let (mut x, s) = list[q];
             let gr = self.st.groups[s];
-            if gr.thr < 0.0 {
+            if !gr.split() {
                 continue;
             }
-            let v = self.st.vel[x];
-            let s2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-            let boundary = self.off[s] + gr.n_slow as usize;
-            let slow_now = x < boundary;
-            let slow_wanted = s2 <= gr.thr * gr.thr;
-            if slow_now == slow_wanted {
+            let want = gr.group_of(speed2(&self.st.vel[x]));
+            // Current group and the first position of each group.
+            let mut first = [0usize; GROUPS + 1];
+            first[0] = self.off[s];
+            for g in 0..GROUPS {
+                first[g + 1] = first[g] + gr.n[g] as usize;
+            }
+            let mut g = (1..GROUPS).filter(|&h| x >= first[h]).count();
+            if g == want {
                 continue;
             }
-            // The boundary particle: the last slow one or the first fast one.
-            let y = if slow_now { boundary - 1 } else { boundary };
-            self.swap_particles(x, y);
-            for e in &mut list[q + 1..n] {
-                if e.0 == y {
-                    e.0 = x;
+            let mut gr = gr;
+            while g != want {
+                // Swap with the particle at the boundary towards `want`; the boundary moves
+                // past x, which changes group.
+                let y = if want > g {
+                    gr.n[g] -= 1;
+                    gr.n[g + 1] += 1;
+                    first[g + 1] -= 1;
+                    first[g + 1]
+                } else {
+                    gr.n[g] -= 1;
+                    gr.n[g - 1] += 1;
+                    first[g] += 1;
+                    first[g] - 1
+                };
+                self.swap_particles(x, y);
+                for e in &mut list[q + 1..n] {
+                    if e.0 == y {
+                        e.0 = x;
+                    }
                 }
+                x = y;
+                g = if want > g { g + 1 } else { g - 1 };
             }
-            let gr = &mut self.st.groups[s];
-            if slow_now {
-                gr.n_slow -= 1;
-            } else {
-                gr.n_slow += 1;
-            }
-            let count = self.sys.species[s].count;
-            if gr.n_slow > gr.cap[0] || count - gr.n_slow > gr.cap[1] {
-                gr.cap = [capacity(gr.n_slow), capacity(count - gr.n_slow)];
+            if gr.n.iter().zip(&gr.cap).any(|(n, c)| n > c) {
+                gr.cap = gr.n.map(capacity);
                 overflow = true;
             }
+            self.st.groups[s] = gr;
+            self.sync_groups(s);
         }
         if overflow {
             self.rebuild_rates();
@@ -584,8 +651,8 @@ impl DsmcSim {
         overflow
     }
 
-    /// Split every species (with at least GROUP_MIN particles) into its slow and fast group
-    /// at SLOW_FACTOR times its rms speed (after `refresh_bounds` set vmax), and set the
+    /// Split every species (with at least GROUP_MIN particles) into its speed groups at
+    /// GROUP_FACTORS times its rms speed (after `refresh_bounds` set vmax), and set the
     /// capacities.
     pub(super) fn regroup(&mut self) {
         for s in 0..self.sys.species.len() {
@@ -593,36 +660,43 @@ impl DsmcSim {
             let (lo, hi) = (self.off[s], self.off[s + 1]);
             if count < GROUP_MIN {
                 self.st.groups[s] = SpeciesGroups::single(count);
+                self.sync_groups(s);
                 continue;
             }
-            let v2: f64 = self.st.vel[lo..hi]
-                .iter()
-                .map(|v| v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-                .sum();
-            let thr = (SLOW_FACTOR * (v2 / count as f64).sqrt()).min(self.st.vmax[s]);
-            let thr2 = thr * thr;
-            // Partition: slow particles first (Hoare, deterministic).
-            let (mut x, mut y) = (lo, hi);
-            loop {
-                while x < y && speed2(&self.st.vel[x]) <= thr2 {
+            let v2: f64 = self.st.vel[lo..hi].iter().map(speed2).sum();
+            let rms = (v2 / count as f64).sqrt();
+            let thr = GROUP_FACTORS.map(|f| (f * rms).min(self.st.vmax[s]));
+            // Partition group by group: particles of group g first among those left
+            // (Hoare, deterministic).
+            let mut n = [0u64; GROUPS];
+            let mut start = lo;
+            for (g, &t) in thr.iter().enumerate() {
+                let t2 = t * t;
+                let (mut x, mut y) = (start, hi);
+                loop {
+                    while x < y && speed2(&self.st.vel[x]) <= t2 {
+                        x += 1;
+                    }
+                    while x < y && speed2(&self.st.vel[y - 1]) > t2 {
+                        y -= 1;
+                    }
+                    if x + 1 >= y {
+                        break;
+                    }
+                    self.swap_particles(x, y - 1);
                     x += 1;
-                }
-                while x < y && speed2(&self.st.vel[y - 1]) > thr2 {
                     y -= 1;
                 }
-                if x + 1 >= y {
-                    break;
-                }
-                self.swap_particles(x, y - 1);
-                x += 1;
-                y -= 1;
+                n[g] = (x - start) as u64;
+                start = x;
             }
-            let n_slow = (x - lo) as u64;
+            n[GROUPS - 1] = (hi - start) as u64;
             self.st.groups[s] = SpeciesGroups {
-                n_slow,
-                cap: [capacity(n_slow), capacity(count - n_slow)],
+                n,
+                cap: n.map(capacity),
                 thr,
             };
+            self.sync_groups(s);
         }
     }
 
@@ -645,7 +719,7 @@ impl DsmcSim {
         let mut void = None;
         for j in 0..BATCH {
             let mut c = self.batch[j];
-            let (i, k) = ((c.i & !GROUP_BIT) as usize, c.k as usize);
+            let (i, k) = ((c.i & SPECIES_MASK) as usize, c.k as usize);
             c.i = i as u32;
             c.a = sc.apos[j];
             let _ = k;
@@ -749,4 +823,77 @@ fn prefetch_record(vel: &[[f64; 3]], j: usize) {
     let p = vel.as_ptr().wrapping_add(j) as *const u8;
     prefetch(p);
     prefetch(p.wrapping_add(23));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::manifest::dsmc::DsmcParams;
+
+    fn sim(tamsd: bool) -> DsmcSim {
+        let mut p = serde_json::json!({
+            "method": "low_rank",
+            "species": {"power_law": {"n1": 0.1, "N1": 3000, "theta": 2.5}},
+            "restitution": {"constant": 0.3},
+            "t_end": 40.0,
+            "observables": ["temperature", "msd"],
+            "refresh_every": 0.3
+        });
+        if tamsd {
+            p["observables"] = serde_json::json!(["msd", "tamsd"]);
+            p["tamsd"] = serde_json::json!({"lags": [1.0], "tracers": 50, "grid": 40});
+        }
+        let params: DsmcParams = serde_json::from_value(p).unwrap();
+        DsmcSim::new(DsmcSystem::from_params(&params).unwrap(), 77)
+    }
+
+    /// After every chunk of a run (batches end between chunks): the groups are consistent
+    /// (sizes add up, capacities hold them), every particle's speed is within its group's
+    /// bound, the particle ids are a permutation whose tracers are where `tracer_pos` says,
+    /// and particles did change groups (so the moves were exercised).
+    #[test]
+    fn groups_hold_their_particles() {
+        for tamsd in [false, true] {
+            let mut s = sim(tamsd);
+            let m = s.sys.species.len();
+            assert!(s.st.groups.iter().filter(|g| g.split()).count() >= 3);
+            let first = s.st.groups.clone();
+            let mut changed = false;
+            loop {
+                let done = s.advance(5_000).unwrap();
+                check_groups(&s.sys, &s.st).unwrap();
+                for k in 0..m {
+                    let gr = s.st.groups[k];
+                    let mut start = s.off[k];
+                    for g in 0..GROUPS {
+                        let bound = if g + 1 < GROUPS {
+                            gr.thr[g]
+                        } else {
+                            s.st.vmax[k]
+                        };
+                        for v in &s.st.vel[start..start + gr.n[g] as usize] {
+                            assert!(
+                                speed2(v).sqrt() <= bound,
+                                "species {k} group {g}: speed {} above bound {bound}",
+                                speed2(v).sqrt()
+                            );
+                        }
+                        start += gr.n[g] as usize;
+                    }
+                    assert_eq!(start, s.off[k + 1]);
+                }
+                if tamsd {
+                    for (q, &p) in s.tracer_pos.clone().iter().enumerate() {
+                        assert_eq!(s.tracer_number(s.st.ids[p as usize]), Some(q));
+                    }
+                }
+                changed |= s.st.groups != first;
+                if done {
+                    break;
+                }
+            }
+            assert!(changed, "no particle changed group");
+            assert!(s.st.collisions > 20_000, "{} collisions", s.st.collisions);
+        }
+    }
 }

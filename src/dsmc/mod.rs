@@ -161,6 +161,8 @@ pub struct DsmcSim {
     tracer_pos: Vec<u32>,
     /// Low-rank: a refresh is due at the end of the current batch.
     refresh_pending: bool,
+    /// Low-rank: the groups as the hot loop reads them (derived from `st.groups`).
+    gtab: Vec<low_rank::GroupInfo>,
     /// Bird: candidates drawn ahead (saved in `st.pipeline` at checkpoints).
     ring: Ring,
     /// Low-rank: the candidates of the current batch not yet tried (saved in `st.pipeline`).
@@ -332,6 +334,7 @@ impl DsmcSim {
             slot_species,
             tracer_pos: Vec::new(),
             refresh_pending: false,
+            gtab: Vec::new(),
             ring,
             batch,
             scratch: low_rank::BatchScratch::default(),
@@ -344,6 +347,11 @@ impl DsmcSim {
             sim.sq = crate::memory::huge_vec(sim.st.vel.len(), 255u8);
             sim.requantize();
             sim.tracer_pos = sim.tracer_positions();
+            sim.gtab =
+                vec![low_rank::GroupInfo::default(); low_rank::GROUPS * sim.sys.species.len()];
+            for s in 0..sim.sys.species.len() {
+                sim.sync_groups(s);
+            }
         }
         sim.rebuild_rates();
         sim.update_next_event();
@@ -371,7 +379,7 @@ impl DsmcSim {
         let (n, m) = (st.vel.len(), sys.species.len());
         let foreign = |c: &Candidate| {
             let i = match sys.method {
-                DsmcMethod::LowRank => (c.i & !low_rank::GROUP_BIT) as usize,
+                DsmcMethod::LowRank => (c.i & low_rank::SPECIES_MASK) as usize,
                 DsmcMethod::Bird => c.i as usize,
             };
             c.a as usize >= n || c.b as usize >= n || i >= m || c.k as usize >= m
