@@ -299,8 +299,9 @@ impl DsmcSim {
             speed = crate::memory::huge_vec(st.vel.len(), 0f32);
             let sig_max = sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
             for (k, sp) in sys.species.iter().enumerate() {
-                for j in off[k]..off[k + 1] {
-                    speed[j] = bird::bird_weight(&st.vel[j], sp.diameter, sig_max);
+                let range = off[k]..off[k + 1];
+                for (w, v) in speed[range.clone()].iter_mut().zip(&st.vel[range]) {
+                    *w = bird::bird_weight(v, sp.diameter, sig_max);
                 }
             }
         }
