@@ -759,6 +759,11 @@ impl DsmcSim {
                     break;
                 }
             }
+            if !self.st.disp.is_empty() {
+                // The displacements are updated when the batch's collisions are applied.
+                prefetch(self.st.disp.as_ptr().wrapping_add(a));
+                prefetch(self.st.disp.as_ptr().wrapping_add(b));
+            }
             p.push(c, t, j);
             if p.n == PENDING {
                 tried = j + 1;
