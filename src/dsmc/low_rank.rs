@@ -348,7 +348,7 @@ impl DsmcSim {
         let b = self.off[k] + db;
         let u = self.rng.f64();
         let gap = self.rng.f64_open0();
-        let pa = if g + 1 == GROUPS {
+        let pa = if g >= 1 {
             (ga.start + ga.n) as usize - 1 - ja.min(ga.n as usize)
         } else {
             ga.start as usize + ja
@@ -397,10 +397,12 @@ impl DsmcSim {
         let b = c.b;
         let gb = gk[1..].iter().filter(|x| b >= x.start).count();
         let ub = c.u * (ga.bound + gk[gb].bound);
-        // The top group's slots count down from the end of the species' range, which never
-        // moves, so that positions prefetched a batch ahead stay right when group sizes change.
+        // The slots of every group but the first count down from its upper end (for the top
+        // group the end of the species' range, which never moves; for a middle group the
+        // boundary that moves least), so that positions prefetched a batch ahead mostly stay
+        // right when group sizes change.
         let ja = c.a;
-        let pos = if g + 1 == GROUPS {
+        let pos = if g >= 1 {
             (ga.start + ga.n).wrapping_sub(1).wrapping_sub(ja)
         } else {
             ga.start.wrapping_add(ja)
