@@ -104,7 +104,8 @@ pub struct GroupInfo {
 /// Proposal capacity of a group of `n` particles: head-room so that particles moving in
 /// rarely force a rebuild.
 fn capacity(n: u64) -> u64 {
-    n + (n / 64).max(8)
+    // Positions and capacities are 32-bit (a run has at most u32::MAX - 1 particles).
+    (n + (n / 64).max(8)).min(u32::MAX as u64)
 }
 
 /// Slot j of the u table -> (term r, species i | group << GROUP_SHIFT), r-major, then
