@@ -84,6 +84,17 @@ impl SpeciesGroups {
         self.thr[0] >= 0.0
     }
 
+    /// Speed bound of group g (the top group's is the species' vmax; negative for the
+    /// unused lower groups of an unsplit species).
+    #[inline(always)]
+    pub fn bound(&self, g: usize, vmax: f64) -> f64 {
+        if g + 1 < GROUPS {
+            self.thr[g]
+        } else {
+            vmax
+        }
+    }
+
     /// The group a squared speed belongs to.
     #[inline(always)]
     pub fn group_of(&self, s2: f64) -> usize {
@@ -138,12 +149,7 @@ pub fn dynamic_weights(
             let gr = &groups[i];
             let fs = wr * f(sp.diameter);
             for g in 0..GROUPS {
-                let bound = if g + 1 < GROUPS {
-                    gr.thr[g].max(0.0)
-                } else {
-                    vmax[i]
-                };
-                w.push(fs * gr.cap[g] as f64 * bound);
+                w.push(fs * gr.cap[g] as f64 * gr.bound(g, vmax[i]).max(0.0));
             }
         }
     }
@@ -235,7 +241,7 @@ impl SpeedLadder {
     /// The level of a velocity.
     #[inline(always)]
     pub fn level(&self, v: &[f64; 3]) -> u8 {
-        let x = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) * self.inv_lo;
+        let x = speed2(v) * self.inv_lo;
         if x < 1.0 {
             return 0;
         }
@@ -371,16 +377,11 @@ impl DsmcSim {
         let gr = self.st.groups[s];
         let mut start = self.off[s];
         for g in 0..GROUPS {
-            let bound = if g + 1 < GROUPS {
-                gr.thr[g]
-            } else {
-                self.st.vmax[s]
-            };
             self.gtab[GROUPS * s + g] = GroupInfo {
                 start: start as u32,
                 n: gr.n[g] as u32,
                 cap: gr.cap[g] as u32,
-                bound,
+                bound: gr.bound(g, self.st.vmax[s]),
             };
             start += gr.n[g] as usize;
         }
@@ -513,7 +514,7 @@ impl DsmcSim {
             // Raise bounds that a new speed exceeds.
             let mut void = false;
             for (s, v) in [(i, na), (k, nb)] {
-                let s2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+                let s2 = speed2(&v);
                 if s2 > self.st.vmax[s] * self.st.vmax[s] {
                     self.st.vmax[s] = s2.sqrt() * RAISE_SLACK;
                     void = true;
@@ -721,11 +722,10 @@ impl DsmcSim {
         let mut end = BatchEnd::More;
         let mut void = None;
         for j in 0..BATCH {
+            // Resolved: species without the group bits, a as its position.
             let mut c = self.batch[j];
-            let (i, k) = ((c.i & SPECIES_MASK) as usize, c.k as usize);
-            c.i = i as u32;
+            c.i &= SPECIES_MASK;
             c.a = sc.apos[j];
-            let _ = k;
             if p.n > 0 && p.touches(&c) {
                 tried = j;
                 break;
@@ -874,11 +874,7 @@ mod tests {
                     let gr = s.st.groups[k];
                     let mut start = s.off[k];
                     for g in 0..GROUPS {
-                        let bound = if g + 1 < GROUPS {
-                            gr.thr[g]
-                        } else {
-                            s.st.vmax[k]
-                        };
+                        let bound = gr.bound(g, s.st.vmax[k]);
                         for v in &s.st.vel[start..start + gr.n[g] as usize] {
                             assert!(
                                 speed2(v).sqrt() <= bound,
