@@ -68,16 +68,46 @@ impl RunRng {
         x
     }
 
+    /// The next `n` words (n <= 128) without consuming them; [`consume`](Self::consume) then
+    /// takes some of them. The position is unchanged (the buffer is moved, not the stream).
+    #[inline(always)]
+    pub fn window(&mut self, n: usize) -> &[u64] {
+        debug_assert!(n <= BUF / 2);
+        if BUF - self.idx < n {
+            self.shift();
+        }
+        // SAFETY: idx + n <= BUF after the shift.
+        unsafe { self.buf.get_unchecked(self.idx..self.idx + n) }
+    }
+
+    /// Skip `n` words of the last [`window`](Self::window).
+    #[inline(always)]
+    pub fn consume(&mut self, n: usize) {
+        self.idx += n;
+        debug_assert!(self.idx <= BUF);
+    }
+
+    /// Move the unread words to the front of the buffer and fill the rest.
+    #[cold]
+    fn shift(&mut self) {
+        let left = BUF - self.idx;
+        self.buf.copy_within(self.idx.., 0);
+        // The buffer now starts `idx` 64-bit words later in the stream.
+        self.filled_at += 2 * self.idx as u128;
+        self.core.fill(&mut self.buf[left..]);
+        self.idx = 0;
+    }
+
     /// Uniform in [0, 1) with 53 random bits.
     #[inline(always)]
     pub fn f64(&mut self) -> f64 {
-        (self.u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        unit_f64(self.u64())
     }
 
     /// Uniform in (0, 1].
     #[inline(always)]
     pub fn f64_open0(&mut self) -> f64 {
-        ((self.u64() >> 11) + 1) as f64 * (1.0 / (1u64 << 53) as f64)
+        unit_f64_open0(self.u64())
     }
 
     /// Uniform integer in [0, n) by multiply-high (bias below n / 2^64).
@@ -136,9 +166,21 @@ impl RunRng {
     }
 }
 
+/// A word as a uniform in [0, 1) (its top 53 bits), as [`RunRng::f64`].
+#[inline(always)]
+pub fn unit_f64(w: u64) -> f64 {
+    (w >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// A word as a uniform in (0, 1], as [`RunRng::f64_open0`].
+#[inline(always)]
+pub fn unit_f64_open0(w: u64) -> f64 {
+    ((w >> 11) + 1) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
 /// Uniform in [0, n) from 32 random bits, or None when they must be redrawn (Lemire 2019).
 #[inline(always)]
-fn lemire32(x: u32, n: u32) -> Option<u32> {
+pub fn lemire32(x: u32, n: u32) -> Option<u32> {
     let m = x as u64 * n as u64;
     let l = m as u32;
     if l < n {

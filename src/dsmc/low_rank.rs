@@ -261,15 +261,27 @@ impl SpeedLadder {
 }
 
 /// Per-batch scratch of the low-rank loop (derived, never checkpointed).
-#[derive(Default)]
+#[derive(Clone, Copy)]
 pub struct BatchScratch {
-    /// Indices (into the batch) of the candidates that pass the speed-bound filter, in order.
-    pass: Vec<u32>,
+    /// Bit j: candidate j of the batch passes the speed-level filter.
+    pass: u32,
     /// Per candidate of the batch: the position of particle a (its slot in its group).
-    apos: Vec<u32>,
+    apos: [u32; BATCH],
     /// Per candidate of the batch: u (b_a + b_b), the acceptance threshold on |g|.
-    ubound: Vec<f64>,
+    ubound: [f64; BATCH],
 }
+
+impl Default for BatchScratch {
+    fn default() -> Self {
+        BatchScratch {
+            pass: 0,
+            apos: [0; BATCH],
+            ubound: [0.0; BATCH],
+        }
+    }
+}
+
+const _: () = assert!(BATCH <= 32, "the pass mask has 32 bits");
 
 /// The collisions accepted in the current batch: distinct particles, in time order; the first
 /// `applied` of them have been applied.
@@ -335,10 +347,16 @@ enum BatchEnd {
 }
 
 impl DsmcSim {
+    /// Draw the next candidate: five words, (term r, species i, group g) from the u table,
+    /// species k from table r, the slot of a in its group and particle b of k (the 32-bit
+    /// halves of one word, Lemire's method), the acceptance uniform and the gap uniform.
     #[inline(always)]
     fn draw_candidate(&mut self) -> Candidate {
-        let ri = self.pair_i.sample(self.rng.u64());
-        // SAFETY: the slot tables have one entry per (r, i, g) slot; r < 3.
+        let w = self.rng.window(5);
+        let (w0, w1, w2, w3, w4) = (w[0], w[1], w[2], w[3], w[4]);
+        let ri = self.pair_i.sample(w0);
+        // SAFETY: the slot tables have one entry per (r, i, g) slot of pair_i; r < 3; the
+        // species tables have GROUPS entries per species and off one more than species.
         let (r, ig) = unsafe {
             (
                 *self.slot_term.get_unchecked(ri) as usize,
@@ -347,14 +365,19 @@ impl DsmcSim {
         };
         let i = (ig & SPECIES_MASK) as usize;
         let g = (ig >> GROUP_SHIFT) as usize;
-        let k = unsafe { self.pair_k.get_unchecked(r) }.sample(self.rng.u64());
-        let ga = self.gtab[GROUPS * i + g];
-        let (ja, db) = self
-            .rng
-            .below_pair(ga.cap as usize, self.off[k + 1] - self.off[k]);
-        let b = self.off[k] + db;
-        let u = self.rng.f64();
-        let gap = self.rng.f64_open0();
+        let k = unsafe { self.pair_k.get_unchecked(r) }.sample(w1);
+        let ga = unsafe { *self.gtab.get_unchecked(GROUPS * i + g) };
+        let (ok, ok1) = unsafe { (*self.off.get_unchecked(k), *self.off.get_unchecked(k + 1)) };
+        let (Some(ja), Some(db)) = (
+            crate::rng::lemire32((w2 >> 32) as u32, ga.cap),
+            crate::rng::lemire32(w2 as u32, (ok1 - ok) as u32),
+        ) else {
+            return self.draw_candidate_redraw();
+        };
+        let (ja, b) = (ja as usize, ok + db as usize);
+        self.rng.consume(5);
+        let u = crate::rng::unit_f64(w3);
+        let gap = crate::rng::unit_f64_open0(w4);
         let pa = if g >= 1 {
             (ga.start + ga.n) as usize - 1 - ja.min(ga.n as usize)
         } else {
@@ -362,6 +385,33 @@ impl DsmcSim {
         };
         prefetch(self.sq.as_ptr().wrapping_add(pa));
         prefetch(self.sq.as_ptr().wrapping_add(b));
+        Candidate {
+            i: ig,
+            k: k as u32,
+            a: ja as u32,
+            b: b as u32,
+            u,
+            gap,
+        }
+    }
+
+    /// [`draw_candidate`](Self::draw_candidate) when a slot must be redrawn (probability
+    /// below n / 2^32): the same words, one at a time, with the redraws.
+    #[cold]
+    #[inline(never)]
+    fn draw_candidate_redraw(&mut self) -> Candidate {
+        let ri = self.pair_i.sample(self.rng.u64());
+        let (r, ig) = (self.slot_term[ri] as usize, self.slot_species[ri]);
+        let i = (ig & SPECIES_MASK) as usize;
+        let g = (ig >> GROUP_SHIFT) as usize;
+        let k = self.pair_k[r].sample(self.rng.u64());
+        let ga = self.gtab[GROUPS * i + g];
+        let (ja, db) = self
+            .rng
+            .below_pair(ga.cap as usize, self.off[k + 1] - self.off[k]);
+        let b = self.off[k] + db;
+        let u = self.rng.f64();
+        let gap = self.rng.f64_open0();
         Candidate {
             i: ig,
             k: k as u32,
@@ -394,11 +444,12 @@ impl DsmcSim {
         let i = (c.i & SPECIES_MASK) as usize;
         let g = (c.i >> GROUP_SHIFT) as usize;
         let k = c.k as usize;
-        let ga = self.gtab[GROUPS * i + g];
-        let gk = &self.gtab[GROUPS * k..GROUPS * k + GROUPS];
+        // SAFETY: gtab has GROUPS entries per species; i and k are species.
+        let ga = unsafe { *self.gtab.get_unchecked(GROUPS * i + g) };
+        let gk = unsafe { self.gtab.get_unchecked(GROUPS * k..GROUPS * k + GROUPS) };
         let b = c.b;
         let gb = gk[1..].iter().filter(|x| b >= x.start).count();
-        let ub = c.u * (ga.bound + gk[gb].bound);
+        let ub = c.u * (ga.bound + unsafe { gk.get_unchecked(gb) }.bound);
         // The slots of every group but the first count down from its upper end (for the top
         // group the end of the species' range, which never moves; for a middle group the
         // boundary that moves least), so that positions prefetched a batch ahead mostly stay
@@ -430,39 +481,35 @@ impl DsmcSim {
         } else {
             2 * BATCH - moved.min(BATCH)
         };
-        for j in lo..2 * BATCH {
-            let c = self.batch[j];
-            let (a, ub) = self.resolve(&c);
+        let cands: &[Candidate; AHEAD] = self.batch[..AHEAD].try_into().unwrap();
+        for c in &cands[lo..2 * BATCH] {
+            let (a, ub) = self.resolve(c);
             let a = a.unwrap_or(0);
             let b = c.b as usize;
             // Branch-free: a rejected candidate prefetches particle 0 (a line kept hot).
-            let keep =
-                (ub < self.ladder.bound(self.sq[a]) + self.ladder.bound(self.sq[b])) as usize;
+            let keep = (ub < self.level_bound(a) + self.level_bound(b)) as usize;
             let mask = keep.wrapping_neg();
             prefetch_record(&self.st.vel, a & mask);
             prefetch_record(&self.st.vel, b & mask);
         }
-        let mut sc = std::mem::take(&mut self.scratch);
-        sc.pass.clear();
-        sc.pass.resize(BATCH, 0);
-        sc.apos.resize(BATCH, 0);
-        sc.ubound.resize(BATCH, 0.0);
-        let mut np = 0;
-        for j in 0..BATCH {
-            let c = self.batch[j];
-            let (a, ub) = self.resolve(&c);
+        let mut pass = 0u32;
+        for (j, c) in cands[..BATCH].iter().enumerate() {
+            let (a, ub) = self.resolve(c);
             let b = c.b as usize;
-            let ok = a.is_some_and(|a| {
-                ub < self.ladder.bound(self.sq[a]) + self.ladder.bound(self.sq[b])
-            });
-            sc.apos[j] = a.unwrap_or(0) as u32;
-            sc.ubound[j] = ub;
-            // Branch-free compaction: always write, advance when passing.
-            sc.pass[np] = j as u32;
-            np += ok as usize;
+            let ok = a.is_some_and(|a| ub < self.level_bound(a) + self.level_bound(b));
+            self.scratch.apos[j] = a.unwrap_or(0) as u32;
+            self.scratch.ubound[j] = ub;
+            pass |= (ok as u32) << j;
         }
-        sc.pass.truncate(np);
-        self.scratch = sc;
+        self.scratch.pass = pass;
+    }
+
+    /// The speed bound of particle p's level.
+    #[inline(always)]
+    fn level_bound(&self, p: usize) -> f64 {
+        debug_assert!(p < self.sq.len());
+        // SAFETY: p is a particle position (sq has one level per particle).
+        self.ladder.bound(unsafe { *self.sq.get_unchecked(p) })
     }
 
     /// Apply the accepted collisions not yet applied, in time order. A raised speed bound or
@@ -716,16 +763,18 @@ impl DsmcSim {
         let moved = self.last_tried;
         self.fill_and_filter(moved);
         let mut p = Accepted::new();
-        let sc = std::mem::take(&mut self.scratch);
-        let mut next_pass = 0;
+        let pass = self.scratch.pass;
         let mut tried = BATCH;
         let mut end = BatchEnd::More;
         let mut void = None;
         for j in 0..BATCH {
             // Resolved: species without the group bits, a as its position.
-            let mut c = self.batch[j];
+            debug_assert!(self.batch.len() >= BATCH);
+            // SAFETY: the batch holds AHEAD candidates until this loop ends (a void clears
+            // it and leaves the loop).
+            let mut c = unsafe { *self.batch.get_unchecked(j) };
             c.i &= SPECIES_MASK;
-            c.a = sc.apos[j];
+            c.a = self.scratch.apos[j];
             if p.n > 0 && p.touches(&c) {
                 tried = j;
                 break;
@@ -735,16 +784,17 @@ impl DsmcSim {
                 self.st.gap_log += self.st.gap_prod.ln();
                 self.st.gap_prod = 1.0;
             }
-            if sc.pass.get(next_pass) != Some(&(j as u32)) {
+            if pass & (1 << j) == 0 {
                 continue;
             }
-            next_pass += 1;
             let (a, b) = (c.a as usize, c.b as usize);
-            let va = self.st.vel[a];
-            let vb = self.st.vel[b];
+            debug_assert!(a < self.st.vel.len() && b < self.st.vel.len());
+            // SAFETY: a passing candidate's a and b are particle positions.
+            let (va, vb) =
+                unsafe { (*self.st.vel.get_unchecked(a), *self.st.vel.get_unchecked(b)) };
             let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
             let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-            let ub = sc.ubound[j];
+            let ub = self.scratch.ubound[j];
             if ub * ub >= g2 {
                 continue;
             }
@@ -773,7 +823,6 @@ impl DsmcSim {
                 break;
             }
         }
-        self.scratch = sc;
         if void.is_none() && !matches!(end, BatchEnd::Done) {
             void = self.apply_accepted(&mut p);
         }
