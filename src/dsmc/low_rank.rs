@@ -205,84 +205,6 @@ pub const AHEAD: usize = 3 * BATCH;
 /// Accepted collisions per batch at most (a batch ends when this many are pending).
 const PENDING: usize = 24;
 
-/// Per-particle speed bounds in one byte: level q bounds |v| for |v|^2 < lo 2^e (1 + (m+1)/8)
-/// with q = 8 e + m (e the binary exponent of |v|^2 / lo, m its top three mantissa bits), so
-/// a level costs no square root; level 255 is unbounded. The 1.2 MB of levels of the Table I
-/// gas stay in the core's L2 cache where f32 bounds (4.8 MB) did not. Re-anchored at each
-/// refresh; a bound only filters (it never changes a decision), so it is not checkpointed.
-pub struct SpeedLadder {
-    /// 1 / lo, a power of two (the scaling is exact).
-    inv_lo: f64,
-    /// |v| bound of each level (with a 1e-12 margin over rounding); lev[255] = infinity.
-    lev: Box<[f64; 256]>,
-}
-
-impl SpeedLadder {
-    /// A ladder whose top finite level is ~15 times (in |v|^2) above `vtop`^2.
-    pub fn new(vtop: f64) -> Self {
-        let v2 = vtop * vtop;
-        let e = if v2 > 0.0 && v2.is_finite() {
-            v2.log2().floor() as i32 - 28
-        } else {
-            0
-        };
-        let lo = 2f64.powi(e);
-        let mut lev = Box::new([f64::INFINITY; 256]);
-        for (q, l) in lev.iter_mut().enumerate().take(255) {
-            let top = lo * 2f64.powi((q >> 3) as i32) * (1.0 + ((q & 7) + 1) as f64 / 8.0);
-            *l = top.sqrt() * (1.0 + 1e-12);
-        }
-        SpeedLadder {
-            inv_lo: 1.0 / lo,
-            lev,
-        }
-    }
-
-    /// The level of a velocity.
-    #[inline(always)]
-    pub fn level(&self, v: &[f64; 3]) -> u8 {
-        let x = speed2(v) * self.inv_lo;
-        if x < 1.0 {
-            return 0;
-        }
-        if !x.is_finite() {
-            // NaN or infinite: no bound (the exact test decides).
-            return 255;
-        }
-        let bits = x.to_bits();
-        let q = ((bits >> 52) as i64 - 1023) * 8 + ((bits >> 49) & 7) as i64;
-        q.min(255) as u8
-    }
-
-    #[inline(always)]
-    pub fn bound(&self, q: u8) -> f64 {
-        self.lev[q as usize]
-    }
-}
-
-/// Per-batch scratch of the low-rank loop (derived, never checkpointed).
-#[derive(Clone, Copy)]
-pub struct BatchScratch {
-    /// Bit j: candidate j of the batch passes the speed-level filter.
-    pass: u32,
-    /// Per candidate of the batch: the position of particle a (its slot in its group).
-    apos: [u32; BATCH],
-    /// Per candidate of the batch: u (b_a + b_b), the acceptance threshold on |g|.
-    ubound: [f64; BATCH],
-}
-
-impl Default for BatchScratch {
-    fn default() -> Self {
-        BatchScratch {
-            pass: 0,
-            apos: [0; BATCH],
-            ubound: [0.0; BATCH],
-        }
-    }
-}
-
-const _: () = assert!(BATCH <= 32, "the pass mask has 32 bits");
-
 /// The collisions accepted in the current batch: distinct particles, in time order; the first
 /// `applied` of them have been applied.
 struct Accepted {
@@ -379,12 +301,14 @@ impl DsmcSim {
         let u = crate::rng::unit_f64(w3);
         let gap = crate::rng::unit_f64_open0(w4);
         let pa = if g >= 1 {
-            (ga.start + ga.n) as usize - 1 - ja.min(ga.n as usize)
+            (ga.start + ga.n).wrapping_sub(1) as usize - ja.min(ga.n as usize)
         } else {
             ga.start as usize + ja
         };
-        prefetch(self.sq.as_ptr().wrapping_add(pa));
-        prefetch(self.sq.as_ptr().wrapping_add(b));
+        // Tried two batches later: its velocity lines are then in the cache (a slot past
+        // the group's size, a void trial, prefetches a harmless address).
+        prefetch_record(&self.st.vel, pa);
+        prefetch_record(&self.st.vel, b);
         Candidate {
             i: ig,
             k: k as u32,
@@ -463,53 +387,13 @@ impl DsmcSim {
         ((ja < ga.n).then_some(pos as usize), ub)
     }
 
-    /// Fill the candidate buffer to [`AHEAD`] candidates, resolve those of the current batch
-    /// (the first BATCH) and list the ones that the speed levels do not already reject
-    /// (|g| <= |v_a| + |v_b| <= s_a + s_b). The buffer is a three-stage pipeline: a candidate
-    /// gets its speed levels prefetched when drawn, its velocity lines prefetched when it
-    /// moves into the second BATCH (if its possibly stale levels do not reject it), and is
-    /// tried in the first.
-    fn fill_and_filter(&mut self, moved: usize) {
-        let before = self.batch.len();
+    /// Fill the candidate buffer to [`AHEAD`] candidates (their velocity lines are
+    /// prefetched when drawn, two batches before they are tried).
+    fn fill(&mut self) {
         while self.batch.len() < AHEAD {
             let c = self.draw_candidate();
             self.batch.push(c);
         }
-        // Candidates that entered stage 2: [2B - moved, 2B) (after a fresh start, all of it).
-        let lo = if before == 0 {
-            BATCH
-        } else {
-            2 * BATCH - moved.min(BATCH)
-        };
-        let cands: &[Candidate; AHEAD] = self.batch[..AHEAD].try_into().unwrap();
-        for c in &cands[lo..2 * BATCH] {
-            let (a, ub) = self.resolve(c);
-            let a = a.unwrap_or(0);
-            let b = c.b as usize;
-            // Branch-free: a rejected candidate prefetches particle 0 (a line kept hot).
-            let keep = (ub < self.level_bound(a) + self.level_bound(b)) as usize;
-            let mask = keep.wrapping_neg();
-            prefetch_record(&self.st.vel, a & mask);
-            prefetch_record(&self.st.vel, b & mask);
-        }
-        let mut pass = 0u32;
-        for (j, c) in cands[..BATCH].iter().enumerate() {
-            let (a, ub) = self.resolve(c);
-            let b = c.b as usize;
-            let ok = a.is_some_and(|a| ub < self.level_bound(a) + self.level_bound(b));
-            self.scratch.apos[j] = a.unwrap_or(0) as u32;
-            self.scratch.ubound[j] = ub;
-            pass |= (ok as u32) << j;
-        }
-        self.scratch.pass = pass;
-    }
-
-    /// The speed bound of particle p's level.
-    #[inline(always)]
-    fn level_bound(&self, p: usize) -> f64 {
-        debug_assert!(p < self.sq.len());
-        // SAFETY: p is a particle position (sq has one level per particle).
-        self.ladder.bound(unsafe { *self.sq.get_unchecked(p) })
     }
 
     /// Apply the accepted collisions not yet applied, in time order. A raised speed bound or
@@ -553,8 +437,6 @@ impl DsmcSim {
             self.st.t = t;
             self.st.vel[a] = na;
             self.st.vel[b] = nb;
-            self.sq[a] = self.ladder.level(&na);
-            self.sq[b] = self.ladder.level(&nb);
             self.st.collisions += 1;
             self.st.species_collisions[i] += 1;
             self.st.species_collisions[k] += 1;
@@ -595,7 +477,6 @@ impl DsmcSim {
             return;
         }
         self.st.vel.swap(x, y);
-        self.sq.swap(x, y);
         if !self.st.disp.is_empty() {
             self.st.disp.swap(x, y);
         }
@@ -760,21 +641,21 @@ impl DsmcSim {
     /// the output schedule, and so does the random stream. Adds the trials (void ones
     /// excluded) to `trials`.
     fn low_rank_batch(&mut self, trials: &mut u64) -> Result<BatchEnd, PhysicsError> {
-        let moved = self.last_tried;
-        self.fill_and_filter(moved);
+        self.fill();
         let mut p = Accepted::new();
-        let pass = self.scratch.pass;
         let mut tried = BATCH;
         let mut end = BatchEnd::More;
         let mut void = None;
         for j in 0..BATCH {
-            // Resolved: species without the group bits, a as its position.
             debug_assert!(self.batch.len() >= BATCH);
             // SAFETY: the batch holds AHEAD candidates until this loop ends (a void clears
             // it and leaves the loop).
             let mut c = unsafe { *self.batch.get_unchecked(j) };
+            // Resolved (the groups do not change within a batch): species without the group
+            // bits, a as its position (0 for a slot past its group's size, a void trial).
+            let (apos, ub) = self.resolve(&c);
             c.i &= SPECIES_MASK;
-            c.a = self.scratch.apos[j];
+            c.a = apos.unwrap_or(0) as u32;
             if p.n > 0 && p.touches(&c) {
                 tried = j;
                 break;
@@ -784,17 +665,16 @@ impl DsmcSim {
                 self.st.gap_log += self.st.gap_prod.ln();
                 self.st.gap_prod = 1.0;
             }
-            if pass & (1 << j) == 0 {
+            if apos.is_none() {
                 continue;
             }
             let (a, b) = (c.a as usize, c.b as usize);
             debug_assert!(a < self.st.vel.len() && b < self.st.vel.len());
-            // SAFETY: a passing candidate's a and b are particle positions.
+            // SAFETY: a resolved candidate's a and b are particle positions.
             let (va, vb) =
                 unsafe { (*self.st.vel.get_unchecked(a), *self.st.vel.get_unchecked(b)) };
             let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
             let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-            let ub = self.scratch.ubound[j];
             if ub * ub >= g2 {
                 continue;
             }
@@ -845,7 +725,6 @@ impl DsmcSim {
             None => {}
         }
         *trials += tried as u64;
-        self.last_tried = tried;
         Ok(end)
     }
 

@@ -167,13 +167,6 @@ pub struct DsmcSim {
     ring: Ring,
     /// Low-rank: the candidates of the current batch not yet tried (saved in `st.pipeline`).
     batch: Vec<Candidate>,
-    /// Low-rank: scratch for the batch filter.
-    scratch: low_rank::BatchScratch,
-    /// Low-rank: per-particle speed levels (see [`low_rank::SpeedLadder`]); derived.
-    sq: Vec<u8>,
-    ladder: low_rank::SpeedLadder,
-    /// Low-rank: candidates tried in the last batch (how far the pipeline moved).
-    last_tried: usize,
     /// Evaluates eps for a colliding pair.
     eps: EpsModel,
     /// Per particle, an f32 upper bound (rounded up with margin) on its speed (low-rank) or on
@@ -338,15 +331,9 @@ impl DsmcSim {
             gtab: Vec::new(),
             ring,
             batch,
-            scratch: low_rank::BatchScratch::default(),
-            last_tried: 0,
             speed,
-            sq: Vec::new(),
-            ladder: low_rank::SpeedLadder::new(0.0),
         };
         if sim.sys.method == DsmcMethod::LowRank {
-            sim.sq = crate::memory::huge_vec(sim.st.vel.len(), 255u8);
-            sim.requantize();
             sim.tracer_pos = sim.tracer_positions();
             sim.gtab =
                 vec![low_rank::GroupInfo::default(); low_rank::GROUPS * sim.sys.species.len()];
@@ -535,21 +522,11 @@ impl DsmcSim {
         if self.sys.method == DsmcMethod::LowRank {
             // Candidates drawn from the old tables are void.
             self.batch.clear();
-            if !self.sq.is_empty() {
-                self.requantize();
+            if !self.gtab.is_empty() {
                 self.regroup();
             }
         }
         self.rebuild_rates();
-    }
-
-    /// Low-rank: anchor the speed ladder at the current bounds and recompute every level.
-    fn requantize(&mut self) {
-        let vtop = self.st.vmax.iter().copied().fold(0.0, f64::max);
-        self.ladder = low_rank::SpeedLadder::new(vtop);
-        for (q, v) in self.sq.iter_mut().zip(&self.st.vel) {
-            *q = self.ladder.level(v);
-        }
     }
 
     #[inline(always)]
