@@ -213,6 +213,28 @@ mod tests {
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
+    /// Windows (which move the buffer when they reach its end) serve the same words as
+    /// `u64`, and a position taken after a moved buffer restores the same stream.
+    #[test]
+    fn windows_are_the_stream() {
+        let mut plain = RunRng::new(5);
+        let mut win = RunRng::new(5);
+        for step in 0..5000usize {
+            let n = 1 + step % 7;
+            let w = win.window(n).to_vec();
+            let take = 1 + step % n;
+            win.consume(take);
+            for (j, &x) in w.iter().enumerate().take(take) {
+                assert_eq!(x, plain.u64(), "step {step} word {j}");
+            }
+            if step % 97 == 0 {
+                win = RunRng::restore(&win.position());
+            }
+            assert_eq!(win.position().seed, 5);
+        }
+        assert_eq!(win.u64(), plain.u64());
+    }
+
     #[test]
     fn restore_continues_the_same_stream() {
         let mut a = RunRng::new(7);
