@@ -202,6 +202,72 @@ pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), String> {
 pub const BATCH: usize = 32;
 /// Candidates drawn ahead: the batch being tried and two more in the prefetch pipeline.
 pub const AHEAD: usize = 3 * BATCH;
+/// Capacity of the candidate queue (a power of two, at least AHEAD).
+const QUEUE: usize = 128;
+const _: () = assert!(QUEUE.is_power_of_two() && QUEUE >= AHEAD);
+
+/// The candidates drawn and not yet tried, oldest first (a ring: trying a batch moves the
+/// head, nothing is copied).
+pub struct CandidateQueue {
+    buf: Box<[Candidate; QUEUE]>,
+    head: usize,
+    len: usize,
+}
+
+impl CandidateQueue {
+    pub fn from_slice(cs: &[Candidate]) -> Self {
+        let mut q = CandidateQueue {
+            buf: Box::new([Candidate::default(); QUEUE]),
+            head: 0,
+            len: 0,
+        };
+        for &c in cs.iter().take(AHEAD) {
+            q.push(c);
+        }
+        q
+    }
+
+    #[inline(always)]
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    #[inline(always)]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    #[inline(always)]
+    fn push(&mut self, c: Candidate) {
+        debug_assert!(self.len < QUEUE);
+        self.buf[(self.head + self.len) & (QUEUE - 1)] = c;
+        self.len += 1;
+    }
+
+    /// The candidate j places behind the oldest (j < len).
+    #[inline(always)]
+    fn get(&self, j: usize) -> Candidate {
+        debug_assert!(j < self.len);
+        self.buf[(self.head + j) & (QUEUE - 1)]
+    }
+
+    /// Drop the oldest n.
+    #[inline(always)]
+    fn advance(&mut self, n: usize) {
+        debug_assert!(n <= self.len);
+        self.head = (self.head + n) & (QUEUE - 1);
+        self.len -= n;
+    }
+
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    pub fn to_vec(&self) -> Vec<Candidate> {
+        (0..self.len).map(|j| self.get(j)).collect()
+    }
+}
+
 /// Accepted collisions per batch at most (a batch ends when this many are pending).
 const PENDING: usize = 24;
 
@@ -410,20 +476,29 @@ impl DsmcSim {
         let msd = !self.st.disp.is_empty();
         while p.applied < p.n {
             let q = p.applied;
+            debug_assert!(q < PENDING);
             p.applied += 1;
-            let c = p.cand[q];
+            // SAFETY (this loop): q < p.n <= PENDING; a and b are particle positions, i and k
+            // species (the candidate was resolved).
+            let (c, t) = unsafe { (*p.cand.get_unchecked(q), *p.t.get_unchecked(q)) };
             let (a, b) = (c.a as usize, c.b as usize);
             let (i, k) = (c.i as usize, c.k as usize);
-            let va = self.st.vel[a];
-            let vb = self.st.vel[b];
+            debug_assert!(a < self.st.vel.len() && b < self.st.vel.len());
+            debug_assert!(i < self.sys.species.len() && k < self.sys.species.len());
+            let (va, vb) =
+                unsafe { (*self.st.vel.get_unchecked(a), *self.st.vel.get_unchecked(b)) };
             let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
             let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
             let (w, gne) = impact_impulse(g, g2, &mut self.geom);
-            let (ma, mb) = (self.sys.species[i].mass, self.sys.species[k].mass);
+            let (ma, mb) = unsafe {
+                (
+                    self.sys.species.get_unchecked(i).mass,
+                    self.sys.species.get_unchecked(k).mass,
+                )
+            };
             let (mut na, mut nb) = (va, vb);
             let eps = self.eps.eps(i, k, gne);
             collide_impulse(&mut na, &mut nb, ma, mb, eps, w);
-            let t = p.t[q];
             if msd {
                 for (j, v) in [(a, va), (b, vb)] {
                     let d = &mut self.st.disp[j];
@@ -435,17 +510,20 @@ impl DsmcSim {
                 }
             }
             self.st.t = t;
-            self.st.vel[a] = na;
-            self.st.vel[b] = nb;
+            unsafe {
+                *self.st.vel.get_unchecked_mut(a) = na;
+                *self.st.vel.get_unchecked_mut(b) = nb;
+                *self.st.species_collisions.get_unchecked_mut(i) += 1;
+                *self.st.species_collisions.get_unchecked_mut(k) += 1;
+            }
             self.st.collisions += 1;
-            self.st.species_collisions[i] += 1;
-            self.st.species_collisions[k] += 1;
             // Raise bounds that a new speed exceeds.
             let mut void = false;
             for (s, v) in [(i, na), (k, nb)] {
                 let s2 = speed2(&v);
-                if s2 > self.st.vmax[s] * self.st.vmax[s] {
-                    self.st.vmax[s] = s2.sqrt() * RAISE_SLACK;
+                let vmax = unsafe { self.st.vmax.get_unchecked_mut(s) };
+                if s2 > *vmax * *vmax {
+                    *vmax = s2.sqrt() * RAISE_SLACK;
                     void = true;
                 }
             }
@@ -647,10 +725,9 @@ impl DsmcSim {
         let mut end = BatchEnd::More;
         let mut void = None;
         for j in 0..BATCH {
-            debug_assert!(self.batch.len() >= BATCH);
-            // SAFETY: the batch holds AHEAD candidates until this loop ends (a void clears
-            // it and leaves the loop).
-            let mut c = unsafe { *self.batch.get_unchecked(j) };
+            // The queue holds AHEAD candidates until this loop ends (a void clears it and
+            // leaves the loop).
+            let mut c = self.batch.get(j);
             // Resolved (the groups do not change within a batch): species without the group
             // bits, a as its position (0 for a slot past its group's size, a void trial).
             let (apos, ub) = self.resolve(&c);
@@ -720,7 +797,7 @@ impl DsmcSim {
         match void {
             Some(j) => tried = j + 1,
             None if !matches!(end, BatchEnd::Done) => {
-                self.batch.drain(..tried);
+                self.batch.advance(tried);
             }
             None => {}
         }

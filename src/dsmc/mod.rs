@@ -166,7 +166,7 @@ pub struct DsmcSim {
     /// Bird: candidates drawn ahead (saved in `st.pipeline` at checkpoints).
     ring: Ring,
     /// Low-rank: the candidates of the current batch not yet tried (saved in `st.pipeline`).
-    batch: Vec<Candidate>,
+    batch: low_rank::CandidateQueue,
     /// Evaluates eps for a colliding pair.
     eps: EpsModel,
     /// Per particle, an f32 upper bound (rounded up with margin) on its speed (low-rank) or on
@@ -284,8 +284,14 @@ impl DsmcSim {
         }
         let pair_k = low_rank::static_tables(&sys);
         let (ring, batch) = match sys.method {
-            DsmcMethod::LowRank => (Ring::default(), st.pipeline.clone()),
-            DsmcMethod::Bird => (Ring::from_slice(&st.pipeline), Vec::new()),
+            DsmcMethod::LowRank => (
+                Ring::default(),
+                low_rank::CandidateQueue::from_slice(&st.pipeline),
+            ),
+            DsmcMethod::Bird => (
+                Ring::from_slice(&st.pipeline),
+                low_rank::CandidateQueue::from_slice(&[]),
+            ),
         };
         let mut speed = Vec::new();
         if sys.method == DsmcMethod::Bird {
@@ -351,7 +357,7 @@ impl DsmcSim {
         self.st.rng = self.rng.position();
         self.st.geom = self.geom.position();
         self.st.pipeline = match self.sys.method {
-            DsmcMethod::LowRank => self.batch.clone(),
+            DsmcMethod::LowRank => self.batch.to_vec(),
             DsmcMethod::Bird => self.ring.to_vec(),
         };
         postcard::to_stdvec(&self.st).expect("state serialises")
@@ -361,16 +367,24 @@ impl DsmcSim {
     pub fn from_state_bytes(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
         let st: DsmcState = postcard::from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
-        if st.vel.len() != sys.n_particles() || st.vmax.len() != sys.species.len() {
+        if st.vel.len() != sys.n_particles()
+            || st.vmax.len() != sys.species.len()
+            || st.species_collisions.len() != sys.species.len()
+        {
             return Err("checkpoint does not match the run's species".into());
         }
         let (n, m) = (st.vel.len(), sys.species.len());
-        let foreign = |c: &Candidate| {
-            let i = match sys.method {
-                DsmcMethod::LowRank => (c.i & low_rank::SPECIES_MASK) as usize,
-                DsmcMethod::Bird => c.i as usize,
-            };
-            c.a as usize >= n || c.b as usize >= n || i >= m || c.k as usize >= m
+        let foreign = |c: &Candidate| match sys.method {
+            // Low-rank: a is a slot of the proposed group (a slot past the group's size is
+            // a void trial), the group is in the top bits of i.
+            DsmcMethod::LowRank => {
+                let i = (c.i & low_rank::SPECIES_MASK) as usize;
+                let g = (c.i >> low_rank::GROUP_SHIFT) as usize;
+                g >= low_rank::GROUPS || i >= m || c.b as usize >= n || c.k as usize >= m
+            }
+            DsmcMethod::Bird => {
+                c.a as usize >= n || c.b as usize >= n || c.i as usize >= m || c.k as usize >= m
+            }
         };
         if st.pipeline.len() > PIPELINE_DEPTH.max(low_rank::AHEAD)
             || st.pipeline.iter().any(foreign)
