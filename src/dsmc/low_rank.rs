@@ -201,7 +201,7 @@ pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), String> {
 /// Candidates tried per batch (16-32 were fastest for Table I; 64 4 % and 128 15 % slower).
 pub const BATCH: usize = 32;
 /// Candidates drawn ahead: the batch being tried and two more in the prefetch pipeline.
-pub const AHEAD: usize = 3 * BATCH;
+pub const AHEAD: usize = 2 * BATCH;
 /// Capacity of the candidate queue (a power of two, at least AHEAD).
 const QUEUE: usize = 128;
 const _: () = assert!(QUEUE.is_power_of_two() && QUEUE >= AHEAD);
@@ -366,15 +366,6 @@ impl DsmcSim {
         self.rng.consume(5);
         let u = crate::rng::unit_f64(w3);
         let gap = crate::rng::unit_f64_open0(w4);
-        let pa = if g >= 1 {
-            (ga.start + ga.n).wrapping_sub(1) as usize - ja.min(ga.n as usize)
-        } else {
-            ga.start as usize + ja
-        };
-        // Tried two batches later: its velocity lines are then in the cache (a slot past
-        // the group's size, a void trial, prefetches a harmless address).
-        prefetch_record(&self.st.vel, pa);
-        prefetch_record(&self.st.vel, b);
         Candidate {
             i: ig,
             k: k as u32,
@@ -456,10 +447,27 @@ impl DsmcSim {
     /// Fill the candidate buffer to [`AHEAD`] candidates (their velocity lines are
     /// prefetched when drawn, two batches before they are tried).
     fn fill(&mut self) {
+        let fresh = self.batch.is_empty();
         while self.batch.len() < AHEAD {
             let c = self.draw_candidate();
             self.batch.push(c);
         }
+        if fresh {
+            // The batch about to be tried was not prefetched by the one before.
+            for j in 0..BATCH {
+                self.prefetch_candidate(j);
+            }
+        }
+    }
+
+    /// Prefetch the velocity lines of queued candidate j's particles (a slot past its
+    /// group's size, a void trial, prefetches particle 0).
+    #[inline(always)]
+    fn prefetch_candidate(&self, j: usize) {
+        let c = self.batch.get(j);
+        let (a, _) = self.resolve(&c);
+        prefetch_record(&self.st.vel, a.unwrap_or(0));
+        prefetch_record(&self.st.vel, c.b as usize);
     }
 
     /// Apply the accepted collisions not yet applied, in time order. A raised speed bound or
@@ -727,6 +735,9 @@ impl DsmcSim {
         for j in 0..BATCH {
             // The queue holds AHEAD candidates until this loop ends (a void clears it and
             // leaves the loop).
+            // The next batch's candidates are prefetched one per trial, so that the misses
+            // are spread over the batch (a burst of them stalls on the miss buffers).
+            self.prefetch_candidate(j + BATCH);
             let mut c = self.batch.get(j);
             // Resolved (the groups do not change within a batch): species without the group
             // bits, a as its position (0 for a slot past its group's size, a void trial).
