@@ -268,64 +268,6 @@ impl CandidateQueue {
     }
 }
 
-/// Accepted collisions per batch at most (a batch ends when this many are pending).
-const PENDING: usize = 24;
-
-/// The collisions accepted in the current batch: distinct particles, in time order; the first
-/// `applied` of them have been applied.
-struct Accepted {
-    n: usize,
-    applied: usize,
-    cand: [Candidate; PENDING],
-    t: [f64; PENDING],
-    /// Position in the batch of each one's trial.
-    trial: [u32; PENDING],
-    /// 256-bit filter of their particles (bit p mod 256).
-    bloom: [u64; 4],
-}
-
-impl Accepted {
-    fn new() -> Self {
-        Accepted {
-            n: 0,
-            applied: 0,
-            cand: [Candidate::default(); PENDING],
-            t: [0.0; PENDING],
-            trial: [0; PENDING],
-            bloom: [0; 4],
-        }
-    }
-
-    #[inline(always)]
-    fn bit(p: u32) -> (usize, u64) {
-        ((p as usize >> 6) & 3, 1u64 << (p & 63))
-    }
-
-    /// Whether a candidate shares a particle with a collision accepted in this batch.
-    #[inline(always)]
-    fn touches(&self, c: &Candidate) -> bool {
-        let ((wa, ba), (wb, bb)) = (Self::bit(c.a), Self::bit(c.b));
-        if self.bloom[wa] & ba == 0 && self.bloom[wb] & bb == 0 {
-            return false;
-        }
-        self.cand[..self.n]
-            .iter()
-            .any(|p| p.a == c.a || p.b == c.a || p.a == c.b || p.b == c.b)
-    }
-
-    #[inline(always)]
-    fn push(&mut self, c: Candidate, t: f64, trial: usize) {
-        self.cand[self.n] = c;
-        self.t[self.n] = t;
-        self.trial[self.n] = trial as u32;
-        self.n += 1;
-        for p in [c.a, c.b] {
-            let (w, b) = Self::bit(p);
-            self.bloom[w] |= b;
-        }
-    }
-}
-
 /// How a batch ended.
 enum BatchEnd {
     /// Go on with the next batch.
@@ -466,95 +408,94 @@ impl DsmcSim {
     fn prefetch_candidate(&self, j: usize) {
         let c = self.batch.get(j);
         let (a, _) = self.resolve(&c);
-        prefetch_record(&self.st.vel, a.unwrap_or(0));
+        let a = a.unwrap_or(0);
+        prefetch_record(&self.st.vel, a);
         prefetch_record(&self.st.vel, c.b as usize);
+        if !self.st.disp.is_empty() {
+            // Displacements are updated when a collision is applied.
+            prefetch(self.st.disp.as_ptr().wrapping_add(a));
+            prefetch(self.st.disp.as_ptr().wrapping_add(c.b as usize));
+        }
     }
 
-    /// Apply the accepted collisions not yet applied, in time order. A raised speed bound or
-    /// a due refresh at collision j changes the proposal tables: the collisions accepted after
-    /// j, the trials after j and the candidates drawn ahead are void (they came from the old
-    /// tables; the decision to drop them depends only on the past). Returns the batch position
-    /// of the trial of collision j when that happened. Particles are not moved between groups
-    /// here (see [`relocate`](Self::relocate)).
+    /// Apply the accepted collision of particles a (species i) and b (species k), velocities
+    /// va and vb, relative velocity g (|g|^2 = g2), at time t; then move the two particles
+    /// to the groups their new speeds belong to. Returns whether the proposal tables changed
+    /// (a speed bound raised, a group past its capacity, a refresh done): the candidates drawn
+    /// ahead came from the old tables and are void (the decision depends only on the past).
     ///
-    /// Impact directions come from their own stream (`geom`), drawn in collision order, so
-    /// that when the collisions are applied (at the end of a batch or at an output time) does
-    /// not change the trajectory.
-    fn apply_accepted(&mut self, p: &mut Accepted) -> Option<usize> {
-        let msd = !self.st.disp.is_empty();
-        while p.applied < p.n {
-            let q = p.applied;
-            debug_assert!(q < PENDING);
-            p.applied += 1;
-            // SAFETY (this loop): q < p.n <= PENDING; a and b are particle positions, i and k
-            // species (the candidate was resolved).
-            let (c, t) = unsafe { (*p.cand.get_unchecked(q), *p.t.get_unchecked(q)) };
-            let (a, b) = (c.a as usize, c.b as usize);
-            let (i, k) = (c.i as usize, c.k as usize);
-            debug_assert!(a < self.st.vel.len() && b < self.st.vel.len());
-            debug_assert!(i < self.sys.species.len() && k < self.sys.species.len());
-            let (va, vb) =
-                unsafe { (*self.st.vel.get_unchecked(a), *self.st.vel.get_unchecked(b)) };
-            let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
-            let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-            let (w, gne) = impact_impulse(g, g2, &mut self.geom);
-            let (ma, mb) = unsafe {
-                (
-                    self.sys.species.get_unchecked(i).mass,
-                    self.sys.species.get_unchecked(k).mass,
-                )
-            };
-            let (mut na, mut nb) = (va, vb);
-            let eps = self.eps.eps(i, k, gne);
-            collide_impulse(&mut na, &mut nb, ma, mb, eps, w);
-            if msd {
-                for (j, v) in [(a, va), (b, vb)] {
-                    let d = &mut self.st.disp[j];
-                    let dt = t - d[3];
-                    d[0] += v[0] * dt;
-                    d[1] += v[1] * dt;
-                    d[2] += v[2] * dt;
-                    d[3] = t;
-                }
-            }
-            self.st.t = t;
-            unsafe {
-                *self.st.vel.get_unchecked_mut(a) = na;
-                *self.st.vel.get_unchecked_mut(b) = nb;
-                *self.st.species_collisions.get_unchecked_mut(i) += 1;
-                *self.st.species_collisions.get_unchecked_mut(k) += 1;
-            }
-            self.st.collisions += 1;
-            // Raise bounds that a new speed exceeds.
-            let mut void = false;
-            for (s, v) in [(i, na), (k, nb)] {
-                let s2 = speed2(&v);
-                let vmax = unsafe { self.st.vmax.get_unchecked_mut(s) };
-                if s2 > *vmax * *vmax {
-                    *vmax = s2.sqrt() * RAISE_SLACK;
-                    void = true;
-                }
-            }
-            if void {
-                self.st.bound_raises += 1;
-                self.sync_groups(i);
-                self.sync_groups(k);
-                self.rebuild_rates();
-            }
-            if self.refresh_due() {
-                // Done at the end of the batch, after the particles have been relocated.
-                self.refresh_pending = true;
-                void = true;
-            }
-            if void {
-                self.batch.clear();
-                self.st.gap_prod = 1.0;
-                self.st.gap_log = 0.0;
-                p.n = p.applied;
-                return Some(p.trial[q] as usize);
+    /// Impact directions come from their own stream (`geom`), one draw per collision in
+    /// collision order.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn collide_now(
+        &mut self,
+        (a, i): (usize, usize),
+        (b, k): (usize, usize),
+        va: [f64; 3],
+        vb: [f64; 3],
+        g: [f64; 3],
+        g2: f64,
+        t: f64,
+    ) -> bool {
+        debug_assert!(a < self.st.vel.len() && b < self.st.vel.len());
+        debug_assert!(i < self.sys.species.len() && k < self.sys.species.len());
+        let (w, gne) = impact_impulse(g, g2, &mut self.geom);
+        // SAFETY (this function): a and b are particle positions, i and k species.
+        let (ma, mb) = unsafe {
+            (
+                self.sys.species.get_unchecked(i).mass,
+                self.sys.species.get_unchecked(k).mass,
+            )
+        };
+        let (mut na, mut nb) = (va, vb);
+        let eps = self.eps.eps(i, k, gne);
+        collide_impulse(&mut na, &mut nb, ma, mb, eps, w);
+        if !self.st.disp.is_empty() {
+            for (j, v) in [(a, va), (b, vb)] {
+                let d = &mut self.st.disp[j];
+                let dt = t - d[3];
+                d[0] += v[0] * dt;
+                d[1] += v[1] * dt;
+                d[2] += v[2] * dt;
+                d[3] = t;
             }
         }
-        None
+        self.st.t = t;
+        unsafe {
+            *self.st.vel.get_unchecked_mut(a) = na;
+            *self.st.vel.get_unchecked_mut(b) = nb;
+            *self.st.species_collisions.get_unchecked_mut(i) += 1;
+            *self.st.species_collisions.get_unchecked_mut(k) += 1;
+        }
+        self.st.collisions += 1;
+        // Raise bounds that a new speed exceeds.
+        let mut changed = false;
+        for (s, v) in [(i, na), (k, nb)] {
+            let s2 = speed2(&v);
+            let vmax = unsafe { self.st.vmax.get_unchecked_mut(s) };
+            if s2 > *vmax * *vmax {
+                *vmax = s2.sqrt() * RAISE_SLACK;
+                changed = true;
+            }
+        }
+        if changed {
+            self.st.bound_raises += 1;
+            self.sync_groups(i);
+            self.sync_groups(k);
+        }
+        let mut b = b;
+        let mut overflow = self.relocate(a, i, &mut b);
+        let mut none = usize::MAX;
+        overflow |= self.relocate(b, k, &mut none);
+        if changed || overflow {
+            self.rebuild_rates();
+        }
+        if self.refresh_due() {
+            self.refresh_bounds();
+            return true;
+        }
+        changed || overflow
     }
 
     /// Exchange the particles at positions x and y (velocity, level, displacement, id).
@@ -602,70 +543,69 @@ impl DsmcSim {
         pos
     }
 
-    /// Move the particles of the applied collisions of a batch into the group their speed
-    /// belongs to (one swap with the particle at each group boundary crossed). Returns
-    /// whether a group outgrew its proposal capacity (the capacities are then reset and the
-    /// rates rebuilt).
-    fn relocate(&mut self, p: &Accepted) -> bool {
-        let mut list = [(0usize, 0usize); 2 * PENDING];
-        let mut n = 0;
-        for c in &p.cand[..p.applied] {
-            list[n] = (c.a as usize, c.i as usize);
-            list[n + 1] = (c.b as usize, c.k as usize);
-            n += 2;
+    /// Move the particle at position x (species s) into the group its speed belongs to (one
+    /// swap with the particle at each group boundary crossed); `other`, a position, follows
+    /// the particle it holds. Returns whether a group outgrew its proposal capacity (the
+    /// capacities are then reset; the caller rebuilds the rates).
+    #[inline(always)]
+    fn relocate(&mut self, x: usize, s: usize, other: &mut usize) -> bool {
+        let gr = self.st.groups[s];
+        if !gr.split() {
+            return false;
+        }
+        let want = gr.group_of(speed2(&self.st.vel[x]));
+        // Current group and the first position of each group.
+        let mut first = [0usize; GROUPS + 1];
+        first[0] = self.off[s];
+        for g in 0..GROUPS {
+            first[g + 1] = first[g] + gr.n[g] as usize;
+        }
+        let g = (1..GROUPS).filter(|&h| x >= first[h]).count();
+        if g == want {
+            return false;
+        }
+        self.relocate_slow(x, s, other, g, want, first)
+    }
+
+    #[inline(never)]
+    fn relocate_slow(
+        &mut self,
+        mut x: usize,
+        s: usize,
+        other: &mut usize,
+        mut g: usize,
+        want: usize,
+        mut first: [usize; GROUPS + 1],
+    ) -> bool {
+        let mut gr = self.st.groups[s];
+        while g != want {
+            // Swap with the particle at the boundary towards `want`; the boundary moves
+            // past x, which changes group.
+            let y = if want > g {
+                gr.n[g] -= 1;
+                gr.n[g + 1] += 1;
+                first[g + 1] -= 1;
+                first[g + 1]
+            } else {
+                gr.n[g] -= 1;
+                gr.n[g - 1] += 1;
+                first[g] += 1;
+                first[g] - 1
+            };
+            self.swap_particles(x, y);
+            if *other == y {
+                *other = x;
+            }
+            x = y;
+            g = if want > g { g + 1 } else { g - 1 };
         }
         let mut overflow = false;
-        for q in 0..n {
-            let (mut x, s) = list[q];
-            let gr = self.st.groups[s];
-            if !gr.split() {
-                continue;
-            }
-            let want = gr.group_of(speed2(&self.st.vel[x]));
-            // Current group and the first position of each group.
-            let mut first = [0usize; GROUPS + 1];
-            first[0] = self.off[s];
-            for g in 0..GROUPS {
-                first[g + 1] = first[g] + gr.n[g] as usize;
-            }
-            let mut g = (1..GROUPS).filter(|&h| x >= first[h]).count();
-            if g == want {
-                continue;
-            }
-            let mut gr = gr;
-            while g != want {
-                // Swap with the particle at the boundary towards `want`; the boundary moves
-                // past x, which changes group.
-                let y = if want > g {
-                    gr.n[g] -= 1;
-                    gr.n[g + 1] += 1;
-                    first[g + 1] -= 1;
-                    first[g + 1]
-                } else {
-                    gr.n[g] -= 1;
-                    gr.n[g - 1] += 1;
-                    first[g] += 1;
-                    first[g] - 1
-                };
-                self.swap_particles(x, y);
-                for e in &mut list[q + 1..n] {
-                    if e.0 == y {
-                        e.0 = x;
-                    }
-                }
-                x = y;
-                g = if want > g { g + 1 } else { g - 1 };
-            }
-            if gr.n.iter().zip(&gr.cap).any(|(n, c)| n > c) {
-                gr.cap = gr.n.map(capacity);
-                overflow = true;
-            }
-            self.st.groups[s] = gr;
-            self.sync_groups(s);
+        if gr.n.iter().zip(&gr.cap).any(|(n, c)| n > c) {
+            gr.cap = gr.n.map(capacity);
+            overflow = true;
         }
-        if overflow {
-            self.rebuild_rates();
-        }
+        self.st.groups[s] = gr;
+        self.sync_groups(s);
         overflow
     }
 
@@ -718,45 +658,34 @@ impl DsmcSim {
         }
     }
 
-    /// One batch: fill and filter, then try the candidates in order. Accepted collisions are
-    /// applied at the end of the batch or before an output time; their particles change
-    /// groups at the end of the batch. A candidate on a particle of a collision accepted in
-    /// this batch ends the batch before it (its filter result and maybe its velocities are
-    /// stale), as does the PENDING-th acceptance; candidates not tried stay for the next
-    /// batch, resolved and filtered again. Batches therefore end at the same trials whatever
-    /// the output schedule, and so does the random stream. Adds the trials (void ones
+    /// One batch: fill the queue, then try its first BATCH candidates in order, each
+    /// resolved against the current groups. An accepted collision is applied at once (its
+    /// particles change groups at once), after the outputs before its time; when it changes
+    /// the proposal tables the queue is void and the batch ends. Adds the trials (void ones
     /// excluded) to `trials`.
     fn low_rank_batch(&mut self, trials: &mut u64) -> Result<BatchEnd, PhysicsError> {
         self.fill();
-        let mut p = Accepted::new();
         let mut tried = BATCH;
         let mut end = BatchEnd::More;
-        let mut void = None;
+        let mut void = false;
         for j in 0..BATCH {
             // The queue holds AHEAD candidates until this loop ends (a void clears it and
-            // leaves the loop).
-            // The next batch's candidates are prefetched one per trial, so that the misses
-            // are spread over the batch (a burst of them stalls on the miss buffers).
+            // leaves the loop). The next batch's candidates are prefetched one per trial, so
+            // that the misses are spread over the batch (a burst of them stalls on the miss
+            // buffers).
             self.prefetch_candidate(j + BATCH);
-            let mut c = self.batch.get(j);
-            // Resolved (the groups do not change within a batch): species without the group
-            // bits, a as its position (0 for a slot past its group's size, a void trial).
+            let c = self.batch.get(j);
+            // Resolved: a's position (None for a slot past its group's size, a void trial).
             let (apos, ub) = self.resolve(&c);
-            c.i &= SPECIES_MASK;
-            c.a = apos.unwrap_or(0) as u32;
-            if p.n > 0 && p.touches(&c) {
-                tried = j;
-                break;
-            }
             self.st.gap_prod *= c.gap;
             if self.st.gap_prod < 1e-250 {
                 self.st.gap_log += self.st.gap_prod.ln();
                 self.st.gap_prod = 1.0;
             }
-            if apos.is_none() {
+            let Some(a) = apos else {
                 continue;
-            }
-            let (a, b) = (c.a as usize, c.b as usize);
+            };
+            let b = c.b as usize;
             debug_assert!(a < self.st.vel.len() && b < self.st.vel.len());
             // SAFETY: a resolved candidate's a and b are particle positions.
             let (va, vb) =
@@ -767,50 +696,25 @@ impl DsmcSim {
                 continue;
             }
             // Accepted: the collision happens at t_c; outputs before it see the old state.
-            let t_last = if p.n > 0 { p.t[p.n - 1] } else { self.st.t };
-            let t = self.gap_time_from(t_last);
-            if self.next_event <= t {
-                void = self.apply_accepted(&mut p);
-                if void.is_some() {
-                    break;
-                }
-                if self.outputs_before(t)? {
-                    tried = j + 1;
-                    end = BatchEnd::Done;
-                    break;
-                }
-            }
-            if !self.st.disp.is_empty() {
-                // The displacements are updated when the batch's collisions are applied.
-                prefetch(self.st.disp.as_ptr().wrapping_add(a));
-                prefetch(self.st.disp.as_ptr().wrapping_add(b));
-            }
-            p.push(c, t, j);
-            if p.n == PENDING {
+            let t = self.gap_time();
+            if self.next_event <= t && self.outputs_before(t)? {
                 tried = j + 1;
+                end = BatchEnd::Done;
+                break;
+            }
+            let (i, k) = ((c.i & SPECIES_MASK) as usize, c.k as usize);
+            if self.collide_now((a, i), (b, k), va, vb, g, g2, t) {
+                tried = j + 1;
+                void = true;
                 break;
             }
         }
-        if void.is_none() && !matches!(end, BatchEnd::Done) {
-            void = self.apply_accepted(&mut p);
-        }
-        if self.relocate(&p) && void.is_none() && p.applied > 0 {
-            // New capacities: the trials after the batch's last collision are void.
+        if void {
             self.batch.clear();
             self.st.gap_prod = 1.0;
             self.st.gap_log = 0.0;
-            void = Some(p.trial[p.applied - 1] as usize);
-        }
-        if self.refresh_pending {
-            self.refresh_pending = false;
-            self.refresh_bounds();
-        }
-        match void {
-            Some(j) => tried = j + 1,
-            None if !matches!(end, BatchEnd::Done) => {
-                self.batch.advance(tried);
-            }
-            None => {}
+        } else if !matches!(end, BatchEnd::Done) {
+            self.batch.advance(tried);
         }
         *trials += tried as u64;
         Ok(end)

@@ -83,8 +83,9 @@ pub struct Candidate {
 /// How many trials ahead candidates are drawn, so their velocities can be prefetched: the
 /// ring is refilled in batches of `PIPELINE_DEPTH / 2` whenever half of it is used.
 pub const PIPELINE_DEPTH: usize = 32;
-/// Layout version of [`DsmcState`] in checkpoints.
-pub const STATE_FORMAT: &str = "dsmc/4";
+/// Layout version of [`DsmcState`] in checkpoints (5: the low-rank queue holds two batches
+/// and collisions are applied when accepted, so a dsmc/4 pipeline would resume differently).
+pub const STATE_FORMAT: &str = "dsmc/5";
 
 /// A raised speed bound gets this much head-room, so that it is not raised again at once.
 pub const RAISE_SLACK: f64 = 1.05;
@@ -159,8 +160,6 @@ pub struct DsmcSim {
     slot_species: Vec<u32>,
     /// Low-rank with TAMSD: the position of each tracer (derived from `st.ids`).
     tracer_pos: Vec<u32>,
-    /// Low-rank: a refresh is due at the end of the current batch.
-    refresh_pending: bool,
     /// Low-rank: the groups as the hot loop reads them (derived from `st.groups`).
     gtab: Vec<low_rank::GroupInfo>,
     /// Bird: candidates drawn ahead (saved in `st.pipeline` at checkpoints).
@@ -333,7 +332,6 @@ impl DsmcSim {
             slot_term,
             slot_species,
             tracer_pos: Vec::new(),
-            refresh_pending: false,
             gtab: Vec::new(),
             ring,
             batch,
