@@ -117,7 +117,7 @@ impl Engine {
     /// Simulated time reached (auxiliary models: realisations or walks done).
     pub fn time(&self) -> f64 {
         match self {
-            Engine::Dsmc(s) => s.st.t,
+            Engine::Dsmc(s) => s.time(),
             Engine::Rfm(r) => r.sim.time(),
             Engine::Bisection(r) => r.done() as f64,
             Engine::Cascade(r) => r.done() as f64,

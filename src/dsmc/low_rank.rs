@@ -419,7 +419,8 @@ impl DsmcSim {
     }
 
     /// Apply the accepted collision of particles a (species i) and b (species k), velocities
-    /// va and vb, relative velocity g (|g|^2 = g2), at time t; then move the two particles
+    /// va and vb, relative velocity g (|g|^2 = g2), at time t (NaN for lazy collision times,
+    /// where the time is not needed); then move the two particles
     /// to the groups their new speeds belong to. Returns whether the proposal tables changed
     /// (a speed bound raised, a group past its capacity, a refresh done): the candidates drawn
     /// ahead came from the old tables and are void (the decision depends only on the past).
@@ -460,8 +461,8 @@ impl DsmcSim {
                 d[2] += v[2] * dt;
                 d[3] = t;
             }
+            self.st.t = t;
         }
-        self.st.t = t;
         unsafe {
             *self.st.vel.get_unchecked_mut(a) = na;
             *self.st.vel.get_unchecked_mut(b) = nb;
@@ -665,6 +666,7 @@ impl DsmcSim {
     /// excluded) to `trials`.
     fn low_rank_batch(&mut self, trials: &mut u64) -> Result<BatchEnd, PhysicsError> {
         self.fill();
+        let lazy = self.lazy_time();
         let mut tried = BATCH;
         let mut end = BatchEnd::More;
         let mut void = false;
@@ -681,6 +683,7 @@ impl DsmcSim {
             if self.st.gap_prod < 1e-250 {
                 self.st.gap_log += self.st.gap_prod.ln();
                 self.st.gap_prod = 1.0;
+                self.update_lazy_threshold();
             }
             let Some(a) = apos else {
                 continue;
@@ -696,14 +699,28 @@ impl DsmcSim {
                 continue;
             }
             // Accepted: the collision happens at t_c; outputs before it see the old state.
-            let t = self.gap_time();
-            if self.next_event <= t && self.outputs_before(t)? {
-                tried = j + 1;
-                end = BatchEnd::Done;
-                break;
-            }
+            // With lazy times t_c is computed only when it may be at or after the next
+            // output (it then becomes the new `st.t`).
+            let t = if !lazy || self.st.gap_prod <= self.lazy_thr {
+                let t = self.gap_time();
+                self.st.t = t;
+                if self.next_event <= t && self.outputs_before(t)? {
+                    tried = j + 1;
+                    end = BatchEnd::Done;
+                    break;
+                }
+                self.update_lazy_threshold();
+                t
+            } else {
+                f64::NAN
+            };
             let (i, k) = ((c.i & SPECIES_MASK) as usize, c.k as usize);
+            let rate = self.rate;
             if self.collide_now((a, i), (b, k), va, vb, g, g2, t) {
+                if lazy {
+                    // The tables changed: fix the time of this collision (at the old rate).
+                    self.st.t -= (self.st.gap_log + self.st.gap_prod.ln()) / rate;
+                }
                 tried = j + 1;
                 void = true;
                 break;
@@ -713,6 +730,7 @@ impl DsmcSim {
             self.batch.clear();
             self.st.gap_prod = 1.0;
             self.st.gap_log = 0.0;
+            self.update_lazy_threshold();
         } else if !matches!(end, BatchEnd::Done) {
             self.batch.advance(tried);
         }

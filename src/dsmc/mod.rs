@@ -160,6 +160,8 @@ pub struct DsmcSim {
     slot_species: Vec<u32>,
     /// Low-rank with TAMSD: the position of each tracer (derived from `st.ids`).
     tracer_pos: Vec<u32>,
+    /// Low-rank without displacements: see [`update_lazy_threshold`](Self::update_lazy_threshold).
+    lazy_thr: f64,
     /// Low-rank: the groups as the hot loop reads them (derived from `st.groups`).
     gtab: Vec<low_rank::GroupInfo>,
     /// Bird: candidates drawn ahead (saved in `st.pipeline` at checkpoints).
@@ -333,6 +335,7 @@ impl DsmcSim {
             slot_species,
             tracer_pos: Vec::new(),
             gtab: Vec::new(),
+            lazy_thr: 0.0,
             ring,
             batch,
             speed,
@@ -428,7 +431,7 @@ impl DsmcSim {
         if self.st.done {
             return 1.0;
         }
-        ((1.0 + self.st.t).ln() / (1.0 + self.sys.t_end).ln()).clamp(0.0, 1.0)
+        ((1.0 + self.time()).ln() / (1.0 + self.sys.t_end).ln()).clamp(0.0, 1.0)
     }
 
     /// Run at most `max_trials` trials; `Ok(true)` once t_end is reached.
@@ -501,6 +504,7 @@ impl DsmcSim {
                 );
                 self.pair_i.rebuild(&w);
                 self.rate = self.sys.rate_scale * self.pair_i.total();
+                self.update_lazy_threshold();
             }
             DsmcMethod::Bird => {
                 let n = self.sys.n_particles() as f64;
@@ -649,6 +653,39 @@ impl DsmcSim {
             _ => f64::INFINITY,
         };
         self.next_event = output.min(grid);
+        self.update_lazy_threshold();
+    }
+
+    /// Low-rank without displacements, where a collision's time is needed only to know
+    /// whether an output comes first: collision times are not summed one by one (a logarithm
+    /// each); the trials' uniforms multiply on since the last time fixed (`st.t`), and the
+    /// next collision is at or after `next_event` when the product is at or below this
+    /// threshold, exp(-(next_event - t) rate - gap_log). Derived from the state (so a
+    /// resumed run decides the same); recomputed whenever t, the rate, `gap_log` or
+    /// `next_event` change.
+    pub(super) fn update_lazy_threshold(&mut self) {
+        self.lazy_thr = if self.lazy_time() && self.next_event.is_finite() && self.rate > 0.0 {
+            (-(self.next_event - self.st.t) * self.rate - self.st.gap_log).exp()
+        } else {
+            0.0
+        };
+    }
+
+    /// Whether collision times are fixed only when needed (see
+    /// [`update_lazy_threshold`](Self::update_lazy_threshold)).
+    #[inline(always)]
+    pub(super) fn lazy_time(&self) -> bool {
+        self.sys.method == DsmcMethod::LowRank && self.st.disp.is_empty()
+    }
+
+    /// Simulated time reached: `st.t`, plus, for lazy collision times, the time of the
+    /// trials since (without changing the state).
+    pub fn time(&self) -> f64 {
+        if self.lazy_time() && self.rate > 0.0 && !self.st.done {
+            self.st.t - (self.st.gap_log + self.st.gap_prod.ln()) / self.rate
+        } else {
+            self.st.t
+        }
     }
 
     /// Append the tracers' displacements at grid time `t` (extrapolated like `record`, without
