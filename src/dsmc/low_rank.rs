@@ -8,7 +8,7 @@
 //!
 //! Speed groups tighten the majorant without changing the process: each species with at
 //! least [`GROUP_MIN`] particles is split into a slow group (speeds below a threshold set at
-//! each refresh, [`SLOW_FACTOR`] times the species' rms speed; its particles come first in the
+//! each refresh, [`GROUP_FACTORS`] times the species' rms speed; its particles come first in the
 //! species' range) and a fast group bounded by vmax_i. The u side then proposes (term, species,
 //! group) with weight W_r sigma_i^p C_ig b_ig (C_ig >= N_ig a capacity fixed between
 //! rebuilds, b_ig the group's bound) and a uniform slot of the group's capacity (a slot past
