@@ -268,6 +268,22 @@ impl CandidateQueue {
     }
 }
 
+impl Candidate {
+    /// A low-rank candidate: species i with its proposed group (bits from GROUP_SHIFT), slot
+    /// `a` of the group, species k and particle b of it.
+    #[inline(always)]
+    fn low_rank(ig: u32, k: usize, a: usize, b: usize, u: f64, gap: f64) -> Self {
+        Candidate {
+            i: ig,
+            k: k as u32,
+            a: a as u32,
+            b: b as u32,
+            u,
+            gap,
+        }
+    }
+}
+
 /// How a batch ended.
 enum BatchEnd {
     /// Go on with the next batch.
@@ -302,47 +318,18 @@ impl DsmcSim {
             crate::rng::lemire32((w2 >> 32) as u32, ga.cap),
             crate::rng::lemire32(w2 as u32, (ok1 - ok) as u32),
         ) else {
-            return self.draw_candidate_redraw();
+            // A slot must be redrawn (probability below n / 2^32): words 0 and 1 stand, the
+            // slots (with their redraws) and the uniforms come one word at a time from word 2.
+            self.rng.consume(2);
+            let (ja, db) = self.rng.below_pair(ga.cap as usize, ok1 - ok);
+            let (u, gap) = (self.rng.f64(), self.rng.f64_open0());
+            return Candidate::low_rank(ig, k, ja, ok + db, u, gap);
         };
         let (ja, b) = (ja as usize, ok + db as usize);
         self.rng.consume(5);
         let u = crate::rng::unit_f64(w3);
         let gap = crate::rng::unit_f64_open0(w4);
-        Candidate {
-            i: ig,
-            k: k as u32,
-            a: ja as u32,
-            b: b as u32,
-            u,
-            gap,
-        }
-    }
-
-    /// [`draw_candidate`](Self::draw_candidate) when a slot must be redrawn (probability
-    /// below n / 2^32): the same words, one at a time, with the redraws.
-    #[cold]
-    #[inline(never)]
-    fn draw_candidate_redraw(&mut self) -> Candidate {
-        let ri = self.pair_i.sample(self.rng.u64());
-        let (r, ig) = (self.slot_term[ri] as usize, self.slot_species[ri]);
-        let i = (ig & SPECIES_MASK) as usize;
-        let g = (ig >> GROUP_SHIFT) as usize;
-        let k = self.pair_k[r].sample(self.rng.u64());
-        let ga = self.gtab[GROUPS * i + g];
-        let (ja, db) = self
-            .rng
-            .below_pair(ga.cap as usize, self.off[k + 1] - self.off[k]);
-        let b = self.off[k] + db;
-        let u = self.rng.f64();
-        let gap = self.rng.f64_open0();
-        Candidate {
-            i: ig,
-            k: k as u32,
-            a: ja as u32,
-            b: b as u32,
-            u,
-            gap,
-        }
+        Candidate::low_rank(ig, k, ja, b, u, gap)
     }
 
     /// Recompute the hot-loop view of species s's groups.
