@@ -162,6 +162,9 @@ pub struct DsmcSim {
     tracer_pos: Vec<u32>,
     /// Low-rank without displacements: see [`update_lazy_threshold`](Self::update_lazy_threshold).
     lazy_thr: f64,
+    /// Low-rank with displacements: updates of the last collisions not yet written (empty
+    /// between `advance` calls, before outputs and before particles move).
+    disp_pending: low_rank::PendingDisplacements,
     /// Low-rank: the groups as the hot loop reads them (derived from `st.groups`).
     gtab: Vec<low_rank::GroupInfo>,
     /// Bird: candidates drawn ahead (saved in `st.pipeline` at checkpoints).
@@ -336,6 +339,7 @@ impl DsmcSim {
             tracer_pos: Vec::new(),
             gtab: Vec::new(),
             lazy_thr: 0.0,
+            disp_pending: Default::default(),
             ring,
             batch,
             speed,
@@ -717,6 +721,9 @@ impl DsmcSim {
     /// collision: they see the state before it); mark the run done if `t_next` is past t_end.
     #[inline]
     fn outputs_before(&mut self, t_next: f64) -> Result<bool, PhysicsError> {
+        if !self.disp_pending.is_empty() {
+            self.flush_displacements();
+        }
         if let Some((grid, t_end)) = self.sys.tamsd.as_ref().map(|p| (p.grid, self.sys.t_end)) {
             while self.st.next_grid <= grid {
                 let t = crate::manifest::dsmc::grid_time(t_end, grid, self.st.next_grid);
