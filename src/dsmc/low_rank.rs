@@ -45,9 +45,10 @@ pub const GROUP_MIN: u64 = 64;
 /// Speed groups per species.
 pub const GROUPS: usize = 2;
 /// Upper speed bounds of the groups below the top one, in units of the species' rms speed at
-/// the refresh (the top group is bounded by vmax). For a Maxwell gas these minimise the mean
-/// bound, 0.76 of the two-group optimum (0.98 v_rms = 1.7 and 1.59 v_rms = 2.75 standard
-/// deviations of a component: ~60 %, ~33 % and ~7 % of the particles).
+/// the refresh (the top group is bounded by vmax). With two groups, 1.6 v_rms (2.77 standard
+/// deviations of a component) puts ~95 % of a Maxwell gas in the slow group. (Three groups,
+/// [0.98, 1.59]: ~60 %, ~33 % and ~7 %, 27 % fewer trials for Table I but slower, the group
+/// moves costing more than the trials saved; see README, Performance.)
 pub const GROUP_FACTORS: [f64; GROUPS - 1] = [1.6];
 /// Candidate's `i` holds the proposed group from this bit on.
 pub const GROUP_SHIFT: u32 = 30;
@@ -200,7 +201,8 @@ pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), String> {
 
 /// Candidates tried per batch (16-32 were fastest for Table I; 64 4 % and 128 15 % slower).
 pub const BATCH: usize = 32;
-/// Candidates drawn ahead: the batch being tried and two more in the prefetch pipeline.
+/// Candidates drawn ahead: the batch being tried and the next one (whose velocity lines are
+/// prefetched while this one is tried).
 pub const AHEAD: usize = 2 * BATCH;
 /// Capacity of the candidate queue (a power of two, at least AHEAD).
 const QUEUE: usize = 128;
@@ -417,8 +419,9 @@ impl DsmcSim {
         ((ja < ga.n).then_some(pos as usize), ub)
     }
 
-    /// Fill the candidate buffer to [`AHEAD`] candidates (their velocity lines are
-    /// prefetched when drawn, two batches before they are tried).
+    /// Fill the candidate queue to [`AHEAD`] candidates. Their velocity lines are prefetched
+    /// during the batch before theirs (`prefetch_candidate`); after a void, the first batch's
+    /// here.
     fn fill(&mut self) {
         let fresh = self.batch.is_empty();
         while self.batch.len() < AHEAD {
@@ -833,6 +836,41 @@ mod tests {
         }
         let params: DsmcParams = serde_json::from_value(p).unwrap();
         DsmcSim::new(DsmcSystem::from_params(&params).unwrap(), 77)
+    }
+
+    /// A checkpoint whose queued candidate names a particle outside its species k (which
+    /// would move particles across species ranges and index out of bounds), or whose gap
+    /// accumulator or counters are impossible, is refused; the untouched one is accepted.
+    #[test]
+    fn restore_refuses_impossible_candidates_and_counters() {
+        let mut s = sim(false);
+        s.advance(5_000).unwrap();
+        let sys = s.sys.clone();
+        let bytes = s.state_bytes();
+        let st: DsmcState = postcard::from_bytes(&bytes).unwrap();
+        assert!(!st.pipeline.is_empty());
+        let edit = |f: &dyn Fn(&mut DsmcState)| {
+            let mut st = st.clone();
+            f(&mut st);
+            DsmcSim::from_state_bytes(sys.clone(), &postcard::to_stdvec(&st).unwrap())
+        };
+        assert!(edit(&|_| {}).is_ok());
+        let off = s.off.clone();
+        let outside = edit(&|st| {
+            // The first particle of the next species, or the last of the previous one.
+            let k = st.pipeline[0].k as usize;
+            let m = off.len() - 1;
+            st.pipeline[0].b = if k + 1 < m { off[k + 1] } else { off[k] - 1 } as u32;
+        });
+        assert!(
+            outside.is_err(),
+            "a candidate's b outside species k was accepted"
+        );
+        for bad in [f64::NAN, 0.0, 2.0] {
+            assert!(edit(&|st| st.gap_prod = bad).is_err(), "gap_prod {bad}");
+        }
+        assert!(edit(&|st| st.collisions_at_refresh = st.collisions + 1).is_err());
+        assert!(edit(&|st| st.next_output = usize::MAX).is_err());
     }
 
     /// Displacement updates wait in `disp_pending` (flushed before outputs, swaps and the end

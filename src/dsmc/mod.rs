@@ -73,8 +73,8 @@ pub struct Candidate {
     pub k: u32,
     pub a: u32,
     pub b: u32,
-    /// The trial's acceptance uniform, drawn with the pair (low-rank: already multiplied by
-    /// vmax_i + vmax_k, the bound the pair was proposed with).
+    /// The trial's acceptance uniform, drawn with the pair (low-rank: multiplied by the
+    /// pair's group bounds when the candidate is resolved, at its trial).
     pub u: f64,
     /// Low-rank: the trial's uniform in (0, 1] for the exponential gap before it.
     pub gap: f64,
@@ -123,8 +123,9 @@ pub struct DsmcState {
     pub tracks: Vec<[f64; 3]>,
     pub collisions_at_refresh: u64,
     pub pipeline: Vec<Candidate>,
-    /// Product of the uniforms U of the trials since the last collision (the time to the next
-    /// collision is -ln(prod U) / rate, the sum of the trials' exponential gaps).
+    /// Product of the uniforms U of the trials since `t` (the last collision, or for lazy
+    /// low-rank times the last time fixed): the time to the next collision is
+    /// -ln(prod U) / rate, the sum of the trials' exponential gaps.
     pub gap_prod: f64,
     /// Logs of underflow-guarded parts of that product.
     pub gap_log: f64,
@@ -169,14 +170,14 @@ pub struct DsmcSim {
     gtab: Vec<low_rank::GroupInfo>,
     /// Bird: candidates drawn ahead (saved in `st.pipeline` at checkpoints).
     ring: Ring,
-    /// Low-rank: the candidates of the current batch not yet tried (saved in `st.pipeline`).
+    /// Low-rank: the candidates drawn and not yet tried, two batches (saved in `st.pipeline`).
     batch: low_rank::CandidateQueue,
     /// Evaluates eps for a colliding pair.
     eps: EpsModel,
-    /// Per particle, an f32 upper bound (rounded up with margin) on its speed (low-rank) or on
-    /// ((sigma_j + sigma_M)/2)^2 |v_j| (Bird): the sum of the pair's bounds majorises the
-    /// accepted quantity, so most trials are rejected without touching the velocity lines.
-    /// Derived from `vel`.
+    /// Bird: per particle, an f32 upper bound (rounded up with margin) on
+    /// ((sigma_j + sigma_M)/2)^2 |v_j|: the sum of the pair's bounds majorises the accepted
+    /// quantity, so most trials are rejected without touching the velocity lines. Derived
+    /// from `vel`; empty for low-rank.
     speed: Vec<f32>,
 }
 
@@ -379,18 +380,36 @@ impl DsmcSim {
             return Err("checkpoint does not match the run's species".into());
         }
         let (n, m) = (st.vel.len(), sys.species.len());
+        let mut off = vec![0usize];
+        for sp in &sys.species {
+            off.push(off.last().unwrap() + sp.count as usize);
+        }
         let foreign = |c: &Candidate| match sys.method {
             // Low-rank: a is a slot of the proposed group (a slot past the group's size is
-            // a void trial), the group is in the top bits of i.
+            // a void trial), the group is in the top bits of i, b a particle of species k.
             DsmcMethod::LowRank => {
                 let i = (c.i & low_rank::SPECIES_MASK) as usize;
                 let g = (c.i >> low_rank::GROUP_SHIFT) as usize;
-                g >= low_rank::GROUPS || i >= m || c.b as usize >= n || c.k as usize >= m
+                let k = c.k as usize;
+                g >= low_rank::GROUPS
+                    || i >= m
+                    || k >= m
+                    || !(off[k]..off[k + 1]).contains(&(c.b as usize))
             }
             DsmcMethod::Bird => {
                 c.a as usize >= n || c.b as usize >= n || c.i as usize >= m || c.k as usize >= m
             }
         };
+        let counters_ok = st.next_output <= sys.output_times.len()
+            && st.collisions_at_refresh <= st.collisions
+            && st.gap_prod > 0.0
+            && st.gap_prod <= 1.0
+            && st.gap_log <= 0.0
+            && st.gap_log.is_finite()
+            && st.t.is_finite();
+        if !counters_ok {
+            return Err("checkpoint's counters or clock are inconsistent".into());
+        }
         if st.pipeline.len() > PIPELINE_DEPTH.max(low_rank::AHEAD)
             || st.pipeline.iter().any(foreign)
         {
