@@ -6,7 +6,9 @@
 //! rate N^2 C_max pi / V (50).
 
 use super::collision::{collide, uniform_direction};
-use super::{prefetch, speed_bound, Candidate, DsmcSim, PhysicsError, PIPELINE_DEPTH, RAISE_SLACK};
+use super::{
+    drift, prefetch, speed_bound, Candidate, DsmcSim, PhysicsError, PIPELINE_DEPTH, RAISE_SLACK,
+};
 
 /// How many trials ahead of use a candidate's velocity lines are prefetched.
 const STAGE: usize = 8;
@@ -105,14 +107,8 @@ impl DsmcSim {
                 e
             };
             if msd {
-                for (p, v) in [(a, va), (b, vb)] {
-                    let d = &mut self.st.disp[p];
-                    let dt = t - d[3];
-                    d[0] += v[0] * dt;
-                    d[1] += v[1] * dt;
-                    d[2] += v[2] * dt;
-                    d[3] = t;
-                }
+                drift(&mut self.st.disp[a], va, t);
+                drift(&mut self.st.disp[b], vb, t);
             }
             let (ma, mb) = (self.sys.species[i].mass, self.sys.species[k].mass);
             let (mut na, mut nb) = (va, vb);

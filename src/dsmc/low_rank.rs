@@ -26,7 +26,9 @@ use serde::{Deserialize, Serialize};
 
 use super::alias::Alias;
 use super::collision::{collide_impulse, impact_impulse};
-use super::{prefetch, Candidate, DsmcSim, DsmcState, DsmcSystem, PhysicsError, RAISE_SLACK};
+use super::{
+    drift, prefetch, Candidate, DsmcSim, DsmcState, DsmcSystem, PhysicsError, RAISE_SLACK,
+};
 use crate::manifest::dsmc::DsmcMethod;
 
 /// The three static tables over k: weights N_k, N_k sigma_k, N_k sigma_k^2.
@@ -531,12 +533,7 @@ impl DsmcSim {
     /// its velocity before the collision since its last update.
     pub(super) fn flush_displacements(&mut self) {
         for &(j, v, t) in self.disp_pending.take() {
-            let d = &mut self.st.disp[j];
-            let dt = t - d[3];
-            d[0] += v[0] * dt;
-            d[1] += v[1] * dt;
-            d[2] += v[2] * dt;
-            d[3] = t;
+            drift(&mut self.st.disp[j], v, t);
         }
     }
 
@@ -723,12 +720,7 @@ impl DsmcSim {
             let c = self.batch.get(j);
             // Resolved: a's position (None for a slot past its group's size, a void trial).
             let (apos, ub) = self.resolve(&c);
-            self.st.gap_prod *= c.gap;
-            if self.st.gap_prod < 1e-250 {
-                self.st.gap_log += self.st.gap_prod.ln();
-                self.st.gap_prod = 1.0;
-                self.update_lazy_threshold();
-            }
+            self.gap_factor(c.gap);
             let Some(a) = apos else {
                 continue;
             };
@@ -763,7 +755,7 @@ impl DsmcSim {
             if self.collide_now((a, i), (b, k), va, vb, g, g2, t) {
                 if lazy {
                     // The tables changed: fix the time of this collision (at the old rate).
-                    self.st.t -= (self.st.gap_log + self.st.gap_prod.ln()) / rate;
+                    self.st.t += self.gap_elapsed(rate);
                 }
                 tried = j + 1;
                 void = true;

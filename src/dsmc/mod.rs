@@ -282,11 +282,7 @@ impl DsmcSim {
 
     fn assemble(sys: DsmcSystem, st: DsmcState, rng: RunRng) -> Self {
         let geom = RunRng::restore(&st.geom);
-        let mut off = Vec::with_capacity(sys.species.len() + 1);
-        off.push(0);
-        for s in &sys.species {
-            off.push(off.last().unwrap() + s.count as usize);
-        }
+        let off = species_offsets(&sys);
         let pair_k = low_rank::static_tables(&sys);
         let (ring, batch) = match sys.method {
             DsmcMethod::LowRank => (
@@ -380,10 +376,7 @@ impl DsmcSim {
             return Err("checkpoint does not match the run's species".into());
         }
         let (n, m) = (st.vel.len(), sys.species.len());
-        let mut off = vec![0usize];
-        for sp in &sys.species {
-            off.push(off.last().unwrap() + sp.count as usize);
-        }
+        let off = species_offsets(&sys);
         let foreign = |c: &Candidate| match sys.method {
             // Low-rank: a is a slot of the proposed group (a slot past the group's size is
             // a void trial), the group is in the top bits of i, b a particle of species k.
@@ -576,11 +569,27 @@ impl DsmcSim {
     /// One more trial's uniform in the product that gives the time to the next collision.
     #[inline(always)]
     fn gap_trial(&mut self) {
-        self.st.gap_prod *= self.rng.f64_open0();
+        let u = self.rng.f64_open0();
+        self.gap_factor(u);
+    }
+
+    /// Multiply a trial's gap uniform `u` into the product (its underflow-guarded part moved
+    /// to `gap_log`, which moves the lazy-time threshold).
+    #[inline(always)]
+    fn gap_factor(&mut self, u: f64) {
+        self.st.gap_prod *= u;
         if self.st.gap_prod < 1e-250 {
             self.st.gap_log += self.st.gap_prod.ln();
             self.st.gap_prod = 1.0;
+            self.update_lazy_threshold();
         }
+    }
+
+    /// The sum of the exponential gaps of the trials in the product, at trial rate `rate`:
+    /// -ln(prod U) / rate.
+    #[inline(always)]
+    fn gap_elapsed(&self, rate: f64) -> f64 {
+        -(self.st.gap_log + self.st.gap_prod.ln()) / rate
     }
 
     /// Time of the trial just accepted: the trials since the last collision had i.i.d.
@@ -593,10 +602,10 @@ impl DsmcSim {
     /// [`gap_time`](Self::gap_time) after a collision at `t_last`.
     #[inline(always)]
     fn gap_time_from(&mut self, t_last: f64) -> f64 {
-        let s = -(self.st.gap_log + self.st.gap_prod.ln());
+        let dt = self.gap_elapsed(self.rate);
         self.st.gap_prod = 1.0;
         self.st.gap_log = 0.0;
-        t_last + s / self.rate
+        t_last + dt
     }
 
     /// With a zero trial rate (every particle at rest) nothing happens until t_end.
@@ -705,7 +714,7 @@ impl DsmcSim {
     /// trials since (without changing the state).
     pub fn time(&self) -> f64 {
         if self.lazy_time() && self.rate > 0.0 && !self.st.done {
-            self.st.t - (self.st.gap_log + self.st.gap_prod.ln()) / self.rate
+            self.st.t + self.gap_elapsed(self.rate)
         } else {
             self.st.t
         }
@@ -842,6 +851,27 @@ impl EpsModel {
             EpsModel::Viscoelastic { table, a_pair, m } => table.eps_pair(a_pair[k * m + i], g_n),
         }
     }
+}
+
+/// Offsets of the species' particle ranges (M + 1 entries, the last one N).
+pub fn species_offsets(sys: &DsmcSystem) -> Vec<usize> {
+    let mut off = Vec::with_capacity(sys.species.len() + 1);
+    off.push(0);
+    for s in &sys.species {
+        off.push(off.last().unwrap() + s.count as usize);
+    }
+    off
+}
+
+/// Move a displacement record [x, y, z, t_last] on to time t with velocity v (constant since
+/// t_last).
+#[inline(always)]
+pub fn drift(d: &mut [f64; 4], v: [f64; 3], t: f64) {
+    let dt = t - d[3];
+    d[0] += v[0] * dt;
+    d[1] += v[1] * dt;
+    d[2] += v[2] * dt;
+    d[3] = t;
 }
 
 /// Seed of a run's impact-direction stream (low-rank): a fixed bijective mix of the run's
