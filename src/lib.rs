@@ -23,6 +23,7 @@ pub mod engine;
 pub mod exit_codes;
 pub mod fsutil;
 pub mod manifest;
+pub mod math;
 pub mod memory;
 pub mod plan;
 pub mod plot;

@@ -7,7 +7,7 @@
 
 use std::f64::consts::PI;
 
-use super::fit::{self, Fit};
+use crate::math::fit::{self, Fit};
 
 /// k_D (4.5) with l_0 from (4.7): (2 - eps_n^2 - eps_t^2) phi / (pi d). (The /8 form of the
 /// thesis's tables, spec 6.18.)
@@ -109,7 +109,7 @@ pub fn mean_field_count(r: f64, n: f64, box_length: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::fit::tests::sd;
+    use crate::math::fit::tests::sd;
     use crate::rng::RunRng;
 
     #[test]

@@ -4,7 +4,7 @@
 //! Either A_0, C, D_f free (D_f from the paths, compare with S(k)) or D_f fixed (the thesis's
 //! C = 78 / 121 / 179 use D_f = 1.63).
 
-use super::fit::{self, Fit};
+use crate::math::fit::{self, Fit};
 
 /// One free-path bin: centre (geometric for log bins), density (m^-1), count.
 #[derive(Clone, Copy, Debug)]
@@ -69,7 +69,7 @@ pub fn fit_tail(bins: &[PathBin], fixed_df: Option<f64>) -> Option<Fit> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::fit::tests::sd;
+    use crate::math::fit::tests::sd;
     use crate::rng::RunRng;
 
     /// Expected counts of (4.25) in log bins with Poisson-like noise: D_f and C recovered

@@ -15,7 +15,6 @@
 //! replica the run's own block error where the table has one.
 
 pub mod figures;
-pub mod fit;
 pub mod fractal;
 pub mod free_path;
 pub mod multiscaling;
@@ -1146,7 +1145,7 @@ fn tail_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
         .collect();
     if alphas.len() >= 2 {
         let (v, e): (Vec<f64>, Vec<f64>) = alphas.iter().copied().unzip();
-        if let Some((m, err, chi)) = fit::weighted_mean(&v, &e) {
+        if let Some((m, err, chi)) = crate::math::fit::weighted_mean(&v, &e) {
             ctx.fit(
                 "alpha_weighted_mean",
                 "all points with an accepted alpha",

@@ -3,7 +3,7 @@
 //! the uniform-bisection prediction zeta_m = ln(1+m)/ln 2 (spec 5.8) and the scaling collapse
 //! of F 3.3, <v^2> N^xi_2 (D L'/M^2)^(-2/3) against 1 - eps^2.
 
-use super::fit::{self, Fit};
+use crate::math::fit::{self, Fit};
 
 /// One moment at one N: value and standard error (block or replica), if any.
 #[derive(Clone, Copy, Debug)]
@@ -62,7 +62,7 @@ pub fn bisection_density(x: f64, n: f64) -> f64 {
     if !(x > 0.0 && x < 1.0) {
         return 0.0;
     }
-    (-x.ln()).powf(n - 1.0) / crate::theory::quad::gamma(n)
+    (-x.ln()).powf(n - 1.0) / crate::math::quad::gamma(n)
 }
 
 /// The collapse variable of F 3.3: <v^2> N^xi_2 (D L'/M^2)^(-2/3).
@@ -80,7 +80,7 @@ pub fn collapse_value(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::fit::tests::sd;
+    use crate::math::fit::tests::sd;
     use crate::rng::RunRng;
 
     #[test]

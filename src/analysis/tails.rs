@@ -5,7 +5,7 @@
 //! Histograms are of signed velocity components; they are folded to |v| (the 1D thesis
 //! histograms are of |v|, spec 6.12; in 2D both components are pooled and folded [REC]).
 
-use super::fit::{self, Fit};
+use crate::math::fit::{self, Fit};
 
 /// One bin of a folded histogram: |v| at the bin centre, its count and width.
 #[derive(Clone, Copy, Debug, PartialEq)]

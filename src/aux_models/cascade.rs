@@ -547,7 +547,7 @@ impl CascadeRun {
         }
         let n = x.len() as u32;
         (
-            super::fit::wls_line(&x, &y, &w)
+            crate::math::fit::wls_line(&x, &y, &w)
                 .map(|(a, b, _, sb, chi2)| (-b, sb * chi2.max(1.0).sqrt(), a.exp(), chi2)),
             n,
         )
@@ -562,7 +562,7 @@ impl CascadeRun {
         let tau = 2.0 * std::f64::consts::PI / c.box_length;
         let mut sk: Vec<SkRow> = (0..self.n2.len())
             .map(|s| {
-                let (mean, sem) = super::mean_sem(r, self.st.s_sum[s], self.st.s_sum2[s]);
+                let (mean, sem) = crate::math::stats::mean_sem_from_sums(r, self.st.s_sum[s], self.st.s_sum2[s]);
                 SkRow {
                     source: "field".into(),
                     n2: self.n2[s],

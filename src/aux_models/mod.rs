@@ -15,7 +15,6 @@
 
 pub mod bisection;
 pub mod cascade;
-pub mod fit;
 pub mod spm;
 
 /// The rows of a finished auxiliary-model run.
@@ -24,19 +23,4 @@ pub enum AuxOutput {
     Bisection(bisection::BisectionOutput),
     Cascade(cascade::CascadeOutput),
     Spm(spm::SpmOutput),
-}
-
-/// Mean and standard error of the mean from a count, sum and sum of squares (None for fewer
-/// than two values).
-pub fn mean_sem(n: u64, sum: f64, sum2: f64) -> (f64, Option<f64>) {
-    if n == 0 {
-        return (f64::NAN, None);
-    }
-    let nf = n as f64;
-    let mean = sum / nf;
-    if n < 2 {
-        return (mean, None);
-    }
-    let var = ((sum2 - nf * mean * mean) / (nf - 1.0)).max(0.0);
-    (mean, Some((var / nf).sqrt()))
 }

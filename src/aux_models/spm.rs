@@ -122,7 +122,7 @@ pub fn fit_free_path_tail(edges: &[f64], density: &[f64], below: f64) -> Option<
         let beta = d_f - 1.0;
         let x: Vec<f64> = pts.iter().map(|p| p.0.powf(beta)).collect();
         let y: Vec<f64> = pts.iter().map(|p| p.1 - (beta - 1.0) * p.0.ln()).collect();
-        if let Some((_, b, _, _, chi2)) = super::fit::wls_line(&x, &y, &w) {
+        if let Some((_, b, _, _, chi2)) = crate::math::fit::wls_line(&x, &y, &w) {
             if b < 0.0 && best.is_none_or(|bb| chi2 < bb.2) {
                 best = Some((d_f, -b, chi2));
             }
@@ -435,7 +435,7 @@ impl SpmRun {
             let x: Vec<f64> = pts.iter().map(|m| (m.0 / vl).powi(2)).collect();
             let y: Vec<f64> = pts.iter().map(|m| m.1.ln()).collect();
             let w: Vec<f64> = pts.iter().map(|m| m.2 as f64).collect();
-            if let Some((_, slope, _, sb, chi2)) = super::fit::wls_line(&x, &y, &w) {
+            if let Some((_, slope, _, sb, chi2)) = crate::math::fit::wls_line(&x, &y, &w) {
                 let f = 2f64.powf(2.0 / 3.0);
                 gc = Some(-slope * f);
                 gce = Some(sb * chi2.max(1.0).sqrt() * f);
@@ -495,14 +495,14 @@ impl SpmRun {
             let v: Vec<f64> = tail.iter().map(|m| m.0).collect();
             let lp: Vec<f64> = tail.iter().map(|m| m.1.ln()).collect();
             let w: Vec<f64> = tail.iter().map(|m| m.2 as f64).collect();
-            if let Some((a, k, _)) = super::fit::stretched_exponential(&v, &lp, &w, 0.3, 3.0) {
+            if let Some((a, k, _)) = crate::math::fit::stretched_exponential(&v, &lp, &w, 0.3, 3.0) {
                 am = Some(a);
                 km = Some(k);
             }
             // (5.31): with the predicted prefactor H(v) ~ v^h divided out.
             if let Some(h) = pred.map(|p| p.2) {
                 let lph: Vec<f64> = v.iter().zip(&lp).map(|(v, l)| l - h * v.ln()).collect();
-                if let Some((a, k, _)) = super::fit::stretched_exponential(&v, &lph, &w, 0.3, 3.0) {
+                if let Some((a, k, _)) = crate::math::fit::stretched_exponential(&v, &lph, &w, 0.3, 3.0) {
                     amh = Some(a);
                     kmh = Some(k);
                 }
@@ -558,7 +558,7 @@ fn fit_c_at(edges: &[f64], density: &[f64], below: f64, d_f: f64) -> Option<f64>
         }
     }
     let w = vec![1.0; x.len()];
-    super::fit::wls_line(&x, &y, &w).map(|f| -f.1)
+    crate::math::fit::wls_line(&x, &y, &w).map(|f| -f.1)
 }
 
 #[cfg(test)]

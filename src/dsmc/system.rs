@@ -163,10 +163,10 @@ impl DsmcSystem {
         };
         let mut species = species;
         if let InitialTemperature::Hcs { mean } = p.initial_temperature {
-            let th: Vec<crate::theory::temperature::Species> = species
+            let th: Vec<crate::theory::Species> = species
                 .iter()
                 .map(|s| {
-                    crate::theory::temperature::Species::new(
+                    crate::theory::Species::new(
                         s.mass,
                         s.diameter,
                         s.count as f64 / volume,

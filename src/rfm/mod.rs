@@ -8,7 +8,6 @@
 //! - [`integrate`]: the integrator: random kick, then the exact flow of every contact over
 //!   the step (closed-form damped oscillator with the exact in-step start and end times),
 //!   superposed over pairs.
-//! - [`stream`]: the run's ChaCha8 stream generated in bulk (vectorised block function).
 //! - [`noise`]: bulk normals and the symmetrised kicks (variance 2 D dt / M^2 per component).
 //! - [`neighbours`]: 1D ring neighbours; 2D cell-built Verlet lists with a skin.
 //! - [`sim`]: [`RfmSim`], the state, initial layouts, checkpoints.
@@ -48,7 +47,6 @@ pub mod noise;
 pub mod observe;
 pub mod params;
 pub mod sim;
-pub mod stream;
 pub mod structure;
 
 pub use params::{InitialLayout, RfmConfig};

@@ -12,7 +12,7 @@
 
 use std::sync::OnceLock;
 
-use super::stream::WordStream;
+use crate::rng::stream::WordStream;
 
 /// Layers of the normal ziggurat (the layer index is the low 8 bits of a word, the sign
 /// bit 8, the value bits 11-63).

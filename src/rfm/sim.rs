@@ -15,7 +15,7 @@ use super::neighbours::{wrap, NeighbourList};
 use super::noise::Kicks;
 use super::observe::HistRow;
 use super::params::{InitialLayout, RfmConfig};
-use super::stream::WordStream;
+use crate::rng::stream::WordStream;
 use crate::rng::{RngPosition, RunRng};
 
 /// Skin of the 2D neighbour list, in diameters.

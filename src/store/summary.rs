@@ -18,30 +18,10 @@ use super::tables;
 use crate::campaign::ledger::RunStatus;
 use crate::campaign::Campaign;
 use crate::fsutil;
+pub use crate::math::stats::{mean_sem, replica_mean_sem};
 
 /// Rows of the raw table held at once (per chunk of points).
 const CHUNK_ROWS: u64 = 4_000_000;
-
-/// Mean and standard error of the mean (None for fewer than two values).
-/// (replicas, mean, sem) of (replica, value) pairs, summed in replica order so the result does
-/// not depend on the order in which runs finished; a replica counts once.
-pub fn replica_mean_sem<R: Ord + Copy>(mut v: Vec<(R, f64)>) -> (u32, f64, Option<f64>) {
-    v.sort_by_key(|x| x.0);
-    v.dedup_by_key(|x| x.0);
-    let xs: Vec<f64> = v.iter().map(|x| x.1).collect();
-    let (mean, sem) = mean_sem(&xs);
-    (xs.len() as u32, mean, sem)
-}
-
-pub fn mean_sem(x: &[f64]) -> (f64, Option<f64>) {
-    let n = x.len() as f64;
-    let mean = x.iter().sum::<f64>() / n;
-    if x.len() < 2 {
-        return (mean, None);
-    }
-    let var = x.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0);
-    (mean, Some((var / n).sqrt()))
-}
 
 /// Every batch of every part of `table` (only this campaign's parts; see
 /// `parquet_io::read_campaign_file`).

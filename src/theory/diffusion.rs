@@ -4,7 +4,7 @@
 //! (8). g2 = 1.
 
 use super::restitution::{pair_rates, PairRestitution};
-use super::temperature::Species;
+use super::species::Species;
 use std::f64::consts::PI;
 
 /// tau_c (7): 1 / (4 n_1 sigma_1^2 sqrt(pi T_1 / m_1)) of the reference species `s1` at

@@ -73,12 +73,11 @@
 pub mod diffusion;
 pub mod hcs;
 pub mod msd;
-mod ode;
-pub mod quad;
 pub mod restitution;
+pub mod species;
 pub mod tamsd;
 pub mod temperature;
 pub mod tracer;
 
 pub use restitution::{PairEps, PairRates, PairRestitution, ScaledEps};
-pub use temperature::Species;
+pub use species::Species;

@@ -50,8 +50,8 @@
 //! For velocity-dependent eps the averages are computed by adaptive Gauss-Legendre quadrature
 //! over z in [0, 9.5] (the neglected tail is < 1e-33 of the total), to ~1e-13 relative.
 
-use super::quad::{adaptive, gamma};
-use super::temperature::Species;
+use crate::math::quad::{adaptive, gamma};
+use super::species::Species;
 use std::f64::consts::PI;
 use std::fmt;
 use std::sync::Arc;
@@ -662,7 +662,7 @@ mod tests {
         let u = 1.7;
         let (a1, _) = maxwell_averages(|g| (-g / 3.0).exp(), u);
         let a = 2f64.sqrt() * u / 3.0;
-        let (x, w) = crate::theory::quad::gauss_legendre(20);
+        let (x, w) = crate::math::quad::gauss_legendre(20);
         let mut reference = 0.0;
         for p in 0..2000 {
             let (lo, hi) = (p as f64 * 0.01, (p + 1) as f64 * 0.01);

@@ -17,27 +17,10 @@
 //! cools), so the integrator is implicit: 3-stage Radau IIA (order 5, L-stable) with step
 //! doubling error control on y (absolute 1e-11, i.e. relative 1e-11 on T per step).
 
-use super::ode::{integrate, OdeSystem, Tolerances};
+use crate::math::ode::{integrate, OdeSystem, Tolerances};
 use super::restitution::{pair_rates, PairRestitution, PairTable};
+use super::species::Species;
 
-/// One species as the theory sees it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Species {
-    pub mass: f64,
-    pub diameter: f64,
-    /// Number density n_k.
-    pub density: f64,
-}
-
-impl Species {
-    pub fn new(mass: f64, diameter: f64, density: f64) -> Self {
-        Species {
-            mass,
-            diameter,
-            density,
-        }
-    }
-}
 
 /// xi_ki of (15): the cooling of species k by collisions with species i.
 pub fn xi_pair(k: &Species, tk: f64, i: &Species, ti: f64, eps: f64) -> f64 {

@@ -10,7 +10,8 @@ use granular::dsmc::{DsmcSim, DsmcSystem, SpeciesRow, TamsdRow};
 use granular::engine::{Engine, RunOutput};
 use granular::manifest::dsmc::DsmcParams;
 use granular::plan::ModelParams;
-use granular::theory::temperature::{haff, tau0, Species};
+use granular::theory::temperature::{haff, tau0};
+use granular::theory::Species;
 
 use super::util::heavy;
 

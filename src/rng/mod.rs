@@ -1,8 +1,11 @@
 //! Random streams. Every run draws from a ChaCha8 stream seeded by its seed (itself derived
-//! from the campaign seed and the run's identity, see [`crate::plan::derive_seed`]).
+//! from the campaign seed and the run's identity, see `derive_seed` in the campaign plan).
 //!
 //! [`RunRng`] serves 64-bit words from a buffer filled in bulk (the ChaCha block function is
 //! vectorised), and its position can be saved and restored exactly for checkpoints.
+//! [`stream`] is that block function in bulk, also used directly by the RFM noise.
+
+pub mod stream;
 
 use rand::RngCore;
 
@@ -13,7 +16,7 @@ const BUF: usize = 256;
 pub struct RunRng {
     /// The ChaCha8 block function in bulk (16 blocks at a time, vectorised; the same words as
     /// `rand_chacha::ChaCha8Rng`, checked by `words_are_rand_chacha_chacha8`).
-    core: crate::rfm::stream::WordStream,
+    core: stream::WordStream,
     /// Word position of `core` when `buf` was filled (in 32-bit words).
     filled_at: u128,
     buf: Box<[u64; BUF]>,
@@ -36,7 +39,7 @@ impl RunRng {
 
     /// The stream of `seed` from word position `filled_at` (in 32-bit words), buffer filled.
     fn at(seed: u64, filled_at: u128) -> Self {
-        let core = crate::rfm::stream::WordStream::at(&RngPosition {
+        let core = stream::WordStream::at(&RngPosition {
             seed,
             filled_at,
             idx: 0,

@@ -9,7 +9,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::rng::{RngPosition, RunRng};
+use super::{RngPosition, RunRng};
 
 /// Blocks per chunk (16 words of 32 bits each).
 const CHUNK_BLOCKS: usize = 16;

@@ -1,0 +1,9 @@
+//! Numerics with no physics in them, shared by the theory, the simulators and the analysis:
+//! [`quad`] (Gauss-Legendre rules, adaptive and composite quadrature, Gamma), [`ode`] (a stiff
+//! Radau IIA integrator), [`fit`] (weighted least squares, power laws, Levenberg-Marquardt,
+//! the stretched-exponential fits), [`stats`] (mean and standard error).
+
+pub mod fit;
+pub mod ode;
+pub mod quad;
+pub mod stats;
