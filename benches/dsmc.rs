@@ -4,7 +4,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use granular::dsmc::{DsmcSim, DsmcSystem};
-use granular::manifest::dsmc::DsmcParams;
+use granular::models::dsmc::DsmcParams;
 
 fn system(method: &str, n1: u64) -> DsmcSystem {
     let p: DsmcParams = serde_json::from_value(serde_json::json!({
@@ -14,7 +14,7 @@ fn system(method: &str, n1: u64) -> DsmcSystem {
         "t_end": 1.0e9,
     }))
     .expect("params");
-    DsmcSystem::from_params(&p).expect("system")
+    p.system().expect("system")
 }
 
 fn trials(c: &mut Criterion) {

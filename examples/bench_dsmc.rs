@@ -5,8 +5,8 @@
 
 use std::time::Instant;
 
-use granular::dsmc::{DsmcSim, DsmcSystem};
-use granular::manifest::dsmc::DsmcParams;
+use granular::dsmc::DsmcSim;
+use granular::models::dsmc::DsmcParams;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -28,7 +28,7 @@ fn main() {
         "refresh_every": refresh,
     }))
     .expect("params");
-    let sys = DsmcSystem::from_params(&params).expect("system");
+    let sys = params.system().expect("system");
     let (m, n) = (sys.species.len(), sys.n_particles());
     let t0 = Instant::now();
     let mut sim = DsmcSim::new(sys, seed);

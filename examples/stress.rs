@@ -10,8 +10,8 @@ use std::time::Instant;
 
 use granular::dsmc::predict::theory_species;
 use granular::dsmc::system::theory_restitution;
-use granular::dsmc::{DsmcSim, DsmcSystem};
-use granular::manifest::dsmc::DsmcParams;
+use granular::dsmc::DsmcSim;
+use granular::models::dsmc::DsmcParams;
 use granular::theory::temperature::evolve_temperatures;
 
 struct Case {
@@ -111,7 +111,7 @@ fn main() {
             let mut p = case.params.clone();
             p["method"] = serde_json::json!(method);
             let params: DsmcParams = serde_json::from_value(p).expect("params");
-            let sys = DsmcSystem::from_params(&params).expect("system");
+            let sys = params.system().expect("system");
             let (m, n) = (sys.species.len(), sys.n_particles());
             if method == "bird" && m > 100 && !quick {
                 // Bird's acceptance ~ M^(-2/3): the 500-species case takes too long.

@@ -10,9 +10,9 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::campaign::ledger::RunStatus;
+use crate::campaign::plan::Shard;
 use crate::campaign::{self, Campaign, CampaignError, Event, Outcome, Reporter, RunOptions};
 use crate::exit_codes;
-use crate::plan::Shard;
 
 #[derive(Parser)]
 #[command(
@@ -204,7 +204,7 @@ pub fn main() -> i32 {
     };
     init_tracing(cli.log_format);
     match cli.command {
-        Command::Validate { manifest } => match crate::manifest::load_manifest(&manifest) {
+        Command::Validate { manifest } => match crate::campaign::plan::load(&manifest) {
             Ok((m, plan)) => {
                 println!(
                     "{}: valid: campaign {:?}, model {}, {} points x {} replicas = {} runs",
@@ -223,8 +223,15 @@ pub fn main() -> i32 {
             }
         },
         Command::Theory { manifest, out } => match Campaign::create_or_open(&manifest, &out) {
-            Ok(c) => match crate::campaign::writer::write_theory(&c) {
-                Ok(()) => {
+            Ok(c) => match c.write_theory() {
+                Ok(false) => {
+                    eprintln!(
+                        "error: model {} has no kinetic-theory tables",
+                        c.plan.model.as_str()
+                    );
+                    exit_codes::INVALID_INPUT
+                }
+                Ok(true) => {
                     println!(
                         "wrote {}/tables/dsmc_theory and dsmc_theory_point ({} points)",
                         out.display(),
@@ -242,14 +249,27 @@ pub fn main() -> i32 {
         Command::Plot { dir, out } => match Campaign::open(&dir) {
             Ok(c) => {
                 let out = out.unwrap_or_else(|| dir.join("figures"));
-                match crate::plot::figures(&c)
-                    .map_err(|e| e.to_string())
-                    .and_then(|f| crate::plot::render(&f, &out))
-                {
-                    Ok(files) => {
-                        println!("wrote {} files to {}", files.len(), out.display());
-                        exit_codes::OK
+                match c.figures().map_err(|e| e.to_string()) {
+                    Ok(None) => {
+                        eprintln!(
+                            "error: `granular plot` draws no figures of model {} (see `granular analyze`)",
+                            c.plan.model.as_str()
+                        );
+                        return exit_codes::INVALID_INPUT;
                     }
+                    Ok(Some(figs)) => match crate::plot::render(&figs, &out) {
+                        Ok((files, failed)) => {
+                            for f in failed {
+                                tracing::warn!("{f}");
+                            }
+                            println!("wrote {} files to {}", files.len(), out.display());
+                            exit_codes::OK
+                        }
+                        Err(e) => {
+                            eprintln!("error: {e}");
+                            exit_codes::IO_ERROR
+                        }
+                    },
                     Err(e) => {
                         eprintln!("error: {e}");
                         exit_codes::IO_ERROR
@@ -574,7 +594,7 @@ fn execute(c: &Campaign, rt: &Runtime) -> i32 {
     };
     tracing::info!(campaign = %c.manifest.name, dir = %c.root.display(), shard = %rt.shard, "starting");
     let mut reporter = CliReporter::new(rt.quiet);
-    let result = campaign::run(c, &opts, &mut reporter);
+    let result = campaign::dispatch::run(c, &opts, &mut reporter);
     reporter.finish();
     match result {
         Ok(o) => summarise(c, &o),
@@ -814,14 +834,14 @@ fn submit_command(a: SubmitArgs) -> i32 {
             ));
         }
         if a.dry_run {
-            match crate::manifest::load_manifest(&a.target) {
+            match crate::campaign::plan::load(&a.target) {
                 Ok((manifest, plan)) => {
                     let value = serde_json::to_value(&manifest).expect("manifest serialises");
                     let c = Campaign {
                         root: out.clone(),
                         manifest,
                         plan,
-                        manifest_json: crate::plan::canonical(&value),
+                        manifest_json: crate::campaign::plan::canonical(&value),
                     };
                     let root = std::path::absolute(&out).unwrap_or(out);
                     (c, root)

@@ -1,34 +1,26 @@
-//! Figures (PNG and SVG) from a campaign's tables: per point, T_k(t) and <R_k^2(t)> on log-log
-//! axes (ensemble mean with standard-error bars, theory lines where a `dsmc_theory` table
-//! exists), and for polydisperse points T_k and <R_k^2>/<R_1^2> against k at the last time
-//! (the paper's Figs 4 and 6).
+//! The one figure renderer (PNG and SVG, plotters, the embedded DejaVu Sans font): figures of
+//! series of (x, y, error) points, drawn as markers with error bars or as lines, on any
+//! combination of linear and logarithmic axes (a log axis is drawn as log10 of the data on a
+//! linear chart, its ticks labelled with the original values). What a figure shows is the
+//! business of its model (`models::<model>::figures`) or of the analysis.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use arrow_array::cast::AsArray;
-use arrow_array::types::{Float64Type, UInt32Type};
-use arrow_array::Array;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::campaign::Campaign;
-use crate::store::parquet_io::{self, StoreError};
-use crate::store::summary::table_files;
-use crate::store::tables;
-
-pub(crate) static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 /// One curve: (x, y, error) points.
 #[derive(Clone, Debug, Default)]
 pub struct Series {
     pub label: String,
     pub points: Vec<(f64, f64, f64)>,
-    /// Drawn as a line (theory) rather than markers with error bars.
+    /// Drawn as a line (theory, fit) rather than markers with error bars.
     pub line: bool,
 }
 
-/// A log-log figure.
+/// A figure: its series, labels and axis types.
 #[derive(Clone, Debug)]
 pub struct Figure {
     pub title: String,
@@ -36,279 +28,67 @@ pub struct Figure {
     pub y_label: String,
     pub series: Vec<Series>,
     pub log_x: bool,
+    pub log_y: bool,
     /// Legend in the lower right (growing curves) rather than the upper right.
     pub legend_low: bool,
+    /// Series from this index on are reference lines (theory, guides) with their own colours
+    /// rather than fits drawn in the colour of the data before them.
+    pub references_from: Option<usize>,
 }
 
-#[derive(Default)]
-struct SummaryRows {
-    // point -> species -> [(t, T mean, T sem, msd mean, msd sem)]
-    by_point: BTreeMap<u32, BTreeMap<u32, Vec<(f64, f64, f64, Option<f64>, f64)>>>,
+impl Figure {
+    /// A figure with linear axes and the legend in the upper right.
+    pub fn new(title: String, x_label: &str, y_label: &str, series: Vec<Series>) -> Self {
+        Figure {
+            title,
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            series,
+            log_x: false,
+            log_y: false,
+            legend_low: false,
+            references_from: None,
+        }
+    }
 }
 
-fn read_summary(c: &Campaign) -> Result<SummaryRows, StoreError> {
-    let mut out = SummaryRows::default();
-    for f in table_files(c, tables::DSMC_SPECIES_SUMMARY)? {
-        for b in parquet_io::read_file(&f, tables::DSMC_SPECIES_SUMMARY)? {
-            let get = |n: &str| {
-                b.column_by_name(n).cloned().ok_or_else(|| {
-                    StoreError::Corrupt(f.display().to_string(), format!("has no column {n}"))
-                })
-            };
-            let (p, t, s, tm, ts, mm, ms) = (
-                get("point_id")?,
-                get("t")?,
-                get("species")?,
-                get("temperature_mean")?,
-                get("temperature_sem")?,
-                get("msd_mean")?,
-                get("msd_sem")?,
-            );
-            let (p, t, s) = (
-                p.as_primitive::<UInt32Type>(),
-                t.as_primitive::<Float64Type>(),
-                s.as_primitive::<UInt32Type>(),
-            );
-            let (tm, ts, mm, ms) = (
-                tm.as_primitive::<Float64Type>(),
-                ts.as_primitive::<Float64Type>(),
-                mm.as_primitive::<Float64Type>(),
-                ms.as_primitive::<Float64Type>(),
-            );
-            for i in 0..b.num_rows() {
-                let sem =
-                    |a: &arrow_array::Float64Array| if a.is_null(i) { 0.0 } else { a.value(i) };
-                let msd = if mm.is_null(i) {
-                    None
-                } else {
-                    Some(mm.value(i))
-                };
-                out.by_point
-                    .entry(p.value(i))
-                    .or_default()
-                    .entry(s.value(i))
-                    .or_default()
-                    .push((t.value(i), tm.value(i), sem(ts), msd, sem(ms)));
-            }
-        }
+/// `fig` on log-log axes.
+pub fn loglog(fig: Figure) -> Figure {
+    Figure {
+        log_x: true,
+        log_y: true,
+        ..fig
     }
-    for sp in out.by_point.values_mut() {
-        for rows in sp.values_mut() {
-            rows.sort_by(|a, b| a.0.total_cmp(&b.0));
-        }
-    }
-    Ok(out)
 }
 
-/// Theory rows (point -> species -> [(t, T, msd)]) if the campaign has a `dsmc_theory` table.
-fn read_theory(c: &Campaign) -> BTreeMap<u32, BTreeMap<u32, Vec<(f64, f64, Option<f64>)>>> {
-    let mut out: BTreeMap<u32, BTreeMap<u32, Vec<(f64, f64, Option<f64>)>>> = BTreeMap::new();
-    let Ok(files) = table_files(c, "dsmc_theory") else {
-        return out;
-    };
-    for f in files {
-        let Ok(batches) = parquet_io::read_file(&f, "dsmc_theory") else {
-            continue;
-        };
-        for b in batches {
-            let (Some(p), Some(t), Some(s), Some(tt), Some(m)) = (
-                b.column_by_name("point_id"),
-                b.column_by_name("t"),
-                b.column_by_name("species"),
-                b.column_by_name("temperature"),
-                b.column_by_name("msd"),
-            ) else {
-                continue;
-            };
-            let (p, t, s, tt, m) = (
-                p.as_primitive::<UInt32Type>(),
-                t.as_primitive::<Float64Type>(),
-                s.as_primitive::<UInt32Type>(),
-                tt.as_primitive::<Float64Type>(),
-                m.as_primitive::<Float64Type>(),
-            );
-            for i in 0..b.num_rows() {
-                let msd = if m.is_null(i) { None } else { Some(m.value(i)) };
-                out.entry(p.value(i))
-                    .or_default()
-                    .entry(s.value(i))
-                    .or_default()
-                    .push((t.value(i), tt.value(i), msd));
-            }
-        }
+/// `fig` on linear axes.
+pub fn linear(fig: Figure) -> Figure {
+    Figure {
+        log_x: false,
+        log_y: false,
+        ..fig
     }
-    for sp in out.values_mut() {
-        for rows in sp.values_mut() {
-            rows.sort_by(|a, b| a.0.total_cmp(&b.0));
-        }
-    }
-    out
 }
 
-/// Species shown in time plots: all of up to 6, else a log-spaced selection.
-fn shown_species(all: &[u32]) -> Vec<u32> {
-    if all.len() <= 6 {
-        return all.to_vec();
+/// `fig` with a logarithmic y axis.
+pub fn semilog_y(fig: Figure) -> Figure {
+    Figure {
+        log_x: false,
+        log_y: true,
+        ..fig
     }
-    let mut pick: Vec<u32> = [1u32, 2, 3, 5, 10, 20, 50, 100, 200, 500]
-        .iter()
-        .copied()
-        .filter(|k| all.contains(k))
-        .collect();
-    pick.truncate(6);
-    pick
 }
 
-/// Build the standard figures of a campaign (data only; see [`render`]).
-pub fn figures(c: &Campaign) -> Result<Vec<(String, Figure)>, StoreError> {
-    let summary = read_summary(c)?;
-    let theory = read_theory(c);
-    let mut figs = Vec::new();
-    for (&point, species) in &summary.by_point {
-        let desc = c
-            .plan
-            .sweep_keys
-            .iter()
-            .zip(&c.plan.point(point).values)
-            .map(|(k, v)| format!("{k}={v}"))
-            .collect::<Vec<_>>()
-            .join(", ");
-        let title = |what: &str| {
-            if desc.is_empty() {
-                format!("{} - {what}", c.manifest.name)
-            } else {
-                format!("{} [{desc}] - {what}", c.manifest.name)
-            }
-        };
-        let all: Vec<u32> = species.keys().copied().collect();
-        let shown = shown_species(&all);
-        let th = theory.get(&point);
-        let mut temp = Vec::new();
-        let mut msd = Vec::new();
-        for k in &shown {
-            let rows = &species[k];
-            temp.push(Series {
-                label: format!("T_{k} (DSMC)"),
-                points: rows
-                    .iter()
-                    .filter(|r| r.0 > 0.0)
-                    .map(|r| (r.0, r.1, r.2))
-                    .collect(),
-                line: false,
-            });
-            if rows.iter().any(|r| r.3.is_some()) {
-                msd.push(Series {
-                    label: format!("<R_{k}^2> (DSMC)"),
-                    points: rows
-                        .iter()
-                        .filter(|r| r.0 > 0.0 && r.3.is_some_and(|m| m > 0.0))
-                        .map(|r| (r.0, r.3.unwrap_or(0.0), r.4))
-                        .collect(),
-                    line: false,
-                });
-            }
-            if let Some(tr) = th.and_then(|m| m.get(k)) {
-                temp.push(Series {
-                    label: format!("T_{k} (theory)"),
-                    points: tr
-                        .iter()
-                        .filter(|r| r.0 > 0.0)
-                        .map(|r| (r.0, r.1, 0.0))
-                        .collect(),
-                    line: true,
-                });
-                if tr.iter().any(|r| r.2.is_some()) && !msd.is_empty() {
-                    msd.push(Series {
-                        label: format!("<R_{k}^2> (theory)"),
-                        points: tr
-                            .iter()
-                            .filter(|r| r.0 > 0.0 && r.2.is_some_and(|m| m > 0.0))
-                            .map(|r| (r.0, r.2.unwrap_or(0.0), 0.0))
-                            .collect(),
-                        line: true,
-                    });
-                }
-            }
-        }
-        figs.push((
-            format!("point-{point:04}-temperature"),
-            Figure {
-                title: title("temperatures"),
-                x_label: "time t".into(),
-                y_label: "temperature T_k".into(),
-                series: temp,
-                log_x: true,
-                legend_low: false,
-            },
-        ));
-        if !msd.is_empty() {
-            figs.push((
-                format!("point-{point:04}-msd"),
-                Figure {
-                    title: title("mean-squared displacement"),
-                    x_label: "time t".into(),
-                    y_label: "MSD <R_k^2(t)>".into(),
-                    series: msd,
-                    log_x: true,
-                    legend_low: true,
-                },
-            ));
-        }
-        if all.len() > 3 {
-            let last = species
-                .values()
-                .filter_map(|rows| rows.last().map(|r| r.0))
-                .fold(0.0, f64::max);
-            let at_last = |k: &u32| species[k].iter().find(|r| r.0 == last).copied();
-            let tk: Vec<(f64, f64, f64)> = all
-                .iter()
-                .filter_map(|k| at_last(k).map(|r| (*k as f64, r.1, r.2)))
-                .collect();
-            figs.push((
-                format!("point-{point:04}-temperature-vs-k"),
-                Figure {
-                    title: title(&format!("T_k at t = {last}")),
-                    x_label: "species k = m_k/m_1".into(),
-                    y_label: "temperature T_k".into(),
-                    series: vec![Series {
-                        label: "DSMC".into(),
-                        points: tk,
-                        line: false,
-                    }],
-                    log_x: true,
-                    legend_low: true,
-                },
-            ));
-            if let Some(r1) = at_last(&1).and_then(|r| r.3) {
-                let ratio: Vec<(f64, f64, f64)> = all
-                    .iter()
-                    .filter_map(|k| {
-                        at_last(k).and_then(|r| r.3.map(|m| (*k as f64, m / r1, r.4 / r1)))
-                    })
-                    .collect();
-                figs.push((
-                    format!("point-{point:04}-msd-ratio-vs-k"),
-                    Figure {
-                        title: title(&format!("MSD ratios at t = {last}")),
-                        x_label: "species k = m_k/m_1".into(),
-                        y_label: "<R_k^2> / <R_1^2>".into(),
-                        series: vec![Series {
-                            label: "DSMC".into(),
-                            points: ratio,
-                            line: false,
-                        }],
-                        log_x: true,
-                        legend_low: false,
-                    },
-                ));
-            }
-        }
+impl Figure {
+    /// Mark the series from index `i` on as reference lines.
+    pub fn with_references_from(mut self, i: usize) -> Self {
+        self.references_from = Some(i);
+        self
     }
-    Ok(figs)
 }
 
 /// Axis tick text: plain numbers in [1e-2, 1e4), powers of ten outside.
-pub(crate) fn tick(v: f64) -> String {
+fn tick(v: f64) -> String {
     let a = v.abs();
     if a == 0.0 {
         "0".into()
@@ -320,7 +100,7 @@ pub(crate) fn tick(v: f64) -> String {
     }
 }
 
-pub(crate) const COLORS: [RGBColor; 8] = [
+const COLORS: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
@@ -331,42 +111,83 @@ pub(crate) const COLORS: [RGBColor; 8] = [
     RGBColor(127, 127, 127),
 ];
 
+fn tr(v: f64, log: bool) -> Option<f64> {
+    if log {
+        (v > 0.0 && v.is_finite()).then(|| v.log10())
+    } else {
+        v.is_finite().then_some(v)
+    }
+}
+
+/// Label of a log-axis tick at log10 value `v`: three significant digits.
+fn log_tick(v: f64) -> String {
+    let r = 10f64.powf(v);
+    if !(1e-2..1e4).contains(&r) {
+        return format!("{r:.1e}");
+    }
+    let decimals = (2 - v.floor() as i32).max(0) as usize;
+    let s = format!("{r:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), String> {
     let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    let p = fig;
     root.fill(&WHITE).map_err(e)?;
-    let pts: Vec<(f64, f64)> = fig
+    // Transformed (x, y, y_lo, y_hi) per series.
+    let series: Vec<Vec<(f64, f64, f64, f64)>> = fig
         .series
         .iter()
-        .flat_map(|s| s.points.iter().map(|p| (p.0, p.1)))
-        .filter(|p| p.0 > 0.0 && p.1 > 0.0 && p.0.is_finite() && p.1.is_finite())
+        .map(|s| {
+            s.points
+                .iter()
+                .filter_map(|&(x, y, err)| {
+                    let (tx, ty) = (tr(x, p.log_x)?, tr(y, p.log_y)?);
+                    let lo = tr(
+                        (y - err).max(if p.log_y { y * 1e-3 } else { f64::MIN }),
+                        p.log_y,
+                    )
+                    .unwrap_or(ty);
+                    let hi = tr(y + err, p.log_y).unwrap_or(ty);
+                    Some((tx, ty, lo, hi))
+                })
+                .collect()
+        })
         .collect();
-    if pts.is_empty() {
-        return Err("no positive data to plot".into());
+    let all: Vec<&(f64, f64, f64, f64)> = series.iter().flatten().collect();
+    if all.is_empty() {
+        return Err("no data to plot".into());
     }
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for (x, y) in &pts {
-        x0 = x0.min(*x);
-        x1 = x1.max(*x);
-        y0 = y0.min(*y);
-        y1 = y1.max(*y);
+    for q in &all {
+        x0 = x0.min(q.0);
+        x1 = x1.max(q.0);
+        y0 = y0.min(q.1);
+        y1 = y1.max(q.1);
     }
-    let (x0, x1) = if x1 > x0 {
-        (x0 / 1.3, x1 * 1.3)
-    } else {
-        (x0 / 2.0, x0 * 2.0)
+    let pad = |a: f64, b: f64| {
+        let w = if b > a {
+            0.05 * (b - a)
+        } else {
+            0.5 * a.abs().max(0.1)
+        };
+        (a - w, b + w)
     };
-    let (y0, y1) = if y1 > y0 {
-        (y0 / 1.5, y1 * 1.5)
-    } else {
-        (y0 / 2.0, y0 * 2.0)
-    };
+    let ((x0, x1), (y0, y1)) = (pad(x0, x1), pad(y0, y1));
     let mut chart = ChartBuilder::on(&root)
-        .caption(&fig.title, ("sans-serif", 20))
+        .caption(&fig.title, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(45)
         .y_label_area_size(70)
-        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+        .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(e)?;
+    let (lx, ly) = (p.log_x, p.log_y);
+    let fx = move |v: &f64| if lx { log_tick(*v) } else { tick(*v) };
+    let fy = move |v: &f64| if ly { log_tick(*v) } else { tick(*v) };
     chart
         .configure_mesh()
         .x_desc(&fig.x_label)
@@ -375,23 +196,26 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         .axis_desc_style(("sans-serif", 16))
         .x_labels(8)
         .y_labels(8)
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
+        .x_label_formatter(&fx)
+        .y_label_formatter(&fy)
         .draw()
         .map_err(e)?;
-    for (j, s) in fig.series.iter().enumerate() {
-        // A theory line takes the colour of the DSMC series just before it.
-        let colour = COLORS[(if s.line && j > 0 { j - 1 } else { j }) % COLORS.len()];
-        let data: Vec<(f64, f64, f64)> = s
-            .points
-            .iter()
-            .copied()
-            .filter(|p| p.0 > 0.0 && p.1 > 0.0)
-            .collect();
+    let mut colour_index = 0usize;
+    for (j, (s, data)) in fig.series.iter().zip(&series).enumerate() {
+        if data.is_empty() {
+            continue;
+        }
+        // A fitted line takes the colour of the data series just before it.
+        let reference = p.references_from.is_some_and(|r| j >= r);
+        let follows_data = s.line && !reference && j > 0 && !fig.series[j - 1].line;
+        if !follows_data && j > 0 {
+            colour_index += 1;
+        }
+        let colour = COLORS[colour_index % COLORS.len()];
         if s.line {
             chart
                 .draw_series(LineSeries::new(
-                    data.iter().map(|p| (p.0, p.1)),
+                    data.iter().map(|q| (q.0, q.1)),
                     colour.stroke_width(2),
                 ))
                 .map_err(e)?
@@ -401,15 +225,16 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
                 });
         } else {
             chart
-                .draw_series(data.iter().map(|p| {
-                    let lo = (p.1 - p.2).max(p.1 * 1e-3);
-                    ErrorBar::new_vertical(p.0, lo, p.1, p.1 + p.2, colour.filled(), 6)
-                }))
+                .draw_series(
+                    data.iter()
+                        .filter(|q| q.3 > q.2)
+                        .map(|q| ErrorBar::new_vertical(q.0, q.2, q.1, q.3, colour.filled(), 4)),
+                )
                 .map_err(e)?;
             chart
                 .draw_series(
                     data.iter()
-                        .map(|p| Circle::new((p.0, p.1), 3, colour.filled())),
+                        .map(|q| Circle::new((q.0, q.1), 2, colour.filled())),
                 )
                 .map_err(e)?
                 .label(&s.label)
@@ -420,7 +245,7 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
-        .label_font(("sans-serif", 13))
+        .label_font(("sans-serif", 12))
         .position(if fig.legend_low {
             SeriesLabelPosition::LowerRight
         } else {
@@ -432,23 +257,27 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
     Ok(())
 }
 
-/// Write `name.png` and `name.svg` for every figure into `dir`; returns the files written.
-pub fn render(figs: &[(String, Figure)], dir: &Path) -> Result<Vec<PathBuf>, String> {
+/// Write `name.png` and `name.svg` of every figure into `dir`. Returns the files written and
+/// one message per figure that could not be drawn (e.g. no positive data on a log axis).
+pub fn render(
+    figs: &[(String, Figure)],
+    dir: &Path,
+) -> Result<(Vec<PathBuf>, Vec<String>), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
-    let mut out = Vec::new();
-    for (name, fig) in figs {
+    let (mut out, mut failed) = (Vec::new(), Vec::new());
+    for (name, p) in figs {
         let png = dir.join(format!("{name}.png"));
-        draw(
-            BitMapBackend::new(&png, (900, 650)).into_drawing_area(),
-            fig,
-        )
-        .map_err(|e| format!("{}: {e}", png.display()))?;
         let svg = dir.join(format!("{name}.svg"));
-        draw(SVGBackend::new(&svg, (900, 650)).into_drawing_area(), fig)
-            .map_err(|e| format!("{}: {e}", svg.display()))?;
-        out.push(png);
-        out.push(svg);
+        let r = draw(BitMapBackend::new(&png, (900, 650)).into_drawing_area(), p)
+            .and_then(|_| draw(SVGBackend::new(&svg, (900, 650)).into_drawing_area(), p));
+        match r {
+            Ok(()) => {
+                out.push(png);
+                out.push(svg);
+            }
+            Err(e) => failed.push(format!("figure {name}: {e}")),
+        }
     }
-    Ok(out)
+    Ok((out, failed))
 }

@@ -1,5 +1,6 @@
 //! Integration tests of `granular`, in one test binary (one link, shared helpers).
 //!
+//! - `architecture`: the import graph of `src/` has no circles and no forbidden arrows.
 //! - `manifests`: data-driven validation of `tests/manifests/{good,bad}/*.json`.
 //! - `resume`: kill -9 / resume, thread count and sharding give bit-identical tables;
 //!   directory refusal, re-running a finished campaign, `status --json`.
@@ -20,6 +21,7 @@
 
 mod it {
     pub mod analyze;
+    pub mod architecture;
     pub mod aux_models;
     pub mod drills;
     pub mod interrupt;

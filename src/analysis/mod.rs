@@ -3,10 +3,10 @@
 //! `analysis_curves` (the data behind every figure: measured points, fitted lines, the
 //! collapse and the Moon plot) and figures (PNG + SVG).
 //!
-//! Physics in pure, unit-tested functions: [`fit`] (least squares), [`multiscaling`]
-//! (xi_m, zeta_m, collapse), [`fractal`] (D_f from S(k), C(R), n(R)), [`tails`] (alpha
-//! windows, crossover (5.32), Moon plot), [`free_path`] ((4.25)). This module reads the
-//! tables, groups points, calls them and writes the results; [`figures`] draws.
+//! Physics in pure, unit-tested functions: [`multiscaling`] (xi_m, zeta_m, collapse),
+//! [`fractal`] (D_f from S(k), C(R), n(R)), [`tails`] (alpha windows, crossover (5.32), Moon
+//! plot), [`free_path`] ((4.25)), with the least squares of `math::fit`. This module reads the
+//! tables, groups points, calls them and writes the results; `plot` draws.
 //!
 //! Only finished runs (`runs.status = 'done'`) are used, so a campaign that is still running
 //! (or was interrupted) is analysed as far as it got, with a warning. Replica statistics are
@@ -14,7 +14,6 @@
 //! campaign is complete): the mean over replicas with its standard error, or with one
 //! replica the run's own block error where the table has one.
 
-pub mod figures;
 pub mod fractal;
 pub mod free_path;
 pub mod multiscaling;
@@ -24,18 +23,23 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use arrow_array::cast::AsArray;
-use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
 use arrow_array::{Array, ArrayRef, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
 
+use crate::campaign::tables::{POINTS, RUNS};
 use crate::campaign::Campaign;
-use crate::manifest::rfm::RfmParams;
-use crate::plan::ModelParams;
-use crate::plot::{Figure, Series};
+use crate::math::stats::mean_sem;
+use crate::models::rfm::tables as rt;
+use crate::models::rfm::RfmParams;
+use crate::models::ModelParams;
+use crate::plot::{self, Figure, Series};
+use crate::store::cols::{get_f64 as f64s, get_str, get_u32 as u32s, get_u64 as u64s};
 use crate::store::parquet_io::{self, StoreError};
-use crate::store::summary::campaign_batches as batches;
-use crate::store::tables;
+
+/// Every batch of a table of the campaign.
+fn batches(c: &Campaign, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+    c.data().read(table)
+}
 
 /// The fits table.
 pub const ANALYSIS_FITS: &str = "analysis_fits";
@@ -120,43 +124,6 @@ pub enum AnalysisError {
     Io(String),
 }
 
-fn corrupt(table: &str, what: &str) -> StoreError {
-    StoreError::Corrupt(table.into(), what.into())
-}
-
-fn col<'a>(b: &'a RecordBatch, table: &str, name: &str) -> Result<&'a ArrayRef, StoreError> {
-    b.column_by_name(name)
-        .ok_or_else(|| corrupt(table, &format!("has no column {name}")))
-}
-
-fn f64s<'a>(
-    b: &'a RecordBatch,
-    t: &str,
-    n: &str,
-) -> Result<&'a arrow_array::Float64Array, StoreError> {
-    col(b, t, n)?
-        .as_primitive_opt::<Float64Type>()
-        .ok_or_else(|| corrupt(t, &format!("column {n} is not Float64")))
-}
-fn u32s<'a>(
-    b: &'a RecordBatch,
-    t: &str,
-    n: &str,
-) -> Result<&'a arrow_array::UInt32Array, StoreError> {
-    col(b, t, n)?
-        .as_primitive_opt::<UInt32Type>()
-        .ok_or_else(|| corrupt(t, &format!("column {n} is not UInt32")))
-}
-fn u64s<'a>(
-    b: &'a RecordBatch,
-    t: &str,
-    n: &str,
-) -> Result<&'a arrow_array::UInt64Array, StoreError> {
-    col(b, t, n)?
-        .as_primitive_opt::<UInt64Type>()
-        .ok_or_else(|| corrupt(t, &format!("column {n} is not UInt64")))
-}
-
 /// Mean and standard error over replicas; with one replica its own error (if any).
 fn replica_stat(v: &[(f64, Option<f64>)]) -> (f64, Option<f64>) {
     match v.len() {
@@ -164,7 +131,7 @@ fn replica_stat(v: &[(f64, Option<f64>)]) -> (f64, Option<f64>) {
         1 => v[0],
         n => {
             let xs: Vec<f64> = v.iter().map(|x| x.0).collect();
-            let (m, s) = crate::store::summary::mean_sem(&xs);
+            let (m, s) = mean_sem(&xs);
             debug_assert_eq!(xs.len(), n);
             (m, s)
         }
@@ -174,11 +141,11 @@ fn replica_stat(v: &[(f64, Option<f64>)]) -> (f64, Option<f64>) {
 /// The finished runs: run_id -> point_id, for status 'done'.
 fn done_runs(c: &Campaign) -> Result<BTreeMap<u64, u32>, StoreError> {
     let mut out = BTreeMap::new();
-    for b in batches(c, tables::RUNS)? {
+    for b in batches(c, RUNS)? {
         let (r, p, s) = (
-            u64s(&b, tables::RUNS, "run_id")?,
-            u32s(&b, tables::RUNS, "point_id")?,
-            col(&b, tables::RUNS, "status")?.as_string::<i32>(),
+            u64s(&b, RUNS, "run_id")?,
+            u32s(&b, RUNS, "point_id")?,
+            get_str(&b, RUNS, "status")?,
         );
         for i in 0..b.num_rows() {
             if s.value(i) == "done" {
@@ -211,7 +178,7 @@ struct RfmData {
 
 fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreError> {
     let mut d = RfmData::default();
-    let t = tables::RFM_MOMENTS;
+    let t = rt::RFM_MOMENTS;
     for b in batches(c, t)? {
         let (r, p, o, v, s) = (
             u64s(&b, t, "run_id")?,
@@ -230,7 +197,7 @@ fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreErr
             }
         }
     }
-    let t = tables::RFM_NEIGHBOUR_MOMENTS;
+    let t = rt::RFM_NEIGHBOUR_MOMENTS;
     for b in batches(c, t)? {
         let (r, p, h, o, v, s) = (
             u64s(&b, t, "run_id")?,
@@ -250,12 +217,12 @@ fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreErr
             }
         }
     }
-    let t = tables::RFM_HISTOGRAMS;
+    let t = rt::RFM_HISTOGRAMS;
     for b in batches(c, t)? {
         let (r, p, kind, h, lo, hi, n) = (
             u64s(&b, t, "run_id")?,
             u32s(&b, t, "point_id")?,
-            col(&b, t, "kind")?.as_string::<i32>(),
+            get_str(&b, t, "kind")?,
             u32s(&b, t, "h")?,
             f64s(&b, t, "lo")?,
             f64s(&b, t, "hi")?,
@@ -274,7 +241,7 @@ fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreErr
             e.2 += n.value(i) as f64;
         }
     }
-    let t = tables::RFM_STRUCTURE_FACTOR;
+    let t = rt::RFM_STRUCTURE_FACTOR;
     for b in batches(c, t)? {
         let (r, p, n2, k, s, sem) = (
             u64s(&b, t, "run_id")?,
@@ -293,7 +260,7 @@ fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreErr
             }
         }
     }
-    let t = tables::RFM_RADIAL;
+    let t = rt::RFM_RADIAL;
     for b in batches(c, t)? {
         let (r, p, lo, hi, cv) = (
             u64s(&b, t, "run_id")?,
@@ -383,7 +350,7 @@ struct Ctx<'a> {
     c: &'a Campaign,
     opts: &'a Options,
     report: Report,
-    figs: Vec<(String, figures::Plot)>,
+    figs: Vec<(String, Figure)>,
 }
 
 impl Ctx<'_> {
@@ -415,8 +382,8 @@ impl Ctx<'_> {
         self.report.warnings.push(w);
     }
     /// Record a figure and its data in `analysis_curves`.
-    fn figure(&mut self, name: String, plot: figures::Plot) {
-        for s in &plot.fig.series {
+    fn figure(&mut self, name: String, plot: Figure) {
+        for s in &plot.series {
             for p in &s.points {
                 self.report.curves.push(CurveRow {
                     figure: name.clone(),
@@ -443,7 +410,6 @@ pub fn analyze(c: &Campaign, out: &Path, opts: &Options) -> Result<Report, Analy
         .iter()
         .filter_map(|p| match &p.params {
             ModelParams::Rfm(r) => Some((p.point_id, r)),
-            #[allow(unreachable_patterns)]
             _ => None,
         })
         .collect();
@@ -471,11 +437,11 @@ pub fn analyze(c: &Campaign, out: &Path, opts: &Options) -> Result<Report, Analy
         figs: Vec::new(),
     };
     if !rfm.is_empty() {
-        if !c.root.join("tables").join(tables::RUNS).is_dir() {
+        if !c.root.join("tables").join(RUNS).is_dir() {
             return Err(AnalysisError::NotAnalysable(format!(
                 "{}: table {} is missing (has the campaign been run?)",
                 c.root.display(),
-                tables::RUNS
+                RUNS
             )));
         }
         let done = done_runs(c)?;
@@ -494,8 +460,8 @@ pub fn analyze(c: &Campaign, out: &Path, opts: &Options) -> Result<Report, Analy
             ));
         }
         // Every run-level table the manifest asks for must exist.
-        for t in c.rfm_tables() {
-            if t.ends_with("_summary") || t == tables::RFM_SNAPSHOTS {
+        for t in c.tables() {
+            if t.ends_with("_summary") || t == rt::RFM_SNAPSHOTS {
                 continue;
             }
             if !c.root.join("tables").join(t).is_dir() {
@@ -539,7 +505,7 @@ pub fn analyze(c: &Campaign, out: &Path, opts: &Options) -> Result<Report, Analy
         .push(out.join(format!("{ANALYSIS_CURVES}.parquet")));
     if opts.figures && !ctx.figs.is_empty() {
         let dir = out.join("figures");
-        let (files, failed) = figures::render(&ctx.figs, &dir).map_err(AnalysisError::Io)?;
+        let (files, failed) = plot::render(&ctx.figs, &dir).map_err(AnalysisError::Io)?;
         ctx.report.files.extend(files);
         for f in failed {
             ctx.warn(f);
@@ -680,14 +646,7 @@ fn line(label: String, x0: f64, x1: f64, f: impl Fn(f64) -> f64) -> Series {
 }
 
 fn fig(title: String, x: &str, y: &str, series: Vec<Series>) -> Figure {
-    Figure {
-        title,
-        x_label: x.into(),
-        y_label: y.into(),
-        series,
-        log_x: true,
-        legend_low: false,
-    }
+    Figure::new(title, x, y, series)
 }
 
 /// 1D: xi_m from <|v|^m> vs N and zeta_m from <R^m> vs N, per group of points that differ
@@ -848,7 +807,7 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             "<v^2> (m^2/s^2)",
             v2_series,
         );
-        ctx.figure("xi2-fit".into(), figures::Plot::loglog(f));
+        ctx.figure("xi2-fit".into(), plot::loglog(f));
     }
     if !xim_series.is_empty() {
         let mut s = xim_series;
@@ -859,10 +818,7 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             line: true,
         });
         let f = fig(ctx.title("xi_m / m (3.14)"), "m", "xi_m / m", s);
-        ctx.figure(
-            "xi-m".into(),
-            figures::Plot::linear(f).with_references_from(r),
-        );
+        ctx.figure("xi-m".into(), plot::linear(f).with_references_from(r));
     }
     if !zeta_series.is_empty() {
         let mut s = zeta_series;
@@ -875,10 +831,7 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             line: true,
         });
         let f = fig(ctx.title("zeta_m / m (3.20)"), "m", "zeta_m / m", s);
-        ctx.figure(
-            "zeta-m".into(),
-            figures::Plot::linear(f).with_references_from(r),
-        );
+        ctx.figure("zeta-m".into(), plot::linear(f).with_references_from(r));
     }
     if !collapse.is_empty() {
         let s = collapse
@@ -898,7 +851,7 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             "<v^2> N^xi_2 (D L'/M^2)^(-2/3)",
             s,
         );
-        ctx.figure("collapse".into(), figures::Plot::loglog(f));
+        ctx.figure("collapse".into(), plot::loglog(f));
     }
 }
 
@@ -974,7 +927,7 @@ fn bisection_comparison(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
         );
         ctx.figure(
             format!("g1-bisection-{}", slug(&key)),
-            figures::Plot::loglog(fg).with_references_from(1),
+            plot::loglog(fg).with_references_from(1),
         );
     }
 }
@@ -1037,7 +990,7 @@ fn structure_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                         ),
                     ];
                     let fg = fig(ctx.title(&format!("S(k) [{key}]")), "k d", "S(k)", series);
-                    ctx.figure(format!("sk-{}", slug(&key)), figures::Plot::loglog(fg));
+                    ctx.figure(format!("sk-{}", slug(&key)), plot::loglog(fg));
                 }
                 None => ctx.warn(format!(
                     "{key}: fewer than two S(k) shells below k' (k' d = {:.4}, first shell k d = \
@@ -1126,7 +1079,7 @@ fn structure_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                 "count within R",
                 series,
             );
-            ctx.figure(format!("cr-{}", slug(&key)), figures::Plot::loglog(fg));
+            ctx.figure(format!("cr-{}", slug(&key)), plot::loglog(fg));
         }
     }
 }
@@ -1278,7 +1231,7 @@ fn tail_fits_per_point(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             "P(v)",
             pv_series,
         );
-        ctx.figure(format!("pv-{}", slug(&key)), figures::Plot::semilog_y(fg));
+        ctx.figure(format!("pv-{}", slug(&key)), plot::semilog_y(fg));
         // Moon plot with P' = P(0) and P' = A_0 (exponential tail amplitude).
         let p0 = tails::density(&folded[0], total);
         let mut moon = Vec::new();
@@ -1341,7 +1294,7 @@ fn tail_fits_per_point(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
         );
         ctx.figure(
             format!("moon-{}", slug(&key)),
-            figures::Plot::linear(fg).with_references_from(r),
+            plot::linear(fg).with_references_from(r),
         );
     }
 }
@@ -1436,19 +1389,16 @@ fn free_path_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             "P_l (1/m)",
             series,
         );
-        ctx.figure(
-            format!("free-path-{}", slug(&key)),
-            figures::Plot::loglog(fg),
-        );
+        ctx.figure(format!("free-path-{}", slug(&key)), plot::loglog(fg));
     }
 }
 
 /// Per point: the params JSON (points table), for models this module has no types for.
 fn point_params_json(c: &Campaign) -> Result<BTreeMap<u32, serde_json::Value>, StoreError> {
     let mut out = BTreeMap::new();
-    for b in batches(c, tables::POINTS)? {
-        let p = u32s(&b, tables::POINTS, "point_id")?;
-        let j = col(&b, tables::POINTS, "params")?.as_string::<i32>();
+    for b in batches(c, POINTS)? {
+        let p = u32s(&b, POINTS, "point_id")?;
+        let j = get_str(&b, POINTS, "params")?;
         for i in 0..b.num_rows() {
             out.insert(
                 p.value(i),
@@ -1549,10 +1499,7 @@ fn cascade_fits(ctx: &mut Ctx) -> Result<(), AnalysisError> {
                     "S(k)",
                     series,
                 );
-                ctx.figure(
-                    format!("cascade-sk-{}", slug(&key)),
-                    figures::Plot::loglog(fg),
-                );
+                ctx.figure(format!("cascade-sk-{}", slug(&key)), plot::loglog(fg));
             }
             None => ctx.warn(format!(
                 "{key}: fewer than two cascade S(k) points in {window}"

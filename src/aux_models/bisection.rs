@@ -303,7 +303,11 @@ impl BisectionRun {
             .map(|j| {
                 let (lo, hi) = (self.edges[j], self.edges[j + 1]);
                 let w = hi - lo;
-                let (mean, sem) = crate::math::stats::mean_sem_from_sums(r, self.st.count_sum[j], self.st.count_sum2[j]);
+                let (mean, sem) = crate::math::stats::mean_sem_from_sums(
+                    r,
+                    self.st.count_sum[j],
+                    self.st.count_sum2[j],
+                );
                 HistRow {
                     x_lo: lo,
                     x_hi: hi,
@@ -318,7 +322,11 @@ impl BisectionRun {
         let moments = (1..=cfg.orders)
             .map(|m| {
                 let j = (m - 1) as usize;
-                let (mean, sem) = crate::math::stats::mean_sem_from_sums(r, self.st.mom_sum[j], self.st.mom_sum2[j]);
+                let (mean, sem) = crate::math::stats::mean_sem_from_sums(
+                    r,
+                    self.st.mom_sum[j],
+                    self.st.mom_sum2[j],
+                );
                 let am = cfg.split.moment(m);
                 let exact = am.powi(cfg.level as i32);
                 MomentRow {

@@ -562,7 +562,8 @@ impl CascadeRun {
         let tau = 2.0 * std::f64::consts::PI / c.box_length;
         let mut sk: Vec<SkRow> = (0..self.n2.len())
             .map(|s| {
-                let (mean, sem) = crate::math::stats::mean_sem_from_sums(r, self.st.s_sum[s], self.st.s_sum2[s]);
+                let (mean, sem) =
+                    crate::math::stats::mean_sem_from_sums(r, self.st.s_sum[s], self.st.s_sum2[s]);
                 SkRow {
                     source: "field".into(),
                     n2: self.n2[s],

@@ -495,14 +495,17 @@ impl SpmRun {
             let v: Vec<f64> = tail.iter().map(|m| m.0).collect();
             let lp: Vec<f64> = tail.iter().map(|m| m.1.ln()).collect();
             let w: Vec<f64> = tail.iter().map(|m| m.2 as f64).collect();
-            if let Some((a, k, _)) = crate::math::fit::stretched_exponential(&v, &lp, &w, 0.3, 3.0) {
+            if let Some((a, k, _)) = crate::math::fit::stretched_exponential(&v, &lp, &w, 0.3, 3.0)
+            {
                 am = Some(a);
                 km = Some(k);
             }
             // (5.31): with the predicted prefactor H(v) ~ v^h divided out.
             if let Some(h) = pred.map(|p| p.2) {
                 let lph: Vec<f64> = v.iter().zip(&lp).map(|(v, l)| l - h * v.ln()).collect();
-                if let Some((a, k, _)) = crate::math::fit::stretched_exponential(&v, &lph, &w, 0.3, 3.0) {
+                if let Some((a, k, _)) =
+                    crate::math::fit::stretched_exponential(&v, &lph, &w, 0.3, 3.0)
+                {
                     amh = Some(a);
                     kmh = Some(k);
                 }

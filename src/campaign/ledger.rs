@@ -17,8 +17,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::campaign::plan::Shard;
 use crate::fsutil;
-use crate::plan::Shard;
 use crate::store::FORMAT_VERSION;
 
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]

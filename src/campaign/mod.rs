@@ -1,6 +1,6 @@
-//! The campaign engine: a campaign directory, its frozen manifest and plan, and `run`, which
-//! drives the pending runs of a shard on a rayon pool while one dispatcher (this thread) owns
-//! the campaign state, fans events out to the reporter and feeds the single table writer.
+//! The campaign engine, the same for every model: a campaign directory, its frozen manifest
+//! and plan ([`Campaign`]), the events between workers and the dispatcher, and the pieces that
+//! [`dispatch::run`] drives (plan, ledger, worker, writer, status, slurm, compact, verify).
 //!
 //! Directory layout:
 //! ```text
@@ -13,28 +13,34 @@
 //! ```
 
 pub mod compact;
+pub mod dispatch;
 pub mod ledger;
+pub mod plan;
 pub mod slurm;
 pub mod status;
+pub mod tables;
 pub mod verify;
 pub mod worker;
 pub mod writer;
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::atomic::AtomicU8;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::fsutil;
-use crate::manifest::{self, Manifest, ManifestErrors};
-use crate::plan::{canonical, Plan, RunSpec, Shard};
+use crate::manifest::validate::ManifestErrors;
+use crate::manifest::Manifest;
+use crate::models::{CampaignView, ModelParams, PointView};
+use crate::store::dataset::Dataset;
 use crate::store::FORMAT_VERSION;
 use crate::CODE_VERSION;
-use ledger::{RunStatus, ShardLock};
-use worker::{RunEnd, RunResult};
+use ledger::RunStatus;
+use plan::{canonical, Plan, Shard};
 
 #[derive(Debug, thiserror::Error)]
 pub enum CampaignError {
@@ -66,7 +72,7 @@ pub struct Campaign {
     pub manifest_json: String,
 }
 
-fn io_err(p: &Path, e: impl std::fmt::Display) -> CampaignError {
+pub(crate) fn io_err(p: &Path, e: impl std::fmt::Display) -> CampaignError {
     CampaignError::Io(format!("{}: {e}", p.display()))
 }
 
@@ -74,7 +80,7 @@ impl Campaign {
     /// Validate `manifest_path` and create `out` for it, or open `out` if it already holds
     /// the same campaign (a different one is refused). Nothing is written for a bad manifest.
     pub fn create_or_open(manifest_path: &Path, out: &Path) -> Result<Campaign, CampaignError> {
-        let (manifest, plan) = manifest::load_manifest(manifest_path)?;
+        let (manifest, plan) = plan::load(manifest_path)?;
         let value = serde_json::to_value(&manifest).expect("manifest serialises");
         let info_path = out.join("campaign.json");
         if info_path.exists() {
@@ -159,7 +165,7 @@ impl Campaign {
             tracing::warn!(was = %info.code_version, now = CODE_VERSION, "campaign was started by another code version");
         }
         let text = serde_json::to_string(&info.manifest).expect("value serialises");
-        let (manifest, plan) = manifest::parse_manifest(&text, &info_path.display().to_string())?;
+        let (manifest, plan) = plan::parse(&text, &info_path.display().to_string())?;
         Ok(Campaign {
             root: root.to_path_buf(),
             manifest,
@@ -168,56 +174,74 @@ impl Campaign {
         })
     }
 
-    /// Whether any point records the time-averaged MSD (then, and only then, the campaign has
-    /// the `dsmc_tamsd*` and `dsmc_theory_tamsd` tables).
-    pub fn observes_tamsd(&self) -> bool {
-        self.plan.points.iter().any(|p| match &p.params {
-            crate::plan::ModelParams::Dsmc(d) => d.wants_tamsd(),
-            _ => false,
-        })
+    /// The campaign's tables.
+    pub fn data(&self) -> Dataset {
+        Dataset::new(&self.root, &self.manifest_json)
     }
 
-    /// The RFM tables this campaign has (raw and summaries), by the observables it records.
-    pub fn rfm_tables(&self) -> Vec<&'static str> {
-        use crate::manifest::rfm::RfmObservable as O;
-        use crate::store::tables as t;
-        let wants = |o: O| {
-            self.plan.points.iter().any(|p| match &p.params {
-                crate::plan::ModelParams::Rfm(r) => r.wants(o),
-                _ => false,
-            })
-        };
-        let mut v = vec![
-            t::RFM_TIMESERIES,
-            t::RFM_TIMESERIES_SUMMARY,
-            t::RFM_TEMPERATURE_BLOCKS,
-        ];
-        if wants(O::Snapshot) {
-            v.push(t::RFM_SNAPSHOTS);
+    /// The campaign as its model sees it; `done` maps the runs finished with status done to
+    /// their replica numbers.
+    pub fn view<'a>(
+        &'a self,
+        data: &'a Dataset,
+        done: &'a BTreeMap<u64, u32>,
+    ) -> CampaignView<'a, ModelParams> {
+        CampaignView {
+            name: &self.manifest.name,
+            points: self
+                .plan
+                .points
+                .iter()
+                .map(|p| PointView {
+                    point_id: p.point_id,
+                    params: &p.params,
+                    label: self.plan.label(p.point_id),
+                })
+                .collect(),
+            replicas: self.plan.replicas,
+            done,
+            data,
         }
-        if wants(O::VelocityMoments) {
-            v.extend([t::RFM_MOMENTS, t::RFM_MOMENTS_SUMMARY]);
-        }
-        if wants(O::VelocityHistogram)
-            || wants(O::NeighbourDistances)
-            || wants(O::FreePaths)
-            || wants(O::PostCollisionVelocity)
-        {
-            v.extend([t::RFM_HISTOGRAMS, t::RFM_HISTOGRAMS_SUMMARY]);
-        }
-        if wants(O::NeighbourDistances) {
-            v.extend([t::RFM_NEIGHBOUR_MOMENTS, t::RFM_NEIGHBOUR_MOMENTS_SUMMARY]);
-        }
-        if wants(O::StructureFactor) {
-            v.extend([t::RFM_STRUCTURE_FACTOR, t::RFM_STRUCTURE_FACTOR_SUMMARY]);
-        }
-        if wants(O::RadialDistribution) {
-            v.extend([t::RFM_RADIAL, t::RFM_RADIAL_SUMMARY]);
-        }
-        if wants(O::FreePaths) {
-            v.extend([t::RFM_FREE_PATH_MOMENTS, t::RFM_FREE_PATH_MOMENTS_SUMMARY]);
-        }
-        v
+    }
+
+    /// Every table of the campaign (the model's and `runs`, `points`).
+    pub fn tables(&self) -> Vec<&'static str> {
+        let points: Vec<&ModelParams> = self.plan.points.iter().map(|p| &p.params).collect();
+        let mut t = vec![tables::RUNS, tables::POINTS];
+        t.extend(self.plan.model.tables(&points));
+        t
+    }
+
+    /// Write the replica summaries of the runs finished so far.
+    pub fn write_summaries(
+        &self,
+        finished: &BTreeMap<u64, RunStatus>,
+    ) -> Result<(), crate::store::parquet_io::StoreError> {
+        let done: BTreeMap<u64, u32> = finished
+            .iter()
+            .filter(|(_, s)| **s == RunStatus::Done)
+            .map(|(r, _)| (*r, self.plan.replica_of(*r)))
+            .collect();
+        let data = self.data();
+        self.plan.model.write_summaries(&self.view(&data, &done))
+    }
+
+    /// Write the kinetic-theory tables that do not exist yet; `Ok(false)` if the model has
+    /// none.
+    pub fn write_theory(&self) -> Result<bool, crate::store::parquet_io::StoreError> {
+        let data = self.data();
+        let none = BTreeMap::new();
+        self.plan.model.write_theory(&self.view(&data, &none))
+    }
+
+    /// The model's standard figures from the summary tables; `Ok(None)` if it has none.
+    pub fn figures(
+        &self,
+    ) -> Result<Option<Vec<(String, crate::plot::Figure)>>, crate::store::parquet_io::StoreError>
+    {
+        let data = self.data();
+        let none = BTreeMap::new();
+        self.plan.model.figures(&self.view(&data, &none))
     }
 
     pub fn checkpoint_dir(&self) -> PathBuf {
@@ -311,179 +335,4 @@ pub struct Outcome {
     pub interrupted: bool,
     /// Every run of the campaign (all shards) is finished and the summaries are written.
     pub complete: bool,
-}
-
-/// Run (or continue) the pending runs of `opts.shard`.
-pub fn run(
-    c: &Campaign,
-    opts: &RunOptions,
-    reporter: &mut dyn Reporter,
-) -> Result<Outcome, CampaignError> {
-    let _lock = ShardLock::acquire(&c.root, opts.shard).map_err(CampaignError::Refused)?;
-    let tag = opts.shard.tag();
-    for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
-        reporter.event(&Event::Warning { message: note });
-    }
-    let commits = ledger::read_commits(&c.root).map_err(CampaignError::Refused)?;
-    let finished = ledger::finished_runs(&commits);
-    let mine: Vec<RunSpec> = (0..c.plan.n_runs())
-        .filter(|r| opts.shard.contains(*r))
-        .map(|r| c.plan.run(r))
-        .collect();
-    let pending: Vec<RunSpec> = mine
-        .iter()
-        .filter(|r| !finished.contains_key(&r.run_id))
-        .copied()
-        .collect();
-    reporter.event(&Event::Plan {
-        total: mine.len() as u64,
-        already: (mine.len() - pending.len()) as u64,
-        pending: pending.len() as u64,
-    });
-
-    let ckpt_dir = c.checkpoint_dir();
-    fsutil::create_dir_durable(&ckpt_dir).map_err(|e| io_err(&ckpt_dir, e))?;
-    let mut writer = writer::Writer::new(c, &tag).map_err(|e| CampaignError::Io(e.to_string()))?;
-    writer
-        .ensure_points()
-        .map_err(|e| CampaignError::Io(e.to_string()))?;
-    writer
-        .ensure_theory()
-        .map_err(|e| CampaignError::Io(e.to_string()))?;
-
-    let threads = if opts.threads == 0 {
-        std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(1)
-    } else {
-        opts.threads
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .thread_name(|i| format!("granular-worker-{i}"))
-        .build()
-        .map_err(|e| CampaignError::Io(format!("cannot start {threads} worker threads: {e}")))?;
-
-    let (tx, rx) = std::sync::mpsc::channel::<(Event, Option<RunResult>)>();
-    let mut outcome = Outcome::default();
-    let mut fatal: Option<CampaignError> = None;
-    let mut last_heartbeat = Instant::now() - Duration::from_secs(60);
-    let mut running: std::collections::BTreeSet<u64> = Default::default();
-    std::thread::scope(|scope| {
-        let tx_workers = tx.clone();
-        let pending = &pending;
-        let pool = &pool;
-        scope.spawn(move || {
-            // A shared queue: each worker takes the next pending run in plan order.
-            let next = std::sync::atomic::AtomicUsize::new(0);
-            let next = &next;
-            pool.scope(|s| {
-                for _ in 0..threads {
-                    let mut tx = tx_workers.clone();
-                    s.spawn(move |_| loop {
-                        let j = next.fetch_add(1, Ordering::SeqCst);
-                        let Some(spec) = pending.get(j) else { break };
-                        worker::run_one(c, spec, opts, &mut tx);
-                    });
-                }
-            });
-            drop(tx_workers);
-        });
-        drop(tx);
-        loop {
-            let msg = rx.recv_timeout(Duration::from_millis(200));
-            match msg {
-                Ok((event, result)) => {
-                    match &event {
-                        Event::Started { run_id, .. } => {
-                            running.insert(*run_id);
-                        }
-                        Event::Finished { run_id, status, .. } => {
-                            running.remove(run_id);
-                            match status {
-                                RunStatus::Done => outcome.done += 1,
-                                RunStatus::Failed => outcome.failed += 1,
-                            }
-                        }
-                        Event::Interrupted { run_id } => {
-                            running.remove(run_id);
-                            outcome.interrupted = true;
-                        }
-                        _ => {}
-                    }
-                    reporter.event(&event);
-                    if let Some(r) = result {
-                        if fatal.is_none() {
-                            writer.add(r);
-                        }
-                    }
-                }
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-            if fatal.is_none() && writer.due(opts.flush_every) {
-                match writer.flush() {
-                    Ok(Some((runs, seq))) => reporter.event(&Event::Committed { runs, seq }),
-                    Ok(None) => {}
-                    Err(e) => {
-                        // Stop the workers (they checkpoint); nothing of this batch is committed.
-                        opts.interrupt.fetch_max(1, Ordering::SeqCst);
-                        fatal = Some(CampaignError::Io(format!("writing the tables failed: {e}")));
-                    }
-                }
-            }
-            if last_heartbeat.elapsed() > Duration::from_secs(2) {
-                last_heartbeat = Instant::now();
-                let _ = status::write_heartbeat(&c.root, &tag, &running);
-            }
-        }
-    });
-    if let Some(e) = fatal {
-        return Err(e);
-    }
-    match writer.flush() {
-        Ok(Some((runs, seq))) => reporter.event(&Event::Committed { runs, seq }),
-        Ok(None) => {}
-        Err(e) => return Err(CampaignError::Io(format!("writing the tables failed: {e}"))),
-    }
-    status::remove_heartbeat(&c.root, &tag);
-    if opts.interrupt.load(Ordering::SeqCst) > 0 {
-        outcome.interrupted = true;
-    }
-    let commits = ledger::read_commits(&c.root).map_err(CampaignError::Refused)?;
-    let finished = ledger::finished_runs(&commits);
-    outcome.remaining = mine
-        .iter()
-        .filter(|r| !finished.contains_key(&r.run_id))
-        .count() as u64;
-    outcome.failed_in_shard = mine
-        .iter()
-        .filter(|r| finished.get(&r.run_id) == Some(&RunStatus::Failed))
-        .count() as u64;
-    if outcome.remaining == 0 {
-        outcome.interrupted = false;
-    }
-    if finished.len() as u64 == c.plan.n_runs() {
-        crate::store::summary::write_summaries(c, &finished)
-            .map_err(|e| CampaignError::Io(e.to_string()))?;
-        outcome.complete = true;
-    }
-    Ok(outcome)
-}
-
-/// Run a single run to completion in memory, without a campaign directory (tests, benches).
-pub fn run_in_memory(
-    params: &crate::plan::ModelParams,
-    seed: u64,
-) -> Result<crate::engine::RunOutput, crate::dsmc::PhysicsError> {
-    let mut e = crate::engine::Engine::start(params, seed)
-        .map_err(|reason| crate::dsmc::PhysicsError { t: 0.0, reason })?;
-    while !e.advance(u64::MAX)? {}
-    Ok(e.finish())
-}
-
-impl RunResult {
-    pub fn is_final(&self) -> bool {
-        matches!(self.end, RunEnd::Done(_) | RunEnd::Failed { .. })
-    }
 }

@@ -7,8 +7,8 @@ use std::collections::BTreeMap;
 use arrow_array::cast::AsArray;
 use arrow_array::types::UInt64Type;
 
-use super::{ledger, Campaign};
-use crate::store::{layout, parquet_io, tables};
+use super::{ledger, tables, Campaign};
+use crate::store::{layout, parquet_io};
 
 #[derive(Debug, Default)]
 pub struct VerifyReport {

@@ -6,15 +6,15 @@ use std::sync::mpsc::Sender;
 use std::time::Instant;
 
 use super::ledger::RunStatus;
+use super::plan::RunSpec;
 use super::{Campaign, Event, RunOptions};
-use crate::engine::{Engine, RunOutput, WORK_CHUNK};
-use crate::plan::RunSpec;
+use crate::models::{Engine, ModelParams, RunIds, RunRows, WORK_CHUNK};
 use crate::store::checkpoint::{self, CheckpointHeader};
 use crate::CODE_VERSION;
 
 #[derive(Debug)]
 pub enum RunEnd {
-    Done(RunOutput),
+    Done(RunRows),
     /// A deterministic physics failure.
     Failed {
         reason: String,
@@ -39,65 +39,16 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
     let started = Instant::now();
     let params = &c.plan.point(spec.point_id).params;
     let dir = c.checkpoint_dir();
-    let mut wall_before = 0.0;
-    let mut resumed_from = None;
-    let mut engine = None;
-    match checkpoint::load(&dir, spec.run_id, spec.seed) {
-        Ok(Some(loaded)) => {
-            for s in loaded.skipped {
-                let _ = tx.send((
-                    Event::Warning {
-                        message: format!("run {}: skipped a bad checkpoint: {s}", spec.run_id),
-                    },
-                    None,
-                ));
-            }
-            let format_ok = loaded.header.state_format == Engine::expected_state_format(params);
-            let restored = if format_ok {
-                Engine::restore(params, &loaded.payload)
-            } else {
-                Err(format!(
-                    "state format {:?}, this granular writes {:?}",
-                    loaded.header.state_format,
-                    Engine::expected_state_format(params)
-                ))
-            };
-            match restored {
-                Ok(e) => {
-                    wall_before = loaded.header.wall_seconds;
-                    resumed_from = Some(loaded.header.t);
-                    engine = Some(e);
-                }
-                Err(e) => {
-                    let _ = tx.send((
-                        Event::Warning {
-                            message: format!(
-                                "run {}: checkpoint unusable ({e}); restarting from t = 0",
-                                spec.run_id
-                            ),
-                        },
-                        None,
-                    ));
-                }
-            }
-        }
-        Ok(None) => {}
-        Err(problems) => {
-            let _ = tx.send((
-                Event::Warning {
-                    message: format!(
-                        "run {}: no usable checkpoint ({}); restarting from t = 0",
-                        spec.run_id,
-                        problems.join("; ")
-                    ),
-                },
-                None,
-            ));
-        }
-    }
+    let warn = |tx: &mut Tx, message: String| {
+        let _ = tx.send((Event::Warning { message }, None));
+    };
+    let (engine, wall_before, resumed_from) = match restore(&dir, spec, params, tx, &warn) {
+        Some((e, wall, t)) => (Some(e), wall, Some(t)),
+        None => (None, 0.0, None),
+    };
     let mut engine = match engine {
         Some(e) => e,
-        None => match Engine::start(params, spec.seed) {
+        None => match params.start(spec.seed) {
             Ok(e) => e,
             Err(reason) => return finish(tx, spec, RunEnd::Failed { reason, t: 0.0 }, 0.0, None),
         },
@@ -118,7 +69,7 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
             run_id: spec.run_id,
             seed: spec.seed,
             code_version: CODE_VERSION.into(),
-            state_format: engine.state_format().into(),
+            state_format: params.state_format().into(),
             wall_seconds: wall(&started),
             t: engine.time(),
         };
@@ -201,10 +152,67 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
     finish(
         tx,
         spec,
-        RunEnd::Done(engine.finish()),
+        RunEnd::Done(engine.finish(RunIds {
+            run_id: spec.run_id,
+            point_id: spec.point_id,
+        })),
         wall(&started),
         Some(t),
     )
+}
+
+/// The run's engine restored from its newest usable checkpoint, with the wall time spent and
+/// the simulated time reached before; None (after warnings) when there is none.
+fn restore(
+    dir: &std::path::Path,
+    spec: &RunSpec,
+    params: &ModelParams,
+    tx: &mut Tx,
+    warn: &dyn Fn(&mut Tx, String),
+) -> Option<(Engine, f64, f64)> {
+    let loaded = match checkpoint::load(dir, spec.run_id, spec.seed) {
+        Ok(Some(loaded)) => loaded,
+        Ok(None) => return None,
+        Err(problems) => {
+            let why = problems.join("; ");
+            warn(
+                tx,
+                format!(
+                    "run {}: no usable checkpoint ({why}); restarting from t = 0",
+                    spec.run_id
+                ),
+            );
+            return None;
+        }
+    };
+    for s in loaded.skipped {
+        warn(
+            tx,
+            format!("run {}: skipped a bad checkpoint: {s}", spec.run_id),
+        );
+    }
+    let restored = if loaded.header.state_format == params.state_format() {
+        params.restore(&loaded.payload)
+    } else {
+        Err(format!(
+            "state format {:?}, this granular writes {:?}",
+            loaded.header.state_format,
+            params.state_format()
+        ))
+    };
+    match restored {
+        Ok(e) => Some((e, loaded.header.wall_seconds, loaded.header.t)),
+        Err(e) => {
+            warn(
+                tx,
+                format!(
+                    "run {}: checkpoint unusable ({e}); restarting from t = 0",
+                    spec.run_id
+                ),
+            );
+            None
+        }
+    }
 }
 
 fn finish(tx: &mut Tx, spec: &RunSpec, end: RunEnd, wall_seconds: f64, t: Option<f64>) {
@@ -229,4 +237,10 @@ fn finish(tx: &mut Tx, spec: &RunSpec, end: RunEnd, wall_seconds: f64, t: Option
             wall_seconds,
         }),
     ));
+}
+
+impl RunResult {
+    pub fn is_final(&self) -> bool {
+        matches!(self.end, RunEnd::Done(_) | RunEnd::Failed { .. })
+    }
 }

@@ -1,16 +1,20 @@
-//! The single table writer of a shard: buffers finished runs, then flushes them as one
-//! commit (pending parts -> commit record -> rename; see `ledger`).
+//! The single table writer of a shard: buffers the rows of finished runs (in the tables their
+//! model names) and flushes them as one commit (pending parts -> commit record -> rename; see
+//! `ledger`). It knows tables by name only, never a model.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use arrow_array::RecordBatch;
+
 use super::ledger::{self, Commit, CommittedRun, RunStatus};
+use super::plan::canonical;
+use super::tables::{self, RunRow, SweepColumn};
 use super::worker::{RunEnd, RunResult};
 use super::Campaign;
 use crate::fsutil;
-use crate::plan::canonical;
 use crate::store::parquet_io::{self, StoreError};
-use crate::store::tables::{self, RunRow, SpeciesBuffer, SweepColumn, TamsdBuffer};
 use crate::store::{checkpoint, FORMAT_VERSION};
 
 /// Flush when this many rows are buffered, whatever the time.
@@ -21,43 +25,21 @@ pub struct Writer<'c> {
     tag: String,
     seq: u64,
     cols: Vec<SweepColumn>,
+    /// The campaign's tables, in the order parts are written.
+    order: Vec<&'static str>,
     runs: Vec<RunRow>,
-    species: SpeciesBuffer,
-    tamsd: TamsdBuffer,
-    rfm: tables::RfmBuffer,
-    aux: crate::store::aux_tables::AuxBuffer,
+    /// Buffered rows per table.
+    rows: BTreeMap<&'static str, Vec<RecordBatch>>,
+    buffered: usize,
     since: Option<Instant>,
 }
 
 impl<'c> Writer<'c> {
     pub fn new(c: &'c Campaign, tag: &str) -> Result<Self, StoreError> {
-        let mut names = vec![tables::RUNS, tables::POINTS];
-        match c.plan.model {
-            crate::manifest::ModelKind::Dsmc => names.extend([
-                tables::DSMC_SPECIES,
-                tables::DSMC_SPECIES_SUMMARY,
-                tables::DSMC_THEORY,
-                tables::DSMC_THEORY_POINT,
-            ]),
-            crate::manifest::ModelKind::Rfm => names.extend(c.rfm_tables()),
-            crate::manifest::ModelKind::Bisection
-            | crate::manifest::ModelKind::Cascade
-            | crate::manifest::ModelKind::Spm => {
-                names.extend(crate::store::aux_tables::aux_tables(&c.plan))
-            }
-        }
-        // Tables of an observable exist only when it is recorded (an empty dataset directory
-        // is an error for DuckDB's globs).
-        if c.observes_tamsd() {
-            names.extend([
-                tables::DSMC_TAMSD,
-                tables::DSMC_TAMSD_SUMMARY,
-                tables::DSMC_THEORY_TAMSD,
-            ]);
-        }
-        for t in names {
-            crate::store::layout::ensure_table_dir(&c.root, t)
-                .map_err(|e| StoreError::io(&c.root.join("tables").join(t), e))?;
+        let order = c.tables();
+        let data = c.data();
+        for t in &order {
+            data.ensure(t)?;
         }
         let d = ledger::ledger_dir(&c.root, tag);
         fsutil::create_dir_durable(&d).map_err(|e| StoreError::io(&d, e))?;
@@ -66,24 +48,18 @@ impl<'c> Writer<'c> {
             tag: tag.to_string(),
             seq: ledger::next_seq(&c.root, tag),
             cols: tables::sweep_columns(&c.plan),
+            order,
             runs: Vec::new(),
-            species: SpeciesBuffer::default(),
-            tamsd: TamsdBuffer::default(),
-            rfm: tables::RfmBuffer::default(),
-            aux: Default::default(),
+            rows: BTreeMap::new(),
+            buffered: 0,
             since: None,
         })
     }
 
     /// Write the `points` table once (it depends only on the manifest).
     pub fn ensure_points(&self) -> Result<(), StoreError> {
-        let path = self
-            .c
-            .root
-            .join("tables")
-            .join(tables::POINTS)
-            .join("points.parquet");
-        if path.exists() {
+        let data = self.c.data();
+        if data.has(tables::POINTS, "points.parquet") {
             return Ok(());
         }
         let params: Vec<String> = self
@@ -94,35 +70,24 @@ impl<'c> Writer<'c> {
             .map(|p| canonical(&p.params.to_value()))
             .collect();
         let batch = tables::points_batch(&self.c.plan, &self.cols, &params);
-        let tmp = fsutil::temp_path(&path);
-        parquet_io::write_file(&tmp, &batch, tables::POINTS, &self.c.manifest_json)?;
-        std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
-        fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))
+        data.write_whole(tables::POINTS, "points.parquet", &batch)
     }
 
-    /// Write the kinetic-theory tables once (they depend only on the manifest).
+    /// Write the model's kinetic-theory tables once (they depend only on the manifest).
     pub fn ensure_theory(&self) -> Result<(), StoreError> {
-        write_theory(self.c)
+        self.c.write_theory().map(|_| ())
     }
 
     pub fn add(&mut self, r: RunResult) {
-        let (status, reason, t_failed, collisions, trials) = match &r.end {
+        let (status, reason, t_failed, collisions, trials) = match r.end {
             RunEnd::Done(out) => {
-                self.species
-                    .push(r.spec.run_id, r.spec.point_id, &out.dsmc_species);
-                self.tamsd
-                    .push(r.spec.run_id, r.spec.point_id, &out.dsmc_tamsd);
-                if let Some(rfm) = &out.rfm {
-                    self.rfm.push(r.spec.run_id, r.spec.point_id, rfm);
-                }
-                if let Some(aux) = &out.aux {
-                    self.aux.push(r.spec.run_id, r.spec.point_id, aux);
+                for (table, batch) in out.tables {
+                    self.buffered += batch.num_rows();
+                    self.rows.entry(table).or_default().push(batch);
                 }
                 (RunStatus::Done, None, None, out.collisions, out.trials)
             }
-            RunEnd::Failed { reason, t } => {
-                (RunStatus::Failed, Some(reason.clone()), Some(*t), 0, 0)
-            }
+            RunEnd::Failed { reason, t } => (RunStatus::Failed, Some(reason), Some(t), 0, 0),
             RunEnd::Interrupted => return,
         };
         self.runs.push(RunRow {
@@ -145,9 +110,7 @@ impl<'c> Writer<'c> {
 
     pub fn due(&self, every: Duration) -> bool {
         !self.runs.is_empty()
-            && (self.species.rows + self.tamsd.rows + self.rfm.rows() + self.aux.rows()
-                >= FLUSH_ROWS
-                || self.since.is_some_and(|s| s.elapsed() >= every))
+            && (self.buffered >= FLUSH_ROWS || self.since.is_some_and(|s| s.elapsed() >= every))
     }
 
     fn part(&self, table: &str) -> (String, PathBuf) {
@@ -156,31 +119,38 @@ impl<'c> Writer<'c> {
         (rel, abs)
     }
 
+    /// The buffered parts, `runs` first, then the model's tables in their order.
+    fn batches(&mut self) -> Vec<(&'static str, Vec<RecordBatch>)> {
+        let mut out = vec![(
+            tables::RUNS,
+            vec![tables::runs_batch(&self.c.plan, &self.cols, &self.runs)],
+        )];
+        for t in &self.order {
+            if let Some(b) = self.rows.remove(t) {
+                out.push((t, b));
+            }
+        }
+        // Rows of a table the campaign does not list (a model bug) are written too, last,
+        // rather than lost.
+        out.extend(std::mem::take(&mut self.rows));
+        self.buffered = 0;
+        out
+    }
+
     /// Commit the buffered runs; returns (runs committed, commit seq).
     pub fn flush(&mut self) -> Result<Option<(usize, u64)>, StoreError> {
         if self.runs.is_empty() {
             return Ok(None);
         }
-        let mut files = Vec::new();
-        let mut batches = vec![(
-            tables::RUNS,
-            tables::runs_batch(&self.c.plan, &self.cols, &self.runs),
-        )];
-        if self.species.rows > 0 {
-            batches.push((tables::DSMC_SPECIES, self.species.finish()));
-        }
-        if self.tamsd.rows > 0 {
-            batches.push((tables::DSMC_TAMSD, self.tamsd.finish()));
-        }
-        batches.extend(self.rfm.finish());
-        batches.extend(self.aux.finish());
+        let batches = self.batches();
         // 1. pending parts
+        let mut files = Vec::new();
         let mut written = Vec::new();
-        for (table, batch) in &batches {
+        for (table, parts) in &batches {
             let (rel, abs) = self.part(table);
             let pending = ledger::pending_path(&abs);
-            if let Err(e) = parquet_io::write_file(&pending, batch, table, &self.c.manifest_json) {
-                let _ = std::fs::remove_file(&pending);
+            if let Err(e) = parquet_io::write_batches(&pending, parts, table, &self.c.manifest_json)
+            {
                 for p in &written {
                     let _ = std::fs::remove_file(p);
                 }
@@ -238,80 +208,4 @@ impl<'c> Writer<'c> {
         self.seq += 1;
         Ok(Some((n, seq)))
     }
-}
-
-/// Compute the kinetic-theory predictions of every point (in parallel) and write
-/// those of `dsmc_theory`, `dsmc_theory_point` and `dsmc_theory_tamsd` that do not exist yet
-/// (a campaign directory of an older version gains the tables it lacks; existing ones are
-/// never rewritten).
-pub fn write_theory(c: &Campaign) -> Result<(), StoreError> {
-    if c.plan.model != crate::manifest::ModelKind::Dsmc {
-        return Ok(());
-    }
-    use rayon::prelude::*;
-    let dir = c.root.join("tables");
-    let theory = dir.join(tables::DSMC_THEORY).join("theory.parquet");
-    let per_point = dir
-        .join(tables::DSMC_THEORY_POINT)
-        .join("theory_point.parquet");
-    let tamsd = dir
-        .join(tables::DSMC_THEORY_TAMSD)
-        .join("theory_tamsd.parquet");
-    let with_tamsd = c.observes_tamsd();
-    if theory.exists() && per_point.exists() && (tamsd.exists() || !with_tamsd) {
-        return Ok(());
-    }
-    let mut names = vec![tables::DSMC_THEORY, tables::DSMC_THEORY_POINT];
-    if with_tamsd {
-        names.push(tables::DSMC_THEORY_TAMSD);
-    }
-    for t in names {
-        crate::store::layout::ensure_table_dir(&c.root, t)
-            .map_err(|e| StoreError::io(&dir.join(t), e))?;
-    }
-    let preds: Vec<(u32, crate::dsmc::predict::Prediction)> = c
-        .plan
-        .points
-        .par_iter()
-        .filter_map(|p| match &p.params {
-            crate::plan::ModelParams::Dsmc(d) => crate::dsmc::DsmcSystem::from_params(d)
-                .ok()
-                .map(|sys| (p.point_id, crate::dsmc::predict::predict(&sys))),
-            _ => None,
-        })
-        .collect();
-    let rows: Vec<(u32, crate::dsmc::predict::TheoryRow)> = preds
-        .iter()
-        .flat_map(|(p, pr)| pr.rows.iter().map(move |r| (*p, r.clone())))
-        .collect();
-    let tamsd_rows: Vec<(u32, crate::dsmc::predict::TamsdTheoryRow)> = preds
-        .iter()
-        .flat_map(|(p, pr)| pr.tamsd.iter().map(move |r| (*p, r.clone())))
-        .collect();
-    let points: Vec<(u32, f64, Vec<f64>)> = preds
-        .iter()
-        .map(|(p, pr)| (*p, pr.tau0, pr.initial_temperatures.clone()))
-        .collect();
-    for (path, batch, table) in [
-        (&theory, tables::theory_batch(&rows), tables::DSMC_THEORY),
-        (
-            &per_point,
-            tables::theory_point_batch(&points),
-            tables::DSMC_THEORY_POINT,
-        ),
-        (
-            &tamsd,
-            tables::theory_tamsd_batch(&tamsd_rows),
-            tables::DSMC_THEORY_TAMSD,
-        ),
-    ] {
-        if path.exists() || (table == tables::DSMC_THEORY_TAMSD && !with_tamsd) {
-            continue;
-        }
-        let tmp = fsutil::temp_path(path);
-        parquet_io::write_file(&tmp, &batch, table, &c.manifest_json)?;
-        std::fs::rename(&tmp, path).map_err(|e| StoreError::io(path, e))?;
-        fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(path, e))?;
-    }
-    Ok(())
 }

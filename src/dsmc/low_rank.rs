@@ -26,10 +26,10 @@ use serde::{Deserialize, Serialize};
 
 use super::alias::Alias;
 use super::collision::{collide_impulse, impact_impulse};
+use super::system::Method;
 use super::{
     drift, prefetch, Candidate, DsmcSim, DsmcState, DsmcSystem, PhysicsError, RAISE_SLACK,
 };
-use crate::manifest::dsmc::DsmcMethod;
 
 /// The three static tables over k: weights N_k, N_k sigma_k, N_k sigma_k^2.
 pub fn static_tables(sys: &DsmcSystem) -> [Alias; 3] {
@@ -161,7 +161,7 @@ pub fn dynamic_weights(
 
 /// Consistency of a checkpoint's speed groups and particle ids with the run.
 pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), String> {
-    if sys.method != DsmcMethod::LowRank {
+    if sys.method != Method::LowRank {
         return if st.groups.is_empty() && st.ids.is_empty() {
             Ok(())
         } else {
@@ -811,23 +811,32 @@ fn prefetch_record(vel: &[[f64; 3]], j: usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::manifest::dsmc::DsmcParams;
+    use crate::dsmc::system::{power_law_species, RestitutionModel, TamsdPlan};
 
+    /// The power law n1 = 0.1, N1 = 3000, theta = 2.5, eps = 0.3, t_end = 40, msd on, bounds
+    /// refreshed every 0.3 N collisions; with `tamsd` also 50 tracers on a grid of 40 (lag 1).
     fn sim(tamsd: bool) -> DsmcSim {
-        let mut p = serde_json::json!({
-            "method": "low_rank",
-            "species": {"power_law": {"n1": 0.1, "N1": 3000, "theta": 2.5}},
-            "restitution": {"constant": 0.3},
-            "t_end": 40.0,
-            "observables": ["temperature", "msd"],
-            "refresh_every": 0.3
+        let species = power_law_species(3000, 2.5, 1.0).unwrap();
+        let volume = 3000.0 / 0.1;
+        let tamsd = tamsd.then(|| TamsdPlan {
+            grid: 40,
+            tracers: species.iter().map(|s| s.count.min(50) as usize).collect(),
+            lag_steps: vec![1],
+            lags: vec![1.0],
         });
-        if tamsd {
-            p["observables"] = serde_json::json!(["msd", "tamsd"]);
-            p["tamsd"] = serde_json::json!({"lags": [1.0], "tracers": 50, "grid": 40});
-        }
-        let params: DsmcParams = serde_json::from_value(p).unwrap();
-        DsmcSim::new(DsmcSystem::from_params(&params).unwrap(), 77)
+        let sys = DsmcSystem {
+            method: Method::LowRank,
+            species,
+            volume,
+            restitution: RestitutionModel::Constant(0.3),
+            t_end: 40.0,
+            output_times: vec![0.0, 40.0],
+            msd: true,
+            tamsd,
+            refresh_every: 0.3,
+            rate_scale: std::f64::consts::PI / (4.0 * volume),
+        };
+        DsmcSim::new(sys, 77)
     }
 
     /// A checkpoint whose queued candidate names a particle outside its species k (which

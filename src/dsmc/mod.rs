@@ -21,10 +21,10 @@ pub mod viscoelastic;
 
 use serde::{Deserialize, Serialize};
 
-use crate::manifest::dsmc::DsmcMethod;
+use crate::physics::PhysicsError;
 use crate::rng::{RngPosition, RunRng};
 use alias::Alias;
-pub use system::{DsmcSystem, RestitutionModel, SpeciesInfo};
+pub use system::{DsmcSystem, Method, RestitutionModel, SpeciesInfo};
 
 /// One row of the `dsmc_species` table (without the run's ids).
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -56,14 +56,6 @@ pub struct TamsdRow {
     pub tamsd: f64,
     /// The measurement time t of (26): t_end.
     pub t_total: f64,
-}
-
-/// A deterministic physics failure (the same seed fails the same way).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{reason} at t = {t}")]
-pub struct PhysicsError {
-    pub t: f64,
-    pub reason: String,
 }
 
 /// A pre-drawn trial candidate: species pair and particle indices (global).
@@ -249,7 +241,7 @@ impl DsmcSim {
             },
             vmax: vec![0.0; m],
             groups: Vec::new(),
-            ids: if sys.method == DsmcMethod::LowRank && sys.tamsd.is_some() {
+            ids: if sys.method == Method::LowRank && sys.tamsd.is_some() {
                 (0..n as u32).collect()
             } else {
                 Vec::new()
@@ -285,17 +277,17 @@ impl DsmcSim {
         let off = species_offsets(&sys);
         let pair_k = low_rank::static_tables(&sys);
         let (ring, batch) = match sys.method {
-            DsmcMethod::LowRank => (
+            Method::LowRank => (
                 Ring::default(),
                 low_rank::CandidateQueue::from_slice(&st.pipeline),
             ),
-            DsmcMethod::Bird => (
+            Method::Bird => (
                 Ring::from_slice(&st.pipeline),
                 low_rank::CandidateQueue::from_slice(&[]),
             ),
         };
         let mut speed = Vec::new();
-        if sys.method == DsmcMethod::Bird {
+        if sys.method == Method::Bird {
             speed = crate::memory::huge_vec(st.vel.len(), 0f32);
             let sig_max = sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
             for (k, sp) in sys.species.iter().enumerate() {
@@ -311,7 +303,7 @@ impl DsmcSim {
             .max(1.0) as u64;
         let (slot_term, slot_species) = low_rank::slot_tables(m);
         let mut st = st;
-        if sys.method == DsmcMethod::LowRank && st.groups.is_empty() {
+        if sys.method == Method::LowRank && st.groups.is_empty() {
             st.groups = sys
                 .species
                 .iter()
@@ -341,7 +333,7 @@ impl DsmcSim {
             batch,
             speed,
         };
-        if sim.sys.method == DsmcMethod::LowRank {
+        if sim.sys.method == Method::LowRank {
             sim.tracer_pos = sim.tracer_positions();
             sim.gtab =
                 vec![low_rank::GroupInfo::default(); low_rank::GROUPS * sim.sys.species.len()];
@@ -359,8 +351,8 @@ impl DsmcSim {
         self.st.rng = self.rng.position();
         self.st.geom = self.geom.position();
         self.st.pipeline = match self.sys.method {
-            DsmcMethod::LowRank => self.batch.to_vec(),
-            DsmcMethod::Bird => self.ring.to_vec(),
+            Method::LowRank => self.batch.to_vec(),
+            Method::Bird => self.ring.to_vec(),
         };
         postcard::to_stdvec(&self.st).expect("state serialises")
     }
@@ -380,7 +372,7 @@ impl DsmcSim {
         let foreign = |c: &Candidate| match sys.method {
             // Low-rank: a is a slot of the proposed group (a slot past the group's size is
             // a void trial), the group is in the top bits of i, b a particle of species k.
-            DsmcMethod::LowRank => {
+            Method::LowRank => {
                 let i = (c.i & low_rank::SPECIES_MASK) as usize;
                 let g = (c.i >> low_rank::GROUP_SHIFT) as usize;
                 let k = c.k as usize;
@@ -389,7 +381,7 @@ impl DsmcSim {
                     || k >= m
                     || !(off[k]..off[k + 1]).contains(&(c.b as usize))
             }
-            DsmcMethod::Bird => {
+            Method::Bird => {
                 c.a as usize >= n || c.b as usize >= n || c.i as usize >= m || c.k as usize >= m
             }
         };
@@ -456,8 +448,8 @@ impl DsmcSim {
             return Ok(true);
         }
         match self.sys.method {
-            DsmcMethod::LowRank => self.advance_low_rank(max_trials),
-            DsmcMethod::Bird => self.advance_bird(max_trials),
+            Method::LowRank => self.advance_low_rank(max_trials),
+            Method::Bird => self.advance_bird(max_trials),
         }
     }
 
@@ -511,7 +503,7 @@ impl DsmcSim {
     /// Total trial rate for the current bounds.
     fn rebuild_rates(&mut self) {
         match self.sys.method {
-            DsmcMethod::LowRank => {
+            Method::LowRank => {
                 let w = low_rank::dynamic_weights(
                     &self.sys,
                     &self.st.vmax,
@@ -522,7 +514,7 @@ impl DsmcSim {
                 self.rate = self.sys.rate_scale * self.pair_i.total();
                 self.update_lazy_threshold();
             }
-            DsmcMethod::Bird => {
+            Method::Bird => {
                 let n = self.sys.n_particles() as f64;
                 self.rate =
                     n * n * 2.0 * self.st.bird_bound * std::f64::consts::PI / self.sys.volume;
@@ -551,7 +543,7 @@ impl DsmcSim {
         }
         self.st.bird_bound = bound;
         self.st.collisions_at_refresh = self.st.collisions;
-        if self.sys.method == DsmcMethod::LowRank {
+        if self.sys.method == Method::LowRank {
             // Candidates drawn from the old tables are void.
             self.batch.clear();
             if !self.gtab.is_empty() {
@@ -707,7 +699,7 @@ impl DsmcSim {
     /// [`update_lazy_threshold`](Self::update_lazy_threshold)).
     #[inline(always)]
     pub(super) fn lazy_time(&self) -> bool {
-        self.sys.method == DsmcMethod::LowRank && self.st.disp.is_empty()
+        self.sys.method == Method::LowRank && self.st.disp.is_empty()
     }
 
     /// Simulated time reached: `st.t`, plus, for lazy collision times, the time of the
@@ -754,7 +746,7 @@ impl DsmcSim {
         }
         if let Some((grid, t_end)) = self.sys.tamsd.as_ref().map(|p| (p.grid, self.sys.t_end)) {
             while self.st.next_grid <= grid {
-                let t = crate::manifest::dsmc::grid_time(t_end, grid, self.st.next_grid);
+                let t = system::grid_time(t_end, grid, self.st.next_grid);
                 if t > t_next {
                     break;
                 }

@@ -1,8 +1,26 @@
-//! The physical system of a DSMC run, resolved from the manifest: species (mass, diameter,
-//! count, initial temperature), volume, restitution, output schedule.
+//! The physical system of a DSMC run, the engine's own configuration: species (mass,
+//! diameter, count, initial temperature), volume, restitution, output schedule. The `dsmc`
+//! model (`models::dsmc`) resolves it from the manifest's parameters.
 
-use crate::manifest::dsmc::{DsmcMethod, DsmcParams, InitialTemperature, Restitution, SpeciesSpec};
 use crate::rng::RunRng;
+
+/// The collision-pair selection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// The paper's low-rank method (section III.A): species pairs from a rank-3 majorant.
+    LowRank,
+    /// Bird's method (section III.B): uniform ordered pairs, one global majorant.
+    Bird,
+}
+
+/// j t_end / grid, and t_end exactly for j = grid (also the lag of j steps).
+pub fn grid_time(t_end: f64, grid: u64, j: u64) -> f64 {
+    if j == grid {
+        t_end
+    } else {
+        j as f64 * t_end / grid as f64
+    }
+}
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct SpeciesInfo {
@@ -14,7 +32,7 @@ pub struct SpeciesInfo {
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct DsmcSystem {
-    pub method: DsmcMethod,
+    pub method: Method,
     pub species: Vec<SpeciesInfo>,
     pub volume: f64,
     pub restitution: RestitutionModel,
@@ -53,7 +71,7 @@ impl TamsdPlan {
 
     /// Time of grid point j.
     pub fn time(&self, t_end: f64, j: u64) -> f64 {
-        crate::manifest::dsmc::grid_time(t_end, self.grid, j)
+        grid_time(t_end, self.grid, j)
     }
 }
 
@@ -101,125 +119,36 @@ pub fn theory_restitution(
     }
 }
 
+/// The species of the paper's power law: N_k = round(N_1 k^-theta), m_k = k,
+/// sigma_k = k^(1/3), for every k up to the first with N_k < 1 (at most 10^6 species).
+pub fn power_law_species(
+    n1_count: u64,
+    theta: f64,
+    temperature: f64,
+) -> Result<Vec<SpeciesInfo>, String> {
+    let mut species = Vec::new();
+    for k in 1u64.. {
+        let count = (n1_count as f64 * (k as f64).powf(-theta)).round();
+        if count < 1.0 {
+            break;
+        }
+        species.push(SpeciesInfo {
+            mass: k as f64,
+            diameter: (k as f64).cbrt(),
+            count: count as u64,
+            initial_temperature: temperature,
+        });
+        if species.len() > 1_000_000 {
+            return Err("power_law gives more than 1e6 species".into());
+        }
+    }
+    Ok(species)
+}
+
 /// Largest particle count a run may have (particle indices are 32-bit).
 pub const MAX_PARTICLES: u64 = u32::MAX as u64 - 1;
 
 impl DsmcSystem {
-    pub fn from_params(p: &DsmcParams) -> Result<Self, String> {
-        let base_t = match p.initial_temperature {
-            InitialTemperature::Value(t) => t,
-            InitialTemperature::Hcs { mean } => mean,
-        };
-        let (species, volume) = match &p.species {
-            SpeciesSpec::PowerLaw(pl) => {
-                let mut species = Vec::new();
-                for k in 1u64.. {
-                    let count = (pl.n1_count as f64 * (k as f64).powf(-pl.theta)).round();
-                    if count < 1.0 {
-                        break;
-                    }
-                    species.push(SpeciesInfo {
-                        mass: k as f64,
-                        diameter: (k as f64).cbrt(),
-                        count: count as u64,
-                        initial_temperature: base_t,
-                    });
-                    if species.len() > 1_000_000 {
-                        return Err("power_law gives more than 1e6 species".into());
-                    }
-                }
-                (species, pl.n1_count as f64 / pl.n1)
-            }
-            SpeciesSpec::List(list) => {
-                let species: Vec<SpeciesInfo> = list
-                    .iter()
-                    .map(|s| SpeciesInfo {
-                        mass: s.mass,
-                        diameter: s.diameter,
-                        count: s.count,
-                        initial_temperature: s.temperature.unwrap_or(base_t),
-                    })
-                    .collect();
-                let n: u64 = species.iter().map(|s| s.count).sum();
-                let volume = match (p.volume, p.number_density) {
-                    (Some(v), _) => v,
-                    (None, Some(d)) => n as f64 / d,
-                    (None, None) => {
-                        return Err("species.list needs volume or number_density".into())
-                    }
-                };
-                (species, volume)
-            }
-        };
-        let n: u64 = species.iter().map(|s| s.count).sum();
-        if n > MAX_PARTICLES {
-            return Err(format!(
-                "{n} particles is more than the supported {MAX_PARTICLES}"
-            ));
-        }
-        let restitution = match &p.restitution {
-            Restitution::Constant(e) => RestitutionModel::Constant(*e),
-            Restitution::Viscoelastic(v) => RestitutionModel::Viscoelastic { a_kappa: v.a_kappa },
-        };
-        let mut species = species;
-        if let InitialTemperature::Hcs { mean } = p.initial_temperature {
-            let th: Vec<crate::theory::Species> = species
-                .iter()
-                .map(|s| {
-                    crate::theory::Species::new(
-                        s.mass,
-                        s.diameter,
-                        s.count as f64 / volume,
-                    )
-                })
-                .collect();
-            let r = theory_restitution(&restitution, &species);
-            let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean);
-            for (s, t) in species.iter_mut().zip(t0) {
-                if !(t.is_finite() && t > 0.0) {
-                    return Err(format!(
-                        "no homogeneous cooling state found (temperature {t})"
-                    ));
-                }
-                s.initial_temperature = t;
-            }
-        }
-        let tamsd = match (&p.tamsd, p.wants_tamsd()) {
-            (Some(tm), true) => {
-                let lag_steps: Vec<u64> = tm
-                    .resolve(p.t_end)
-                    .into_iter()
-                    .filter(|&l| l < tm.grid)
-                    .collect();
-                Some(TamsdPlan {
-                    grid: tm.grid,
-                    tracers: species
-                        .iter()
-                        .map(|s| s.count.min(tm.tracers) as usize)
-                        .collect(),
-                    lags: lag_steps
-                        .iter()
-                        .map(|&l| crate::manifest::dsmc::grid_time(p.t_end, tm.grid, l))
-                        .collect(),
-                    lag_steps,
-                })
-            }
-            _ => None,
-        };
-        Ok(DsmcSystem {
-            method: p.method,
-            species,
-            volume,
-            restitution,
-            t_end: p.t_end,
-            output_times: p.output_times.resolve(p.t_end),
-            msd: p.wants_msd(),
-            tamsd,
-            refresh_every: p.refresh_every,
-            rate_scale: std::f64::consts::PI / (4.0 * volume),
-        })
-    }
-
     /// Whether per-particle displacements are kept (for `msd` and `tamsd`).
     pub fn displacements(&self) -> bool {
         self.msd || self.tamsd.is_some()

@@ -1,17 +1,17 @@
-//! The JSON manifest: serde types that mirror the file exactly (`deny_unknown_fields`, no
-//! `untagged`/`flatten`), the JSON Schema generated from them, and loading with validation
-//! that reports every error at once with its JSON path ([`validate`]).
+//! The JSON manifest's envelope: serde types that mirror the file exactly
+//! (`deny_unknown_fields`, no `untagged`/`flatten`), the JSON Schema generated from them with
+//! each model's `params` schema (from `models`), and the first two stages of validation
+//! ([`validate`]: JSON syntax and the schema, every error at once with its JSON path). The
+//! third stage, the checks of the expanded sweep, is `campaign::plan`.
 
-pub mod aux_models;
-pub mod dsmc;
-pub mod rfm;
+pub mod sweep;
 pub mod validate;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
-pub use validate::{load_manifest, parse_manifest, ManifestError, ManifestErrors};
+pub use crate::models::ModelKind;
 
 /// Manifest format version written into frozen copies; bump on incompatible changes.
 pub const MANIFEST_FORMAT: u32 = 1;
@@ -52,44 +52,21 @@ fn default_replicas() -> u32 {
     1
 }
 
-/// The simulators `granular` knows.
-#[derive(Serialize, Deserialize, JsonSchema, Clone, Copy, Debug, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum ModelKind {
-    /// Direct simulation Monte Carlo of a polydisperse granular gas (homogeneous cooling).
-    Dsmc,
-    /// Soft-sphere molecular dynamics of the Random Force Model (driven granular gas, 1D/2D).
-    Rfm,
-    /// Multiplicative bisection of [0, 1] (thesis sec. 3.4; spec 3.1).
-    Bisection,
-    /// Multiplicative cascade on a 2^n x 2^n grid, S(k), D_f, particle placement (ch. 6).
-    Cascade,
-    /// Single particle model: Q(v, l) and P(v) from a free-path distribution (sec. 5.2-5.3).
-    Spm,
-}
-
-impl ModelKind {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            ModelKind::Dsmc => "dsmc",
-            ModelKind::Rfm => "rfm",
-            ModelKind::Bisection => "bisection",
-            ModelKind::Cascade => "cascade",
-            ModelKind::Spm => "spm",
-        }
-    }
-}
-
 /// The manifest's JSON Schema (draft 2020-12), generated from the Rust types: the envelope
 /// with `params` typed per model through `if`/`then`.
 pub fn json_schema() -> Value {
     let mut generator = schemars::generate::SchemaSettings::draft2020_12().into_generator();
     let root = generator.root_schema_for::<Manifest>();
-    let dsmc_ref = generator.subschema_for::<dsmc::DsmcParams>();
-    let rfm_ref = generator.subschema_for::<rfm::RfmParams>();
-    let bisection_ref = generator.subschema_for::<aux_models::BisectionParams>();
-    let cascade_ref = generator.subschema_for::<aux_models::CascadeParams>();
-    let spm_ref = generator.subschema_for::<aux_models::SpmParams>();
+    let branches: Vec<Value> = ModelKind::ALL
+        .iter()
+        .map(|m| {
+            let params = m.params_subschema(&mut generator).to_value();
+            serde_json::json!({
+                "if": {"properties": {"model": {"const": m.as_str()}}, "required": ["model"]},
+                "then": {"properties": {"params": params}}
+            })
+        })
+        .collect();
     let mut root = root.to_value();
     let defs = generator.take_definitions(true);
     let obj = root.as_object_mut().expect("schema is an object");
@@ -99,43 +76,6 @@ pub fn json_schema() -> Value {
     for (k, v) in defs {
         root_defs.as_object_mut().expect("$defs").insert(k, v);
     }
-    obj.insert(
-        "allOf".into(),
-        serde_json::json!([
-            {
-                "if": {"properties": {"model": {"const": "dsmc"}}, "required": ["model"]},
-                "then": {"properties": {"params": dsmc_ref.to_value()}}
-            },
-            {
-                "if": {"properties": {"model": {"const": "rfm"}}, "required": ["model"]},
-                "then": {"properties": {"params": rfm_ref.to_value()}}
-            },
-            {
-                "if": {"properties": {"model": {"const": "bisection"}}, "required": ["model"]},
-                "then": {"properties": {"params": bisection_ref.to_value()}}
-            },
-            {
-                "if": {"properties": {"model": {"const": "cascade"}}, "required": ["model"]},
-                "then": {"properties": {"params": cascade_ref.to_value()}}
-            },
-            {
-                "if": {"properties": {"model": {"const": "spm"}}, "required": ["model"]},
-                "then": {"properties": {"params": spm_ref.to_value()}}
-            }
-        ]),
-    );
+    obj.insert("allOf".into(), Value::Array(branches));
     root
-}
-
-/// The schema of one model's `params` object, standalone (with its `$defs`).
-pub fn params_schema(model: ModelKind) -> Value {
-    let mut generator = schemars::generate::SchemaSettings::draft2020_12().into_generator();
-    let root = match model {
-        ModelKind::Dsmc => generator.root_schema_for::<dsmc::DsmcParams>(),
-        ModelKind::Rfm => generator.root_schema_for::<rfm::RfmParams>(),
-        ModelKind::Bisection => generator.root_schema_for::<aux_models::BisectionParams>(),
-        ModelKind::Cascade => generator.root_schema_for::<aux_models::CascadeParams>(),
-        ModelKind::Spm => generator.root_schema_for::<aux_models::SpmParams>(),
-    };
-    root.to_value()
 }

@@ -12,8 +12,8 @@ use jsonschema::error::ValidationErrorKind;
 use jsonschema::ValidationError;
 use serde_json::Value;
 
-use super::{json_schema, params_schema, Manifest, ModelKind};
-use crate::plan::{self, Plan};
+use super::sweep::sweep_key_errors;
+use super::{json_schema, Manifest, ModelKind};
 
 /// One problem in a manifest.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -49,25 +49,34 @@ impl fmt::Display for ManifestErrors {
 
 impl std::error::Error for ManifestErrors {}
 
-/// Read and validate a manifest file.
-pub fn load_manifest(path: &Path) -> Result<(Manifest, Plan), ManifestErrors> {
-    let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ManifestErrors {
-        file: file.clone(),
-        errors: vec![ManifestError {
-            path: String::new(),
-            message: format!("cannot read the file: {e}"),
-        }],
-    })?;
-    parse_manifest(&text, &file)
+impl ManifestErrors {
+    /// The problems of `file`, each reported once.
+    pub fn new(file: &str, mut errors: Vec<ManifestError>) -> Self {
+        dedup(&mut errors);
+        ManifestErrors {
+            file: file.to_string(),
+            errors,
+        }
+    }
 }
 
-/// Validate manifest text; `file` names it in errors.
-pub fn parse_manifest(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors> {
-    let fail = |errors: Vec<ManifestError>| ManifestErrors {
-        file: file.to_string(),
-        errors,
-    };
+/// The text of a manifest file (an unreadable file is a manifest error at `/`).
+pub fn read(path: &Path) -> Result<String, ManifestErrors> {
+    std::fs::read_to_string(path).map_err(|e| {
+        ManifestErrors::new(
+            &path.display().to_string(),
+            vec![ManifestError {
+                path: String::new(),
+                message: format!("cannot read the file: {e}"),
+            }],
+        )
+    })
+}
+
+/// Stages 1 and 2: JSON syntax and the generated schema (with the sweep's key checks, so all
+/// are reported together); `file` names the text in errors.
+pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
+    let fail = |errors: Vec<ManifestError>| ManifestErrors::new(file, errors);
     let value: Value = serde_json::from_str(text).map_err(|e| {
         fail(vec![ManifestError {
             path: String::new(),
@@ -84,35 +93,20 @@ pub fn parse_manifest(text: &str, file: &str) -> Result<(Manifest, Plan), Manife
             value.get("params"),
             value.get("sweep").and_then(|s| s.as_object()),
         ) {
-            let more = plan::sweep_key_errors(params, sweep);
+            let more = sweep_key_errors(params, sweep);
             errors.extend(
                 more.into_iter()
                     .map(|(path, message)| ManifestError { path, message }),
             );
         }
-        dedup(&mut errors);
         return Err(fail(errors));
     }
-    let manifest: Manifest = match serde_json::from_value(value.clone()) {
-        Ok(m) => m,
-        Err(e) => {
-            return Err(fail(vec![ManifestError {
-                path: String::new(),
-                message: e.to_string(),
-            }]))
-        }
-    };
-    match plan::expand(&manifest) {
-        Ok(plan) => Ok((manifest, plan)),
-        Err(errs) => {
-            errors.extend(
-                errs.into_iter()
-                    .map(|(path, message)| ManifestError { path, message }),
-            );
-            dedup(&mut errors);
-            Err(fail(errors))
-        }
-    }
+    serde_json::from_value(value).map_err(|e| {
+        fail(vec![ManifestError {
+            path: String::new(),
+            message: e.to_string(),
+        }])
+    })
 }
 
 /// Validate a model's params object (after sweep substitution) against its schema; paths are
@@ -124,7 +118,7 @@ pub fn params_schema_errors(model: ModelKind, params: &Value, prefix: &str) -> V
     VALIDATORS.with(|cell| {
         let mut cache = cell.borrow_mut();
         if !cache.iter().any(|(m, _)| *m == model) {
-            let v = jsonschema::validator_for(&params_schema(model))
+            let v = jsonschema::validator_for(&model.params_schema())
                 .expect("generated schema compiles");
             cache.push((model, v));
         }

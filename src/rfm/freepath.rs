@@ -30,8 +30,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::observe::{HistRow, BLOCKS};
-use super::structure::block_sem;
+use super::blocks::{block_sem, HistRow, BLOCKS};
 
 /// Highest moment <l^m> recorded.
 pub const FREE_PATH_ORDERS: usize = 4;

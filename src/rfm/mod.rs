@@ -39,6 +39,7 @@
 //! calibration (2.12), spec 6.7), e.g. 0.058 for nominal eps_n = eps_t = 0.1 and 0.591 for
 //! 0.6; [`RfmConfig::effective_tangential_restitution`] gives it.
 
+pub mod blocks;
 pub mod contact;
 pub mod freepath;
 pub mod integrate;

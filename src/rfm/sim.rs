@@ -8,12 +8,12 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::blocks::HistRow;
 use super::contact::ContactLaw;
 use super::freepath::{FreePathAcc, FreePathConfig, FreePathMomentRow, FreePaths};
 use super::integrate::PairPropagator;
 use super::neighbours::{wrap, NeighbourList};
 use super::noise::Kicks;
-use super::observe::HistRow;
 use super::params::{InitialLayout, RfmConfig};
 use crate::rng::stream::WordStream;
 use crate::rng::{RngPosition, RunRng};

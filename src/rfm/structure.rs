@@ -17,19 +17,11 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::observe::{HistRow, BLOCKS};
+use super::blocks::block_sem;
+use super::blocks::{HistRow, BLOCKS};
 
 /// Highest moment <R^m> of the neighbour separations.
 pub const NEIGHBOUR_ORDERS: usize = 9;
-
-/// Standard error of the mean of block means (None with fewer than 2 blocks).
-pub fn block_sem(blocks: &[f64]) -> Option<f64> {
-    (blocks.len() >= 2).then(|| {
-        let k = blocks.len() as f64;
-        let mean = blocks.iter().sum::<f64>() / k;
-        (blocks.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (k - 1.0) / k).sqrt()
-    })
-}
 
 // ----------------------------------------------------------------------------------------
 // 1D neighbour separations

@@ -18,10 +18,10 @@
 //! exists (the ratios drift as the gas cools); [`hcs_temperatures`] then returns the
 //! instantaneous equal-cooling-rate state at the given mean temperature.
 
-use crate::math::ode::Lu;
 use super::restitution::{pair_rates, PairRestitution};
 use super::species::Species;
 use super::temperature::{check_input, cooling_rates_with, time_scale};
+use crate::math::ode::Lu;
 use std::f64::consts::PI;
 
 /// xi_k and d xi_k / d ln T_j (row-major), by pairwise forward differences.

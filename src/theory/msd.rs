@@ -15,10 +15,10 @@
 //! from one implicit integration that lands on each node. Accuracy ~1e-9 relative.
 
 use super::diffusion::{diffusion_coefficients, tau_v};
-use crate::math::quad::{composite_nodes, phi, tau_ln1p};
 use super::restitution::{PairRestitution, PairTable};
 use super::species::Species;
 use super::temperature::{evolve, tau0_with, time_scale};
+use crate::math::quad::{composite_nodes, phi, tau_ln1p};
 
 /// (22): 6 D_k(0) tau_0 ln(1 + t/tau_0) + 6 D_k(0) tau_v,k(0) ((1 + t/tau_0)^-beta_k - 1),
 /// beta_k = tau_0/tau_v,k(0), evaluated stably as 6 D tau_v phi(L/tau_v) with

@@ -50,8 +50,8 @@
 //! For velocity-dependent eps the averages are computed by adaptive Gauss-Legendre quadrature
 //! over z in [0, 9.5] (the neglected tail is < 1e-33 of the total), to ~1e-13 relative.
 
-use crate::math::quad::{adaptive, gamma};
 use super::species::Species;
+use crate::math::quad::{adaptive, gamma};
 use std::f64::consts::PI;
 use std::fmt;
 use std::sync::Arc;

@@ -19,10 +19,10 @@
 //! panel min(tau_0, Delta, tau_v)/4), the integrand written as expm1(-tau_0 ln1p(Delta/(t'+tau_0))/tau_v).
 
 use super::diffusion::{diffusion_coefficients, tau_v};
-use crate::math::quad::graded_integral;
 use super::restitution::PairRestitution;
 use super::species::Species;
 use super::temperature::tau0_with;
+use crate::math::quad::graded_integral;
 
 /// tau_0 ln(1 + Delta/(x + tau_0)), with its limit Delta for tau_0 = infinity.
 fn l_of(tau0: f64, delta: f64, x: f64) -> f64 {

@@ -17,10 +17,9 @@
 //! cools), so the integrator is implicit: 3-stage Radau IIA (order 5, L-stable) with step
 //! doubling error control on y (absolute 1e-11, i.e. relative 1e-11 on T per step).
 
-use crate::math::ode::{integrate, OdeSystem, Tolerances};
 use super::restitution::{pair_rates, PairRestitution, PairTable};
 use super::species::Species;
-
+use crate::math::ode::{integrate, OdeSystem, Tolerances};
 
 /// xi_ki of (15): the cooling of species k by collisions with species i.
 pub fn xi_pair(k: &Species, tk: f64, i: &Species, ti: f64, eps: f64) -> f64 {

@@ -11,9 +11,9 @@
 //! T_2/T_1 = 412.93 >> mu and the mu >> 1 expansion (gamma/mu -> 0) does not apply.
 
 use super::diffusion::tau_c;
-use crate::math::quad::phi;
 use super::restitution::{pair_rates, PairRestitution};
 use super::species::Species;
+use crate::math::quad::phi;
 
 /// tau_0 (29) = 6 tau_c(0) / (1 - eps_11^2).
 pub fn tau0_tracer(eps11: f64, tau_c0: f64) -> f64 {

@@ -10,7 +10,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use granular::manifest::load_manifest;
+use granular::campaign::plan::load as load_manifest;
 
 use super::util::{self, repo_root};
 

@@ -5,11 +5,10 @@
 
 use serde_json::{json, Value};
 
-use granular::campaign::run_in_memory;
-use granular::dsmc::{DsmcSim, DsmcSystem, SpeciesRow, TamsdRow};
-use granular::engine::{Engine, RunOutput};
-use granular::manifest::dsmc::DsmcParams;
-use granular::plan::ModelParams;
+use granular::dsmc::{DsmcSim, SpeciesRow, TamsdRow};
+use granular::models::dsmc::DsmcParams;
+use granular::models::{Engine, ModelParams};
+use granular::physics::PhysicsError;
 use granular::theory::temperature::{haff, tau0};
 use granular::theory::Species;
 
@@ -19,8 +18,8 @@ use super::util::heavy;
 /// set-up used here is one a user could write).
 fn dsmc_params(params: Value) -> DsmcParams {
     let m = json!({"name": "physics-test", "model": "dsmc", "seed": 1, "params": params});
-    let (_, plan) = granular::manifest::parse_manifest(&m.to_string(), "inline")
-        .unwrap_or_else(|e| panic!("{e}"));
+    let (_, plan) =
+        granular::campaign::plan::parse(&m.to_string(), "inline").unwrap_or_else(|e| panic!("{e}"));
     let ModelParams::Dsmc(p) = plan.points[0].params.clone() else {
         panic!("dsmc params")
     };
@@ -29,6 +28,38 @@ fn dsmc_params(params: Value) -> DsmcParams {
 
 fn model(params: Value) -> ModelParams {
     ModelParams::Dsmc(dsmc_params(params))
+}
+
+/// The rows and counters of a finished DSMC run (what its `dsmc_species`, `dsmc_tamsd` and
+/// `runs` rows hold).
+#[derive(Debug, Clone, PartialEq)]
+struct RunOutput {
+    dsmc_species: Vec<SpeciesRow>,
+    dsmc_tamsd: Vec<TamsdRow>,
+    collisions: u64,
+    trials: u64,
+}
+
+/// The output of a finished engine (a DSMC one).
+fn finish(e: Engine) -> RunOutput {
+    let Engine::Dsmc(mut sim) = e else {
+        unreachable!("DSMC test")
+    };
+    RunOutput {
+        dsmc_tamsd: sim.tamsd_rows(),
+        dsmc_species: sim.take_rows(),
+        collisions: sim.st.collisions,
+        trials: sim.st.trials,
+    }
+}
+
+/// Run to the end in memory.
+fn run_in_memory(params: &ModelParams, seed: u64) -> Result<RunOutput, PhysicsError> {
+    let mut e = params
+        .start(seed)
+        .map_err(|reason| PhysicsError { t: 0.0, reason })?;
+    while !e.advance(u64::MAX)? {}
+    Ok(finish(e))
 }
 
 /// The rows of one species, in time order.
@@ -179,7 +210,7 @@ fn chunked(
     restore_at: &dyn Fn(usize) -> bool,
     peek_at: &dyn Fn(usize) -> bool,
 ) -> Finished {
-    let mut e = Engine::start(params, seed).unwrap();
+    let mut e = params.start(seed).unwrap();
     let mut chunks = 0;
     loop {
         let done = e.advance(chunk).unwrap();
@@ -192,7 +223,7 @@ fn chunked(
             let bytes = e.state_bytes();
             let t = e.time();
             drop(e);
-            e = Engine::restore(params, &bytes).unwrap();
+            e = params.restore(&bytes).unwrap();
             assert_eq!(e.time().to_bits(), t.to_bits());
             // The restored engine serialises to the same bytes (nothing lost or re-derived
             // differently).
@@ -210,7 +241,7 @@ fn chunked(
         _ => unreachable!("DSMC test"),
     };
     Finished {
-        out: e.finish(),
+        out: finish(e),
         state,
         chunks,
         bound_raises,
@@ -404,18 +435,18 @@ fn restore_refuses_a_foreign_state() {
     let b = model(
         json!({"method": "low_rank", "species": {"power_law": {"n1": 0.1, "N1": 400, "theta": 3}}, "restitution": {"constant": 0.5}, "t_end": 1.0}),
     );
-    let mut e = Engine::start(&a, 1).unwrap();
+    let mut e = a.start(1).unwrap();
     e.advance(1000).unwrap();
     let bytes = e.state_bytes();
     assert!(
-        Engine::restore(&b, &bytes).is_err(),
+        b.restore(&bytes).is_err(),
         "restored a state of 300-monomer run into a 400-monomer run"
     );
     assert!(
-        Engine::restore(&a, &bytes[..bytes.len() / 2]).is_err(),
+        a.restore(&bytes[..bytes.len() / 2]).is_err(),
         "restored a truncated state"
     );
-    assert!(Engine::restore(&a, &bytes).is_ok());
+    assert!(a.restore(&bytes).is_ok());
 }
 
 // ---------------------------------------------------------------------------------------
@@ -454,7 +485,7 @@ fn check_conservation(method: &str, eps: f64) {
         "restitution": {"constant": eps},
         "t_end": 30.0
     }));
-    let sys = DsmcSystem::from_params(&params).unwrap();
+    let sys = params.system().unwrap();
     assert!(sys.species.len() >= 10);
     let mut sim = DsmcSim::new(sys, 77);
     let e0 = sim.sum_mv2();
@@ -642,7 +673,7 @@ fn tamsd_grid_records_the_state_like_outputs() {
             "observables": ["msd", "tamsd"],
             "tamsd": {"lags": [1.0], "tracers": 1000, "grid": 400}
         }));
-        let sys = DsmcSystem::from_params(&params).unwrap();
+        let sys = params.system().unwrap();
         let mut sim = DsmcSim::new(sys, 31);
         while !sim.advance(100_000).unwrap() {}
         let plan = sim.sys.tamsd.clone().expect("tamsd plan");

@@ -86,7 +86,7 @@ fn job_manifests_validate() {
     let failures: Vec<String> = files
         .iter()
         .filter_map(|f| {
-            granular::manifest::load_manifest(f)
+            granular::campaign::plan::load(f)
                 .err()
                 .map(|e| e.to_string())
         })

@@ -1,7 +1,15 @@
-//! Manifest types of the `dsmc` model (spec `dsmc.md`).
+//! The `params` of a `dsmc` manifest (spec `dsmc.md`): serde types that mirror the JSON,
+//! their cross-field rules (`check`), and their resolution into the engine's configuration
+//! ([`DsmcParams::system`]).
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
+
+use crate::dsmc::system::{
+    grid_time, power_law_species, theory_restitution, Method, RestitutionModel, SpeciesInfo,
+    TamsdPlan, MAX_PARTICLES,
+};
+use crate::dsmc::DsmcSystem;
 
 /// Parameters of a DSMC run (homogeneous cooling state of a polydisperse granular gas).
 #[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
@@ -137,6 +145,14 @@ pub enum DsmcMethod {
 }
 
 impl DsmcMethod {
+    /// The engine's method.
+    pub fn engine(self) -> Method {
+        match self {
+            DsmcMethod::LowRank => Method::LowRank,
+            DsmcMethod::Bird => Method::Bird,
+        }
+    }
+
     pub fn as_str(self) -> &'static str {
         match self {
             DsmcMethod::LowRank => "low_rank",
@@ -309,15 +325,6 @@ impl TamsdSpec {
     }
 }
 
-/// j t_end / grid, and t_end exactly for j = grid (also the lag of j steps).
-pub fn grid_time(t_end: f64, grid: u64, j: u64) -> f64 {
-    if j == grid {
-        t_end
-    } else {
-        j as f64 * t_end / grid as f64
-    }
-}
-
 impl OutputTimes {
     /// The sorted, de-duplicated output times, with 0 and `t_end` included.
     pub fn resolve(&self, t_end: f64) -> Vec<f64> {
@@ -341,6 +348,149 @@ impl OutputTimes {
 }
 
 impl DsmcParams {
+    /// The engine's configuration of a run with these parameters (species resolved, the HCS
+    /// temperatures computed, output times and TAMSD lags resolved).
+    pub fn system(&self) -> Result<DsmcSystem, String> {
+        let p = self;
+        let base_t = match p.initial_temperature {
+            InitialTemperature::Value(t) => t,
+            InitialTemperature::Hcs { mean } => mean,
+        };
+        let (species, volume) = match &p.species {
+            SpeciesSpec::PowerLaw(pl) => (
+                power_law_species(pl.n1_count, pl.theta, base_t)?,
+                pl.n1_count as f64 / pl.n1,
+            ),
+            SpeciesSpec::List(list) => {
+                let species: Vec<SpeciesInfo> = list
+                    .iter()
+                    .map(|s| SpeciesInfo {
+                        mass: s.mass,
+                        diameter: s.diameter,
+                        count: s.count,
+                        initial_temperature: s.temperature.unwrap_or(base_t),
+                    })
+                    .collect();
+                let n: u64 = species.iter().map(|s| s.count).sum();
+                let volume = match (p.volume, p.number_density) {
+                    (Some(v), _) => v,
+                    (None, Some(d)) => n as f64 / d,
+                    (None, None) => {
+                        return Err("species.list needs volume or number_density".into())
+                    }
+                };
+                (species, volume)
+            }
+        };
+        let n: u64 = species.iter().map(|s| s.count).sum();
+        if n > MAX_PARTICLES {
+            return Err(format!(
+                "{n} particles is more than the supported {MAX_PARTICLES}"
+            ));
+        }
+        let restitution = match &p.restitution {
+            Restitution::Constant(e) => RestitutionModel::Constant(*e),
+            Restitution::Viscoelastic(v) => RestitutionModel::Viscoelastic { a_kappa: v.a_kappa },
+        };
+        let mut species = species;
+        if let InitialTemperature::Hcs { mean } = p.initial_temperature {
+            let th: Vec<crate::theory::Species> = species
+                .iter()
+                .map(|s| crate::theory::Species::new(s.mass, s.diameter, s.count as f64 / volume))
+                .collect();
+            let r = theory_restitution(&restitution, &species);
+            let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean);
+            for (s, t) in species.iter_mut().zip(t0) {
+                if !(t.is_finite() && t > 0.0) {
+                    return Err(format!(
+                        "no homogeneous cooling state found (temperature {t})"
+                    ));
+                }
+                s.initial_temperature = t;
+            }
+        }
+        let tamsd = match (&p.tamsd, p.wants_tamsd()) {
+            (Some(tm), true) => {
+                let lag_steps: Vec<u64> = tm
+                    .resolve(p.t_end)
+                    .into_iter()
+                    .filter(|&l| l < tm.grid)
+                    .collect();
+                Some(TamsdPlan {
+                    grid: tm.grid,
+                    tracers: species
+                        .iter()
+                        .map(|s| s.count.min(tm.tracers) as usize)
+                        .collect(),
+                    lags: lag_steps
+                        .iter()
+                        .map(|&l| grid_time(p.t_end, tm.grid, l))
+                        .collect(),
+                    lag_steps,
+                })
+            }
+            _ => None,
+        };
+        Ok(DsmcSystem {
+            method: p.method.engine(),
+            species,
+            volume,
+            restitution,
+            t_end: p.t_end,
+            output_times: p.output_times.resolve(p.t_end),
+            msd: p.wants_msd(),
+            tamsd,
+            refresh_every: p.refresh_every,
+            rate_scale: std::f64::consts::PI / (4.0 * volume),
+        })
+    }
+
+    /// Particles per species, without resolving the rest of the system (no theory is solved).
+    fn counts(&self) -> Vec<u64> {
+        match &self.species {
+            SpeciesSpec::PowerLaw(pl) => (1u64..=1_000_001)
+                .map(|k| (pl.n1_count as f64 * (k as f64).powf(-pl.theta)).round())
+                .take_while(|c| *c >= 1.0)
+                .map(|c| c as u64)
+                .collect(),
+            SpeciesSpec::List(list) => list.iter().map(|s| s.count).collect(),
+        }
+    }
+
+    /// An estimate of the bytes a run holds at its peak: the particle arrays (velocities,
+    /// and displacements, particle ids, Bird's speed weights when used), the TAMSD tracks and
+    /// the recorded rows, twice (a checkpoint serialises the state once more), plus the
+    /// per-species tables.
+    pub fn memory_estimate(&self) -> u64 {
+        let counts = self.counts();
+        let n = counts.iter().fold(0u64, |a, c| a.saturating_add(*c));
+        let low_rank = self.method == DsmcMethod::LowRank;
+        let disp = self.wants_msd() || self.wants_tamsd();
+        let per_particle = 24
+            + if disp { 32 } else { 0 }
+            + if low_rank && self.wants_tamsd() { 4 } else { 0 }
+            + if low_rank { 0 } else { 4 };
+        let tracks = match (&self.tamsd, self.wants_tamsd()) {
+            (Some(tm), true) => counts
+                .iter()
+                .map(|c| (*c).min(tm.tracers))
+                .fold(0u64, |a, c| a.saturating_add(c))
+                .saturating_mul(tm.grid.saturating_add(1))
+                .saturating_mul(24),
+            _ => 0,
+        };
+        let m = counts.len() as u64;
+        let rows = m
+            .saturating_mul(self.output_times.resolve(self.t_end).len() as u64)
+            .saturating_mul(80);
+        n.saturating_mul(per_particle)
+            .saturating_add(tracks)
+            .saturating_add(rows)
+            .saturating_mul(2)
+            .saturating_add(m.saturating_mul(256))
+            .saturating_add(8 << 20)
+    }
+
     pub fn wants_msd(&self) -> bool {
         self.observables.contains(&DsmcObservable::Msd)
     }

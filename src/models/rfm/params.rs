@@ -1,10 +1,13 @@
-//! Manifest types of the `rfm` model: soft-sphere MD of the Random Force Model (spec
-//! `rfm.md`). Defaults are the thesis's (spec 1.1); SI units.
+//! The `params` of an `rfm` manifest: soft-sphere MD of the Random Force Model (spec
+//! `rfm.md`). Defaults are the thesis's (spec 1.1); SI units. Serde types that mirror the
+//! JSON, their cross-field rules (`check`), and their resolution into the run's own
+//! configuration ([`RfmParams::run_config`]).
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::rfm::freepath::FreePathConfig;
+use crate::rfm::observe::{HistogramConfig, RunConfig};
 use crate::rfm::params::{
     InitialLayout, RfmConfig, THESIS_MASS, THESIS_NOISE, THESIS_RADIUS, THESIS_SPRING,
 };
@@ -357,6 +360,71 @@ impl Default for HistogramSpec {
 impl RfmParams {
     pub fn wants(&self, o: RfmObservable) -> bool {
         self.observables.contains(&o)
+    }
+
+    /// An estimate of the bytes a run holds at its peak: per particle the positions,
+    /// velocities, reference positions, noise and forces, neighbour and cell lists, contact
+    /// and free-path bookkeeping, and the checkpoint's copy of the state; plus the observables'
+    /// accumulators (histograms, S(k) sums, g(R) bins, snapshots).
+    pub fn memory_estimate(&self) -> u64 {
+        let n = self.n_particles;
+        let d = self.dim.clamp(1, 2) as u64;
+        let per_particle = 8 * d * 10 + 160;
+        let mut bytes = n.saturating_mul(per_particle);
+        let hist = |bins: u32| (bins as u64 + 2) * 8 * 2;
+        if let Some(h) = &self.velocity_histogram {
+            bytes = bytes.saturating_add(hist(h.bins));
+        }
+        if let Some(h) = &self.post_collision_velocity {
+            bytes = bytes.saturating_add(hist(h.bins));
+        }
+        if self.config().validate().is_ok() {
+            if let Some(sk) = self.structure_factor_config() {
+                // Half the lattice vectors in |n| <= n_max, a sum pair each, per block.
+                let vectors = (std::f64::consts::PI * sk.n_max * sk.n_max / 2.0).ceil() as u64;
+                bytes = bytes.saturating_add(vectors.saturating_mul(8 * 16));
+            }
+            if let Some(r) = self.radial_config() {
+                bytes = bytes.saturating_add((r.bins as u64).saturating_mul(8 * 14));
+            }
+            if let Some(f) = self.free_path_config() {
+                bytes = bytes
+                    .saturating_add(n.saturating_mul(48))
+                    .saturating_add((f.bins().min(1e12) as u64).saturating_mul(16));
+            }
+        }
+        if let Some(s) = &self.snapshot {
+            bytes =
+                bytes.saturating_add((s.times.len() as u64).saturating_mul(n).saturating_mul(48));
+        }
+        bytes.saturating_add(8 << 20)
+    }
+
+    /// The run's configuration: the simulator's and what it observes, defaults resolved.
+    pub fn run_config(&self) -> RunConfig {
+        RunConfig {
+            sim: self.config(),
+            moments: self.wants(RfmObservable::VelocityMoments),
+            histogram: self.wants(RfmObservable::VelocityHistogram).then(|| {
+                let h = self.velocity_histogram.clone().unwrap_or_default();
+                HistogramConfig {
+                    range: h.range,
+                    bins: h.bins,
+                }
+            }),
+            neighbours: self.neighbour_config(),
+            structure_factor: self.structure_factor_config(),
+            radial: self.radial_config(),
+            snapshot_times: if self.wants(RfmObservable::Snapshot) {
+                self.snapshot
+                    .as_ref()
+                    .map(|s| s.times.clone())
+                    .unwrap_or_default()
+            } else {
+                Vec::new()
+            },
+            free_paths: self.free_path_config(),
+        }
     }
 
     /// The simulator's configuration.

@@ -9,75 +9,47 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use arrow_array::cast::AsArray;
-use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
-use arrow_array::{Array, RecordBatch};
+use arrow_array::RecordBatch;
 use arrow_schema::{DataType, Field, Schema};
 
-use super::aux_tables::{CASCADE_STRUCTURE_FACTOR, CASCADE_STRUCTURE_FACTOR_SUMMARY};
-use super::parquet_io::{self, StoreError};
-use super::summary::{table_files, write_whole};
-use super::tables::cols;
-use crate::campaign::ledger::RunStatus;
-use crate::campaign::Campaign;
-use crate::manifest::ModelKind;
+use super::params::CascadeParams;
+use super::tables::{CASCADE_STRUCTURE_FACTOR, CASCADE_STRUCTURE_FACTOR_SUMMARY};
+use crate::math::stats::mean_sem;
+use crate::models::CampaignView;
+use crate::store::cols::{self, get_f64, get_str, get_u32, get_u64, opt};
+use crate::store::parquet_io::StoreError;
 
 /// One run's shell: (replica, k, n_vectors, n_realisations, s_mean, s_sem).
 type Shell = (u64, f64, u64, u64, f64, Option<f64>);
 
-pub fn write_aux_summaries(
-    c: &Campaign,
-    finished: &BTreeMap<u64, RunStatus>,
-) -> Result<(), StoreError> {
-    if c.plan.model != ModelKind::Cascade {
-        return Ok(());
-    }
-    let replicas = c.plan.replicas as u64;
-    let done = |run: u64| finished.get(&run) == Some(&RunStatus::Done);
+pub fn write(c: &CampaignView<'_, CascadeParams>) -> Result<(), StoreError> {
+    let t = CASCADE_STRUCTURE_FACTOR;
     let mut g: BTreeMap<(u32, String, u64), Vec<Shell>> = BTreeMap::new();
-    for f in table_files(c, CASCADE_STRUCTURE_FACTOR)? {
-        for b in parquet_io::read_campaign_file(&f, CASCADE_STRUCTURE_FACTOR, &c.manifest_json)? {
-            let col = |name: &str| {
-                b.column_by_name(name).cloned().ok_or_else(|| {
-                    StoreError::Corrupt(f.display().to_string(), format!("has no column {name}"))
-                })
-            };
-            let (r, p, src, n2, k, nv, nr, s, se) = (
-                col("run_id")?,
-                col("point_id")?,
-                col("source")?,
-                col("n2")?,
-                col("k")?,
-                col("n_vectors")?,
-                col("n_realisations")?,
-                col("s_mean")?,
-                col("s_sem")?,
-            );
-            let (r, p, src, n2, k, nv, nr, s, sea) = (
-                r.as_primitive::<UInt64Type>(),
-                p.as_primitive::<UInt32Type>(),
-                src.as_string::<i32>(),
-                n2.as_primitive::<UInt64Type>(),
-                k.as_primitive::<Float64Type>(),
-                nv.as_primitive::<UInt64Type>(),
-                nr.as_primitive::<UInt64Type>(),
-                s.as_primitive::<Float64Type>(),
-                se.as_primitive::<Float64Type>(),
-            );
+    for f in c.data.files(t)? {
+        let name = f.display().to_string();
+        for b in c.data.read_file(&f, t)? {
+            let r = get_u64(&b, &name, "run_id")?;
+            let p = get_u32(&b, &name, "point_id")?;
+            let src = get_str(&b, &name, "source")?;
+            let n2 = get_u64(&b, &name, "n2")?;
+            let k = get_f64(&b, &name, "k")?;
+            let nv = get_u64(&b, &name, "n_vectors")?;
+            let nr = get_u64(&b, &name, "n_realisations")?;
+            let s = get_f64(&b, &name, "s_mean")?;
+            let se = get_f64(&b, &name, "s_sem")?;
             for i in 0..b.num_rows() {
-                if !done(r.value(i)) {
+                let Some(&replica) = c.done.get(&r.value(i)) else {
                     continue;
-                }
-                let sem = (!sea.is_null(i)).then(|| sea.value(i));
+                };
                 g.entry((p.value(i), src.value(i).to_string(), n2.value(i)))
                     .or_default()
                     .push((
-                        r.value(i) % replicas,
+                        replica as u64,
                         k.value(i),
                         nv.value(i),
                         nr.value(i),
                         s.value(i),
-                        sem,
+                        opt(se, i),
                     ));
             }
         }
@@ -95,7 +67,7 @@ pub fn write_aux_summaries(
                 .map(|x| x.5.map(|s| s * s))
                 .sum::<Option<f64>>()
                 .map(|s2| s2.sqrt() / n)
-                .or_else(|| super::summary::mean_sem(&xs).1);
+                .or_else(|| mean_sem(&xs).1);
             let real: u64 = v.iter().map(|x| x.3).sum();
             (key, v[0].1, v[0].2, v.len() as u32, real, mean, sem)
         })
@@ -125,10 +97,6 @@ pub fn write_aux_summaries(
         ],
     )
     .expect("cascade structure factor summary");
-    write_whole(
-        c,
-        CASCADE_STRUCTURE_FACTOR_SUMMARY,
-        "summary.parquet",
-        &batch,
-    )
+    c.data
+        .write_whole(CASCADE_STRUCTURE_FACTOR_SUMMARY, "summary.parquet", &batch)
 }

@@ -1,5 +1,5 @@
 //! The plan: a validated manifest expanded into sweep points and runs with stable ids and
-//! seeds.
+//! seeds; loading a manifest with all three stages of validation ([`load`], [`parse`]).
 //!
 //! Points are the cartesian product of the sweep lists (first key outermost) and are numbered
 //! `point_id = 0..`; each point has `replicas` runs, `run_id = point_id * replicas + replica`.
@@ -8,55 +8,14 @@
 
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha20Rng;
-use serde_json::{Map, Value};
+use serde_json::Value;
 
-use crate::manifest::dsmc::DsmcParams;
-use crate::manifest::validate::params_schema_errors;
-use crate::manifest::{Manifest, ModelKind};
-
-/// Resolved parameters of one point, typed per model.
-#[derive(Clone, Debug, PartialEq)]
-pub enum ModelParams {
-    Dsmc(DsmcParams),
-    Rfm(crate::manifest::rfm::RfmParams),
-    Bisection(crate::manifest::aux_models::BisectionParams),
-    Cascade(crate::manifest::aux_models::CascadeParams),
-    Spm(crate::manifest::aux_models::SpmParams),
-}
-
-impl ModelParams {
-    /// The params as canonical JSON (the `points` table).
-    pub fn to_value(&self) -> Value {
-        match self {
-            ModelParams::Dsmc(p) => serde_json::to_value(p),
-            ModelParams::Rfm(p) => serde_json::to_value(p),
-            ModelParams::Bisection(p) => serde_json::to_value(p),
-            ModelParams::Cascade(p) => serde_json::to_value(p),
-            ModelParams::Spm(p) => serde_json::to_value(p),
-        }
-        .expect("params serialise")
-    }
-}
-
-/// Deserialize typed params and run their `check`.
-fn typed_as<T: serde::de::DeserializeOwned>(
-    params: &Value,
-    prefix: &str,
-    errors: &mut Vec<(String, String)>,
-    check: impl Fn(&T, &str, &mut Vec<(String, String)>),
-    wrap: impl Fn(T) -> ModelParams,
-) -> Option<ModelParams> {
-    match serde_json::from_value::<T>(params.clone()) {
-        Ok(p) => {
-            check(&p, prefix, errors);
-            Some(wrap(p))
-        }
-        Err(e) => {
-            errors.push((prefix.to_string(), e.to_string()));
-            None
-        }
-    }
-}
+pub use crate::manifest::sweep::canonical;
+use crate::manifest::sweep::{path_exists, pointer_escape, set_path, sweep_key_errors};
+use crate::manifest::validate::{self, params_schema_errors};
+use crate::manifest::validate::{ManifestError, ManifestErrors};
+use crate::manifest::Manifest;
+use crate::models::{ModelKind, ModelParams};
 
 #[derive(Clone, Debug)]
 pub struct Point {
@@ -137,7 +96,7 @@ impl Plan {
 
     pub fn run(&self, run_id: u64) -> RunSpec {
         let point_id = (run_id / self.replicas as u64) as u32;
-        let replica = (run_id % self.replicas as u64) as u32;
+        let replica = self.replica_of(run_id);
         let point = &self.points[point_id as usize];
         RunSpec {
             run_id,
@@ -153,6 +112,21 @@ impl Plan {
         }
     }
 
+    /// The replica number of a run.
+    pub fn replica_of(&self, run_id: u64) -> u32 {
+        (run_id % self.replicas as u64) as u32
+    }
+
+    /// The swept values of a point, `key=value, ...` (empty without a sweep).
+    pub fn label(&self, point_id: u32) -> String {
+        self.sweep_keys
+            .iter()
+            .zip(&self.point(point_id).values)
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     pub fn point(&self, point_id: u32) -> &Point {
         &self.points[point_id as usize]
     }
@@ -161,26 +135,6 @@ impl Plan {
     pub fn sweep_column(key: &str) -> String {
         key.replace('.', "_")
     }
-}
-
-/// Recursively sorted-key JSON, the canonical form used for identities and comparisons.
-pub fn canonical(v: &Value) -> String {
-    fn sort(v: &Value) -> Value {
-        match v {
-            Value::Object(m) => {
-                let mut keys: Vec<_> = m.keys().collect();
-                keys.sort();
-                let mut out = Map::new();
-                for k in keys {
-                    out.insert(k.clone(), sort(&m[k]));
-                }
-                Value::Object(out)
-            }
-            Value::Array(a) => Value::Array(a.iter().map(sort).collect()),
-            other => other.clone(),
-        }
-    }
-    sort(v).to_string()
 }
 
 /// FNV-1a, 64 bit: a stable hash of identity bytes (not for security).
@@ -216,42 +170,25 @@ pub fn derive_seed(
     ChaCha20Rng::from_seed(key).next_u64()
 }
 
-fn pointer_escape(key: &str) -> String {
-    key.replace('~', "~0").replace('/', "~1")
+/// Read and validate a manifest file: JSON syntax, schema, then the expanded sweep.
+pub fn load(path: &std::path::Path) -> Result<(Manifest, Plan), ManifestErrors> {
+    let file = path.display().to_string();
+    let text = validate::read(path)?;
+    parse(&text, &file)
 }
 
-/// Set `params[path]` (dotted) to `value`; the path must already exist.
-/// One step of a dotted path: an object key, or an array index when the value is an array
-/// (`species.list.0.count`).
-fn step<'v>(cur: &'v Value, part: &str) -> Option<&'v Value> {
-    match cur {
-        Value::Object(o) => o.get(part),
-        Value::Array(a) => part.parse::<usize>().ok().and_then(|i| a.get(i)),
-        _ => None,
+/// Validate manifest text; `file` names it in errors.
+pub fn parse(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors> {
+    let manifest = validate::parse(text, file)?;
+    match expand(&manifest) {
+        Ok(plan) => Ok((manifest, plan)),
+        Err(errs) => Err(ManifestErrors::new(
+            file,
+            errs.into_iter()
+                .map(|(path, message)| ManifestError { path, message })
+                .collect(),
+        )),
     }
-}
-
-fn step_mut<'v>(cur: &'v mut Value, part: &str) -> Option<&'v mut Value> {
-    match cur {
-        Value::Object(o) => o.get_mut(part),
-        Value::Array(a) => part.parse::<usize>().ok().and_then(move |i| a.get_mut(i)),
-        _ => None,
-    }
-}
-
-fn set_path(params: &mut Value, path: &[&str], value: Value) -> bool {
-    let mut cur = params;
-    for (i, part) in path.iter().enumerate() {
-        let Some(next) = step_mut(cur, part) else {
-            return false;
-        };
-        if i + 1 == path.len() {
-            *next = value;
-            return true;
-        }
-        cur = next;
-    }
-    false
 }
 
 fn typed(
@@ -265,103 +202,7 @@ fn typed(
         errors.extend(schema_errs.into_iter().map(|e| (e.path, e.message)));
         return None;
     }
-    match model {
-        ModelKind::Dsmc => match serde_json::from_value::<DsmcParams>(params.clone()) {
-            Ok(p) => {
-                p.check(prefix, errors);
-                Some(ModelParams::Dsmc(p))
-            }
-            Err(e) => {
-                errors.push((prefix.to_string(), e.to_string()));
-                None
-            }
-        },
-        ModelKind::Rfm => {
-            match serde_json::from_value::<crate::manifest::rfm::RfmParams>(params.clone()) {
-                Ok(p) => {
-                    p.check(prefix, errors);
-                    Some(ModelParams::Rfm(p))
-                }
-                Err(e) => {
-                    errors.push((prefix.to_string(), e.to_string()));
-                    None
-                }
-            }
-        }
-        ModelKind::Bisection => typed_as(
-            params,
-            prefix,
-            errors,
-            crate::manifest::aux_models::BisectionParams::check,
-            ModelParams::Bisection,
-        ),
-        ModelKind::Cascade => typed_as(
-            params,
-            prefix,
-            errors,
-            crate::manifest::aux_models::CascadeParams::check,
-            ModelParams::Cascade,
-        ),
-        ModelKind::Spm => typed_as(
-            params,
-            prefix,
-            errors,
-            crate::manifest::aux_models::SpmParams::check,
-            ModelParams::Spm,
-        ),
-    }
-}
-
-fn path_exists(base: &Value, parts: &[&str]) -> bool {
-    let mut cur = base;
-    for part in parts {
-        match step(cur, part) {
-            Some(next) => cur = next,
-            None => return false,
-        }
-    }
-    !parts.is_empty()
-}
-
-/// Checks of the sweep's keys and lists that need no typed params: paths exist in `params`,
-/// no path inside another, lists non-empty, no duplicate values. Runs even when the schema
-/// check failed, so these errors are reported together with the others.
-pub fn sweep_key_errors(params: &Value, sweep: &Map<String, Value>) -> Vec<(String, String)> {
-    let mut errors = Vec::new();
-    for (key, list) in sweep {
-        let kp = format!("/sweep/{}", pointer_escape(key));
-        let parts: Vec<&str> = key.split('.').collect();
-        if key.is_empty() || !path_exists(params, &parts) {
-            errors.push((kp.clone(), format!("sweep path {key:?} does not exist in params (expected a dotted path to a value given in params, e.g. \"restitution.constant\" or \"species.list.0.count\")")));
-        }
-        for other in sweep.keys() {
-            if other != key && other.starts_with(&format!("{key}.")) {
-                errors.push((
-                    kp.clone(),
-                    format!("sweep paths {key:?} and {other:?} overlap"),
-                ));
-            }
-        }
-        let Some(list) = list.as_array() else {
-            continue;
-        };
-        if list.is_empty() {
-            errors.push((kp.clone(), "expected a non-empty list of values".into()));
-        }
-        let canon: Vec<String> = list.iter().map(canonical).collect();
-        for i in 0..canon.len() {
-            if canon[..i].contains(&canon[i]) {
-                errors.push((
-                    format!("{kp}/{i}"),
-                    format!(
-                        "duplicate sweep value {} (would make duplicate points)",
-                        canon[i]
-                    ),
-                ));
-            }
-        }
-    }
-    errors
+    model.params_from(params, prefix, errors)
 }
 
 /// Expand the sweep; every problem is returned as (JSON pointer, message).
@@ -480,7 +321,6 @@ pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::manifest::parse_manifest;
 
     fn manifest(sweep: &str) -> String {
         format!(
@@ -495,9 +335,8 @@ mod tests {
     /// a value to a sweep list leaves the seeds of existing points unchanged.
     #[test]
     fn seeds_follow_identity_not_position() {
-        let (_, a) =
-            parse_manifest(&manifest(r#"{"restitution.constant": [0.5, 0.9]}"#), "a").unwrap();
-        let (_, b) = parse_manifest(
+        let (_, a) = parse(&manifest(r#"{"restitution.constant": [0.5, 0.9]}"#), "a").unwrap();
+        let (_, b) = parse(
             &manifest(r#"{"restitution.constant": [0.1, 0.5, 0.9]}"#),
             "b",
         )
@@ -513,7 +352,7 @@ mod tests {
 
     #[test]
     fn product_order_first_key_outermost() {
-        let (_, p) = parse_manifest(
+        let (_, p) = parse(
             &manifest(
                 r#"{"method": ["low_rank", "bird"], "restitution.constant": [0.5, 0.9, 1.0]}"#,
             ),
@@ -532,7 +371,7 @@ mod tests {
         let ModelParams::Dsmc(d) = &p.points[3].params else {
             panic!("dsmc params")
         };
-        assert_eq!(d.method, crate::manifest::dsmc::DsmcMethod::Bird);
+        assert_eq!(d.method, crate::models::dsmc::params::DsmcMethod::Bird);
     }
 
     #[test]

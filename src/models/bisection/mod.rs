@@ -1,0 +1,84 @@
+//! The `bisection` model: multiplicative bisection of [0, 1] (spec `rfm.md` 3.1), its length
+//! histogram and moments beside the exact P_n and <a^m>^n.
+
+pub mod params;
+pub mod tables;
+
+use crate::aux_models::bisection::BisectionRun;
+use crate::models::{Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::physics::PhysicsError;
+pub use params::BisectionParams;
+use tables::*;
+
+/// The `bisection` model.
+pub struct Bisection;
+
+impl Model for Bisection {
+    type Params = BisectionParams;
+    type Sim = BisectionRun;
+
+    const STATE_FORMAT: &'static str = "bisection/1";
+    const EXAMPLE: &'static str =
+        r#"{"level": 6, "realisations": 300, "split": {"concave": {"exponent": 0.5}}}"#;
+
+    fn check(p: &BisectionParams, path: &str, errors: &mut ParamErrors) {
+        p.check(path, errors)
+    }
+
+    /// The 2^n partition lengths of a realisation (twice: the working copy) and the histogram.
+    fn memory(p: &BisectionParams) -> u64 {
+        let partitions = 1u64.checked_shl(p.level).unwrap_or(u64::MAX);
+        partitions
+            .saturating_mul(16)
+            .saturating_add(1 << 20)
+            .saturating_add(8 << 20)
+    }
+
+    fn start(p: &BisectionParams, seed: u64) -> Result<BisectionRun, String> {
+        Ok(BisectionRun::new(p.config(), seed))
+    }
+
+    fn restore(p: &BisectionParams, state: &[u8]) -> Result<BisectionRun, String> {
+        BisectionRun::from_state_bytes(p.config(), state)
+    }
+
+    fn finish(run: BisectionRun, ids: RunIds) -> RunRows {
+        let out = run.finish();
+        let mut tables = Vec::new();
+        if !out.histogram.is_empty() {
+            tables.push((BISECTION_HISTOGRAM, histogram_batch(ids, &out.histogram)));
+        }
+        if !out.moments.is_empty() {
+            tables.push((
+                BISECTION_MOMENTS,
+                moments_batch(ids, out.realisations, &out.moments),
+            ));
+        }
+        RunRows {
+            collisions: 0,
+            trials: out.realisations,
+            tables,
+        }
+    }
+
+    fn tables(_points: &[&BisectionParams]) -> Vec<&'static str> {
+        vec![BISECTION_HISTOGRAM, BISECTION_MOMENTS]
+    }
+}
+
+impl Simulation for BisectionRun {
+    /// `work` partition splits: whole realisations (at least one).
+    fn advance(&mut self, work: u64) -> Result<bool, PhysicsError> {
+        let n = (work / self.work_per_realisation()).max(1);
+        Ok(BisectionRun::advance(self, n))
+    }
+    fn progress(&self) -> f64 {
+        BisectionRun::progress(self)
+    }
+    fn time(&self) -> f64 {
+        self.done() as f64
+    }
+    fn state_bytes(&mut self) -> Vec<u8> {
+        BisectionRun::state_bytes(self)
+    }
+}

@@ -1,0 +1,119 @@
+//! The `cascade` model: multiplicative cascades on a 2^n x 2^n grid (spec `rfm.md` 3.4, thesis
+//! ch. 6), S(k) by FFT, the D_f fit, and the particle placement of F 6.3.
+
+pub mod params;
+pub mod summary;
+pub mod tables;
+
+use crate::aux_models::cascade::{CascadeOutput, CascadeRun};
+use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::physics::PhysicsError;
+use crate::store::parquet_io::StoreError;
+pub use params::CascadeParams;
+use tables::*;
+
+/// The `cascade` model.
+pub struct Cascade;
+
+impl Model for Cascade {
+    type Params = CascadeParams;
+    type Sim = CascadeRun;
+
+    const STATE_FORMAT: &'static str = "cascade/1";
+    const EXAMPLE: &'static str = r#"{
+        "level": 5, "box_length": 0.2, "variant": "ucp", "realisations": 6,
+        "k_max": 16, "fit_range": [1, 8],
+        "placement": {"n_particles": 100, "radius": 1.5e-3, "k_max": 20}
+    }"#;
+
+    fn check(p: &CascadeParams, path: &str, errors: &mut ParamErrors) {
+        p.check(path, errors)
+    }
+
+    /// The field, its FFT (complex) and the S(k) sums on the 2^n x 2^n grid, and the placed
+    /// discs with their cell grid.
+    fn memory(p: &CascadeParams) -> u64 {
+        let side = 1u64.checked_shl(p.level).unwrap_or(u64::MAX);
+        let cells = side.saturating_mul(side);
+        let discs = p.placement.as_ref().map_or(0, |pl| pl.n_particles);
+        cells
+            .saturating_mul(8 + 8 + 16 + 16)
+            .saturating_add(discs.saturating_mul(64))
+            .saturating_add(8 << 20)
+    }
+
+    fn start(p: &CascadeParams, seed: u64) -> Result<CascadeRun, String> {
+        Ok(CascadeRun::new(p.config(), seed))
+    }
+
+    fn restore(p: &CascadeParams, state: &[u8]) -> Result<CascadeRun, String> {
+        CascadeRun::from_state_bytes(p.config(), state)
+    }
+
+    fn finish(run: CascadeRun, ids: RunIds) -> RunRows {
+        let trials = run.done();
+        // A failed placement is reported by `advance`, so finish sees none.
+        let out = run.finish().unwrap_or(CascadeOutput {
+            structure_factor: Vec::new(),
+            fits: Vec::new(),
+            placement: Vec::new(),
+        });
+        let mut tables = Vec::new();
+        if !out.structure_factor.is_empty() {
+            tables.push((
+                CASCADE_STRUCTURE_FACTOR,
+                structure_factor_batch(ids, &out.structure_factor),
+            ));
+        }
+        if !out.fits.is_empty() {
+            tables.push((CASCADE_FIT, fit_batch(ids, &out.fits)));
+        }
+        if !out.placement.is_empty() {
+            tables.push((CASCADE_PLACEMENT, placement_batch(ids, &out.placement)));
+        }
+        RunRows {
+            collisions: 0,
+            trials,
+            tables,
+        }
+    }
+
+    fn tables(points: &[&CascadeParams]) -> Vec<&'static str> {
+        let mut v = vec![
+            CASCADE_STRUCTURE_FACTOR,
+            CASCADE_STRUCTURE_FACTOR_SUMMARY,
+            CASCADE_FIT,
+        ];
+        if points.iter().any(|p| p.placement.is_some()) {
+            v.push(CASCADE_PLACEMENT);
+        }
+        v
+    }
+
+    fn write_summaries(c: &CampaignView<'_, CascadeParams>) -> Result<(), StoreError> {
+        summary::write(c)
+    }
+}
+
+impl Simulation for CascadeRun {
+    /// `work` grid cells' worth of realisations; a failed placement is a physics failure.
+    fn advance(&mut self, work: u64) -> Result<bool, PhysicsError> {
+        let done = CascadeRun::advance(self, work);
+        match self.failed() {
+            Some(reason) => Err(PhysicsError {
+                t: self.done() as f64,
+                reason: reason.to_string(),
+            }),
+            None => Ok(done),
+        }
+    }
+    fn progress(&self) -> f64 {
+        CascadeRun::progress(self)
+    }
+    fn time(&self) -> f64 {
+        self.done() as f64
+    }
+    fn state_bytes(&mut self) -> Vec<u8> {
+        CascadeRun::state_bytes(self)
+    }
+}

@@ -1,0 +1,123 @@
+//! The `dsmc` model: DSMC of the homogeneous cooling state of a polydisperse granular gas
+//! (spec `dsmc.md`), with the kinetic theory beside every measurement.
+//!
+//! - [`params`]: the manifest's `params` and their resolution into a [`DsmcSystem`];
+//! - [`tables`]: `dsmc_species`, `dsmc_tamsd` and the theory tables in Arrow form;
+//! - [`summary`]: `dsmc_species_summary` and `dsmc_tamsd_summary` over replicas;
+//! - [`theory`]: the theory tables of a campaign (predictions of every point in parallel);
+//! - [`figures`]: T_k(t), MSD_k(t), T_k and MSD ratios against k.
+
+pub mod figures;
+pub mod params;
+pub mod summary;
+pub mod tables;
+pub mod theory;
+
+use crate::dsmc::DsmcSim;
+use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::physics::PhysicsError;
+use crate::plot::Figure;
+use crate::store::parquet_io::StoreError;
+pub use params::DsmcParams;
+use tables::*;
+
+/// The `dsmc` model.
+pub struct Dsmc;
+
+impl Model for Dsmc {
+    type Params = DsmcParams;
+    type Sim = DsmcSim;
+
+    const STATE_FORMAT: &'static str = crate::dsmc::STATE_FORMAT;
+    const EXAMPLE: &'static str = r#"{
+        "method": "low_rank",
+        "species": {"list": [{"mass": 1, "diameter": 1, "count": 400},
+                             {"mass": 10, "diameter": 2, "count": 40}]},
+        "number_density": 0.1,
+        "restitution": {"constant": 0.7},
+        "t_end": 20.0,
+        "output_times": {"log": {"from": 0.1, "to": 20, "per_decade": 3}},
+        "observables": ["temperature", "msd", "tamsd"],
+        "tamsd": {"lags": [1, 4], "tracers": 10, "grid": 40}
+    }"#;
+
+    fn check(p: &DsmcParams, path: &str, errors: &mut ParamErrors) {
+        p.check(path, errors)
+    }
+
+    fn memory(p: &DsmcParams) -> u64 {
+        p.memory_estimate()
+    }
+
+    fn start(p: &DsmcParams, seed: u64) -> Result<DsmcSim, String> {
+        Ok(DsmcSim::new(p.system()?, seed))
+    }
+
+    fn restore(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, String> {
+        DsmcSim::from_state_bytes(p.system()?, state)
+    }
+
+    fn finish(mut sim: DsmcSim, ids: RunIds) -> RunRows {
+        let tamsd = sim.tamsd_rows();
+        let species = sim.take_rows();
+        let mut tables = vec![(DSMC_SPECIES, species_batch(ids, &species))];
+        if !tamsd.is_empty() {
+            tables.push((DSMC_TAMSD, tamsd_batch(ids, &tamsd)));
+        }
+        RunRows {
+            collisions: sim.st.collisions,
+            trials: sim.st.trials,
+            tables,
+        }
+    }
+
+    fn tables(points: &[&DsmcParams]) -> Vec<&'static str> {
+        let mut t = vec![
+            DSMC_SPECIES,
+            DSMC_SPECIES_SUMMARY,
+            DSMC_THEORY,
+            DSMC_THEORY_POINT,
+        ];
+        // Tables of an observable exist only when it is recorded (an empty dataset directory
+        // is an error for DuckDB's globs).
+        if observes_tamsd(points) {
+            t.extend([DSMC_TAMSD, DSMC_TAMSD_SUMMARY, DSMC_THEORY_TAMSD]);
+        }
+        t
+    }
+
+    fn write_theory(c: &CampaignView<'_, DsmcParams>) -> Result<bool, StoreError> {
+        theory::write(c).map(|()| true)
+    }
+
+    fn write_summaries(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {
+        summary::write(c)
+    }
+
+    fn figures(
+        c: &CampaignView<'_, DsmcParams>,
+    ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
+        figures::figures(c).map(Some)
+    }
+}
+
+/// Whether any point records the time-averaged MSD (then, and only then, the campaign has
+/// the `dsmc_tamsd*` tables).
+pub fn observes_tamsd(points: &[&DsmcParams]) -> bool {
+    points.iter().any(|p| p.wants_tamsd())
+}
+
+impl Simulation for DsmcSim {
+    fn advance(&mut self, work: u64) -> Result<bool, PhysicsError> {
+        DsmcSim::advance(self, work)
+    }
+    fn progress(&self) -> f64 {
+        DsmcSim::progress(self)
+    }
+    fn time(&self) -> f64 {
+        DsmcSim::time(self)
+    }
+    fn state_bytes(&mut self) -> Vec<u8> {
+        DsmcSim::state_bytes(self)
+    }
+}

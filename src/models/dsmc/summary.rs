@@ -1,0 +1,373 @@
+//! Ensemble summaries of a DSMC campaign over replicas: `dsmc_species_summary` (mean and
+//! standard error of the mean per point, time and species, joined with `dsmc_theory`: the
+//! theory values and the deviations in sigmas and relative) and `dsmc_tamsd_summary` (the
+//! same per point, species and lag, with the theory (27)). Derived data: rewritten whole,
+//! atomically, whenever the campaign completes. Reads the raw table in chunks of points so
+//! memory stays bounded, and sums in replica order so the result is bit-identical however
+//! the runs were scheduled.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use arrow_array::{ArrayRef, RecordBatch};
+use arrow_schema::{DataType, Field, Schema};
+
+use super::params::DsmcParams;
+use super::tables::*;
+use crate::math::stats::{mean_sem, replica_mean_sem};
+use crate::models::CampaignView;
+use crate::store::cols::{get_f64, get_u32, get_u64, opt};
+use crate::store::parquet_io::StoreError;
+
+type View<'a, 'b> = &'a CampaignView<'b, DsmcParams>;
+
+/// Rows of the raw table held at once (per chunk of points).
+const CHUNK_ROWS: u64 = 4_000_000;
+
+type Key = (u32, u64, u32); // point, t bits, species
+
+/// Write both summaries (the TAMSD one only when it is observed).
+pub fn write(c: View) -> Result<(), StoreError> {
+    write_species_summary(c)?;
+    let points: Vec<&DsmcParams> = c.points.iter().map(|p| p.params).collect();
+    if super::observes_tamsd(&points) {
+        write_tamsd_summary(c)?;
+    }
+    Ok(())
+}
+
+/// Points per chunk so that a chunk holds at most `CHUNK_ROWS` raw rows.
+fn points_per_chunk(c: View, rows_per_run: impl Fn(&DsmcParams) -> u64) -> u32 {
+    let replicas = c.replicas as u64;
+    let rows_per_point = c
+        .points
+        .iter()
+        .map(|p| rows_per_run(p.params) * replicas)
+        .max()
+        .unwrap_or(1)
+        .max(1);
+    (CHUNK_ROWS / rows_per_point).max(1) as u32
+}
+
+/// Species of a point (1 if its system does not resolve).
+fn species_count(d: &DsmcParams) -> u64 {
+    d.system().map(|s| s.species.len()).unwrap_or(1) as u64
+}
+
+fn write_species_summary(c: View) -> Result<(), StoreError> {
+    let files = c.data.files(DSMC_SPECIES)?;
+    let points_per_chunk = points_per_chunk(c, |d| {
+        species_count(d) * d.output_times.resolve(d.t_end).len() as u64
+    });
+    let n_points = c.points.len() as u32;
+
+    let theory = read_theory(c)?;
+    let mut out = SummaryColumns::default();
+    let mut p0 = 0u32;
+    while p0 < n_points {
+        let p1 = (p0 + points_per_chunk).min(n_points);
+        // (point, t, species) -> [(replica, temperature, msd)]
+        let mut acc: BTreeMap<Key, Vec<(u32, f64, Option<f64>)>> = BTreeMap::new();
+        for f in &files {
+            let name = f.display().to_string();
+            for b in c.data.read_file(f, DSMC_SPECIES)? {
+                let run = get_u64(&b, &name, "run_id")?;
+                let point = get_u32(&b, &name, "point_id")?;
+                let t = get_f64(&b, &name, "t")?;
+                let sp = get_u32(&b, &name, "species")?;
+                let temp = get_f64(&b, &name, "temperature")?;
+                let msd = get_f64(&b, &name, "msd")?;
+                for i in 0..b.num_rows() {
+                    let p = point.value(i);
+                    let replica = c.done.get(&run.value(i));
+                    let (Some(&replica), true) = (replica, p >= p0 && p < p1) else {
+                        continue;
+                    };
+                    acc.entry((p, t.value(i).to_bits(), sp.value(i)))
+                        .or_default()
+                        .push((replica, temp.value(i), opt(msd, i)));
+                }
+            }
+        }
+        // Points whose replicas are not all finished (failed ones excluded) are summarised
+        // over the replicas that succeeded.
+        let mut order: Vec<Key> = acc.keys().copied().collect();
+        order.sort_by(|a, b| {
+            (a.0, f64::from_bits(a.1), a.2)
+                .partial_cmp(&(b.0, f64::from_bits(b.1), b.2))
+                .expect("finite times")
+        });
+        for key in order {
+            let mut v = acc.remove(&key).expect("key");
+            v.sort_by_key(|x| x.0);
+            v.dedup_by_key(|x| x.0);
+            let temps: Vec<f64> = v.iter().map(|x| x.1).collect();
+            let (tm, ts) = mean_sem(&temps);
+            let msds: Vec<f64> = v.iter().filter_map(|x| x.2).collect();
+            let (mm, ms) = if msds.len() == v.len() && !msds.is_empty() {
+                let (m, s) = mean_sem(&msds);
+                (Some(m), s)
+            } else {
+                (None, None)
+            };
+            let th = theory.get(&key).copied();
+            out.push(
+                key.0,
+                f64::from_bits(key.1),
+                key.2,
+                v.len() as u32,
+                tm,
+                ts,
+                mm,
+                ms,
+                th,
+            );
+        }
+        p0 = p1;
+    }
+    c.data
+        .write_whole(DSMC_SPECIES_SUMMARY, "summary.parquet", &out.finish())
+}
+
+type TamsdKey = (u32, u32, u64); // point, species, lag bits
+
+/// `dsmc_tamsd_summary`: mean and standard error over the finished replicas of each (point,
+/// species, lag), with the theory (27) joined; in chunks of points, summed in replica order.
+fn write_tamsd_summary(c: View) -> Result<(), StoreError> {
+    let files = c.data.files(DSMC_TAMSD)?;
+    let points_per_chunk = points_per_chunk(c, |d| match (&d.tamsd, d.wants_tamsd()) {
+        (Some(tm), true) => species_count(d) * tm.lags.len() as u64,
+        _ => 0,
+    });
+    let n_points = c.points.len() as u32;
+    let theory = read_tamsd_theory(c)?;
+    let mut cols = TamsdSummaryColumns::default();
+    let mut p0 = 0u32;
+    while p0 < n_points && !files.is_empty() {
+        let p1 = (p0 + points_per_chunk).min(n_points);
+        // (point, species, lag) -> [(replica, tamsd)]
+        let mut acc: BTreeMap<TamsdKey, Vec<(u32, f64)>> = BTreeMap::new();
+        for f in &files {
+            let name = f.display().to_string();
+            for b in c.data.read_file(f, DSMC_TAMSD)? {
+                let run = get_u64(&b, &name, "run_id")?;
+                let point = get_u32(&b, &name, "point_id")?;
+                let sp = get_u32(&b, &name, "species")?;
+                let lag = get_f64(&b, &name, "lag")?;
+                let val = get_f64(&b, &name, "tamsd")?;
+                for i in 0..b.num_rows() {
+                    let p = point.value(i);
+                    let replica = c.done.get(&run.value(i));
+                    let (Some(&replica), true) = (replica, p >= p0 && p < p1) else {
+                        continue;
+                    };
+                    acc.entry((p, sp.value(i), lag.value(i).to_bits()))
+                        .or_default()
+                        .push((replica, val.value(i)));
+                }
+            }
+        }
+        let mut order: Vec<TamsdKey> = acc.keys().copied().collect();
+        order.sort_by(|a, b| {
+            (a.0, a.1, f64::from_bits(a.2))
+                .partial_cmp(&(b.0, b.1, f64::from_bits(b.2)))
+                .expect("finite lags")
+        });
+        for key in order {
+            let (n, mean, sem) = replica_mean_sem(acc.remove(&key).expect("key"));
+            cols.point.push(key.0);
+            cols.species.push(key.1);
+            cols.lag.push(f64::from_bits(key.2));
+            cols.n.push(n);
+            cols.mean.push(mean);
+            cols.sem.push(sem);
+            cols.theory.push(theory.get(&key).copied());
+        }
+        p0 = p1;
+    }
+    c.data
+        .write_whole(DSMC_TAMSD_SUMMARY, "summary.parquet", &cols.finish())
+}
+
+/// Theory (27) by (point, species, lag bits), if the table exists.
+fn read_tamsd_theory(c: View) -> Result<BTreeMap<TamsdKey, f64>, StoreError> {
+    let mut out = BTreeMap::new();
+    for f in c.data.files(DSMC_THEORY_TAMSD)? {
+        let name = f.display().to_string();
+        for b in c.data.read_file(&f, DSMC_THEORY_TAMSD)? {
+            let p = get_u32(&b, &name, "point_id")?;
+            let s = get_u32(&b, &name, "species")?;
+            let l = get_f64(&b, &name, "lag")?;
+            let v = get_f64(&b, &name, "tamsd")?;
+            for i in 0..b.num_rows() {
+                out.insert((p.value(i), s.value(i), l.value(i).to_bits()), v.value(i));
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[derive(Default)]
+struct TamsdSummaryColumns {
+    point: Vec<u32>,
+    species: Vec<u32>,
+    lag: Vec<f64>,
+    n: Vec<u32>,
+    mean: Vec<f64>,
+    sem: Vec<Option<f64>>,
+    theory: Vec<Option<f64>>,
+}
+
+impl TamsdSummaryColumns {
+    fn finish(self) -> RecordBatch {
+        let schema = Schema::new(vec![
+            Field::new("point_id", DataType::UInt32, false),
+            Field::new("species", DataType::UInt32, false),
+            Field::new("lag", DataType::Float64, false),
+            Field::new("n_replicas", DataType::UInt32, false),
+            Field::new("tamsd_mean", DataType::Float64, false),
+            Field::new("tamsd_sem", DataType::Float64, true),
+            Field::new("tamsd_theory", DataType::Float64, true),
+        ]);
+        let arrays: Vec<ArrayRef> = vec![
+            Arc::new(arrow_array::UInt32Array::from(self.point)),
+            Arc::new(arrow_array::UInt32Array::from(self.species)),
+            Arc::new(arrow_array::Float64Array::from(self.lag)),
+            Arc::new(arrow_array::UInt32Array::from(self.n)),
+            Arc::new(arrow_array::Float64Array::from(self.mean)),
+            Arc::new(arrow_array::Float64Array::from(self.sem)),
+            Arc::new(arrow_array::Float64Array::from(self.theory)),
+        ];
+        RecordBatch::try_new(Arc::new(schema), arrays)
+            .expect("tamsd summary batch matches its schema")
+    }
+}
+
+#[derive(Default)]
+struct SummaryColumns {
+    point: Vec<u32>,
+    t: Vec<f64>,
+    species: Vec<u32>,
+    n: Vec<u32>,
+    tm: Vec<f64>,
+    ts: Vec<Option<f64>>,
+    mm: Vec<Option<f64>>,
+    ms: Vec<Option<f64>>,
+    t_th: Vec<Option<f64>>,
+    m_th: Vec<Option<f64>>,
+}
+
+/// (mean - theory) / sem and (mean - theory) / theory.
+fn deviations(
+    mean: Option<f64>,
+    sem: Option<f64>,
+    theory: Option<f64>,
+) -> (Option<f64>, Option<f64>) {
+    match (mean, theory) {
+        (Some(m), Some(t)) => (
+            sem.filter(|s| *s > 0.0).map(|s| (m - t) / s),
+            (t != 0.0).then(|| (m - t) / t),
+        ),
+        _ => (None, None),
+    }
+}
+
+/// Theory values (temperature, msd) by (point, t bits, species), if the table exists.
+fn read_theory(c: View) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreError> {
+    let mut out = BTreeMap::new();
+    for f in c.data.files(DSMC_THEORY)? {
+        let name = f.display().to_string();
+        for b in c.data.read_file(&f, DSMC_THEORY)? {
+            let p = get_u32(&b, &name, "point_id")?;
+            let t = get_f64(&b, &name, "t")?;
+            let s = get_u32(&b, &name, "species")?;
+            let tt = get_f64(&b, &name, "temperature")?;
+            let m = get_f64(&b, &name, "msd")?;
+            for i in 0..b.num_rows() {
+                out.insert(
+                    (p.value(i), t.value(i).to_bits(), s.value(i)),
+                    (tt.value(i), opt(m, i)),
+                );
+            }
+        }
+    }
+    Ok(out)
+}
+
+impl SummaryColumns {
+    #[allow(clippy::too_many_arguments)]
+    fn push(
+        &mut self,
+        p: u32,
+        t: f64,
+        s: u32,
+        n: u32,
+        tm: f64,
+        ts: Option<f64>,
+        mm: Option<f64>,
+        ms: Option<f64>,
+        th: Option<(f64, Option<f64>)>,
+    ) {
+        self.t_th.push(th.map(|x| x.0));
+        self.m_th.push(th.and_then(|x| x.1));
+        self.point.push(p);
+        self.t.push(t);
+        self.species.push(s);
+        self.n.push(n);
+        self.tm.push(tm);
+        self.ts.push(ts);
+        self.mm.push(mm);
+        self.ms.push(ms);
+    }
+
+    fn finish(self) -> RecordBatch {
+        let schema = Schema::new(vec![
+            Field::new("point_id", DataType::UInt32, false),
+            Field::new("t", DataType::Float64, false),
+            Field::new("species", DataType::UInt32, false),
+            Field::new("n_replicas", DataType::UInt32, false),
+            Field::new("temperature_mean", DataType::Float64, false),
+            Field::new("temperature_sem", DataType::Float64, true),
+            Field::new("msd_mean", DataType::Float64, true),
+            Field::new("msd_sem", DataType::Float64, true),
+            Field::new("temperature_theory", DataType::Float64, true),
+            Field::new("msd_theory", DataType::Float64, true),
+            Field::new("temperature_dev_sigma", DataType::Float64, true),
+            Field::new("temperature_dev_rel", DataType::Float64, true),
+            Field::new("msd_dev_sigma", DataType::Float64, true),
+            Field::new("msd_dev_rel", DataType::Float64, true),
+        ]);
+        let n = self.point.len();
+        let (mut tds, mut tdr, mut mds, mut mdr) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        for j in 0..n {
+            let (a, b) = deviations(Some(self.tm[j]), self.ts[j], self.t_th[j]);
+            tds.push(a);
+            tdr.push(b);
+            let (a, b) = deviations(self.mm[j], self.ms[j], self.m_th[j]);
+            mds.push(a);
+            mdr.push(b);
+        }
+        let arrays: Vec<ArrayRef> = vec![
+            Arc::new(arrow_array::UInt32Array::from(self.point)),
+            Arc::new(arrow_array::Float64Array::from(self.t)),
+            Arc::new(arrow_array::UInt32Array::from(self.species)),
+            Arc::new(arrow_array::UInt32Array::from(self.n)),
+            Arc::new(arrow_array::Float64Array::from(self.tm)),
+            Arc::new(arrow_array::Float64Array::from(self.ts)),
+            Arc::new(arrow_array::Float64Array::from(self.mm)),
+            Arc::new(arrow_array::Float64Array::from(self.ms)),
+            Arc::new(arrow_array::Float64Array::from(self.t_th)),
+            Arc::new(arrow_array::Float64Array::from(self.m_th)),
+            Arc::new(arrow_array::Float64Array::from(tds)),
+            Arc::new(arrow_array::Float64Array::from(tdr)),
+            Arc::new(arrow_array::Float64Array::from(mds)),
+            Arc::new(arrow_array::Float64Array::from(mdr)),
+        ];
+        RecordBatch::try_new(Arc::new(schema), arrays).expect("summary batch matches its schema")
+    }
+}

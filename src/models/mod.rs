@@ -1,0 +1,436 @@
+//! One home per model. Each model's folder holds everything that is particular to it: its
+//! manifest `params` (serde types, cross-field checks, the conversion into its simulator's own
+//! configuration), the Arrow form of its rows, its replica summaries, its kinetic-theory tables
+//! and its figures. The simulators themselves (`dsmc`, `rfm`, `aux_models`) know nothing of
+//! manifests, tables or campaigns; the campaign knows no particular model.
+//!
+//! A model is a type implementing [`Model`]; the closed list of models is the one
+//! [`models!`] invocation below, which generates [`ModelKind`] (the manifest's `model`),
+//! [`ModelParams`] (a point's typed parameters) and [`Engine`] (a running simulation) and
+//! the dispatch from each to the model's implementation. Adding a model adds a folder here and
+//! one line to that list (see ARCHITECTURE.md, "Add a model").
+
+pub mod bisection;
+pub mod cascade;
+pub mod dsmc;
+pub mod rfm;
+pub mod spm;
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use arrow_array::{ArrayRef, RecordBatch, UInt32Array, UInt64Array};
+use arrow_schema::{DataType, Field, Schema};
+use schemars::JsonSchema;
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::physics::PhysicsError;
+use crate::plot::Figure;
+use crate::store::dataset::Dataset;
+use crate::store::parquet_io::StoreError;
+
+/// Work per `advance` call: ~10 ms of trials, so interruption and checkpoints are prompt.
+pub const WORK_CHUNK: u64 = 1 << 20;
+
+/// Problems in a model's params: (JSON pointer, message).
+pub type ParamErrors = Vec<(String, String)>;
+
+/// Everything granular needs of a model.
+pub trait Model {
+    /// The manifest's `params` of this model (`deny_unknown_fields` serde types; the JSON
+    /// Schema is generated from them).
+    type Params: Serialize
+        + DeserializeOwned
+        + JsonSchema
+        + Clone
+        + std::fmt::Debug
+        + PartialEq
+        + Send
+        + Sync;
+    /// One run's simulation.
+    type Sim: Simulation;
+
+    /// Layout version of the simulation's checkpoint payload; bump it when the state changes
+    /// (a checkpoint of another layout is then not restored, and the run starts over).
+    const STATE_FORMAT: &'static str;
+    /// Small valid `params` (a run of well under a second): every model runs through the
+    /// generic tests with them.
+    const EXAMPLE: &'static str;
+
+    /// The cross-field rules the JSON Schema cannot express; errors at JSON pointers below
+    /// `path`.
+    fn check(p: &Self::Params, path: &str, errors: &mut ParamErrors);
+    /// An estimate of the memory (bytes) one run of these parameters holds at its peak.
+    fn memory(p: &Self::Params) -> u64;
+    fn start(p: &Self::Params, seed: u64) -> Result<Self::Sim, String>;
+    /// Continue from `Simulation::state_bytes` (of layout `STATE_FORMAT`).
+    fn restore(p: &Self::Params, state: &[u8]) -> Result<Self::Sim, String>;
+    /// The rows of a finished run.
+    fn finish(sim: Self::Sim, ids: RunIds) -> RunRows;
+    /// Every table a campaign of these points has (raw, summaries, theory), in the order the
+    /// parts of a commit are written.
+    fn tables(points: &[&Self::Params]) -> Vec<&'static str>;
+    /// Write those of the model's kinetic-theory tables (they depend only on the manifest)
+    /// that do not exist yet; `Ok(false)` if the model has no theory tables.
+    fn write_theory(_c: &CampaignView<'_, Self::Params>) -> Result<bool, StoreError> {
+        Ok(false)
+    }
+    /// Write the replica summaries (the campaign calls it once every run is finished).
+    fn write_summaries(_c: &CampaignView<'_, Self::Params>) -> Result<(), StoreError> {
+        Ok(())
+    }
+    /// The standard figures (name, figure) from the summary tables; `None` if the model has
+    /// none.
+    fn figures(
+        _c: &CampaignView<'_, Self::Params>,
+    ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
+        Ok(None)
+    }
+}
+
+/// A running simulation as the campaign drives it: in bounded chunks, checkpointed between
+/// them.
+pub trait Simulation: Send {
+    /// Advance by about `work` units (DSMC trials, RFM particle-steps, ...); `Ok(true)` when
+    /// the run is complete. Chunking never changes the result.
+    fn advance(&mut self, work: u64) -> Result<bool, PhysicsError>;
+    /// Fraction of the run done, in [0, 1].
+    fn progress(&self) -> f64;
+    /// Simulated time reached (auxiliary models: realisations or walks done).
+    fn time(&self) -> f64;
+    /// Everything the run needs to continue bit for bit.
+    fn state_bytes(&mut self) -> Vec<u8>;
+}
+
+/// The identity of a run in its rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RunIds {
+    pub run_id: u64,
+    pub point_id: u32,
+}
+
+/// What a finished run hands to the table writer.
+#[derive(Debug, Default)]
+pub struct RunRows {
+    /// The `runs` table's `collisions`: accepted collisions (DSMC), else 0.
+    pub collisions: u64,
+    /// The `runs` table's `trials`, the model's unit of work: DSMC trials, RFM time steps,
+    /// bisection and cascade realisations, SPM walk steps.
+    pub trials: u64,
+    /// The rows per table, each batch led by `run_id` and `point_id`.
+    pub tables: Vec<(&'static str, RecordBatch)>,
+}
+
+/// One batch of a run's rows: `run_id` and `point_id`, then the model's columns.
+pub fn run_batch(ids: RunIds, rows: usize, fields: Vec<Field>, cols: Vec<ArrayRef>) -> RecordBatch {
+    let mut all = vec![
+        Field::new("run_id", DataType::UInt64, false),
+        Field::new("point_id", DataType::UInt32, false),
+    ];
+    all.extend(fields);
+    let mut arrays: Vec<ArrayRef> = vec![
+        Arc::new(UInt64Array::from(vec![ids.run_id; rows])),
+        Arc::new(UInt32Array::from(vec![ids.point_id; rows])),
+    ];
+    arrays.extend(cols);
+    RecordBatch::try_new(Arc::new(Schema::new(all)), arrays).expect("batch matches its schema")
+}
+
+/// A campaign as a model sees it: its points with their parameters, its finished runs, its
+/// tables. `P` is the model's `Params` (or [`ModelParams`] before dispatch).
+pub struct CampaignView<'a, P> {
+    /// The campaign's name (figure titles).
+    pub name: &'a str,
+    pub points: Vec<PointView<'a, P>>,
+    /// Replicas per point (an upper bound on the runs per point).
+    pub replicas: u32,
+    /// The runs finished with status done, and their replica numbers.
+    pub done: &'a BTreeMap<u64, u32>,
+    pub data: &'a Dataset,
+}
+
+/// One sweep point of a [`CampaignView`].
+pub struct PointView<'a, P> {
+    pub point_id: u32,
+    pub params: &'a P,
+    /// The swept values, `key=value, ...` (empty without a sweep).
+    pub label: String,
+}
+
+impl<'a> CampaignView<'a, ModelParams> {
+    fn typed<M: Registered>(&self) -> CampaignView<'a, M::Params> {
+        CampaignView {
+            name: self.name,
+            points: self
+                .points
+                .iter()
+                .filter_map(|p| {
+                    M::params(p.params).map(|params| PointView {
+                        point_id: p.point_id,
+                        params,
+                        label: p.label.clone(),
+                    })
+                })
+                .collect(),
+            replicas: self.replicas,
+            done: self.done,
+            data: self.data,
+        }
+    }
+}
+
+/// What the registry adds to a model: its place in the closed enums.
+trait Registered: Model {
+    fn params(p: &ModelParams) -> Option<&Self::Params>;
+}
+
+/// The closed list of models: `Variant = "name" => type`, with the doc comment that the
+/// manifest's JSON Schema shows for the name.
+macro_rules! models {
+    ($($(#[doc = $doc:literal])* $variant:ident = $name:literal => $model:ty),+ $(,)?) => {
+        /// The simulators `granular` knows.
+        #[derive(Serialize, Deserialize, JsonSchema, Clone, Copy, Debug, PartialEq, Eq)]
+        pub enum ModelKind {
+            $($(#[doc = $doc])* #[serde(rename = $name)] $variant,)+
+        }
+
+        /// The parameters of one sweep point, typed by model.
+        #[derive(Clone, Debug, PartialEq)]
+        pub enum ModelParams {
+            $($variant(<$model as Model>::Params),)+
+        }
+
+        /// A running simulation, typed by model.
+        pub enum Engine {
+            $($variant(Box<<$model as Model>::Sim>),)+
+        }
+
+        $(impl Registered for $model {
+            fn params(p: &ModelParams) -> Option<&Self::Params> {
+                #[allow(unreachable_patterns)]
+                match p {
+                    ModelParams::$variant(x) => Some(x),
+                    _ => None,
+                }
+            }
+        })+
+
+        impl ModelKind {
+            /// Every model, in the order of the list.
+            pub const ALL: &'static [ModelKind] = &[$(ModelKind::$variant),+];
+
+            pub fn as_str(self) -> &'static str {
+                match self {
+                    $(ModelKind::$variant => $name,)+
+                }
+            }
+
+            /// The JSON Schema of the model's `params`, as a subschema of `generator`.
+            pub fn params_subschema(
+                self,
+                generator: &mut schemars::SchemaGenerator,
+            ) -> schemars::Schema {
+                match self {
+                    $(ModelKind::$variant => {
+                        generator.subschema_for::<<$model as Model>::Params>()
+                    })+
+                }
+            }
+
+            /// The JSON Schema of the model's `params`, standalone.
+            pub fn params_schema(self) -> Value {
+                let mut generator =
+                    schemars::generate::SchemaSettings::draft2020_12().into_generator();
+                match self {
+                    $(ModelKind::$variant => generator
+                        .root_schema_for::<<$model as Model>::Params>()
+                        .to_value(),)+
+                }
+            }
+
+            /// Typed params from JSON (already checked against the schema), with the model's
+            /// cross-field checks; problems are pushed onto `errors`.
+            pub fn params_from(
+                self,
+                value: &Value,
+                path: &str,
+                errors: &mut ParamErrors,
+            ) -> Option<ModelParams> {
+                match self {
+                    $(ModelKind::$variant => {
+                        match serde_json::from_value::<<$model as Model>::Params>(value.clone()) {
+                            Ok(p) => {
+                                <$model as Model>::check(&p, path, errors);
+                                Some(ModelParams::$variant(p))
+                            }
+                            Err(e) => {
+                                errors.push((path.to_string(), e.to_string()));
+                                None
+                            }
+                        }
+                    })+
+                }
+            }
+
+            /// Every table of a campaign of this model with these points.
+            pub fn tables(self, points: &[&ModelParams]) -> Vec<&'static str> {
+                match self {
+                    $(ModelKind::$variant => {
+                        let typed: Vec<_> = points
+                            .iter()
+                            .filter_map(|p| <$model as Registered>::params(p))
+                            .collect();
+                        <$model as Model>::tables(&typed)
+                    })+
+                }
+            }
+
+            /// See [`Model::write_theory`].
+            pub fn write_theory(self, c: &CampaignView<'_, ModelParams>) -> Result<bool, StoreError> {
+                match self {
+                    $(ModelKind::$variant => <$model as Model>::write_theory(&c.typed::<$model>()),)+
+                }
+            }
+
+            /// See [`Model::write_summaries`].
+            pub fn write_summaries(self, c: &CampaignView<'_, ModelParams>) -> Result<(), StoreError> {
+                match self {
+                    $(ModelKind::$variant => {
+                        <$model as Model>::write_summaries(&c.typed::<$model>())
+                    })+
+                }
+            }
+
+            /// See [`Model::figures`].
+            pub fn figures(
+                self,
+                c: &CampaignView<'_, ModelParams>,
+            ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
+                match self {
+                    $(ModelKind::$variant => <$model as Model>::figures(&c.typed::<$model>()),)+
+                }
+            }
+
+            /// The example params of the model (see [`Model::EXAMPLE`]).
+            pub fn example(self) -> &'static str {
+                match self {
+                    $(ModelKind::$variant => <$model as Model>::EXAMPLE,)+
+                }
+            }
+        }
+
+        impl ModelParams {
+            pub fn kind(&self) -> ModelKind {
+                match self {
+                    $(ModelParams::$variant(_) => ModelKind::$variant,)+
+                }
+            }
+
+            /// The params as JSON (the `points` table).
+            pub fn to_value(&self) -> Value {
+                match self {
+                    $(ModelParams::$variant(p) => serde_json::to_value(p),)+
+                }
+                .expect("params serialise")
+            }
+
+            /// See [`Model::memory`].
+            pub fn memory(&self) -> u64 {
+                match self {
+                    $(ModelParams::$variant(p) => <$model as Model>::memory(p),)+
+                }
+            }
+
+            /// The layout a checkpoint of this model must have.
+            pub fn state_format(&self) -> &'static str {
+                match self {
+                    $(ModelParams::$variant(_) => <$model as Model>::STATE_FORMAT,)+
+                }
+            }
+
+            pub fn start(&self, seed: u64) -> Result<Engine, String> {
+                match self {
+                    $(ModelParams::$variant(p) => {
+                        Ok(Engine::$variant(Box::new(<$model as Model>::start(p, seed)?)))
+                    })+
+                }
+            }
+
+            pub fn restore(&self, state: &[u8]) -> Result<Engine, String> {
+                match self {
+                    $(ModelParams::$variant(p) => {
+                        Ok(Engine::$variant(Box::new(<$model as Model>::restore(p, state)?)))
+                    })+
+                }
+            }
+        }
+
+        impl Engine {
+            fn sim(&self) -> &dyn Simulation {
+                match self {
+                    $(Engine::$variant(s) => s.as_ref(),)+
+                }
+            }
+
+            fn sim_mut(&mut self) -> &mut dyn Simulation {
+                match self {
+                    $(Engine::$variant(s) => s.as_mut(),)+
+                }
+            }
+
+            /// The rows of the finished run.
+            pub fn finish(self, ids: RunIds) -> RunRows {
+                match self {
+                    $(Engine::$variant(s) => <$model as Model>::finish(*s, ids),)+
+                }
+            }
+        }
+    };
+}
+
+models! {
+    /// Direct simulation Monte Carlo of a polydisperse granular gas (homogeneous cooling).
+    Dsmc = "dsmc" => dsmc::Dsmc,
+    /// Soft-sphere molecular dynamics of the Random Force Model (driven granular gas, 1D/2D).
+    Rfm = "rfm" => rfm::Rfm,
+    /// Multiplicative bisection of [0, 1] (thesis sec. 3.4; spec 3.1).
+    Bisection = "bisection" => bisection::Bisection,
+    /// Multiplicative cascade on a 2^n x 2^n grid, S(k), D_f, particle placement (ch. 6).
+    Cascade = "cascade" => cascade::Cascade,
+    /// Single particle model: Q(v, l) and P(v) from a free-path distribution (sec. 5.2-5.3).
+    Spm = "spm" => spm::Spm,
+}
+
+impl Engine {
+    /// See [`Simulation::advance`].
+    pub fn advance(&mut self, work: u64) -> Result<bool, PhysicsError> {
+        self.sim_mut().advance(work)
+    }
+
+    pub fn progress(&self) -> f64 {
+        self.sim().progress()
+    }
+
+    pub fn time(&self) -> f64 {
+        self.sim().time()
+    }
+
+    pub fn state_bytes(&mut self) -> Vec<u8> {
+        self.sim_mut().state_bytes()
+    }
+}
+
+/// Run one simulation to its end in memory, without a campaign directory (tests, benches).
+pub fn run_in_memory(
+    params: &ModelParams,
+    seed: u64,
+    ids: RunIds,
+) -> Result<RunRows, PhysicsError> {
+    let mut e = params
+        .start(seed)
+        .map_err(|reason| PhysicsError { t: 0.0, reason })?;
+    while !e.advance(u64::MAX)? {}
+    Ok(e.finish(ids))
+}

@@ -1,0 +1,128 @@
+//! The `rfm` model: soft-sphere molecular dynamics of the Random Force Model in 1D and 2D with
+//! the observables of Bray's thesis (spec `rfm.md`).
+//!
+//! - [`params`]: the manifest's `params` and their resolution into the run's configuration;
+//! - [`tables`]: the run-level tables in Arrow form;
+//! - [`summary`]: the replica summaries.
+//!
+//! The thesis's fits across points (`granular analyze`) are in `crate::analysis`.
+
+pub mod params;
+pub mod summary;
+pub mod tables;
+#[cfg(test)]
+mod tests;
+
+use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::physics::PhysicsError;
+use crate::rfm::observe::RfmRun;
+use crate::store::parquet_io::StoreError;
+pub use params::{RfmObservable, RfmParams};
+use tables::*;
+
+/// Layout version of the RFM checkpoint payload.
+pub const STATE_FORMAT: &str = "rfm/4";
+
+/// The `rfm` model.
+pub struct Rfm;
+
+impl Model for Rfm {
+    type Params = RfmParams;
+    type Sim = RfmRun;
+
+    const STATE_FORMAT: &'static str = STATE_FORMAT;
+    const EXAMPLE: &'static str = r#"{
+        "dim": 2, "n_particles": 60, "packing_fraction": 0.3,
+        "warmup": 0.002, "duration": 0.01, "sample_every": 500,
+        "observables": ["temperature", "velocity_moments", "velocity_histogram",
+                        "structure_factor", "radial_distribution", "free_paths",
+                        "post_collision_velocity", "snapshot"],
+        "velocity_histogram": {"range": [-2, 2], "bins": 40},
+        "structure_factor": {"k_max": 5, "every": 2},
+        "radial_distribution": {"bins": 20, "every": 2},
+        "snapshot": {"times": [0.005]}
+    }"#;
+
+    fn check(p: &RfmParams, path: &str, errors: &mut ParamErrors) {
+        p.check(path, errors)
+    }
+
+    fn memory(p: &RfmParams) -> u64 {
+        p.memory_estimate()
+    }
+
+    fn start(p: &RfmParams, seed: u64) -> Result<RfmRun, String> {
+        RfmRun::new(&p.run_config(), seed)
+    }
+
+    fn restore(p: &RfmParams, state: &[u8]) -> Result<RfmRun, String> {
+        RfmRun::from_state_bytes(&p.run_config(), state)
+    }
+
+    fn finish(run: RfmRun, ids: RunIds) -> RunRows {
+        let steps = run.sim.step();
+        RunRows {
+            collisions: 0,
+            trials: steps,
+            tables: batches(ids, &run.finish()),
+        }
+    }
+
+    fn tables(points: &[&RfmParams]) -> Vec<&'static str> {
+        use RfmObservable as O;
+        let wants = |o: O| points.iter().any(|p| p.wants(o));
+        let mut v = vec![
+            RFM_TIMESERIES,
+            RFM_TIMESERIES_SUMMARY,
+            RFM_TEMPERATURE_BLOCKS,
+        ];
+        if wants(O::Snapshot) {
+            v.push(RFM_SNAPSHOTS);
+        }
+        if wants(O::VelocityMoments) {
+            v.extend([RFM_MOMENTS, RFM_MOMENTS_SUMMARY]);
+        }
+        if wants(O::VelocityHistogram)
+            || wants(O::NeighbourDistances)
+            || wants(O::FreePaths)
+            || wants(O::PostCollisionVelocity)
+        {
+            v.extend([RFM_HISTOGRAMS, RFM_HISTOGRAMS_SUMMARY]);
+        }
+        if wants(O::NeighbourDistances) {
+            v.extend([RFM_NEIGHBOUR_MOMENTS, RFM_NEIGHBOUR_MOMENTS_SUMMARY]);
+        }
+        if wants(O::StructureFactor) {
+            v.extend([RFM_STRUCTURE_FACTOR, RFM_STRUCTURE_FACTOR_SUMMARY]);
+        }
+        if wants(O::RadialDistribution) {
+            v.extend([RFM_RADIAL, RFM_RADIAL_SUMMARY]);
+        }
+        if wants(O::FreePaths) {
+            v.extend([RFM_FREE_PATH_MOMENTS, RFM_FREE_PATH_MOMENTS_SUMMARY]);
+        }
+        v
+    }
+
+    fn write_summaries(c: &CampaignView<'_, RfmParams>) -> Result<(), StoreError> {
+        let points: Vec<&RfmParams> = c.points.iter().map(|p| p.params).collect();
+        summary::write(c, &Self::tables(&points))
+    }
+}
+
+impl Simulation for RfmRun {
+    /// `work` particle-steps: work / N time steps (at least one).
+    fn advance(&mut self, work: u64) -> Result<bool, PhysicsError> {
+        let n = self.sim.config().n_particles.max(1) as u64;
+        RfmRun::advance(self, (work / n).max(1))
+    }
+    fn progress(&self) -> f64 {
+        RfmRun::progress(self)
+    }
+    fn time(&self) -> f64 {
+        self.sim.time()
+    }
+    fn state_bytes(&mut self) -> Vec<u8> {
+        RfmRun::state_bytes(self)
+    }
+}

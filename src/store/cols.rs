@@ -1,0 +1,101 @@
+//! Arrow columns: built from a field of every row (`cols::f64s(&rows, |r| r.t)`), and read
+//! back by name with their type checked (`cols::get_f64(&batch, "t")`), so a table file that
+//! lacks a column, or has it with another type, is an error that names the column, never a
+//! panic.
+
+use std::sync::Arc;
+
+use arrow_array::cast::AsArray;
+use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
+use arrow_array::{
+    Array, ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array, UInt64Array,
+};
+use arrow_schema::{DataType, Field};
+
+use super::parquet_io::StoreError;
+
+pub fn f64s<T>(v: &[T], f: impl Fn(&T) -> f64) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<Float64Array>())
+}
+pub fn opt_f64s<T>(v: &[T], f: impl Fn(&T) -> Option<f64>) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<Float64Array>())
+}
+pub fn u32s<T>(v: &[T], f: impl Fn(&T) -> u32) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<UInt32Array>())
+}
+pub fn u64s<T>(v: &[T], f: impl Fn(&T) -> u64) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<UInt64Array>())
+}
+pub fn opt_u64s<T>(v: &[T], f: impl Fn(&T) -> Option<u64>) -> ArrayRef {
+    Arc::new(v.iter().map(f).collect::<UInt64Array>())
+}
+pub fn strs<T>(v: &[T], f: impl Fn(&T) -> &str) -> ArrayRef {
+    Arc::new(v.iter().map(|r| Some(f(r))).collect::<StringArray>())
+}
+
+/// A non-nullable field (nullable with `field_opt`).
+pub fn field(name: &str, t: DataType) -> Field {
+    Field::new(name, t, false)
+}
+pub fn field_opt(name: &str, t: DataType) -> Field {
+    Field::new(name, t, true)
+}
+
+/// The column `name` of a batch read from a table file.
+pub fn get<'a>(b: &'a RecordBatch, table: &str, name: &str) -> Result<&'a ArrayRef, StoreError> {
+    b.column_by_name(name)
+        .ok_or_else(|| StoreError::Corrupt(table.into(), format!("has no column {name}")))
+}
+
+fn typed<'a>(
+    b: &'a RecordBatch,
+    table: &str,
+    name: &str,
+    want: DataType,
+) -> Result<&'a ArrayRef, StoreError> {
+    let c = get(b, table, name)?;
+    if c.data_type() != &want {
+        return Err(StoreError::Corrupt(
+            table.into(),
+            format!("column {name} is {}, expected {want}", c.data_type()),
+        ));
+    }
+    Ok(c)
+}
+
+pub fn get_f64<'a>(
+    b: &'a RecordBatch,
+    table: &str,
+    name: &str,
+) -> Result<&'a Float64Array, StoreError> {
+    Ok(typed(b, table, name, DataType::Float64)?.as_primitive::<Float64Type>())
+}
+pub fn get_u32<'a>(
+    b: &'a RecordBatch,
+    table: &str,
+    name: &str,
+) -> Result<&'a UInt32Array, StoreError> {
+    Ok(typed(b, table, name, DataType::UInt32)?.as_primitive::<UInt32Type>())
+}
+pub fn get_u64<'a>(
+    b: &'a RecordBatch,
+    table: &str,
+    name: &str,
+) -> Result<&'a UInt64Array, StoreError> {
+    Ok(typed(b, table, name, DataType::UInt64)?.as_primitive::<UInt64Type>())
+}
+pub fn get_str<'a>(
+    b: &'a RecordBatch,
+    table: &str,
+    name: &str,
+) -> Result<&'a StringArray, StoreError> {
+    Ok(typed(b, table, name, DataType::Utf8)?.as_string::<i32>())
+}
+
+/// Value `i` of a nullable column.
+pub fn opt<T: arrow_array::ArrowPrimitiveType>(
+    a: &arrow_array::PrimitiveArray<T>,
+    i: usize,
+) -> Option<T::Native> {
+    (!a.is_null(i)).then(|| a.value(i))
+}

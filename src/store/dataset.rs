@@ -1,0 +1,107 @@
+//! A campaign's tables as the storage sees them: a directory per table under `tables/`
+//! (see [`super::layout`]), each file stamped with the campaign's identity (its canonical
+//! manifest) and read back only if it is this campaign's and this table's.
+
+use std::path::{Path, PathBuf};
+
+use arrow_array::RecordBatch;
+
+use super::layout;
+use super::parquet_io::{self, StoreError};
+use crate::fsutil;
+
+/// The tables of one campaign directory.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    root: PathBuf,
+    identity: String,
+}
+
+impl Dataset {
+    /// The tables under `root/tables`, of the campaign whose canonical manifest is `identity`.
+    pub fn new(root: &Path, identity: &str) -> Self {
+        Dataset {
+            root: root.to_path_buf(),
+            identity: identity.to_string(),
+        }
+    }
+
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// The canonical manifest every file of the campaign carries in its footer.
+    pub fn identity(&self) -> &str {
+        &self.identity
+    }
+
+    /// `root/tables/<table>` (through the table's generation link).
+    pub fn dir(&self, table: &str) -> PathBuf {
+        self.root.join("tables").join(table)
+    }
+
+    /// Create the table's directory if it does not exist.
+    pub fn ensure(&self, table: &str) -> Result<(), StoreError> {
+        layout::ensure_table_dir(&self.root, table)
+            .map(|_| ())
+            .map_err(|e| StoreError::io(&self.dir(table), e))
+    }
+
+    /// The table's visible Parquet files, sorted (hidden and pending files excluded; a
+    /// missing directory has none).
+    pub fn files(&self, table: &str) -> Result<Vec<PathBuf>, StoreError> {
+        let dir = self.dir(table);
+        let mut files: Vec<PathBuf> = match std::fs::read_dir(&dir) {
+            Ok(it) => it
+                .filter_map(|e| e.ok())
+                .map(|e| e.path())
+                .filter(|p| {
+                    let n = p
+                        .file_name()
+                        .map(|n| n.to_string_lossy().into_owned())
+                        .unwrap_or_default();
+                    !n.starts_with('.') && n.ends_with(".parquet")
+                })
+                .collect(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+            Err(e) => return Err(StoreError::io(&dir, e)),
+        };
+        files.sort();
+        Ok(files)
+    }
+
+    /// Every batch of one file of `table`, checked to be this campaign's.
+    pub fn read_file(&self, path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+        parquet_io::read_campaign_file(path, table, &self.identity)
+    }
+
+    /// Every batch of every file of `table`.
+    pub fn read(&self, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+        let mut out = Vec::new();
+        for f in self.files(table)? {
+            out.extend(self.read_file(&f, table)?);
+        }
+        Ok(out)
+    }
+
+    /// Whether `tables/<table>/<name>` exists.
+    pub fn has(&self, table: &str, name: &str) -> bool {
+        self.dir(table).join(name).exists()
+    }
+
+    /// Write `tables/<table>/<name>` atomically (write, fsync, rename, fsync the directory):
+    /// a whole table in one file, replacing an earlier one.
+    pub fn write_whole(
+        &self,
+        table: &str,
+        name: &str,
+        batch: &RecordBatch,
+    ) -> Result<(), StoreError> {
+        let path = self.dir(table).join(name);
+        self.ensure(table)?;
+        let tmp = fsutil::temp_path(&path);
+        parquet_io::write_file(&tmp, batch, table, &self.identity)?;
+        std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
+        fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))
+    }
+}
