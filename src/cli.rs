@@ -567,6 +567,10 @@ fn report_error(e: CampaignError) -> i32 {
             eprintln!("error: {m}");
             exit_codes::IO_ERROR
         }
+        CampaignError::TooLarge(m) => {
+            eprintln!("error: {m}");
+            exit_codes::INVALID_INPUT
+        }
     }
 }
 

@@ -1,6 +1,8 @@
 //! Integration tests of `granular`, in one test binary (one link, shared helpers).
 //!
 //! - `architecture`: the import graph of `src/` has no circles and no forbidden arrows.
+//! - `models`: every registered model restores bitwise from a checkpoint at a random point and
+//!   runs a campaign whose tables the generic reader reads.
 //! - `manifests`: data-driven validation of `tests/manifests/{good,bad}/*.json`.
 //! - `resume`: kill -9 / resume, thread count and sharding give bit-identical tables;
 //!   directory refusal, re-running a finished campaign, `status --json`.
@@ -26,6 +28,7 @@ mod it {
     pub mod drills;
     pub mod interrupt;
     pub mod manifests;
+    pub mod models;
     pub mod physics;
     pub mod resume;
     pub mod rfm;

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 
 use super::ledger::{self, RunStatus, ShardLock};
 use super::plan::RunSpec;
+use super::resources::{self, Memory};
 use super::worker::{self, RunResult};
 use super::{
     io_err, status, writer, Campaign, CampaignError, Event, Outcome, Reporter, RunOptions,
@@ -19,6 +20,10 @@ pub fn run(
     opts: &RunOptions,
     reporter: &mut dyn Reporter,
 ) -> Result<Outcome, CampaignError> {
+    let memory = Memory::of_this_machine();
+    if let Some(mem) = memory {
+        resources::check(&c.plan, mem).map_err(CampaignError::TooLarge)?;
+    }
     let _lock = ShardLock::acquire(&c.root, opts.shard).map_err(CampaignError::Refused)?;
     let tag = opts.shard.tag();
     for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
@@ -57,6 +62,16 @@ pub fn run(
             .unwrap_or(1)
     } else {
         opts.threads
+    };
+    let threads = match memory {
+        Some(mem) => {
+            let (fit, note) = resources::threads_within(&c.plan, threads, mem);
+            if let Some(message) = note {
+                reporter.event(&Event::Warning { message });
+            }
+            fit
+        }
+        None => threads,
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)

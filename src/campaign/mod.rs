@@ -16,6 +16,7 @@ pub mod compact;
 pub mod dispatch;
 pub mod ledger;
 pub mod plan;
+pub mod resources;
 pub mod slurm;
 pub mod status;
 pub mod tables;
@@ -51,6 +52,9 @@ pub enum CampaignError {
     Refused(String),
     #[error("{0}")]
     Io(String),
+    /// A run needs more of the machine than it has (refused before anything is written).
+    #[error("{0}")]
+    TooLarge(String),
 }
 
 /// `campaign.json`.
@@ -81,6 +85,9 @@ impl Campaign {
     /// the same campaign (a different one is refused). Nothing is written for a bad manifest.
     pub fn create_or_open(manifest_path: &Path, out: &Path) -> Result<Campaign, CampaignError> {
         let (manifest, plan) = plan::load(manifest_path)?;
+        if let Some(mem) = resources::Memory::of_this_machine() {
+            resources::check(&plan, mem).map_err(CampaignError::TooLarge)?;
+        }
         let value = serde_json::to_value(&manifest).expect("manifest serialises");
         let info_path = out.join("campaign.json");
         if info_path.exists() {
