@@ -170,16 +170,9 @@ pub fn per_task_runs(s: &str) -> Result<u64, String> {
     int_in(s, 1, MAX_PER_TASK_RUNS, "runs per task")
 }
 
-/// `submit --time`: a SLURM time limit (the library's check; its message without the flag,
-/// which clap names).
+/// `submit --time`: a SLURM time limit (the library's check and message).
 pub fn slurm_time(s: &str) -> Result<String, String> {
-    match crate::campaign::slurm::check_time(s) {
-        Ok(()) => Ok(s.to_string()),
-        Err(e) => Err(match e.split_once(": expected") {
-            Some((_, rest)) => format!("expected{rest}"),
-            None => e,
-        }),
-    }
+    crate::campaign::slurm::check_time(s).map(|()| s.to_string())
 }
 
 /// `analyze --n-min`: 0 to 1e9 particles.

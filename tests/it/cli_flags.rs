@@ -239,6 +239,8 @@ fn args<'a>(cmd: &'a Cmd, flag: &'a Flag, value: &'a str, tail: &[&'a str]) -> V
 
 #[test]
 fn bad_numeric_flags_are_refused_before_anything_is_written() {
+    // Light, but hundreds of processes: not beside the timing-sensitive tests.
+    let _g = heavy();
     let base = tempfile::tempdir().unwrap();
     let tpl = base.path().join("template");
     fs::create_dir(&tpl).unwrap();
