@@ -25,6 +25,7 @@ mod it {
     pub mod analyze;
     pub mod architecture;
     pub mod aux_models;
+    pub mod cli_flags;
     pub mod drills;
     pub mod interrupt;
     pub mod manifests;

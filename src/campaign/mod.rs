@@ -233,9 +233,13 @@ impl Campaign {
         self.plan.model.write_summaries(&self.view(&data, &done))
     }
 
-    /// Write the kinetic-theory tables that do not exist yet; `Ok(false)` if the model has
-    /// none.
-    pub fn write_theory(&self) -> Result<bool, crate::store::parquet_io::StoreError> {
+    /// The model's kinetic-theory tables (none for models without theory).
+    pub fn theory_tables(&self) -> Vec<&'static str> {
+        self.plan.theory_tables()
+    }
+
+    /// Write the kinetic-theory tables that do not exist yet.
+    pub fn write_theory(&self) -> Result<(), crate::store::parquet_io::StoreError> {
         let data = self.data();
         let none = BTreeMap::new();
         self.plan.model.write_theory(&self.view(&data, &none))

@@ -112,6 +112,12 @@ impl Plan {
         }
     }
 
+    /// The model's kinetic-theory tables for these points (none for models without theory).
+    pub fn theory_tables(&self) -> Vec<&'static str> {
+        let points: Vec<&ModelParams> = self.points.iter().map(|p| &p.params).collect();
+        self.model.theory_tables(&points)
+    }
+
     /// The replica number of a run.
     pub fn replica_of(&self, run_id: u64) -> u32 {
         (run_id % self.replicas as u64) as u32

@@ -75,7 +75,7 @@ impl<'c> Writer<'c> {
 
     /// Write the model's kinetic-theory tables once (they depend only on the manifest).
     pub fn ensure_theory(&self) -> Result<(), StoreError> {
-        self.c.write_theory().map(|_| ())
+        self.c.write_theory()
     }
 
     pub fn add(&mut self, r: RunResult) {

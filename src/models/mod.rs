@@ -72,10 +72,13 @@ pub trait Model {
     /// Every table a campaign of these points has (raw, summaries, theory), in the order the
     /// parts of a commit are written.
     fn tables(points: &[&Self::Params]) -> Vec<&'static str>;
-    /// Write those of the model's kinetic-theory tables (they depend only on the manifest)
-    /// that do not exist yet; `Ok(false)` if the model has no theory tables.
-    fn write_theory(_c: &CampaignView<'_, Self::Params>) -> Result<bool, StoreError> {
-        Ok(false)
+    /// The model's kinetic-theory tables (they depend only on the manifest); none by default.
+    fn theory_tables(_points: &[&Self::Params]) -> Vec<&'static str> {
+        Vec::new()
+    }
+    /// Write those of the theory tables that do not exist yet.
+    fn write_theory(_c: &CampaignView<'_, Self::Params>) -> Result<(), StoreError> {
+        Ok(())
     }
     /// Write the replica summaries (the campaign calls it once every run is finished).
     fn write_summaries(_c: &CampaignView<'_, Self::Params>) -> Result<(), StoreError> {
@@ -287,8 +290,21 @@ macro_rules! models {
                 }
             }
 
+            /// See [`Model::theory_tables`].
+            pub fn theory_tables(self, points: &[&ModelParams]) -> Vec<&'static str> {
+                match self {
+                    $(ModelKind::$variant => {
+                        let typed: Vec<_> = points
+                            .iter()
+                            .filter_map(|p| <$model as Registered>::params(p))
+                            .collect();
+                        <$model as Model>::theory_tables(&typed)
+                    })+
+                }
+            }
+
             /// See [`Model::write_theory`].
-            pub fn write_theory(self, c: &CampaignView<'_, ModelParams>) -> Result<bool, StoreError> {
+            pub fn write_theory(self, c: &CampaignView<'_, ModelParams>) -> Result<(), StoreError> {
                 match self {
                     $(ModelKind::$variant => <$model as Model>::write_theory(&c.typed::<$model>()),)+
                 }

@@ -86,8 +86,16 @@ impl Model for Dsmc {
         t
     }
 
-    fn write_theory(c: &CampaignView<'_, DsmcParams>) -> Result<bool, StoreError> {
-        theory::write(c).map(|()| true)
+    fn theory_tables(points: &[&DsmcParams]) -> Vec<&'static str> {
+        let mut t = vec![DSMC_THEORY, DSMC_THEORY_POINT];
+        if observes_tamsd(points) {
+            t.push(DSMC_THEORY_TAMSD);
+        }
+        t
+    }
+
+    fn write_theory(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {
+        theory::write(c)
     }
 
     fn write_summaries(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {

@@ -1,0 +1,181 @@
+//! The command line: parses arguments, calls the library, reports. The only layer that
+//! prints.
+//!
+//! One file per command (as in ripgrep and cargo-nextest), each owning its clap `Args` and a
+//! `run(args) -> i32` that returns the exit code; `flags` holds the flags several commands
+//! share and the parsers that validate every numeric flag at parse time; `reporter` the
+//! progress bar. This file holds the parser, the dispatch, the tracing set-up and the
+//! mapping of library errors to exit codes.
+
+mod analyze;
+mod compact;
+mod flags;
+mod plot;
+mod reporter;
+mod run;
+mod schema;
+mod slurm_task;
+mod status;
+mod submit;
+mod theory;
+mod validate;
+mod verify;
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+use crate::campaign::CampaignError;
+use crate::exit_codes;
+
+#[derive(Parser)]
+#[command(
+    name = "granular",
+    version,
+    about = "Ensembles of granular-gas simulations into Parquet tables"
+)]
+struct Cli {
+    /// Log format on stderr.
+    #[arg(long, value_enum, default_value_t = LogFormat::Text, global = true)]
+    log_format: LogFormat,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum LogFormat {
+    Text,
+    Json,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Check a manifest; print every error with its JSON path (exit 2 if any).
+    Validate(validate::Args),
+    /// Run a campaign into a directory (continues it if the directory holds the same one).
+    Run(run::RunArgs),
+    /// Continue a campaign; finished runs are never redone.
+    Resume(run::ResumeArgs),
+    /// Done / running / pending / failed runs, per point, across all shards.
+    Status(status::Args),
+    /// Print the manifest's JSON Schema (also committed as schemas/manifest.schema.json).
+    Schema(schema::Args),
+    /// Write the kinetic-theory predictions of a manifest (tables dsmc_theory and
+    /// dsmc_theory_point) into a campaign directory, without simulating.
+    Theory(theory::Args),
+    /// Run a campaign as a SLURM job array (array task i = shard i+1 of N), with a
+    /// compaction job chained by afterok; or resubmit its unfinished shards (`--missing DIR`).
+    Submit(submit::Args),
+    /// Run one SLURM array task (used by the scripts `granular submit` writes).
+    #[command(hide = true)]
+    SlurmTask(slurm_task::Args),
+    /// Merge a campaign's small Parquet parts into large files (readers never see missing or
+    /// doubled rows) and fold its commit records into one ledger index.
+    Compact(compact::Args),
+    /// Check every table file of a campaign (readable, this campaign's, right table and
+    /// format) and that the runs table holds each committed run exactly once.
+    Verify(verify::Args),
+    /// Draw the standard figures (PNG and SVG) of a campaign's summary tables.
+    Plot(plot::Args),
+    /// Fit the thesis's observables of an rfm campaign (xi_m, zeta_m, D_f, alpha, (5.32),
+    /// (4.25), ...) into the table analysis_fits, the figure data analysis_curves and figures.
+    /// Uses the finished runs (warns if some are missing).
+    Analyze(analyze::Args),
+}
+
+/// Parse the command line, set up logging and run the command; returns the exit code.
+pub fn main() -> i32 {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() {
+                exit_codes::INVALID_INPUT
+            } else {
+                exit_codes::OK
+            };
+        }
+    };
+    init_tracing(cli.log_format);
+    match cli.command {
+        Command::Validate(a) => validate::run(a),
+        Command::Run(a) => run::run(a),
+        Command::Resume(a) => run::resume(a),
+        Command::Status(a) => status::run(a),
+        Command::Schema(a) => schema::run(a),
+        Command::Theory(a) => theory::run(a),
+        Command::Submit(a) => submit::run(a),
+        Command::SlurmTask(a) => slurm_task::run(a),
+        Command::Compact(a) => compact::run(a),
+        Command::Verify(a) => verify::run(a),
+        Command::Plot(a) => plot::run(a),
+        Command::Analyze(a) => analyze::run(a),
+    }
+}
+
+fn init_tracing(format: LogFormat) {
+    let filter = tracing_subscriber::EnvFilter::try_from_env("GRANULAR_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .with_ansi(ansi);
+    let _ = match format {
+        LogFormat::Text => builder.try_init(),
+        LogFormat::Json => builder.json().try_init(),
+    };
+}
+
+/// Print a campaign error and return its exit code.
+fn report_error(e: CampaignError) -> i32 {
+    match e {
+        CampaignError::Manifest(m) => {
+            eprint!("{m}");
+            exit_codes::INVALID_INPUT
+        }
+        CampaignError::Refused(m) => fail(exit_codes::DIRECTORY_REFUSED, m),
+        CampaignError::Io(m) => fail(exit_codes::IO_ERROR, m),
+        CampaignError::TooLarge(m) => fail(exit_codes::INVALID_INPUT, m),
+    }
+}
+
+/// Print `error: {message}` and return `code`.
+fn fail(code: i32, message: impl std::fmt::Display) -> i32 {
+    eprintln!("error: {message}");
+    code
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_command_line_is_consistent() {
+        use clap::CommandFactory;
+        Cli::command().debug_assert();
+    }
+
+    /// The invocation written into array scripts by `campaign::slurm` (earlier submissions
+    /// included) still parses.
+    #[test]
+    fn slurm_script_invocation_parses() {
+        let cli = Cli::try_parse_from([
+            "granular",
+            "slurm-task",
+            "/c",
+            "--shards",
+            "7",
+            "--threads",
+            "4",
+            "--checkpoint-every",
+            "300",
+        ])
+        .expect("parses");
+        let Command::SlurmTask(a) = cli.command else {
+            panic!("not slurm-task")
+        };
+        assert_eq!((a.shards, a.index), (7, None));
+        assert_eq!(a.exec.threads, Some(4));
+        assert_eq!(a.exec.checkpoint.seconds(), 300.0);
+    }
+}

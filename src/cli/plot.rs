@@ -1,0 +1,46 @@
+//! `granular plot DIR [--out FIGDIR]`: the standard figures of a campaign's summary tables.
+
+use std::path::PathBuf;
+
+use super::{fail, report_error};
+use crate::campaign::Campaign;
+use crate::exit_codes;
+
+#[derive(clap::Args)]
+pub struct Args {
+    dir: PathBuf,
+    /// Where to write the figures (default: DIR/figures).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+pub fn run(a: Args) -> i32 {
+    let c = match Campaign::open(&a.dir) {
+        Ok(c) => c,
+        Err(e) => return report_error(e),
+    };
+    let out = a.out.unwrap_or_else(|| a.dir.join("figures"));
+    let figs = match c.figures() {
+        Ok(Some(figs)) => figs,
+        Ok(None) => {
+            return fail(
+                exit_codes::INVALID_INPUT,
+                format!(
+                    "`granular plot` draws no figures of model {} (see `granular analyze`)",
+                    c.plan.model.as_str()
+                ),
+            )
+        }
+        Err(e) => return fail(exit_codes::IO_ERROR, e),
+    };
+    match crate::plot::render(&figs, &out) {
+        Ok((files, failed)) => {
+            for f in failed {
+                tracing::warn!("{f}");
+            }
+            println!("wrote {} files to {}", files.len(), out.display());
+            exit_codes::OK
+        }
+        Err(e) => fail(exit_codes::IO_ERROR, e),
+    }
+}

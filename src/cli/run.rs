@@ -1,0 +1,111 @@
+//! `granular run MANIFEST --out DIR` and `granular resume DIR`: execute (this shard of) a
+//! campaign with the progress bar, the Ctrl-C/SIGTERM handler and the final summary; also
+//! used by `slurm-task`.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::Arc;
+
+use super::flags::{Execution, Runtime};
+use super::report_error;
+use super::reporter::CliReporter;
+use crate::campaign::plan::Shard;
+use crate::campaign::{self, Campaign, Outcome, RunOptions};
+use crate::exit_codes;
+
+#[derive(clap::Args)]
+pub struct RunArgs {
+    manifest: PathBuf,
+    /// Campaign directory.
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    runtime: Runtime,
+}
+
+#[derive(clap::Args)]
+pub struct ResumeArgs {
+    dir: PathBuf,
+    #[command(flatten)]
+    runtime: Runtime,
+}
+
+/// `run`: create (or continue) the campaign, then execute it.
+pub fn run(a: RunArgs) -> i32 {
+    let opts = options(&a.runtime.exec, 0, a.runtime.shard);
+    match Campaign::create_or_open(&a.manifest, &a.out) {
+        Ok(c) => execute(&c, opts, a.runtime.quiet),
+        Err(e) => report_error(e),
+    }
+}
+
+/// `resume`: execute the campaign of an existing directory.
+pub fn resume(a: ResumeArgs) -> i32 {
+    let opts = options(&a.runtime.exec, 0, a.runtime.shard);
+    match Campaign::open(&a.dir) {
+        Ok(c) => execute(&c, opts, a.runtime.quiet),
+        Err(e) => report_error(e),
+    }
+}
+
+/// The library's run options from the flags (`default_threads` if `--threads` is not given).
+pub(super) fn options(exec: &Execution, default_threads: usize, shard: Shard) -> RunOptions {
+    RunOptions {
+        threads: exec.threads(default_threads),
+        checkpoint_every: exec.checkpoint_every(),
+        shard,
+        interrupt: Arc::new(AtomicU8::new(0)),
+        flush_every: exec.flush_every(),
+    }
+}
+
+/// Run the shard `opts.shard` of `c` to its end or an interruption; the exit code.
+pub(super) fn execute(c: &Campaign, opts: RunOptions, quiet: bool) -> i32 {
+    handle_interrupts(opts.interrupt.clone());
+    tracing::info!(campaign = %c.manifest.name, dir = %c.root.display(), shard = %opts.shard, "starting");
+    let mut reporter = CliReporter::new(quiet);
+    let result = campaign::dispatch::run(c, &opts, &mut reporter);
+    reporter.finish();
+    match result {
+        Ok(o) => summarise(c, &o),
+        Err(e) => report_error(e),
+    }
+}
+
+/// Ctrl-C / SIGTERM: the first sets `flag` (checkpoint and stop), the second exits at once.
+fn handle_interrupts(flag: Arc<AtomicU8>) {
+    let _ = ctrlc::set_handler(move || {
+        let n = flag.fetch_add(1, Ordering::SeqCst) + 1;
+        if n >= 2 {
+            eprintln!("\ninterrupted twice: exiting now (work since the last checkpoints is lost)");
+            std::process::exit(exit_codes::INTERRUPTED);
+        }
+        eprintln!("\ninterrupt: checkpointing running simulations and stopping (press Ctrl-C again to exit at once)");
+    });
+}
+
+fn summarise(c: &Campaign, o: &Outcome) -> i32 {
+    tracing::info!(
+        done = o.done,
+        failed = o.failed,
+        remaining = o.remaining,
+        complete = o.complete,
+        "stopped"
+    );
+    if o.interrupted {
+        eprintln!(
+            "stopped with {} runs of this shard left; continue with: granular resume {}",
+            o.remaining,
+            c.root.display()
+        );
+        return exit_codes::INTERRUPTED;
+    }
+    if o.failed_in_shard > 0 {
+        eprintln!(
+            "{} run(s) failed; see the runs table (status = 'failed') for their reasons",
+            o.failed_in_shard
+        );
+        return exit_codes::RUNS_FAILED;
+    }
+    exit_codes::OK
+}

@@ -1,0 +1,81 @@
+//! `granular status DIR [--json]`: done / failed / running / pending runs, per point, across
+//! all shards.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use super::{fail, report_error};
+use crate::campaign::status::CampaignStatus;
+use crate::campaign::{self, Campaign};
+use crate::exit_codes;
+
+#[derive(clap::Args)]
+pub struct Args {
+    dir: PathBuf,
+    /// Machine-readable output.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(a: Args) -> i32 {
+    let c = match Campaign::open(&a.dir) {
+        Ok(c) => c,
+        Err(e) => return report_error(e),
+    };
+    let s = match campaign::status::status(&c) {
+        Ok(s) => s,
+        Err(e) => return fail(exit_codes::DIRECTORY_REFUSED, e),
+    };
+    // Write errors (a closed pipe, `| head`) are not worth a panic.
+    let mut out = std::io::stdout().lock();
+    let _ = if a.json {
+        writeln!(out, "{}", serde_json::to_string_pretty(&s).expect("status"))
+    } else {
+        write_text(&mut out, &s)
+    };
+    exit_codes::OK
+}
+
+fn write_text(out: &mut impl Write, s: &CampaignStatus) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{}: {} runs: {} done, {} failed, {} running, {} pending ({} with checkpoints)",
+        s.name,
+        s.runs,
+        s.counts.done,
+        s.counts.failed,
+        s.counts.running,
+        s.counts.pending,
+        s.counts.checkpointed
+    )?;
+    for l in &s.live_shards {
+        writeln!(out, "  live shard {l}")?;
+    }
+    for sub in &s.slurm {
+        let queue = match &sub.queue {
+            Some(q) if q.is_empty() => "nothing queued".to_string(),
+            Some(q) => q
+                .iter()
+                .map(|(k, n)| format!("{k}: {n}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            None => "squeue not available".to_string(),
+        };
+        writeln!(
+            out,
+            "  slurm submission {}: array {} job {}, compaction job {} ({queue})",
+            sub.number,
+            sub.array,
+            sub.array_job.as_deref().unwrap_or("-"),
+            sub.compact_job.as_deref().unwrap_or("-")
+        )?;
+    }
+    for p in &s.points {
+        writeln!(
+            out,
+            "  point {:>4} {:<40} done {:>3}  failed {:>3}  running {:>3}  pending {:>3}",
+            p.point_id, p.point, p.counts.done, p.counts.failed, p.counts.running, p.counts.pending
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,251 @@
+//! `granular submit`: run a campaign as a SLURM job array with a compaction job chained by
+//! afterok (`MANIFEST --out DIR`), or resubmit its unfinished shards (`--missing DIR`);
+//! `--dry-run` prints the scripts and writes nothing.
+
+use std::path::{Path, PathBuf};
+
+use super::flags::{self, CheckpointEvery};
+use super::{fail, report_error};
+use crate::campaign::slurm::{self, SlurmOptions};
+use crate::campaign::{Campaign, CampaignError};
+use crate::exit_codes;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The manifest (a first submission, with --out) or, with --missing, the campaign
+    /// directory.
+    target: PathBuf,
+    /// Campaign directory of a first submission.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Resubmit only the shards with unfinished runs that no task is working on.
+    #[arg(long)]
+    missing: bool,
+    /// Submit to SLURM (the only scheduler; accepted for clarity).
+    #[arg(long)]
+    slurm: bool,
+    /// Array tasks running at once (the array's % throttle; 1 to 4000001).
+    #[arg(long, allow_hyphen_values = true, value_parser = flags::tasks)]
+    tasks: Option<u32>,
+    /// Runs per array task (1 to 1e9; more are packed per task if the array would exceed
+    /// the cluster's MaxArraySize).
+    #[arg(long, allow_hyphen_values = true, value_parser = flags::per_task_runs)]
+    per_task_runs: Option<u64>,
+    /// Time limit of each task, e.g. 02:00:00 (SLURM's MM, MM:SS, HH:MM:SS, D-HH, D-HH:MM,
+    /// D-HH:MM:SS; 0 = no limit).
+    #[arg(long, allow_hyphen_values = true, value_parser = flags::slurm_time)]
+    time: Option<String>,
+    #[arg(long)]
+    partition: Option<String>,
+    /// Extra #SBATCH argument (repeatable), e.g. --sbatch-arg=--account=abc.
+    #[arg(long = "sbatch-arg", allow_hyphen_values = true)]
+    sbatch_arg: Vec<String>,
+    /// Worker threads per task (--cpus-per-task; 1 to 1024).
+    #[arg(long, allow_hyphen_values = true, value_parser = flags::cpus)]
+    cpus_per_task: Option<u32>,
+    #[command(flatten)]
+    checkpoint: CheckpointEvery,
+    /// No compaction job after the array.
+    #[arg(long)]
+    no_compact: bool,
+    /// Print the scripts and the sbatch commands; write and submit nothing.
+    #[arg(long)]
+    dry_run: bool,
+}
+
+/// The exit code of a step that stopped the command (its message is printed).
+type Stop = i32;
+
+pub fn run(a: Args) -> i32 {
+    match submit(&a) {
+        Ok(code) | Err(code) => code,
+    }
+}
+
+fn submit(a: &Args) -> Result<i32, Stop> {
+    let binary = binary()?;
+    // The campaign (created unless --dry-run) and its absolute directory.
+    let (c, root) = if a.missing {
+        existing_campaign(a)?
+    } else {
+        new_campaign(a)?
+    };
+    let previous = slurm::read_record(&root).map_err(|e| fail(exit_codes::DIRECTORY_REFUSED, e))?;
+    let options = options(a, previous.map(|r| r.options));
+    let (max_array, note) = slurm::max_array_size();
+    if let Some(n) = note {
+        tracing::info!("{n}");
+    }
+    let plan =
+        slurm::plan(&c, &root, options, a.missing, &binary, max_array).map_err(report_error)?;
+    for n in &plan.notes {
+        tracing::warn!("{n}");
+    }
+    if plan.indices.is_empty() {
+        println!(
+            "{}: nothing to submit: every shard is finished, queued or running",
+            root.display()
+        );
+    } else if a.dry_run {
+        print_dry_run(&root, &plan);
+    } else {
+        let p = slurm::submit(&root, plan).map_err(report_error)?;
+        print_submitted(&root, &p);
+    }
+    Ok(exit_codes::OK)
+}
+
+/// This executable's absolute path, for the scripts.
+fn binary() -> Result<String, Stop> {
+    std::env::current_exe()
+        .and_then(|p| p.canonicalize())
+        .map(|p| p.display().to_string())
+        .map_err(|e| {
+            fail(
+                exit_codes::INVALID_INPUT,
+                format!("cannot locate the granular binary: {e}"),
+            )
+        })
+}
+
+/// `--missing DIR`: the campaign in `target`.
+fn existing_campaign(a: &Args) -> Result<(Campaign, PathBuf), Stop> {
+    if a.out.is_some() {
+        return Err(fail(
+            exit_codes::INVALID_INPUT,
+            "--missing takes the campaign directory as its argument, not --out",
+        ));
+    }
+    let c = Campaign::open(&a.target).map_err(report_error)?;
+    let root = a.target.canonicalize().unwrap_or(a.target.clone());
+    Ok((c, root))
+}
+
+/// A first submission: the campaign of manifest `target` in `--out` (created, or only
+/// planned in memory with `--dry-run`).
+fn new_campaign(a: &Args) -> Result<(Campaign, PathBuf), Stop> {
+    let Some(out) = a.out.clone() else {
+        return Err(fail(
+            exit_codes::INVALID_INPUT,
+            "a first submission needs --out DIR (or use --missing DIR)",
+        ));
+    };
+    let missing_flags: Vec<&str> = [
+        ("--time", a.time.is_none()),
+        ("--tasks", a.tasks.is_none()),
+        ("--per-task-runs", a.per_task_runs.is_none()),
+    ]
+    .into_iter()
+    .filter_map(|(flag, absent)| absent.then_some(flag))
+    .collect();
+    if !missing_flags.is_empty() {
+        return Err(fail(
+            exit_codes::INVALID_INPUT,
+            format!("a first submission needs {}", missing_flags.join(", ")),
+        ));
+    }
+    if a.dry_run {
+        return planned_campaign(&a.target, out);
+    }
+    let c = Campaign::create_or_open(&a.target, &out).map_err(report_error)?;
+    let root = out.canonicalize().unwrap_or(out);
+    Ok((c, root))
+}
+
+/// The campaign of `manifest` in `out`, in memory only (nothing is written).
+fn planned_campaign(manifest: &Path, out: PathBuf) -> Result<(Campaign, PathBuf), Stop> {
+    let (manifest, plan) = crate::campaign::plan::load(manifest)
+        .map_err(|e| report_error(CampaignError::Manifest(e)))?;
+    let value = serde_json::to_value(&manifest).expect("manifest serialises");
+    let c = Campaign {
+        root: out.clone(),
+        manifest,
+        plan,
+        manifest_json: crate::campaign::plan::canonical(&value),
+    };
+    let root = std::path::absolute(&out).unwrap_or(out);
+    Ok((c, root))
+}
+
+/// The submission's options: the flags of a first submission; with `--missing`, the
+/// previous submission's options with the flags given overriding them (None without one).
+fn options(a: &Args, previous: Option<SlurmOptions>) -> Option<SlurmOptions> {
+    if a.missing {
+        return previous.map(|mut o| {
+            if let Some(t) = a.tasks {
+                o.throttle = t;
+            }
+            if let Some(t) = &a.time {
+                o.time = t.clone();
+            }
+            if a.partition.is_some() {
+                o.partition = a.partition.clone();
+            }
+            if !a.sbatch_arg.is_empty() {
+                o.sbatch_args = a.sbatch_arg.clone();
+            }
+            if let Some(n) = a.cpus_per_task {
+                o.cpus_per_task = n;
+            }
+            if let Some(x) = a.checkpoint.given {
+                o.checkpoint_every = x;
+            }
+            if a.no_compact {
+                o.compact = false;
+            }
+            o
+        });
+    }
+    Some(SlurmOptions {
+        throttle: a.tasks.unwrap_or(1),
+        per_task_runs: a.per_task_runs.unwrap_or(1),
+        time: a.time.clone().unwrap_or_default(),
+        partition: a.partition.clone(),
+        sbatch_args: a.sbatch_arg.clone(),
+        cpus_per_task: a.cpus_per_task.unwrap_or(1),
+        checkpoint_every: a.checkpoint.seconds(),
+        compact: !a.no_compact,
+    })
+}
+
+/// `--dry-run`: the scripts and the sbatch commands that would run.
+fn print_dry_run(root: &Path, plan: &slurm::Plan) {
+    let sub = plan.record.submissions.last().expect("submission");
+    println!(
+        "# {} (would be written to {})",
+        sub.script,
+        root.join(&sub.script).display()
+    );
+    print!("{}", plan.script);
+    if let (Some(rel), Some(text)) = (&sub.compact_script, &plan.compact_script) {
+        println!("# {rel}");
+        print!("{text}");
+    }
+    println!(
+        "# would run: sbatch --parsable {}",
+        root.join(&sub.script).display()
+    );
+    if let Some(rel) = &sub.compact_script {
+        println!(
+            "# then: sbatch --parsable --dependency=afterok:<array job id> {}",
+            root.join(rel).display()
+        );
+    }
+}
+
+fn print_submitted(root: &Path, p: &slurm::Plan) {
+    let s = p.record.submissions.last().expect("submission");
+    println!(
+        "submitted {} array task(s) ({} shards of about {} runs, array {}) as job {}{}",
+        p.indices.len(),
+        p.record.shards,
+        p.record.runs_per_shard,
+        s.array,
+        s.array_job.as_deref().unwrap_or("?"),
+        s.compact_job
+            .as_deref()
+            .map(|j| format!(", compaction job {j} (afterok)"))
+            .unwrap_or_default()
+    );
+    println!("script: {}", root.join(&s.script).display());
+}

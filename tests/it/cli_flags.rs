@@ -1,0 +1,421 @@
+//! Every numeric flag of every command is checked when the command line is parsed: NaN,
+//! infinities, negative, fractional where an integer is expected, overflowing, absurdly large
+//! values and 0 where it means nothing give exit 2 with a message naming the flag, no panic,
+//! and leave the working directory (a manifest, a campaign directory, the `--out` path)
+//! exactly as it was. And a valid value of each flag is accepted (`validate`, `status`,
+//! `schema`, `theory`, `plot` and `verify` have no numeric flags).
+
+use std::fs;
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+
+use super::util::{bin, heavy, repo_root, snapshot, write_json};
+
+/// Values that no numeric flag accepts.
+const BAD: &[&str] = &[
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "infinity",
+    "-1",
+    "1e300",
+    "18446744073709551616",
+    "abc",
+    "",
+    "1.5.2",
+];
+
+/// A flag, a value it accepts (used while another flag of the command is tested) and its own
+/// bad values besides `BAD`.
+struct Flag {
+    name: &'static str,
+    good: &'static str,
+    bad: &'static [&'static str],
+}
+
+/// A command line: fixed arguments (paths relative to the case's directory, which holds
+/// the manifest `m.json` and the campaign `c`; `out` does not exist), its numeric flags, and
+/// the variants of its tail (e.g. with and without `--dry-run`).
+struct Cmd {
+    prefix: &'static [&'static str],
+    flags: &'static [Flag],
+    tails: &'static [&'static [&'static str]],
+}
+
+const THREADS: Flag = Flag {
+    name: "--threads",
+    good: "1",
+    bad: &["1025", "20000", "1.5", "0x10"],
+};
+const CHECKPOINT: Flag = Flag {
+    name: "--checkpoint-every",
+    good: "0.5",
+    bad: &["0", "-0", "1e-400", "1e8", "-0.5"],
+};
+const FLUSH: Flag = Flag {
+    name: "--flush-every",
+    good: "0.1",
+    bad: &["1e8", "-0.1"],
+};
+const SHARD: Flag = Flag {
+    name: "--shard",
+    good: "1/1",
+    bad: &[
+        "0",
+        "0/1",
+        "2/1",
+        "1/0",
+        "1/4294967296",
+        "-1/2",
+        "1/2/3",
+        "nan/2",
+    ],
+};
+const RUNTIME: &[Flag] = &[THREADS, CHECKPOINT, FLUSH, SHARD];
+const SUBMIT: &[Flag] = &[
+    Flag {
+        name: "--tasks",
+        good: "2",
+        bad: &["0", "4000002", "1.5"],
+    },
+    Flag {
+        name: "--per-task-runs",
+        good: "1",
+        bad: &["0", "1000000001", "1.5"],
+    },
+    Flag {
+        name: "--time",
+        good: "10",
+        bad: &["2h", "1:2:3:4", "12345", "1.5"],
+    },
+    Flag {
+        name: "--cpus-per-task",
+        good: "1",
+        bad: &["0", "1025", "1.5"],
+    },
+    Flag {
+        name: "--checkpoint-every",
+        good: "60",
+        bad: &["0", "1e8"],
+    },
+];
+
+const COMMANDS: &[Cmd] = &[
+    Cmd {
+        prefix: &["run", "m.json", "--out", "out", "--quiet"],
+        flags: RUNTIME,
+        tails: &[&[]],
+    },
+    Cmd {
+        prefix: &["resume", "c", "--quiet"],
+        flags: RUNTIME,
+        tails: &[&[]],
+    },
+    Cmd {
+        prefix: &["slurm-task", "c"],
+        flags: &[
+            Flag {
+                name: "--shards",
+                good: "2",
+                bad: &["0", "4000002", "1.5"],
+            },
+            // 2 is refused after parsing (not below --shards 2), before anything is opened.
+            Flag {
+                name: "--index",
+                good: "0",
+                bad: &["2", "4000001", "1.5"],
+            },
+            THREADS,
+            CHECKPOINT,
+            FLUSH,
+        ],
+        tails: &[&[]],
+    },
+    Cmd {
+        prefix: &["submit", "m.json", "--out", "out", "--slurm"],
+        flags: SUBMIT,
+        tails: &[&[], &["--dry-run"]],
+    },
+    Cmd {
+        prefix: &["submit", "c", "--missing", "--slurm"],
+        flags: SUBMIT,
+        tails: &[&[], &["--dry-run"]],
+    },
+    Cmd {
+        prefix: &["compact", "c"],
+        flags: &[Flag {
+            name: "--target-size",
+            good: "1MB",
+            bad: &[
+                "0",
+                "0.1",
+                "1025GB",
+                "99999999999999999999GB",
+                "1e300MB",
+                "5XB",
+            ],
+        }],
+        tails: &[&[]],
+    },
+    Cmd {
+        prefix: &["analyze", "c", "--no-figures"],
+        flags: &[
+            Flag {
+                name: "--n-min",
+                good: "100",
+                bad: &["1e10", "-0.5"],
+            },
+            Flag {
+                name: "--count-error-factor",
+                good: "2",
+                bad: &["0", "101"],
+            },
+            Flag {
+                name: "--chi2-accept",
+                good: "1.3",
+                bad: &["0", "1001"],
+            },
+            Flag {
+                name: "--fixed-df",
+                good: "1.5",
+                bad: &["0", "2.01", "3"],
+            },
+        ],
+        tails: &[&[]],
+    },
+];
+
+/// `granular args` in `dir`, with stand-ins for the SLURM tools that do not exist (so that
+/// nothing could reach a real cluster).
+fn granular(dir: &Path, args: &[&str]) -> Output {
+    Command::new(bin())
+        .args(args)
+        .current_dir(dir)
+        .env("GRANULAR_SBATCH", "/nonexistent/sbatch")
+        .env("GRANULAR_SQUEUE", "/nonexistent/squeue")
+        .env("GRANULAR_SCONTROL", "/nonexistent/scontrol")
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .stdin(Stdio::null())
+        .output()
+        .expect("run granular")
+}
+
+/// Copy a directory tree, symbolic links (the tables' generations) as links.
+fn copy_tree(from: &Path, to: &Path) {
+    fs::create_dir(to).unwrap();
+    for e in fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let (src, dst) = (e.path(), to.join(e.file_name()));
+        let t = e.file_type().unwrap();
+        if t.is_symlink() {
+            std::os::unix::fs::symlink(fs::read_link(&src).unwrap(), &dst).unwrap();
+        } else if t.is_dir() {
+            copy_tree(&src, &dst);
+        } else {
+            fs::copy(&src, &dst).unwrap();
+        }
+    }
+}
+
+/// A manifest `m.json` and its campaign `c` (theory tables only) in `dir`.
+fn template(dir: &Path) {
+    let m = repo_root().join("tests/manifests/good/power_law_sweep.json");
+    fs::copy(&m, dir.join("m.json")).unwrap();
+    let o = granular(dir, &["theory", "m.json", "--out", "c"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// The command line of `cmd` with `flag` set to `value` and the other flags to good values.
+fn args<'a>(cmd: &'a Cmd, flag: &'a Flag, value: &'a str, tail: &[&'a str]) -> Vec<&'a str> {
+    let mut a = cmd.prefix.to_vec();
+    for f in cmd.flags.iter().filter(|f| f.name != flag.name) {
+        a.extend([f.name, f.good]);
+    }
+    a.extend([flag.name, value]);
+    a.extend(tail);
+    a
+}
+
+#[test]
+fn bad_numeric_flags_are_refused_before_anything_is_written() {
+    // Light, but hundreds of processes: not beside the timing-sensitive tests.
+    let _g = heavy();
+    let base = tempfile::tempdir().unwrap();
+    let tpl = base.path().join("template");
+    fs::create_dir(&tpl).unwrap();
+    template(&tpl);
+    let mut cases = 0;
+    for cmd in COMMANDS {
+        for flag in cmd.flags {
+            for tail in cmd.tails {
+                for &value in BAD.iter().chain(flag.bad) {
+                    let dir = base.path().join(format!("case{cases}"));
+                    copy_tree(&tpl, &dir);
+                    let before = snapshot(&dir);
+                    let a = args(cmd, flag, value, tail);
+                    let o = granular(&dir, &a);
+                    let err = String::from_utf8_lossy(&o.stderr);
+                    let what = format!("granular {a:?}: exit {:?}, stderr:\n{err}", o.status);
+                    assert_eq!(o.status.code(), Some(2), "{what}");
+                    assert!(err.contains(flag.name), "message names the flag: {what}");
+                    assert!(!err.contains("panicked"), "{what}");
+                    assert!(snapshot(&dir) == before, "the directory changed: {what}");
+                    fs::remove_dir_all(&dir).unwrap();
+                    cases += 1;
+                }
+            }
+        }
+    }
+    eprintln!("{cases} bad values refused");
+}
+
+fn ok(dir: &Path, args: &[&str]) -> String {
+    let o = granular(dir, args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "granular {args:?}:\n{err}{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    err
+}
+
+#[test]
+fn good_numeric_flags_are_accepted() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    fs::copy(
+        repo_root().join("tests/manifests/good/power_law_sweep.json"),
+        d.join("m.json"),
+    )
+    .unwrap();
+    ok(d, &["validate", "m.json"]);
+    let run = [
+        "run",
+        "m.json",
+        "--out",
+        "c",
+        "--quiet",
+        "--threads",
+        "1",
+        "--checkpoint-every",
+        "0.5",
+        "--flush-every",
+        "0.1",
+        "--shard",
+        "1/2",
+    ];
+    ok(d, &run);
+    // The largest values; more threads than 4 per core are reduced with a warning.
+    let resume = [
+        "resume",
+        "c",
+        "--quiet",
+        "--threads",
+        "1024",
+        "--checkpoint-every",
+        "1e7",
+        "--flush-every",
+        "0",
+        "--shard",
+        "2/2",
+    ];
+    let err = ok(d, &resume);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if cores * 4 < 1024 {
+        assert!(
+            err.contains("--threads 1024") && err.contains(&format!("using {}", cores * 4)),
+            "{err}"
+        );
+    }
+    let status = granular(d, &["status", "c", "--json"]);
+    let s: serde_json::Value = serde_json::from_slice(&status.stdout).unwrap();
+    assert_eq!(s["done"], 8, "{s}");
+    ok(
+        d,
+        &[
+            "slurm-task",
+            "c",
+            "--shards",
+            "1",
+            "--index",
+            "0",
+            "--threads",
+            "0",
+            "--checkpoint-every",
+            "300",
+            "--flush-every",
+            "30",
+        ],
+    );
+    ok(d, &["compact", "c", "--target-size", "1MB"]);
+    ok(d, &["compact", "c", "--target-size", "1024GB"]);
+    // Largest submit values; --dry-run writes nothing.
+    let before = snapshot(d);
+    let dry = ok(
+        d,
+        &[
+            "submit",
+            "m.json",
+            "--out",
+            "planned",
+            "--slurm",
+            "--tasks",
+            "4000001",
+            "--per-task-runs",
+            "1000000000",
+            "--time",
+            "0",
+            "--cpus-per-task",
+            "1024",
+            "--checkpoint-every",
+            "1e7",
+            "--dry-run",
+        ],
+    );
+    assert!(snapshot(d) == before, "--dry-run wrote something: {dry}");
+    analyze_flags(d);
+}
+
+/// `analyze` with its flags at both ends of their ranges on a one-run 1D rfm campaign.
+fn analyze_flags(d: &Path) {
+    write_json(
+        &d.join("rfm.json"),
+        &serde_json::json!({
+            "name": "cli-flags-rfm",
+            "model": "rfm",
+            "seed": 5,
+            "params": {
+                "dim": 1,
+                "n_particles": 30,
+                "reduced_length": 1.0,
+                "restitution_normal": 0.5,
+                "warmup": 0.01,
+                "duration": 0.02,
+                "sample_every": 1000,
+                "observables": ["velocity_moments", "velocity_histogram"],
+                "velocity_histogram": {"range": [-3, 3], "bins": 60}
+            }
+        }),
+    );
+    ok(d, &["run", "rfm.json", "--out", "r", "--quiet"]);
+    for (n, f, chi2, df) in [("0", "1e-3", "1e-3", "1e-3"), ("1e9", "100", "1000", "2")] {
+        let args = [
+            "analyze",
+            "r",
+            "--no-figures",
+            "--n-min",
+            n,
+            "--count-error-factor",
+            f,
+            "--chi2-accept",
+            chi2,
+            "--fixed-df",
+            df,
+        ];
+        ok(d, &args);
+    }
+}
