@@ -21,10 +21,8 @@ pub mod tails;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
-use arrow_array::{Array, ArrayRef, RecordBatch};
-use arrow_schema::{DataType, Field, Schema};
+use arrow_array::{Array, RecordBatch};
 
 use crate::campaign::tables::{POINTS, RUNS};
 use crate::campaign::Campaign;
@@ -33,7 +31,7 @@ use crate::models::rfm::tables as rt;
 use crate::models::rfm::RfmParams;
 use crate::models::ModelParams;
 use crate::plot::{self, Figure, Series};
-use crate::store::cols::{get_f64 as f64s, get_str, get_u32 as u32s, get_u64 as u64s};
+use crate::store::cols::{get_f64 as f64s, get_str, get_u32 as u32s, get_u64 as u64s, table};
 use crate::store::parquet_io::{self, StoreError};
 
 /// Every batch of a table of the campaign.
@@ -528,106 +526,33 @@ fn write_table(
     crate::fsutil::sync_dir(out).map_err(|e| AnalysisError::Io(format!("{}: {e}", out.display())))
 }
 
-/// Schema of `analysis_fits`.
-pub fn fits_schema() -> Schema {
-    Schema::new(vec![
-        Field::new("campaign", DataType::Utf8, false),
-        Field::new("quantity", DataType::Utf8, false),
-        Field::new("key", DataType::Utf8, false),
-        Field::new("value", DataType::Float64, false),
-        Field::new("error", DataType::Float64, true),
-        Field::new("chi2_reduced", DataType::Float64, true),
-        Field::new("n_points", DataType::UInt32, false),
-        Field::new("window", DataType::Utf8, false),
-        Field::new("reference", DataType::Float64, true),
-    ])
-}
-
 fn fits_batch(campaign: &str, rows: &[FitRow]) -> RecordBatch {
-    let s = |f: &dyn Fn(&FitRow) -> &str| -> ArrayRef {
-        Arc::new(
-            rows.iter()
-                .map(|r| Some(f(r)))
-                .collect::<arrow_array::StringArray>(),
-        )
-    };
-    let o = |f: &dyn Fn(&FitRow) -> Option<f64>| -> ArrayRef {
-        Arc::new(rows.iter().map(f).collect::<arrow_array::Float64Array>())
-    };
-    RecordBatch::try_new(
-        Arc::new(fits_schema()),
+    table(rows, |c| {
         vec![
-            Arc::new(
-                rows.iter()
-                    .map(|_| Some(campaign))
-                    .collect::<arrow_array::StringArray>(),
-            ),
-            s(&|r| &r.quantity),
-            s(&|r| &r.key),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.value)
-                    .collect::<arrow_array::Float64Array>(),
-            ),
-            o(&|r| r.error),
-            o(&|r| r.chi2_reduced),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.n_points)
-                    .collect::<arrow_array::UInt32Array>(),
-            ),
-            s(&|r| &r.window),
-            o(&|r| r.reference),
-        ],
-    )
-    .expect("analysis_fits batch matches its schema")
+            c.const_str("campaign", campaign),
+            c.str("quantity", |r| &r.quantity),
+            c.str("key", |r| &r.key),
+            c.f64("value", |r| r.value),
+            c.opt_f64("error", |r| r.error),
+            c.opt_f64("chi2_reduced", |r| r.chi2_reduced),
+            c.u32("n_points", |r| r.n_points),
+            c.str("window", |r| &r.window),
+            c.opt_f64("reference", |r| r.reference),
+        ]
+    })
 }
 
 fn curves_batch(campaign: &str, rows: &[CurveRow]) -> RecordBatch {
-    let schema = Schema::new(vec![
-        Field::new("campaign", DataType::Utf8, false),
-        Field::new("figure", DataType::Utf8, false),
-        Field::new("series", DataType::Utf8, false),
-        Field::new("x", DataType::Float64, false),
-        Field::new("y", DataType::Float64, false),
-        Field::new("error", DataType::Float64, true),
-    ]);
-    RecordBatch::try_new(
-        Arc::new(schema),
+    table(rows, |c| {
         vec![
-            Arc::new(
-                rows.iter()
-                    .map(|_| Some(campaign))
-                    .collect::<arrow_array::StringArray>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| Some(r.figure.as_str()))
-                    .collect::<arrow_array::StringArray>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| Some(r.series.as_str()))
-                    .collect::<arrow_array::StringArray>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.x)
-                    .collect::<arrow_array::Float64Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.y)
-                    .collect::<arrow_array::Float64Array>(),
-            ),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.error)
-                    .collect::<arrow_array::Float64Array>(),
-            ),
-        ],
-    )
-    .expect("analysis_curves batch matches its schema")
+            c.const_str("campaign", campaign),
+            c.str("figure", |r| &r.figure),
+            c.str("series", |r| &r.series),
+            c.f64("x", |r| r.x),
+            c.f64("y", |r| r.y),
+            c.opt_f64("error", |r| r.error),
+        ]
+    })
 }
 
 /// A fitted power law drawn over [x0, x1] as a line series.
@@ -662,130 +587,15 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                 .push((p, r));
         }
     }
-    let n_min = ctx.opts.n_min;
-    let mut v2_series = Vec::new();
-    let mut collapse: BTreeMap<u64, Vec<(f64, f64, f64)>> = BTreeMap::new();
-    let mut xim_series = Vec::new();
-    let mut zeta_series = Vec::new();
+    let mut figs = MultiscalingFigures::default();
     for (key, pts) in &groups {
         let distinct_n: std::collections::BTreeSet<u64> =
             pts.iter().map(|p| p.1.n_particles).collect();
         if distinct_n.len() < 2 {
             continue;
         }
-        for (what, table, sym) in [
-            ("velocity", &d.moments, "xi"),
-            ("neighbour", &d.neighbour, "zeta"),
-        ] {
-            let orders: std::collections::BTreeSet<u32> = table
-                .keys()
-                .filter(|(p, _)| pts.iter().any(|x| x.0 == *p))
-                .map(|k| k.1)
-                .collect();
-            let mut per_m = Vec::new();
-            for m in orders {
-                let at_n: Vec<multiscaling::MomentAtN> = pts
-                    .iter()
-                    .filter_map(|(p, r)| {
-                        table.get(&(*p, m)).map(|v| {
-                            let (value, sem) = replica_stat(v);
-                            multiscaling::MomentAtN {
-                                n: r.n_particles as f64,
-                                value,
-                                sem,
-                            }
-                        })
-                    })
-                    .collect();
-                // The thesis's N cut (for velocity moments); keep at least 3 points.
-                let cut = if what == "velocity" { n_min } else { 0.0 };
-                let above = at_n.iter().filter(|x| x.n >= cut).count();
-                let (cut, note) = if above >= 3 || cut == 0.0 {
-                    (cut, String::new())
-                } else {
-                    (
-                        0.0,
-                        format!(" (only {above} points with N >= {cut}: all N used)"),
-                    )
-                };
-                if !note.is_empty() && m == 2 {
-                    ctx.warn(format!("{key}: xi_2{note}"));
-                }
-                let Some(f) = multiscaling::exponent_vs_n(&at_n, cut) else {
-                    continue;
-                };
-                let reference = (sym == "zeta").then(|| multiscaling::bisection_zeta(m));
-                let weighted = if f.fit.chi2_reduced.is_some() {
-                    "weighted"
-                } else {
-                    "unweighted"
-                };
-                ctx.fit(
-                    format!("{sym}_{m}"),
-                    key,
-                    f.exponent,
-                    Some(f.error),
-                    f.fit.chi2_reduced,
-                    f.fit.n_points,
-                    format!(
-                        "N in [{}, {}], {weighted}{note}",
-                        f.n_lo as u64, f.n_hi as u64
-                    ),
-                    reference,
-                );
-                per_m.push((m as f64, f.exponent / m as f64, f.error / m as f64));
-                if sym == "xi" && m == 2 {
-                    // lambda(eps) of (3.8): the amplitude over (D L'/M^2)^(2/3).
-                    let r = pts[0].1;
-                    let cfg = r.config();
-                    let lr = cfg.box_length() - cfg.n_particles as f64 * cfg.diameter();
-                    let scale = (r.noise_strength * lr / (r.mass * r.mass)).powf(2.0 / 3.0);
-                    let lambda = f.ln_amplitude.exp() / scale;
-                    let lam_err = lambda * f.fit.errors[0];
-                    ctx.fit(
-                        "lambda",
-                        key,
-                        lambda,
-                        Some(lam_err),
-                        f.fit.chi2_reduced,
-                        f.fit.n_points,
-                        format!(
-                            "<v^2> = (D L'/M^2)^(2/3) lambda N^-xi_2, N >= {}",
-                            f.n_lo as u64
-                        ),
-                        None,
-                    );
-                    let pts_v2: Vec<(f64, f64, f64)> = at_n
-                        .iter()
-                        .map(|x| (x.n, x.value, x.sem.unwrap_or(0.0)))
-                        .collect();
-                    v2_series.push(Series {
-                        label: key.clone(),
-                        points: pts_v2,
-                        line: false,
-                    });
-                    let (la, xi) = (f.ln_amplitude, f.exponent);
-                    v2_series.push(line(format!("N^-{:.3}", xi), f.n_lo, f.n_hi, move |n| {
-                        (la - xi * n.ln()).exp()
-                    }));
-                    for x in &at_n {
-                        let y = multiscaling::collapse_value(
-                            x.value,
-                            x.n,
-                            xi,
-                            r.noise_strength,
-                            lr,
-                            r.mass,
-                        );
-                        let e = y * x.sem.unwrap_or(0.0) / x.value;
-                        collapse.entry(x.n as u64).or_default().push((
-                            1.0 - r.restitution_normal.powi(2),
-                            y,
-                            e,
-                        ));
-                    }
-                }
-            }
+        for (table, sym) in [(&d.moments, "xi"), (&d.neighbour, "zeta")] {
+            let per_m = exponents(ctx, key, pts, table, sym, &mut figs);
             if !per_m.is_empty() {
                 let s = Series {
                     label: key.clone(),
@@ -793,65 +603,210 @@ fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                     line: false,
                 };
                 if sym == "xi" {
-                    xim_series.push(s);
+                    figs.xim.push(s);
                 } else {
-                    zeta_series.push(s);
+                    figs.zeta.push(s);
                 }
             }
         }
     }
-    if !v2_series.is_empty() {
-        let f = fig(
-            ctx.title("<v^2> vs N (3.8)"),
-            "N",
-            "<v^2> (m^2/s^2)",
-            v2_series,
-        );
-        ctx.figure("xi2-fit".into(), plot::loglog(f));
-    }
-    if !xim_series.is_empty() {
-        let mut s = xim_series;
-        let r = s.len();
-        s.push(Series {
-            label: "mean field 1/3".into(),
-            points: vec![(1.0, 1.0 / 3.0, 0.0), (12.0, 1.0 / 3.0, 0.0)],
-            line: true,
-        });
-        let f = fig(ctx.title("xi_m / m (3.14)"), "m", "xi_m / m", s);
-        ctx.figure("xi-m".into(), plot::linear(f).with_references_from(r));
-    }
-    if !zeta_series.is_empty() {
-        let mut s = zeta_series;
-        let r = s.len();
-        s.push(Series {
-            label: "uniform bisection ln(1+m)/(m ln 2)".into(),
-            points: (1..=9)
-                .map(|m| (m as f64, multiscaling::bisection_zeta(m) / m as f64, 0.0))
-                .collect(),
-            line: true,
-        });
-        let f = fig(ctx.title("zeta_m / m (3.20)"), "m", "zeta_m / m", s);
-        ctx.figure("zeta-m".into(), plot::linear(f).with_references_from(r));
-    }
-    if !collapse.is_empty() {
-        let s = collapse
-            .into_iter()
-            .map(|(n, mut v)| {
-                v.sort_by(|a, b| a.0.total_cmp(&b.0));
-                Series {
-                    label: format!("N = {n}"),
-                    points: v,
-                    line: false,
-                }
+    figs.draw(ctx);
+}
+
+/// The series of the multiscaling figures, gathered over the groups of points.
+#[derive(Default)]
+struct MultiscalingFigures {
+    /// <v^2> against N with the fitted lines (F 3.1).
+    v2: Vec<Series>,
+    /// N -> (1 - eps^2, collapsed <v^2>, error) (F 3.3).
+    collapse: BTreeMap<u64, Vec<(f64, f64, f64)>>,
+    /// xi_m / m and zeta_m / m against m, per group.
+    xim: Vec<Series>,
+    zeta: Vec<Series>,
+}
+
+/// The exponents `sym`_m (xi: velocity moments, zeta: neighbour distances) of one group of
+/// points against N, each a fit row; returns (m, exponent / m, error / m) per order.
+fn exponents(
+    ctx: &mut Ctx,
+    key: &str,
+    pts: &[(u32, &RfmParams)],
+    table: &BTreeMap<(u32, u32), PerRun>,
+    sym: &str,
+    figs: &mut MultiscalingFigures,
+) -> Vec<(f64, f64, f64)> {
+    let orders: std::collections::BTreeSet<u32> = table
+        .keys()
+        .filter(|(p, _)| pts.iter().any(|x| x.0 == *p))
+        .map(|k| k.1)
+        .collect();
+    let mut per_m = Vec::new();
+    for m in orders {
+        let at_n: Vec<multiscaling::MomentAtN> = pts
+            .iter()
+            .filter_map(|(p, r)| {
+                table.get(&(*p, m)).map(|v| {
+                    let (value, sem) = replica_stat(v);
+                    multiscaling::MomentAtN {
+                        n: r.n_particles as f64,
+                        value,
+                        sem,
+                    }
+                })
             })
             .collect();
-        let f = fig(
-            ctx.title("collapse (F 3.3)"),
-            "1 - eps^2",
-            "<v^2> N^xi_2 (D L'/M^2)^(-2/3)",
-            s,
+        // The thesis's N cut (for velocity moments); keep at least 3 points.
+        let cut = if sym == "xi" { ctx.opts.n_min } else { 0.0 };
+        let above = at_n.iter().filter(|x| x.n >= cut).count();
+        let (cut, note) = if above >= 3 || cut == 0.0 {
+            (cut, String::new())
+        } else {
+            (
+                0.0,
+                format!(" (only {above} points with N >= {cut}: all N used)"),
+            )
+        };
+        if !note.is_empty() && m == 2 {
+            ctx.warn(format!("{key}: xi_2{note}"));
+        }
+        let Some(f) = multiscaling::exponent_vs_n(&at_n, cut) else {
+            continue;
+        };
+        let reference = (sym == "zeta").then(|| multiscaling::bisection_zeta(m));
+        let weighted = if f.fit.chi2_reduced.is_some() {
+            "weighted"
+        } else {
+            "unweighted"
+        };
+        ctx.fit(
+            format!("{sym}_{m}"),
+            key,
+            f.exponent,
+            Some(f.error),
+            f.fit.chi2_reduced,
+            f.fit.n_points,
+            format!(
+                "N in [{}, {}], {weighted}{note}",
+                f.n_lo as u64, f.n_hi as u64
+            ),
+            reference,
         );
-        ctx.figure("collapse".into(), plot::loglog(f));
+        per_m.push((m as f64, f.exponent / m as f64, f.error / m as f64));
+        if sym == "xi" && m == 2 {
+            lambda_and_collapse(ctx, key, pts[0].1, &f, &at_n, figs);
+        }
+    }
+    per_m
+}
+
+/// From the xi_2 fit of a group: lambda(eps) of (3.8) (the amplitude over (D L'/M^2)^(2/3)),
+/// the <v^2>(N) series with its line, and the group's points of the collapse (F 3.3).
+fn lambda_and_collapse(
+    ctx: &mut Ctx,
+    key: &str,
+    r: &RfmParams,
+    f: &multiscaling::ExponentFit,
+    at_n: &[multiscaling::MomentAtN],
+    figs: &mut MultiscalingFigures,
+) {
+    let cfg = r.config();
+    let lr = cfg.box_length() - cfg.n_particles as f64 * cfg.diameter();
+    let scale = (r.noise_strength * lr / (r.mass * r.mass)).powf(2.0 / 3.0);
+    let lambda = f.ln_amplitude.exp() / scale;
+    let lam_err = lambda * f.fit.errors[0];
+    ctx.fit(
+        "lambda",
+        key,
+        lambda,
+        Some(lam_err),
+        f.fit.chi2_reduced,
+        f.fit.n_points,
+        format!(
+            "<v^2> = (D L'/M^2)^(2/3) lambda N^-xi_2, N >= {}",
+            f.n_lo as u64
+        ),
+        None,
+    );
+    figs.v2.push(Series {
+        label: key.to_string(),
+        points: at_n
+            .iter()
+            .map(|x| (x.n, x.value, x.sem.unwrap_or(0.0)))
+            .collect(),
+        line: false,
+    });
+    let (la, xi) = (f.ln_amplitude, f.exponent);
+    figs.v2
+        .push(line(format!("N^-{:.3}", xi), f.n_lo, f.n_hi, move |n| {
+            (la - xi * n.ln()).exp()
+        }));
+    for x in at_n {
+        let y = multiscaling::collapse_value(x.value, x.n, xi, r.noise_strength, lr, r.mass);
+        let e = y * x.sem.unwrap_or(0.0) / x.value;
+        figs.collapse.entry(x.n as u64).or_default().push((
+            1.0 - r.restitution_normal.powi(2),
+            y,
+            e,
+        ));
+    }
+}
+
+impl MultiscalingFigures {
+    fn draw(self, ctx: &mut Ctx) {
+        if !self.v2.is_empty() {
+            let f = fig(
+                ctx.title("<v^2> vs N (3.8)"),
+                "N",
+                "<v^2> (m^2/s^2)",
+                self.v2,
+            );
+            ctx.figure("xi2-fit".into(), plot::loglog(f));
+        }
+        if !self.xim.is_empty() {
+            let mut s = self.xim;
+            let r = s.len();
+            s.push(Series {
+                label: "mean field 1/3".into(),
+                points: vec![(1.0, 1.0 / 3.0, 0.0), (12.0, 1.0 / 3.0, 0.0)],
+                line: true,
+            });
+            let f = fig(ctx.title("xi_m / m (3.14)"), "m", "xi_m / m", s);
+            ctx.figure("xi-m".into(), plot::linear(f).with_references_from(r));
+        }
+        if !self.zeta.is_empty() {
+            let mut s = self.zeta;
+            let r = s.len();
+            s.push(Series {
+                label: "uniform bisection ln(1+m)/(m ln 2)".into(),
+                points: (1..=9)
+                    .map(|m| (m as f64, multiscaling::bisection_zeta(m) / m as f64, 0.0))
+                    .collect(),
+                line: true,
+            });
+            let f = fig(ctx.title("zeta_m / m (3.20)"), "m", "zeta_m / m", s);
+            ctx.figure("zeta-m".into(), plot::linear(f).with_references_from(r));
+        }
+        if !self.collapse.is_empty() {
+            let s = self
+                .collapse
+                .into_iter()
+                .map(|(n, mut v)| {
+                    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+                    Series {
+                        label: format!("N = {n}"),
+                        points: v,
+                        line: false,
+                    }
+                })
+                .collect();
+            let f = fig(
+                ctx.title("collapse (F 3.3)"),
+                "1 - eps^2",
+                "<v^2> N^xi_2 (D L'/M^2)^(-2/3)",
+                s,
+            );
+            ctx.figure("collapse".into(), plot::loglog(f));
+        }
     }
 }
 
@@ -935,152 +890,165 @@ fn bisection_comparison(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
 /// 2D: D_f from S(k) with the k_D/L_Eff window; C(R) and n(R) power laws.
 fn structure_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
     for &(p, r) in rfm {
-        if r.dim != 2 {
-            continue;
+        if r.dim == 2 {
+            let key = rfm_key(ctx.c, p, r, true);
+            structure_factor_fit(ctx, &key, p, r, d);
+            cumulative_count_fits(ctx, &key, p, r, d);
         }
-        let key = rfm_key(ctx.c, p, r, true);
-        let cfg = r.config();
-        let (l, dd, phi) = (cfg.box_length(), cfg.diameter(), cfg.fill_fraction());
-        let shells: Vec<fractal::SkPoint> =
-            d.sk.range((p, 0)..(p, u64::MAX))
-                .map(|(_, (k, v))| {
-                    let (s, e) = replica_stat(v);
-                    fractal::SkPoint { k: *k, s, err: e }
-                })
-                .collect();
-        if !shells.is_empty() {
-            let kd =
-                fractal::k_dissipative(r.restitution_normal, r.restitution_tangential, phi, dd);
-            let (kp, rule) = fractal::fit_cutoff(kd, l);
-            let window = format!(
-                "{rule}: k d < {:.4} (k_D d = {:.4}, L_Eff = {:.3} m)",
-                kp * dd,
-                kd * dd,
-                fractal::l_eff(kd)
-            );
-            match fractal::fractal_dimension(&shells, 0.0, kp) {
-                Some(f) => {
-                    ctx.fit(
-                        "D_f_structure_factor",
-                        &key,
-                        f.exponent,
-                        Some(f.error),
-                        f.fit.chi2_reduced,
-                        f.fit.n_points,
-                        window,
-                        None,
-                    );
-                    let data: Vec<(f64, f64, f64)> = shells
-                        .iter()
-                        .filter(|s| s.s > 0.0 && s.k * dd <= 25.0)
-                        .map(|s| (s.k * dd, s.s, s.err.unwrap_or(0.0)))
-                        .collect();
-                    let (la, df) = (f.ln_amplitude, f.exponent);
-                    let series = vec![
-                        Series {
-                            label: "S(k)".into(),
-                            points: data,
-                            line: false,
-                        },
-                        line(
-                            format!("k^-{df:.2} (fit, k d < {:.3})", kp * dd),
-                            f.x_lo * dd,
-                            kp * dd,
-                            move |x| (la - df * (x / dd).ln()).exp(),
-                        ),
-                    ];
-                    let fg = fig(ctx.title(&format!("S(k) [{key}]")), "k d", "S(k)", series);
-                    ctx.figure(format!("sk-{}", slug(&key)), plot::loglog(fg));
-                }
-                None => ctx.warn(format!(
-                    "{key}: fewer than two S(k) shells below k' (k' d = {:.4}, first shell k d = \
-                     {:.4}): no D_f; a larger box is needed",
-                    kp * dd,
-                    2.0 * std::f64::consts::PI / l * dd
-                )),
-            }
-        }
-        // C(R) and n(R) = C(R) - n_bar at R = r_hi of each bin; window [2 d, L/4] [REC].
-        let rows: Vec<(f64, f64, Option<f64>)> = d
-            .radial
-            .range((p, 0)..(p, u64::MAX))
-            .map(|(_, (_, hi, v))| {
-                let (m, s) = replica_stat(v);
-                (*hi, m, s)
+    }
+}
+
+/// D_f from the point's S(k) below the fit cut-off k' (k_D, L_Eff; 4.5-4.9), and its figure.
+fn structure_factor_fit(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &RfmData) {
+    let cfg = r.config();
+    let (l, dd, phi) = (cfg.box_length(), cfg.diameter(), cfg.fill_fraction());
+    let shells: Vec<fractal::SkPoint> =
+        d.sk.range((p, 0)..(p, u64::MAX))
+            .map(|(_, (k, v))| {
+                let (s, e) = replica_stat(v);
+                fractal::SkPoint { k: *k, s, err: e }
             })
             .collect();
-        if !rows.is_empty() {
-            let n = r.n_particles as f64;
-            let r_: Vec<f64> = rows.iter().map(|x| x.0).collect();
-            let cv: Vec<f64> = rows.iter().map(|x| x.1).collect();
-            let ce: Vec<Option<f64>> = rows.iter().map(|x| x.2).collect();
-            let nv: Vec<f64> = rows
-                .iter()
-                .map(|x| x.1 - fractal::mean_field_count(x.0, n, l))
-                .collect();
-            let (lo, hi) = (2.0 * dd, 0.25 * l);
-            let window = format!("R in [2 d, L/4] = [{lo:.4}, {hi:.4}] m");
-            let mut series = vec![Series {
-                label: "C(R)".into(),
-                points: r_
-                    .iter()
-                    .zip(&cv)
-                    .map(|(a, b)| (*a / dd, *b, 0.0))
-                    .collect(),
-                line: false,
-            }];
-            if let Some(f) = fractal::cumulative_exponent(&r_, &cv, &ce, lo, hi) {
+    if !shells.is_empty() {
+        let kd = fractal::k_dissipative(r.restitution_normal, r.restitution_tangential, phi, dd);
+        let (kp, rule) = fractal::fit_cutoff(kd, l);
+        let window = format!(
+            "{rule}: k d < {:.4} (k_D d = {:.4}, L_Eff = {:.3} m)",
+            kp * dd,
+            kd * dd,
+            fractal::l_eff(kd)
+        );
+        match fractal::fractal_dimension(&shells, 0.0, kp) {
+            Some(f) => {
                 ctx.fit(
-                    "C_R_exponent",
-                    &key,
+                    "D_f_structure_factor",
+                    key,
                     f.exponent,
                     Some(f.error),
                     f.fit.chi2_reduced,
                     f.fit.n_points,
-                    window.clone(),
+                    window,
                     None,
                 );
-            }
-            series.push(Series {
-                label: "n(R) = C(R) - n_bar".into(),
-                points: r_
+                let data: Vec<(f64, f64, f64)> = shells
                     .iter()
-                    .zip(&nv)
-                    .filter(|(_, v)| **v > 0.0)
-                    .map(|(a, b)| (*a / dd, *b, 0.0))
-                    .collect(),
-                line: false,
-            });
-            match fractal::cumulative_exponent(&r_, &nv, &ce, lo, hi) {
-                Some(f) => {
-                    ctx.fit(
-                        "D_f_n_R",
-                        &key,
-                        f.exponent,
-                        Some(f.error),
-                        f.fit.chi2_reduced,
-                        f.fit.n_points,
-                        window,
-                        None,
-                    );
-                    let (la, e) = (f.ln_amplitude, f.exponent);
-                    series.push(line(
-                        format!("n(R) ~ R^{e:.2}"),
-                        f.x_lo / dd,
-                        f.x_hi / dd,
-                        move |x| (la + e * (x * dd).ln()).exp(),
-                    ));
-                }
-                None => ctx.warn(format!("{key}: n(R) has no positive values in {window}")),
+                    .filter(|s| s.s > 0.0 && s.k * dd <= 25.0)
+                    .map(|s| (s.k * dd, s.s, s.err.unwrap_or(0.0)))
+                    .collect();
+                let (la, df) = (f.ln_amplitude, f.exponent);
+                let series = vec![
+                    Series {
+                        label: "S(k)".into(),
+                        points: data,
+                        line: false,
+                    },
+                    line(
+                        format!("k^-{df:.2} (fit, k d < {:.3})", kp * dd),
+                        f.x_lo * dd,
+                        kp * dd,
+                        move |x| (la - df * (x / dd).ln()).exp(),
+                    ),
+                ];
+                let fg = fig(ctx.title(&format!("S(k) [{key}]")), "k d", "S(k)", series);
+                ctx.figure(format!("sk-{}", slug(key)), plot::loglog(fg));
             }
-            let fg = fig(
-                ctx.title(&format!("C(R), n(R) [{key}]")),
-                "R / d",
-                "count within R",
-                series,
-            );
-            ctx.figure(format!("cr-{}", slug(&key)), plot::loglog(fg));
+            None => ctx.warn(format!(
+                "{key}: fewer than two S(k) shells below k' (k' d = {:.4}, first shell k d = \
+                 {:.4}): no D_f; a larger box is needed",
+                kp * dd,
+                2.0 * std::f64::consts::PI / l * dd
+            )),
         }
+    }
+}
+
+/// C(R) and n(R) = C(R) - n_bar at R = r_hi of each bin, their power laws over the window
+/// [2 d, L/4] [REC], and their figure.
+fn cumulative_count_fits(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &RfmData) {
+    let cfg = r.config();
+    let (l, dd) = (cfg.box_length(), cfg.diameter());
+    let rows: Vec<(f64, f64, Option<f64>)> = d
+        .radial
+        .range((p, 0)..(p, u64::MAX))
+        .map(|(_, (_, hi, v))| {
+            let (m, s) = replica_stat(v);
+            (*hi, m, s)
+        })
+        .collect();
+    if rows.is_empty() {
+        return;
+    }
+    {
+        let n = r.n_particles as f64;
+        let r_: Vec<f64> = rows.iter().map(|x| x.0).collect();
+        let cv: Vec<f64> = rows.iter().map(|x| x.1).collect();
+        let ce: Vec<Option<f64>> = rows.iter().map(|x| x.2).collect();
+        let nv: Vec<f64> = rows
+            .iter()
+            .map(|x| x.1 - fractal::mean_field_count(x.0, n, l))
+            .collect();
+        let (lo, hi) = (2.0 * dd, 0.25 * l);
+        let window = format!("R in [2 d, L/4] = [{lo:.4}, {hi:.4}] m");
+        let mut series = vec![Series {
+            label: "C(R)".into(),
+            points: r_
+                .iter()
+                .zip(&cv)
+                .map(|(a, b)| (*a / dd, *b, 0.0))
+                .collect(),
+            line: false,
+        }];
+        if let Some(f) = fractal::cumulative_exponent(&r_, &cv, &ce, lo, hi) {
+            ctx.fit(
+                "C_R_exponent",
+                key,
+                f.exponent,
+                Some(f.error),
+                f.fit.chi2_reduced,
+                f.fit.n_points,
+                window.clone(),
+                None,
+            );
+        }
+        series.push(Series {
+            label: "n(R) = C(R) - n_bar".into(),
+            points: r_
+                .iter()
+                .zip(&nv)
+                .filter(|(_, v)| **v > 0.0)
+                .map(|(a, b)| (*a / dd, *b, 0.0))
+                .collect(),
+            line: false,
+        });
+        match fractal::cumulative_exponent(&r_, &nv, &ce, lo, hi) {
+            Some(f) => {
+                ctx.fit(
+                    "D_f_n_R",
+                    key,
+                    f.exponent,
+                    Some(f.error),
+                    f.fit.chi2_reduced,
+                    f.fit.n_points,
+                    window,
+                    None,
+                );
+                let (la, e) = (f.ln_amplitude, f.exponent);
+                series.push(line(
+                    format!("n(R) ~ R^{e:.2}"),
+                    f.x_lo / dd,
+                    f.x_hi / dd,
+                    move |x| (la + e * (x * dd).ln()).exp(),
+                ));
+            }
+            None => ctx.warn(format!("{key}: n(R) has no positive values in {window}")),
+        }
+        let fg = fig(
+            ctx.title(&format!("C(R), n(R) [{key}]")),
+            "R / d",
+            "count within R",
+            series,
+        );
+        ctx.figure(format!("cr-{}", slug(key)), plot::loglog(fg));
     }
 }
 
@@ -1128,175 +1096,195 @@ fn tail_fits_per_point(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
         let mut rule = tails::AlphaRule::thesis(r.dim);
         rule.factor = ctx.opts.count_error_factor;
         rule.chi2_max = ctx.opts.chi2_accept;
-        let step = rule.grid.2;
-        let window = |w: &tails::AlphaWindow| {
-            format!(
-                "counts in [{}, {}], |v| in [{:.3}, {:.3}] m/s, s = {} sqrt(X), chi_r^2 < {}",
-                rule.count_lo, rule.count_hi, w.v_lo, w.v_hi, rule.factor, rule.chi2_max
-            )
-        };
-        match tails::alpha_window(&folded, &rule) {
-            Some(w) => {
-                match w.centre_half_width(step) {
-                    Some((c, h)) => ctx.fit(
-                        "alpha",
-                        &key,
-                        c,
-                        Some(h),
-                        Some(w.best_chi2_reduced),
-                        w.n_bins,
-                        format!("accepted range (centre +- half-width); {}", window(&w)),
-                        None,
-                    ),
-                    None => ctx.warn(format!(
-                        "{key}: no alpha has chi_r^2 < {} (best alpha {:.2}, chi_r^2 {:.2})",
-                        rule.chi2_max, w.best_alpha, w.best_chi2_reduced
-                    )),
-                }
-                ctx.fit(
-                    "alpha_best",
-                    &key,
-                    w.best_alpha,
-                    None,
+        alpha_fits(ctx, &key, &folded, &rule);
+        let rms = tails::v_rms(&folded);
+        velocity_distribution(ctx, &key, &folded, total, rms);
+        moon_plot(ctx, &key, &folded, total, rms, &rule);
+    }
+}
+
+/// The accepted alpha window of the tail (A.3, 5.1.1) and the best alpha.
+fn alpha_fits(ctx: &mut Ctx, key: &str, folded: &[tails::FoldedBin], rule: &tails::AlphaRule) {
+    let step = rule.grid.2;
+    let window = |w: &tails::AlphaWindow| {
+        format!(
+            "counts in [{}, {}], |v| in [{:.3}, {:.3}] m/s, s = {} sqrt(X), chi_r^2 < {}",
+            rule.count_lo, rule.count_hi, w.v_lo, w.v_hi, rule.factor, rule.chi2_max
+        )
+    };
+    match tails::alpha_window(folded, rule) {
+        Some(w) => {
+            match w.centre_half_width(step) {
+                Some((c, h)) => ctx.fit(
+                    "alpha",
+                    key,
+                    c,
+                    Some(h),
                     Some(w.best_chi2_reduced),
                     w.n_bins,
-                    format!("smallest chi_r^2 on the grid (step {step}); {}", window(&w)),
+                    format!("accepted range (centre +- half-width); {}", window(&w)),
                     None,
-                );
+                ),
+                None => ctx.warn(format!(
+                    "{key}: no alpha has chi_r^2 < {} (best alpha {:.2}, chi_r^2 {:.2})",
+                    rule.chi2_max, w.best_alpha, w.best_chi2_reduced
+                )),
             }
-            None => ctx.warn(format!(
-                "{key}: fewer than 4 tail bins with counts in [{}, {}]: no alpha window (more \
-                 samples needed)",
-                rule.count_lo, rule.count_hi
-            )),
+            ctx.fit(
+                "alpha_best",
+                key,
+                w.best_alpha,
+                None,
+                Some(w.best_chi2_reduced),
+                w.n_bins,
+                format!("smallest chi_r^2 on the grid (step {step}); {}", window(&w)),
+                None,
+            );
         }
-        let rms = tails::v_rms(&folded);
-        let p_v: Vec<(f64, f64, f64)> = folded
+        None => ctx.warn(format!(
+            "{key}: fewer than 4 tail bins with counts in [{}, {}]: no alpha window (more \
+             samples needed)",
+            rule.count_lo, rule.count_hi
+        )),
+    }
+}
+
+/// P(v) against v / v_rms with the crossover fit (5.32).
+fn velocity_distribution(
+    ctx: &mut Ctx,
+    key: &str,
+    folded: &[tails::FoldedBin],
+    total: f64,
+    rms: f64,
+) {
+    let p_v: Vec<(f64, f64, f64)> = folded
+        .iter()
+        .filter(|b| b.count > 0.0)
+        .map(|b| {
+            let dens = tails::density(b, total);
+            (b.v / rms, dens, dens / b.count.sqrt())
+        })
+        .collect();
+    let mut pv_series = vec![Series {
+        label: "P(v)".into(),
+        points: p_v,
+        line: false,
+    }];
+    // The crossover function (5.32), alpha = 1.
+    if let Some(cr) = tails::crossover_fit(folded, total, 10.0) {
+        let ((vr, vre), (vc, vce)) = (cr.v_r(), cr.v_c());
+        let chi = cr.fit.chi2_reduced;
+        let n = cr.fit.n_points;
+        let w = "(5.32), alpha = 1, ln P, bins with X >= 10";
+        ctx.fit("v_r", key, vr, Some(vre), chi, n, w, None);
+        ctx.fit("v_c", key, vc, Some(vce), chi, n, w, None);
+        let ratio = vc / vr;
+        let ratio_err = ratio * ((vre / vr).powi(2) + (vce / vc).powi(2)).sqrt();
+        ctx.fit("v_c/v_r", key, ratio, Some(ratio_err), chi, n, w, None);
+        ctx.fit("P(v_c)/P(0)", key, cr.ratio_at_v_c(), None, chi, n, w, None);
+        ctx.fit("v_A", key, vr * vr / vc, None, chi, n, "v_r^2 / v_c", None);
+        let params = cr.fit.params.clone();
+        let vmax = folded
             .iter()
-            .filter(|b| b.count > 0.0)
-            .map(|b| {
-                let dens = tails::density(b, total);
-                (b.v / rms, dens, dens / b.count.sqrt())
-            })
-            .collect();
-        let mut pv_series = vec![Series {
-            label: "P(v)".into(),
-            points: p_v,
-            line: false,
-        }];
-        // The crossover function (5.32), alpha = 1.
-        if let Some(cr) = tails::crossover_fit(&folded, total, 10.0) {
-            let ((vr, vre), (vc, vce)) = (cr.v_r(), cr.v_c());
-            let chi = cr.fit.chi2_reduced;
-            let n = cr.fit.n_points;
-            let w = "(5.32), alpha = 1, ln P, bins with X >= 10";
-            ctx.fit("v_r", &key, vr, Some(vre), chi, n, w, None);
-            ctx.fit("v_c", &key, vc, Some(vce), chi, n, w, None);
-            let ratio = vc / vr;
-            let ratio_err = ratio * ((vre / vr).powi(2) + (vce / vc).powi(2)).sqrt();
-            ctx.fit("v_c/v_r", &key, ratio, Some(ratio_err), chi, n, w, None);
-            ctx.fit(
-                "P(v_c)/P(0)",
-                &key,
-                cr.ratio_at_v_c(),
-                None,
-                chi,
-                n,
-                w,
-                None,
-            );
-            ctx.fit("v_A", &key, vr * vr / vc, None, chi, n, "v_r^2 / v_c", None);
-            let params = cr.fit.params.clone();
-            let vmax = folded
-                .iter()
-                .filter(|b| b.count >= 10.0)
-                .map(|b| b.v)
-                .fold(0.0, f64::max);
-            pv_series.push(Series {
-                label: format!("(5.32): v_r = {vr:.3}, v_c = {vc:.3} m/s"),
-                points: (1..=80)
-                    .map(|j| {
-                        let v = vmax * j as f64 / 80.0;
-                        (v / rms, tails::crossover_ln(&params, v).exp(), 0.0)
-                    })
-                    .collect(),
-                line: true,
-            });
-        } else {
-            ctx.warn(format!("{key}: the crossover fit (5.32) did not converge"));
-        }
-        let fg = fig(
-            ctx.title(&format!("P(v) [{key}]")),
-            "v / v_rms",
-            "P(v)",
-            pv_series,
-        );
-        ctx.figure(format!("pv-{}", slug(&key)), plot::semilog_y(fg));
-        // Moon plot with P' = P(0) and P' = A_0 (exponential tail amplitude).
-        let p0 = tails::density(&folded[0], total);
-        let mut moon = Vec::new();
-        let mut refs = vec![("P(0)", p0)];
-        if let Some(f) = tails::tail_fit(&folded, &rule, 1.0) {
-            let width = folded[0].width;
-            refs.push(("A_0", f.params[0] / (2.0 * total * width)));
-            ctx.fit(
-                "A_0/P(0)",
-                &key,
-                f.params[0] / (2.0 * total * width) / p0,
-                None,
-                f.chi2_reduced,
-                f.n_points,
-                "exponential tail fit (alpha = 1) over the alpha window",
-                None,
-            );
-        }
-        for (name, pref) in refs {
-            let pts = tails::moon_points(&folded, total, rms, pref, 10.0);
-            if let Some(f) = tails::moon_slope(&pts, 2f64.ln()) {
-                ctx.fit(
-                    format!("moon_slope_{}", if name == "P(0)" { "P0" } else { "A0" }),
-                    &key,
-                    f.params[1],
-                    Some(f.errors[1]),
-                    f.chi2_reduced,
-                    f.n_points,
-                    format!("Moon plot (5.6) with P' = {name}, v > 2 v_rms, X >= 10"),
-                    None,
-                );
-            }
-            moon.push(Series {
-                label: format!("P' = {name}"),
-                points: pts.iter().map(|m| (m.x, m.y, m.err)).collect(),
-                line: false,
-            });
-        }
-        // Reference lines f = -alpha_T x + C through the first tail point.
-        let r = moon.len();
-        if let Some(first) = moon
-            .first()
-            .and_then(|s| s.points.iter().find(|p| p.0 >= 2f64.ln()))
-        {
-            let (x0, y0) = (first.0, first.1);
-            let x1 = moon[0].points.iter().map(|p| p.0).fold(x0, f64::max);
-            for a in [2.0, 1.5, 1.16, 1.0] {
-                moon.push(Series {
-                    label: format!("alpha_T = {a}"),
-                    points: vec![(x0, y0, 0.0), (x1, y0 - a * (x1 - x0), 0.0)],
-                    line: true,
-                });
-            }
-        }
-        let fg = fig(
-            ctx.title(&format!("Moon plot [{key}]")),
-            "ln(v / v_rms)",
-            "-ln(-ln(P / P'))",
-            moon,
-        );
-        ctx.figure(
-            format!("moon-{}", slug(&key)),
-            plot::linear(fg).with_references_from(r),
+            .filter(|b| b.count >= 10.0)
+            .map(|b| b.v)
+            .fold(0.0, f64::max);
+        pv_series.push(Series {
+            label: format!("(5.32): v_r = {vr:.3}, v_c = {vc:.3} m/s"),
+            points: (1..=80)
+                .map(|j| {
+                    let v = vmax * j as f64 / 80.0;
+                    (v / rms, tails::crossover_ln(&params, v).exp(), 0.0)
+                })
+                .collect(),
+            line: true,
+        });
+    } else {
+        ctx.warn(format!("{key}: the crossover fit (5.32) did not converge"));
+    }
+    let fg = fig(
+        ctx.title(&format!("P(v) [{key}]")),
+        "v / v_rms",
+        "P(v)",
+        pv_series,
+    );
+    ctx.figure(format!("pv-{}", slug(key)), plot::semilog_y(fg));
+}
+
+/// The Moon plot (5.6) with P' = P(0) and P' = A_0 (the exponential tail's amplitude), its
+/// slopes, and reference lines of slope alpha_T.
+fn moon_plot(
+    ctx: &mut Ctx,
+    key: &str,
+    folded: &[tails::FoldedBin],
+    total: f64,
+    rms: f64,
+    rule: &tails::AlphaRule,
+) {
+    // Moon plot with P' = P(0) and P' = A_0 (exponential tail amplitude).
+    let p0 = tails::density(&folded[0], total);
+    let mut moon = Vec::new();
+    let mut refs = vec![("P(0)", p0)];
+    if let Some(f) = tails::tail_fit(folded, rule, 1.0) {
+        let width = folded[0].width;
+        refs.push(("A_0", f.params[0] / (2.0 * total * width)));
+        ctx.fit(
+            "A_0/P(0)",
+            key,
+            f.params[0] / (2.0 * total * width) / p0,
+            None,
+            f.chi2_reduced,
+            f.n_points,
+            "exponential tail fit (alpha = 1) over the alpha window",
+            None,
         );
     }
+    for (name, pref) in refs {
+        let pts = tails::moon_points(folded, total, rms, pref, 10.0);
+        if let Some(f) = tails::moon_slope(&pts, 2f64.ln()) {
+            ctx.fit(
+                format!("moon_slope_{}", if name == "P(0)" { "P0" } else { "A0" }),
+                key,
+                f.params[1],
+                Some(f.errors[1]),
+                f.chi2_reduced,
+                f.n_points,
+                format!("Moon plot (5.6) with P' = {name}, v > 2 v_rms, X >= 10"),
+                None,
+            );
+        }
+        moon.push(Series {
+            label: format!("P' = {name}"),
+            points: pts.iter().map(|m| (m.x, m.y, m.err)).collect(),
+            line: false,
+        });
+    }
+    // Reference lines f = -alpha_T x + C through the first tail point.
+    let r = moon.len();
+    if let Some(first) = moon
+        .first()
+        .and_then(|s| s.points.iter().find(|p| p.0 >= 2f64.ln()))
+    {
+        let (x0, y0) = (first.0, first.1);
+        let x1 = moon[0].points.iter().map(|p| p.0).fold(x0, f64::max);
+        for a in [2.0, 1.5, 1.16, 1.0] {
+            moon.push(Series {
+                label: format!("alpha_T = {a}"),
+                points: vec![(x0, y0, 0.0), (x1, y0 - a * (x1 - x0), 0.0)],
+                line: true,
+            });
+        }
+    }
+    let fg = fig(
+        ctx.title(&format!("Moon plot [{key}]")),
+        "ln(v / v_rms)",
+        "-ln(-ln(P / P'))",
+        moon,
+    );
+    ctx.figure(
+        format!("moon-{}", slug(key)),
+        plot::linear(fg).with_references_from(r),
+    );
 }
 
 /// Free paths: the tail fit (4.25).

@@ -16,11 +16,3 @@
 pub mod bisection;
 pub mod cascade;
 pub mod spm;
-
-/// The rows of a finished auxiliary-model run.
-#[derive(Debug, Clone, PartialEq)]
-pub enum AuxOutput {
-    Bisection(bisection::BisectionOutput),
-    Cascade(cascade::CascadeOutput),
-    Spm(spm::SpmOutput),
-}

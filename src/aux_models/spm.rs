@@ -379,14 +379,68 @@ impl SpmRun {
 
     pub fn finish(self) -> SpmOutput {
         let c = &self.st.cfg;
-        let nb = c.bins as usize;
-        let width = (c.range[1] - c.range[0]) / nb as f64;
+        let width = (c.range[1] - c.range[0]) / c.bins as f64;
         let fixed_l = match c.free_path {
             FreePath::Fixed { length } => Some(length),
             _ => None,
         };
         let vl = fixed_l.map(|l| c.v_scale(l));
-        let histogram: Vec<HistRow> = (0..nb)
+        let histogram = self.histogram(width, vl);
+        let merged = fold_to_speed(&histogram, width);
+        let gaussian = match (fixed_l, vl) {
+            (Some(l), Some(vl)) => gaussian_fit(c, l, vl, &merged),
+            _ => GaussianFit::default(),
+        };
+        let b = c.b();
+        let (d_f, cc) = free_path_tail(&c.free_path);
+        let pred = match (d_f, cc) {
+            (Some(df), Some(cv)) => Some(predicted_tail(df, cv, b)),
+            (Some(df), None) => {
+                let beta = df - 1.0;
+                Some((
+                    6.0 * beta / (3.0 * beta + 2.0),
+                    f64::NAN,
+                    3.0 * beta / (3.0 * beta + 2.0),
+                ))
+            }
+            _ => None,
+        };
+        let tail = tail_fit(c, &merged, pred.map(|p| p.2));
+        let samples = 2 * self.st.steps;
+        let summary = SummaryRow {
+            mode: c.free_path.mode().into(),
+            walks: self.st.walks,
+            samples,
+            samples_outside: self.st.outside,
+            mean_free_path: self.st.sum_l / self.st.walks.max(1) as f64,
+            mean_walk_time: self.st.total_time / 2.0 / self.st.walks.max(1) as f64,
+            v_l: vl,
+            tau_l: fixed_l.map(|l| c.t_scale(l)),
+            gaussian_coefficient: gaussian.coefficient,
+            gaussian_coefficient_err: gaussian.error,
+            gaussian_coefficient_thesis: THESIS_GAUSSIAN_COEFFICIENT,
+            gaussian_tail_si: gaussian.si,
+            gaussian_tail_si_thesis: gaussian.si_thesis,
+            d_f,
+            c: cc,
+            b,
+            alpha_predicted: pred.map(|p| p.0),
+            k_predicted: pred.map(|p| p.1).filter(|k| k.is_finite()),
+            h_predicted: pred.map(|p| p.2),
+            alpha_measured: tail.alpha,
+            k_measured: tail.k,
+            alpha_measured_h: tail.alpha_h,
+            k_measured_h: tail.k_h,
+            tail_v_lo: tail.v_lo,
+            tail_v_hi: tail.v_hi,
+        };
+        SpmOutput { histogram, summary }
+    }
+
+    /// The histogram of the signed velocity, time- and walk-weighted densities.
+    fn histogram(&self, width: f64, vl: Option<f64>) -> Vec<HistRow> {
+        let c = &self.st.cfg;
+        (0..c.bins as usize)
             .map(|b| {
                 let v_lo = c.range[0] + b as f64 * width;
                 let v_hi = c.range[0] + (b + 1) as f64 * width;
@@ -400,147 +454,141 @@ impl SpmRun {
                     density_walk: self.st.w_walk[b] / (self.st.total_walk * width),
                 }
             })
-            .collect();
-        // |v| folded: (|v| centre, density, count) of bins entirely on one side of 0.
-        let mut folded: Vec<(f64, f64, u64)> = Vec::new();
-        for h in &histogram {
-            if h.v_lo >= 0.0 || h.v_hi <= 0.0 {
-                folded.push((0.5 * (h.v_lo + h.v_hi).abs(), h.density, h.count));
-            }
-        }
-        folded.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
-        // Merge the two sides bin by bin (equal |v| centres up to rounding).
-        let mut merged: Vec<(f64, f64, u64, u32)> = Vec::new();
-        for (v, d, n) in folded {
-            match merged.last_mut() {
-                Some(m) if (m.0 - v).abs() < 1e-9 * width.max(v) => {
-                    m.1 += d;
-                    m.2 += n;
-                    m.3 += 1;
-                }
-                _ => merged.push((v, d, n, 1)),
-            }
-        }
-        let merged: Vec<(f64, f64, u64)> = merged
-            .into_iter()
-            .map(|m| (m.0, m.1 / m.3 as f64, m.2))
-            .collect();
-        let (mut gc, mut gce, mut g_si, mut g_si_th) = (None, None, None, None);
-        if let (Some(l), Some(vl)) = (fixed_l, vl) {
-            let [a, b] = c.gaussian_fit;
-            let pts: Vec<&(f64, f64, u64)> = merged
-                .iter()
-                .filter(|m| m.0 / vl >= a && m.0 / vl <= b && m.2 > 0)
-                .collect();
-            let x: Vec<f64> = pts.iter().map(|m| (m.0 / vl).powi(2)).collect();
-            let y: Vec<f64> = pts.iter().map(|m| m.1.ln()).collect();
-            let w: Vec<f64> = pts.iter().map(|m| m.2 as f64).collect();
-            if let Some((_, slope, _, sb, chi2)) = crate::math::fit::wls_line(&x, &y, &w) {
-                let f = 2f64.powf(2.0 / 3.0);
-                gc = Some(-slope * f);
-                gce = Some(sb * chi2.max(1.0).sqrt() * f);
-                let to_si = (1.0 / (2.0 * c.dv() * l)).powf(2.0 / 3.0);
-                g_si = Some(-slope * f * to_si);
-            }
-            g_si_th =
-                Some(THESIS_GAUSSIAN_COEFFICIENT * (1.0 / (2.0 * c.dv() * l)).powf(2.0 / 3.0));
-        }
-        let b = c.b();
-        let (d_f, cc) = match &c.free_path {
-            FreePath::Fixed { .. } => (None, None),
-            FreePath::Fitted { c, d_f, .. } => (Some(*d_f), Some(*c)),
-            FreePath::Table {
-                edges,
-                density,
-                d_f,
-                fit_below,
-            } => match fit_free_path_tail(edges, density, *fit_below) {
-                Some((df, cf)) => match d_f {
-                    // Given D_f: C refitted at that D_f would differ; keep the pair consistent
-                    // by refitting C only.
-                    Some(g) => (
-                        Some(*g),
-                        fit_c_at(edges, density, *fit_below, *g).or(Some(cf)),
-                    ),
-                    None => (Some(df), Some(cf)),
-                },
-                None => (
-                    *d_f,
-                    d_f.and_then(|g| fit_c_at(edges, density, *fit_below, g)),
-                ),
-            },
-        };
-        let pred = match (d_f, cc) {
-            (Some(df), Some(cv)) => Some(predicted_tail(df, cv, b)),
-            (Some(df), None) => {
-                let beta = df - 1.0;
-                Some((
-                    6.0 * beta / (3.0 * beta + 2.0),
-                    f64::NAN,
-                    3.0 * beta / (3.0 * beta + 2.0),
-                ))
-            }
-            _ => None,
-        };
-        // Stretched-exponential fit over the tail window (relative to the peak density).
-        let peak = merged.iter().map(|m| m.1).fold(0.0, f64::max);
-        let i_peak = merged.iter().position(|m| m.1 == peak).unwrap_or(0);
-        let [ra, rb] = c.tail_fit;
-        let tail: Vec<&(f64, f64, u64)> = merged[i_peak..]
-            .iter()
-            .filter(|m| m.2 > 0 && m.1 >= ra * peak && m.1 <= rb * peak)
-            .collect();
-        let (mut am, mut km, mut amh, mut kmh) = (None, None, None, None);
-        if tail.len() >= 5 {
-            let v: Vec<f64> = tail.iter().map(|m| m.0).collect();
-            let lp: Vec<f64> = tail.iter().map(|m| m.1.ln()).collect();
-            let w: Vec<f64> = tail.iter().map(|m| m.2 as f64).collect();
-            if let Some((a, k, _)) = crate::math::fit::stretched_exponential(&v, &lp, &w, 0.3, 3.0)
-            {
-                am = Some(a);
-                km = Some(k);
-            }
-            // (5.31): with the predicted prefactor H(v) ~ v^h divided out.
-            if let Some(h) = pred.map(|p| p.2) {
-                let lph: Vec<f64> = v.iter().zip(&lp).map(|(v, l)| l - h * v.ln()).collect();
-                if let Some((a, k, _)) =
-                    crate::math::fit::stretched_exponential(&v, &lph, &w, 0.3, 3.0)
-                {
-                    amh = Some(a);
-                    kmh = Some(k);
-                }
-            }
-        }
-        let samples = 2 * self.st.steps;
-        let summary = SummaryRow {
-            mode: c.free_path.mode().into(),
-            walks: self.st.walks,
-            samples,
-            samples_outside: self.st.outside,
-            mean_free_path: self.st.sum_l / self.st.walks.max(1) as f64,
-            mean_walk_time: self.st.total_time / 2.0 / self.st.walks.max(1) as f64,
-            v_l: vl,
-            tau_l: fixed_l.map(|l| c.t_scale(l)),
-            gaussian_coefficient: gc,
-            gaussian_coefficient_err: gce,
-            gaussian_coefficient_thesis: THESIS_GAUSSIAN_COEFFICIENT,
-            gaussian_tail_si: g_si,
-            gaussian_tail_si_thesis: g_si_th,
-            d_f,
-            c: cc,
-            b,
-            alpha_predicted: pred.map(|p| p.0),
-            k_predicted: pred.map(|p| p.1).filter(|k| k.is_finite()),
-            h_predicted: pred.map(|p| p.2),
-            alpha_measured: am,
-            k_measured: km,
-            alpha_measured_h: amh,
-            k_measured_h: kmh,
-            tail_v_lo: tail.first().map(|m| m.0),
-            tail_v_hi: tail.last().map(|m| m.0),
-        };
-        SpmOutput { histogram, summary }
+            .collect()
     }
+}
+
+/// The histogram folded to |v|: (|v| centre, density, count) of the bins entirely on one side
+/// of 0, the two sides merged bin by bin (equal |v| centres up to rounding; densities averaged,
+/// counts summed).
+fn fold_to_speed(histogram: &[HistRow], width: f64) -> Vec<(f64, f64, u64)> {
+    let mut folded: Vec<(f64, f64, u64)> = Vec::new();
+    for h in histogram {
+        if h.v_lo >= 0.0 || h.v_hi <= 0.0 {
+            folded.push((0.5 * (h.v_lo + h.v_hi).abs(), h.density, h.count));
+        }
+    }
+    folded.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
+    let mut merged: Vec<(f64, f64, u64, u32)> = Vec::new();
+    for (v, d, n) in folded {
+        match merged.last_mut() {
+            Some(m) if (m.0 - v).abs() < 1e-9 * width.max(v) => {
+                m.1 += d;
+                m.2 += n;
+                m.3 += 1;
+            }
+            _ => merged.push((v, d, n, 1)),
+        }
+    }
+    merged
+        .into_iter()
+        .map(|m| (m.0, m.1 / m.3 as f64, m.2))
+        .collect()
+}
+
+/// The Gaussian core's coefficient at a fixed free path l (scaled units and SI) beside the
+/// thesis's.
+#[derive(Default)]
+struct GaussianFit {
+    coefficient: Option<f64>,
+    error: Option<f64>,
+    si: Option<f64>,
+    si_thesis: Option<f64>,
+}
+
+/// ln P = a - G (v/v_l)^2 2^(-2/3) fitted over `gaussian_fit` (in v / v_l), counts as weights.
+fn gaussian_fit(c: &SpmConfig, l: f64, vl: f64, merged: &[(f64, f64, u64)]) -> GaussianFit {
+    let [a, b] = c.gaussian_fit;
+    let pts: Vec<&(f64, f64, u64)> = merged
+        .iter()
+        .filter(|m| m.0 / vl >= a && m.0 / vl <= b && m.2 > 0)
+        .collect();
+    let x: Vec<f64> = pts.iter().map(|m| (m.0 / vl).powi(2)).collect();
+    let y: Vec<f64> = pts.iter().map(|m| m.1.ln()).collect();
+    let w: Vec<f64> = pts.iter().map(|m| m.2 as f64).collect();
+    let mut g = GaussianFit::default();
+    if let Some((_, slope, _, sb, chi2)) = crate::math::fit::wls_line(&x, &y, &w) {
+        let f = 2f64.powf(2.0 / 3.0);
+        g.coefficient = Some(-slope * f);
+        g.error = Some(sb * chi2.max(1.0).sqrt() * f);
+        let to_si = (1.0 / (2.0 * c.dv() * l)).powf(2.0 / 3.0);
+        g.si = Some(-slope * f * to_si);
+    }
+    g.si_thesis = Some(THESIS_GAUSSIAN_COEFFICIENT * (1.0 / (2.0 * c.dv() * l)).powf(2.0 / 3.0));
+    g
+}
+
+/// (D_f, C) of the free-path tail (4.25): given, or fitted to a tabulated P_l.
+fn free_path_tail(free_path: &FreePath) -> (Option<f64>, Option<f64>) {
+    match free_path {
+        FreePath::Fixed { .. } => (None, None),
+        FreePath::Fitted { c, d_f, .. } => (Some(*d_f), Some(*c)),
+        FreePath::Table {
+            edges,
+            density,
+            d_f,
+            fit_below,
+        } => match fit_free_path_tail(edges, density, *fit_below) {
+            Some((df, cf)) => match d_f {
+                // Given D_f: C refitted at that D_f would differ; keep the pair consistent
+                // by refitting C only.
+                Some(g) => (
+                    Some(*g),
+                    fit_c_at(edges, density, *fit_below, *g).or(Some(cf)),
+                ),
+                None => (Some(df), Some(cf)),
+            },
+            None => (
+                *d_f,
+                d_f.and_then(|g| fit_c_at(edges, density, *fit_below, g)),
+            ),
+        },
+    }
+}
+
+/// The measured stretched-exponential tail: alpha and K, also with the predicted prefactor
+/// v^h divided out (5.31), over the window where the density lies in `tail_fit` x the peak.
+#[derive(Default)]
+struct TailFit {
+    alpha: Option<f64>,
+    k: Option<f64>,
+    alpha_h: Option<f64>,
+    k_h: Option<f64>,
+    v_lo: Option<f64>,
+    v_hi: Option<f64>,
+}
+
+fn tail_fit(c: &SpmConfig, merged: &[(f64, f64, u64)], h: Option<f64>) -> TailFit {
+    let peak = merged.iter().map(|m| m.1).fold(0.0, f64::max);
+    let i_peak = merged.iter().position(|m| m.1 == peak).unwrap_or(0);
+    let [ra, rb] = c.tail_fit;
+    let tail: Vec<&(f64, f64, u64)> = merged[i_peak..]
+        .iter()
+        .filter(|m| m.2 > 0 && m.1 >= ra * peak && m.1 <= rb * peak)
+        .collect();
+    let mut t = TailFit {
+        v_lo: tail.first().map(|m| m.0),
+        v_hi: tail.last().map(|m| m.0),
+        ..TailFit::default()
+    };
+    if tail.len() >= 5 {
+        let v: Vec<f64> = tail.iter().map(|m| m.0).collect();
+        let lp: Vec<f64> = tail.iter().map(|m| m.1.ln()).collect();
+        let w: Vec<f64> = tail.iter().map(|m| m.2 as f64).collect();
+        if let Some((a, k, _)) = crate::math::fit::stretched_exponential(&v, &lp, &w, 0.3, 3.0) {
+            t.alpha = Some(a);
+            t.k = Some(k);
+        }
+        if let Some(h) = h {
+            let lph: Vec<f64> = v.iter().zip(&lp).map(|(v, l)| l - h * v.ln()).collect();
+            if let Some((a, k, _)) = crate::math::fit::stretched_exponential(&v, &lph, &w, 0.3, 3.0)
+            {
+                t.alpha_h = Some(a);
+                t.k_h = Some(k);
+            }
+        }
+    }
+    t
 }
 
 /// C of (4.25) at a given D_f, least squares over the table's tail bins (as

@@ -2,7 +2,9 @@
 //! pool while one dispatcher (the calling thread) owns the campaign state, fans events out to
 //! the reporter and feeds the single table writer; summaries once every run is finished.
 
-use std::sync::atomic::Ordering;
+use std::collections::BTreeSet;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
 use super::ledger::{self, RunStatus, ShardLock};
@@ -29,8 +31,8 @@ pub fn run(
     for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
         reporter.event(&Event::Warning { message: note });
     }
-    let commits = ledger::read_commits(&c.root).map_err(CampaignError::Refused)?;
-    let finished = ledger::finished_runs(&commits);
+    let finished =
+        ledger::finished_runs(&ledger::read_commits(&c.root).map_err(CampaignError::Refused)?);
     let mine: Vec<RunSpec> = (0..c.plan.n_runs())
         .filter(|r| opts.shard.contains(*r))
         .map(|r| c.plan.run(r))
@@ -48,125 +50,42 @@ pub fn run(
 
     let ckpt_dir = c.checkpoint_dir();
     fsutil::create_dir_durable(&ckpt_dir).map_err(|e| io_err(&ckpt_dir, e))?;
-    let mut writer = writer::Writer::new(c, &tag).map_err(|e| CampaignError::Io(e.to_string()))?;
-    writer
-        .ensure_points()
-        .map_err(|e| CampaignError::Io(e.to_string()))?;
-    writer
-        .ensure_theory()
-        .map_err(|e| CampaignError::Io(e.to_string()))?;
+    let io = |e: crate::store::parquet_io::StoreError| CampaignError::Io(e.to_string());
+    let writer = writer::Writer::new(c, &tag).map_err(io)?;
+    writer.ensure_points().map_err(io)?;
+    writer.ensure_theory().map_err(io)?;
 
-    let threads = if opts.threads == 0 {
-        std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(1)
-    } else {
-        opts.threads
+    let threads = worker_threads(c, opts, memory, reporter);
+    let mut d = Dispatcher {
+        c,
+        opts,
+        tag: &tag,
+        reporter,
+        writer,
+        outcome: Outcome::default(),
+        fatal: None,
+        running: Default::default(),
+        last_heartbeat: Instant::now() - Duration::from_secs(60),
     };
-    let threads = match memory {
-        Some(mem) => {
-            let (fit, note) = resources::threads_within(&c.plan, threads, mem);
-            if let Some(message) = note {
-                reporter.event(&Event::Warning { message });
-            }
-            fit
-        }
-        None => threads,
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .thread_name(|i| format!("granular-worker-{i}"))
-        .build()
-        .map_err(|e| CampaignError::Io(format!("cannot start {threads} worker threads: {e}")))?;
-
-    let (tx, rx) = std::sync::mpsc::channel::<(Event, Option<RunResult>)>();
-    let mut outcome = Outcome::default();
-    let mut fatal: Option<CampaignError> = None;
-    let mut last_heartbeat = Instant::now() - Duration::from_secs(60);
-    let mut running: std::collections::BTreeSet<u64> = Default::default();
-    std::thread::scope(|scope| {
-        let tx_workers = tx.clone();
-        let pending = &pending;
-        let pool = &pool;
-        scope.spawn(move || {
-            // A shared queue: each worker takes the next pending run in plan order.
-            let next = std::sync::atomic::AtomicUsize::new(0);
-            let next = &next;
-            pool.scope(|s| {
-                for _ in 0..threads {
-                    let mut tx = tx_workers.clone();
-                    s.spawn(move |_| loop {
-                        let j = next.fetch_add(1, Ordering::SeqCst);
-                        let Some(spec) = pending.get(j) else { break };
-                        worker::run_one(c, spec, opts, &mut tx);
-                    });
-                }
-            });
-            drop(tx_workers);
-        });
-        drop(tx);
-        loop {
-            let msg = rx.recv_timeout(Duration::from_millis(200));
-            match msg {
-                Ok((event, result)) => {
-                    match &event {
-                        Event::Started { run_id, .. } => {
-                            running.insert(*run_id);
-                        }
-                        Event::Finished { run_id, status, .. } => {
-                            running.remove(run_id);
-                            match status {
-                                RunStatus::Done => outcome.done += 1,
-                                RunStatus::Failed => outcome.failed += 1,
-                            }
-                        }
-                        Event::Interrupted { run_id } => {
-                            running.remove(run_id);
-                            outcome.interrupted = true;
-                        }
-                        _ => {}
-                    }
-                    reporter.event(&event);
-                    if let Some(r) = result {
-                        if fatal.is_none() {
-                            writer.add(r);
-                        }
-                    }
-                }
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-            if fatal.is_none() && writer.due(opts.flush_every) {
-                match writer.flush() {
-                    Ok(Some((runs, seq))) => reporter.event(&Event::Committed { runs, seq }),
-                    Ok(None) => {}
-                    Err(e) => {
-                        // Stop the workers (they checkpoint); nothing of this batch is committed.
-                        opts.interrupt.fetch_max(1, Ordering::SeqCst);
-                        fatal = Some(CampaignError::Io(format!("writing the tables failed: {e}")));
-                    }
-                }
-            }
-            if last_heartbeat.elapsed() > Duration::from_secs(2) {
-                last_heartbeat = Instant::now();
-                let _ = status::write_heartbeat(&c.root, &tag, &running);
-            }
-        }
-    });
-    if let Some(e) = fatal {
-        return Err(e);
-    }
-    match writer.flush() {
-        Ok(Some((runs, seq))) => reporter.event(&Event::Committed { runs, seq }),
-        Ok(None) => {}
-        Err(e) => return Err(CampaignError::Io(format!("writing the tables failed: {e}"))),
+    d.drive(&pending, threads)?;
+    let Dispatcher {
+        mut writer,
+        mut outcome,
+        reporter,
+        ..
+    } = d;
+    if let Some((runs, seq)) = writer
+        .flush()
+        .map_err(|e| CampaignError::Io(format!("writing the tables failed: {e}")))?
+    {
+        reporter.event(&Event::Committed { runs, seq });
     }
     status::remove_heartbeat(&c.root, &tag);
     if opts.interrupt.load(Ordering::SeqCst) > 0 {
         outcome.interrupted = true;
     }
-    let commits = ledger::read_commits(&c.root).map_err(CampaignError::Refused)?;
-    let finished = ledger::finished_runs(&commits);
+    let finished =
+        ledger::finished_runs(&ledger::read_commits(&c.root).map_err(CampaignError::Refused)?);
     outcome.remaining = mine
         .iter()
         .filter(|r| !finished.contains_key(&r.run_id))
@@ -184,4 +103,134 @@ pub fn run(
         outcome.complete = true;
     }
     Ok(outcome)
+}
+
+/// Worker threads: `--threads` (0: every core), fewer if the free memory holds fewer runs.
+fn worker_threads(
+    c: &Campaign,
+    opts: &RunOptions,
+    memory: Option<Memory>,
+    reporter: &mut dyn Reporter,
+) -> usize {
+    let threads = if opts.threads == 0 {
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+    } else {
+        opts.threads
+    };
+    let Some(mem) = memory else {
+        return threads;
+    };
+    let (fit, note) = resources::threads_within(&c.plan, threads, mem);
+    if let Some(message) = note {
+        reporter.event(&Event::Warning { message });
+    }
+    fit
+}
+
+/// The dispatcher's state: it owns the writer and the outcome, and hears every event.
+struct Dispatcher<'a, 'r> {
+    c: &'a Campaign,
+    opts: &'a RunOptions,
+    tag: &'a str,
+    reporter: &'r mut dyn Reporter,
+    writer: writer::Writer<'a>,
+    outcome: Outcome,
+    /// The first write failure; the workers are stopped and nothing more is committed.
+    fatal: Option<CampaignError>,
+    running: BTreeSet<u64>,
+    last_heartbeat: Instant,
+}
+
+impl Dispatcher<'_, '_> {
+    /// Run `pending` on `threads` workers (each takes the next pending run in plan order) and
+    /// handle their events on this thread until all are done or stopped.
+    fn drive(&mut self, pending: &[RunSpec], threads: usize) -> Result<(), CampaignError> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("granular-worker-{i}"))
+            .build()
+            .map_err(|e| {
+                CampaignError::Io(format!("cannot start {threads} worker threads: {e}"))
+            })?;
+        let (tx, rx) = std::sync::mpsc::channel::<(Event, Option<RunResult>)>();
+        let (c, opts) = (self.c, self.opts);
+        std::thread::scope(|scope| {
+            let tx_workers = tx.clone();
+            let pool = &pool;
+            scope.spawn(move || {
+                let next = AtomicUsize::new(0);
+                let next = &next;
+                pool.scope(|s| {
+                    for _ in 0..threads {
+                        let mut tx = tx_workers.clone();
+                        s.spawn(move |_| loop {
+                            let j = next.fetch_add(1, Ordering::SeqCst);
+                            let Some(spec) = pending.get(j) else { break };
+                            worker::run_one(c, spec, opts, &mut tx);
+                        });
+                    }
+                });
+                drop(tx_workers);
+            });
+            drop(tx);
+            loop {
+                match rx.recv_timeout(Duration::from_millis(200)) {
+                    Ok((event, result)) => self.handle(event, result),
+                    Err(RecvTimeoutError::Timeout) => {}
+                    Err(RecvTimeoutError::Disconnected) => break,
+                }
+                self.tick();
+            }
+        });
+        match self.fatal.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// One event: counts, the reporter, and the finished run's rows to the writer.
+    fn handle(&mut self, event: Event, result: Option<RunResult>) {
+        match &event {
+            Event::Started { run_id, .. } => {
+                self.running.insert(*run_id);
+            }
+            Event::Finished { run_id, status, .. } => {
+                self.running.remove(run_id);
+                match status {
+                    RunStatus::Done => self.outcome.done += 1,
+                    RunStatus::Failed => self.outcome.failed += 1,
+                }
+            }
+            Event::Interrupted { run_id } => {
+                self.running.remove(run_id);
+                self.outcome.interrupted = true;
+            }
+            _ => {}
+        }
+        self.reporter.event(&event);
+        if let (Some(r), None) = (result, &self.fatal) {
+            self.writer.add(r);
+        }
+    }
+
+    /// Commit when due (a failure stops the workers: they checkpoint, nothing of this batch is
+    /// committed) and write the heartbeat every 2 s.
+    fn tick(&mut self) {
+        if self.fatal.is_none() && self.writer.due(self.opts.flush_every) {
+            match self.writer.flush() {
+                Ok(Some((runs, seq))) => self.reporter.event(&Event::Committed { runs, seq }),
+                Ok(None) => {}
+                Err(e) => {
+                    self.opts.interrupt.fetch_max(1, Ordering::SeqCst);
+                    self.fatal = Some(CampaignError::Io(format!("writing the tables failed: {e}")));
+                }
+            }
+        }
+        if self.last_heartbeat.elapsed() > Duration::from_secs(2) {
+            self.last_heartbeat = Instant::now();
+            let _ = status::write_heartbeat(&self.c.root, self.tag, &self.running);
+        }
+    }
 }

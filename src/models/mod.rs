@@ -28,6 +28,7 @@ use serde_json::Value;
 
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
+use crate::store::cols::{Column, Columns};
 use crate::store::dataset::Dataset;
 use crate::store::parquet_io::StoreError;
 
@@ -127,15 +128,21 @@ pub struct RunRows {
 }
 
 /// One batch of a run's rows: `run_id` and `point_id`, then the model's columns.
-pub fn run_batch(ids: RunIds, rows: usize, fields: Vec<Field>, cols: Vec<ArrayRef>) -> RecordBatch {
+pub fn run_batch<'a, T>(
+    ids: RunIds,
+    rows: &[T],
+    columns: impl FnOnce(Columns<T>) -> Vec<Column<'a, T>>,
+) -> RecordBatch {
+    let n = rows.len();
+    let (fields, cols) = crate::store::cols::build(rows, columns);
     let mut all = vec![
         Field::new("run_id", DataType::UInt64, false),
         Field::new("point_id", DataType::UInt32, false),
     ];
     all.extend(fields);
     let mut arrays: Vec<ArrayRef> = vec![
-        Arc::new(UInt64Array::from(vec![ids.run_id; rows])),
-        Arc::new(UInt32Array::from(vec![ids.point_id; rows])),
+        Arc::new(UInt64Array::from(vec![ids.run_id; n])),
+        Arc::new(UInt32Array::from(vec![ids.point_id; n])),
     ];
     arrays.extend(cols);
     RecordBatch::try_new(Arc::new(Schema::new(all)), arrays).expect("batch matches its schema")

@@ -1,7 +1,8 @@
-//! Arrow columns: built from a field of every row (`cols::f64s(&rows, |r| r.t)`), and read
-//! back by name with their type checked (`cols::get_f64(&batch, "t")`), so a table file that
-//! lacks a column, or has it with another type, is an error that names the column, never a
-//! panic.
+//! Arrow columns: a table's columns declared once each, name and values together
+//! (`table(&rows, |c| vec![c.f64("t", |r| r.t), ...])`), or built from a field of every row
+//! (`cols::f64s(&rows, |r| r.t)`); and read back by name with their type checked
+//! (`cols::get_f64(&batch, "t")`), so a table file that lacks a column, or has it with another
+//! type, is an error that names the column, never a panic.
 
 use std::sync::Arc;
 
@@ -10,7 +11,7 @@ use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
 use arrow_array::{
     Array, ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array, UInt64Array,
 };
-use arrow_schema::{DataType, Field};
+use arrow_schema::{DataType, Field, Schema};
 
 use super::parquet_io::StoreError;
 
@@ -31,6 +32,97 @@ pub fn opt_u64s<T>(v: &[T], f: impl Fn(&T) -> Option<u64>) -> ArrayRef {
 }
 pub fn strs<T>(v: &[T], f: impl Fn(&T) -> &str) -> ArrayRef {
     Arc::new(v.iter().map(|r| Some(f(r))).collect::<StringArray>())
+}
+
+/// How a column's values are made from the rows.
+type Values<'a, T> = Box<dyn Fn(&[T]) -> ArrayRef + 'a>;
+
+/// One column of a table of rows `T`: its name, whether it may hold nulls, and its values.
+pub struct Column<'a, T> {
+    name: &'static str,
+    nullable: bool,
+    values: Values<'a, T>,
+}
+
+impl<'a, T> Column<'a, T> {
+    fn new(name: &'static str, nullable: bool, values: impl Fn(&[T]) -> ArrayRef + 'a) -> Self {
+        Column {
+            name,
+            nullable,
+            values: Box::new(values),
+        }
+    }
+}
+
+/// The column constructors of a table of rows `T` (it fixes `T` for their closures).
+pub struct Columns<T>(std::marker::PhantomData<fn(&T)>);
+
+impl<T> Columns<T> {
+    pub fn f64<'a>(&self, name: &'static str, f: impl Fn(&T) -> f64 + 'a) -> Column<'a, T> {
+        Column::new(name, false, move |v| f64s(v, &f))
+    }
+    pub fn opt_f64<'a>(
+        &self,
+        name: &'static str,
+        f: impl Fn(&T) -> Option<f64> + 'a,
+    ) -> Column<'a, T> {
+        Column::new(name, true, move |v| opt_f64s(v, &f))
+    }
+    pub fn u32<'a>(&self, name: &'static str, f: impl Fn(&T) -> u32 + 'a) -> Column<'a, T> {
+        Column::new(name, false, move |v| u32s(v, &f))
+    }
+    pub fn u64<'a>(&self, name: &'static str, f: impl Fn(&T) -> u64 + 'a) -> Column<'a, T> {
+        Column::new(name, false, move |v| u64s(v, &f))
+    }
+    pub fn opt_u64<'a>(
+        &self,
+        name: &'static str,
+        f: impl Fn(&T) -> Option<u64> + 'a,
+    ) -> Column<'a, T> {
+        Column::new(name, true, move |v| opt_u64s(v, &f))
+    }
+    pub fn str<'a>(&self, name: &'static str, f: impl Fn(&T) -> &str + 'a) -> Column<'a, T> {
+        Column::new(name, false, move |v| strs(v, &f))
+    }
+    /// The same text in every row.
+    pub fn const_str<'a>(&self, name: &'static str, value: &'a str) -> Column<'a, T> {
+        Column::new(name, false, move |v| {
+            Arc::new(v.iter().map(|_| Some(value)).collect::<StringArray>())
+        })
+    }
+    /// A column built from all the rows at once (a list column, say).
+    pub fn array<'a>(
+        &self,
+        name: &'static str,
+        nullable: bool,
+        f: impl Fn(&[T]) -> ArrayRef + 'a,
+    ) -> Column<'a, T> {
+        Column::new(name, nullable, f)
+    }
+}
+
+/// The fields and arrays of the columns `columns` declares over `rows`, in order.
+pub fn build<'a, T>(
+    rows: &[T],
+    columns: impl FnOnce(Columns<T>) -> Vec<Column<'a, T>>,
+) -> (Vec<Field>, Vec<ArrayRef>) {
+    columns(Columns(std::marker::PhantomData))
+        .into_iter()
+        .map(|c| {
+            let a = (c.values)(rows);
+            (Field::new(c.name, a.data_type().clone(), c.nullable), a)
+        })
+        .unzip()
+}
+
+/// A batch of `rows` with the columns `columns` declares:
+/// `table(&rows, |c| vec![c.f64("t", |r| r.t), c.opt_f64("msd", |r| r.msd)])`.
+pub fn table<'a, T>(
+    rows: &[T],
+    columns: impl FnOnce(Columns<T>) -> Vec<Column<'a, T>>,
+) -> RecordBatch {
+    let (fields, arrays) = build(rows, columns);
+    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).expect("columns of equal length")
 }
 
 /// A non-nullable field (nullable with `field_opt`).

@@ -7,16 +7,12 @@
 //! Rewritten whole and atomically when the campaign completes; summed in replica order.
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
-
-use arrow_array::RecordBatch;
-use arrow_schema::{DataType, Field, Schema};
 
 use super::params::CascadeParams;
 use super::tables::{CASCADE_STRUCTURE_FACTOR, CASCADE_STRUCTURE_FACTOR_SUMMARY};
 use crate::math::stats::mean_sem;
 use crate::models::CampaignView;
-use crate::store::cols::{self, get_f64, get_str, get_u32, get_u64, opt};
+use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt, table};
 use crate::store::parquet_io::StoreError;
 
 /// One run's shell: (replica, k, n_vectors, n_realisations, s_mean, s_sem).
@@ -72,31 +68,19 @@ pub fn write(c: &CampaignView<'_, CascadeParams>) -> Result<(), StoreError> {
             (key, v[0].1, v[0].2, v.len() as u32, real, mean, sem)
         })
         .collect();
-    let batch = RecordBatch::try_new(
-        Arc::new(Schema::new(vec![
-            Field::new("point_id", DataType::UInt32, false),
-            Field::new("source", DataType::Utf8, false),
-            Field::new("n2", DataType::UInt64, false),
-            Field::new("k", DataType::Float64, false),
-            Field::new("n_vectors", DataType::UInt64, false),
-            Field::new("n_replicas", DataType::UInt32, false),
-            Field::new("n_realisations", DataType::UInt64, false),
-            Field::new("s_mean", DataType::Float64, false),
-            Field::new("s_sem", DataType::Float64, true),
-        ])),
+    let batch = table(&rows, |col| {
         vec![
-            cols::u32s(&rows, |r| r.0 .0),
-            cols::strs(&rows, |r| r.0 .1.as_str()),
-            cols::u64s(&rows, |r| r.0 .2),
-            cols::f64s(&rows, |r| r.1),
-            cols::u64s(&rows, |r| r.2),
-            cols::u32s(&rows, |r| r.3),
-            cols::u64s(&rows, |r| r.4),
-            cols::f64s(&rows, |r| r.5),
-            cols::opt_f64s(&rows, |r| r.6),
-        ],
-    )
-    .expect("cascade structure factor summary");
+            col.u32("point_id", |r| r.0 .0),
+            col.str("source", |r| r.0 .1.as_str()),
+            col.u64("n2", |r| r.0 .2),
+            col.f64("k", |r| r.1),
+            col.u64("n_vectors", |r| r.2),
+            col.u32("n_replicas", |r| r.3),
+            col.u64("n_realisations", |r| r.4),
+            col.f64("s_mean", |r| r.5),
+            col.opt_f64("s_sem", |r| r.6),
+        ]
+    });
     c.data
         .write_whole(CASCADE_STRUCTURE_FACTOR_SUMMARY, "summary.parquet", &batch)
 }

@@ -3,90 +3,57 @@
 //! (`cascade_placement`).
 
 use arrow_array::RecordBatch;
-use arrow_schema::DataType;
 
 use crate::aux_models::cascade::{FitRow, PlacementRow, SkRow};
 use crate::models::{run_batch, RunIds};
-use crate::store::cols::{f64s, field, field_opt, opt_f64s, opt_u64s, strs, u32s, u64s};
 
 pub const CASCADE_STRUCTURE_FACTOR: &str = "cascade_structure_factor";
 pub const CASCADE_STRUCTURE_FACTOR_SUMMARY: &str = "cascade_structure_factor_summary";
 pub const CASCADE_FIT: &str = "cascade_fit";
 pub const CASCADE_PLACEMENT: &str = "cascade_placement";
 
-use DataType::{Float64 as F64, UInt32 as U32, UInt64 as U64, Utf8};
-
 pub fn structure_factor_batch(ids: RunIds, v: &[SkRow]) -> RecordBatch {
-    run_batch(
-        ids,
-        v.len(),
+    run_batch(ids, v, |c| {
         vec![
-            field("source", Utf8),
-            field("n2", U64),
-            field("k", F64),
-            field("n_vectors", U64),
-            field("n_realisations", U64),
-            field("s_mean", F64),
-            field_opt("s_sem", F64),
-        ],
-        vec![
-            strs(v, |r| &r.source),
-            u64s(v, |r| r.n2),
-            f64s(v, |r| r.k),
-            u64s(v, |r| r.n_vectors),
-            u64s(v, |r| r.n_realisations),
-            f64s(v, |r| r.s_mean),
-            opt_f64s(v, |r| r.s_sem),
-        ],
-    )
+            c.str("source", |r| &r.source),
+            c.u64("n2", |r| r.n2),
+            c.f64("k", |r| r.k),
+            c.u64("n_vectors", |r| r.n_vectors),
+            c.u64("n_realisations", |r| r.n_realisations),
+            c.f64("s_mean", |r| r.s_mean),
+            c.opt_f64("s_sem", |r| r.s_sem),
+        ]
+    })
 }
 
 pub fn fit_batch(ids: RunIds, v: &[FitRow]) -> RecordBatch {
-    run_batch(
-        ids,
-        v.len(),
+    run_batch(ids, v, |c| {
         vec![
-            field("source", Utf8),
-            field("variant", Utf8),
-            field("level", U32),
-            field("k_lo", F64),
-            field("k_hi", F64),
-            field("n_shells", U32),
-            field_opt("d_f", F64),
-            field_opt("d_f_err", F64),
-            field_opt("amplitude", F64),
-            field_opt("chi2_red", F64),
-            field_opt("d_f_thesis", F64),
-            field_opt("d_f_thesis_err", F64),
-            field("weight_sum_mean", F64),
-            field_opt("weight_sum_sem", F64),
-            field_opt("attempts", U64),
-        ],
-        vec![
-            strs(v, |r| &r.source),
-            strs(v, |r| &r.variant),
-            u32s(v, |r| r.level),
-            f64s(v, |r| r.k_lo),
-            f64s(v, |r| r.k_hi),
-            u32s(v, |r| r.n_shells),
-            opt_f64s(v, |r| r.d_f),
-            opt_f64s(v, |r| r.d_f_err),
-            opt_f64s(v, |r| r.amplitude),
-            opt_f64s(v, |r| r.chi2_red),
-            opt_f64s(v, |r| r.d_f_thesis),
-            opt_f64s(v, |r| r.d_f_thesis_err),
-            f64s(v, |r| r.weight_sum_mean),
-            opt_f64s(v, |r| r.weight_sum_sem),
-            opt_u64s(v, |r| r.attempts),
-        ],
-    )
+            c.str("source", |r| &r.source),
+            c.str("variant", |r| &r.variant),
+            c.u32("level", |r| r.level),
+            c.f64("k_lo", |r| r.k_lo),
+            c.f64("k_hi", |r| r.k_hi),
+            c.u32("n_shells", |r| r.n_shells),
+            c.opt_f64("d_f", |r| r.d_f),
+            c.opt_f64("d_f_err", |r| r.d_f_err),
+            c.opt_f64("amplitude", |r| r.amplitude),
+            c.opt_f64("chi2_red", |r| r.chi2_red),
+            c.opt_f64("d_f_thesis", |r| r.d_f_thesis),
+            c.opt_f64("d_f_thesis_err", |r| r.d_f_thesis_err),
+            c.f64("weight_sum_mean", |r| r.weight_sum_mean),
+            c.opt_f64("weight_sum_sem", |r| r.weight_sum_sem),
+            c.opt_u64("attempts", |r| r.attempts),
+        ]
+    })
 }
 
 pub fn placement_batch(ids: RunIds, v: &[PlacementRow]) -> RecordBatch {
-    run_batch(
-        ids,
-        v.len(),
-        vec![field("particle", U32), field("x", F64), field("y", F64)],
-        vec![u32s(v, |r| r.particle), f64s(v, |r| r.x), f64s(v, |r| r.y)],
-    )
+    run_batch(ids, v, |c| {
+        vec![
+            c.u32("particle", |r| r.particle),
+            c.f64("x", |r| r.x),
+            c.f64("y", |r| r.y),
+        ]
+    })
 }

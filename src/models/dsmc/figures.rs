@@ -17,9 +17,12 @@ type View<'a, 'b> = &'a CampaignView<'b, DsmcParams>;
 /// point -> species -> rows, each list sorted by time.
 type ByPoint<T> = BTreeMap<u32, BTreeMap<u32, Vec<T>>>;
 
-/// (t, T mean, T sem, msd mean, msd sem) per point and species.
-fn read_summary(c: View) -> Result<ByPoint<(f64, f64, f64, Option<f64>, f64)>, StoreError> {
-    let mut out: ByPoint<(f64, f64, f64, Option<f64>, f64)> = BTreeMap::new();
+/// A summary row: (t, T mean, T sem, msd mean, msd sem).
+type SummaryPoint = (f64, f64, f64, Option<f64>, f64);
+
+/// The summary rows per point and species.
+fn read_summary(c: View) -> Result<ByPoint<SummaryPoint>, StoreError> {
+    let mut out: ByPoint<SummaryPoint> = BTreeMap::new();
     for f in c.data.files(DSMC_SPECIES_SUMMARY)? {
         let name = f.display().to_string();
         for b in c.data.read_file(&f, DSMC_SPECIES_SUMMARY)? {
@@ -114,137 +117,158 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
                 format!("{} [{desc}] - {what}", c.name)
             }
         };
-        let all: Vec<u32> = species.keys().copied().collect();
-        let shown = shown_species(&all);
-        let th = theory.get(&point);
-        let mut temp = Vec::new();
-        let mut msd = Vec::new();
-        for k in &shown {
-            let rows = &species[k];
-            temp.push(Series {
-                label: format!("T_{k} (DSMC)"),
+        figs.extend(time_figures(point, species, theory.get(&point), &title));
+        if species.len() > 3 {
+            figs.extend(vs_k_figures(point, species, &title));
+        }
+    }
+    Ok(figs)
+}
+
+/// T_k(t) and <R_k^2(t)> of the shown species, with the theory lines.
+fn time_figures(
+    point: u32,
+    species: &BTreeMap<u32, Vec<SummaryPoint>>,
+    th: Option<&BTreeMap<u32, Vec<(f64, f64, Option<f64>)>>>,
+    title: &dyn Fn(&str) -> String,
+) -> Vec<(String, Figure)> {
+    let all: Vec<u32> = species.keys().copied().collect();
+    let shown = shown_species(&all);
+    let mut figs = Vec::new();
+    let mut temp = Vec::new();
+    let mut msd = Vec::new();
+    for k in &shown {
+        let rows = &species[k];
+        temp.push(Series {
+            label: format!("T_{k} (DSMC)"),
+            points: rows
+                .iter()
+                .filter(|r| r.0 > 0.0)
+                .map(|r| (r.0, r.1, r.2))
+                .collect(),
+            line: false,
+        });
+        if rows.iter().any(|r| r.3.is_some()) {
+            msd.push(Series {
+                label: format!("<R_{k}^2> (DSMC)"),
                 points: rows
                     .iter()
-                    .filter(|r| r.0 > 0.0)
-                    .map(|r| (r.0, r.1, r.2))
+                    .filter(|r| r.0 > 0.0 && r.3.is_some_and(|m| m > 0.0))
+                    .map(|r| (r.0, r.3.unwrap_or(0.0), r.4))
                     .collect(),
                 line: false,
             });
-            if rows.iter().any(|r| r.3.is_some()) {
+        }
+        if let Some(tr) = th.and_then(|m| m.get(k)) {
+            temp.push(Series {
+                label: format!("T_{k} (theory)"),
+                points: tr
+                    .iter()
+                    .filter(|r| r.0 > 0.0)
+                    .map(|r| (r.0, r.1, 0.0))
+                    .collect(),
+                line: true,
+            });
+            if tr.iter().any(|r| r.2.is_some()) && !msd.is_empty() {
                 msd.push(Series {
-                    label: format!("<R_{k}^2> (DSMC)"),
-                    points: rows
-                        .iter()
-                        .filter(|r| r.0 > 0.0 && r.3.is_some_and(|m| m > 0.0))
-                        .map(|r| (r.0, r.3.unwrap_or(0.0), r.4))
-                        .collect(),
-                    line: false,
-                });
-            }
-            if let Some(tr) = th.and_then(|m| m.get(k)) {
-                temp.push(Series {
-                    label: format!("T_{k} (theory)"),
+                    label: format!("<R_{k}^2> (theory)"),
                     points: tr
                         .iter()
-                        .filter(|r| r.0 > 0.0)
-                        .map(|r| (r.0, r.1, 0.0))
+                        .filter(|r| r.0 > 0.0 && r.2.is_some_and(|m| m > 0.0))
+                        .map(|r| (r.0, r.2.unwrap_or(0.0), 0.0))
                         .collect(),
                     line: true,
                 });
-                if tr.iter().any(|r| r.2.is_some()) && !msd.is_empty() {
-                    msd.push(Series {
-                        label: format!("<R_{k}^2> (theory)"),
-                        points: tr
-                            .iter()
-                            .filter(|r| r.0 > 0.0 && r.2.is_some_and(|m| m > 0.0))
-                            .map(|r| (r.0, r.2.unwrap_or(0.0), 0.0))
-                            .collect(),
-                        line: true,
-                    });
-                }
             }
         }
+    }
+    figs.push((
+        format!("point-{point:04}-temperature"),
+        Figure {
+            title: title("temperatures"),
+            x_label: "time t".into(),
+            y_label: "temperature T_k".into(),
+            series: temp,
+            log_x: true,
+            log_y: true,
+            legend_low: false,
+            references_from: None,
+        },
+    ));
+    if !msd.is_empty() {
         figs.push((
-            format!("point-{point:04}-temperature"),
+            format!("point-{point:04}-msd"),
             Figure {
-                title: title("temperatures"),
+                title: title("mean-squared displacement"),
                 x_label: "time t".into(),
-                y_label: "temperature T_k".into(),
-                series: temp,
+                y_label: "MSD <R_k^2(t)>".into(),
+                series: msd,
+                log_x: true,
+                log_y: true,
+                legend_low: true,
+                references_from: None,
+            },
+        ));
+    }
+    figs
+}
+
+/// T_k and <R_k^2>/<R_1^2> against k at the last time (the paper's Figs 4 and 6).
+fn vs_k_figures(
+    point: u32,
+    species: &BTreeMap<u32, Vec<SummaryPoint>>,
+    title: &dyn Fn(&str) -> String,
+) -> Vec<(String, Figure)> {
+    let all: Vec<u32> = species.keys().copied().collect();
+    let mut figs = Vec::new();
+    let last = species
+        .values()
+        .filter_map(|rows| rows.last().map(|r| r.0))
+        .fold(0.0, f64::max);
+    let at_last = |k: &u32| species[k].iter().find(|r| r.0 == last).copied();
+    let tk: Vec<(f64, f64, f64)> = all
+        .iter()
+        .filter_map(|k| at_last(k).map(|r| (*k as f64, r.1, r.2)))
+        .collect();
+    figs.push((
+        format!("point-{point:04}-temperature-vs-k"),
+        Figure {
+            title: title(&format!("T_k at t = {last}")),
+            x_label: "species k = m_k/m_1".into(),
+            y_label: "temperature T_k".into(),
+            series: vec![Series {
+                label: "DSMC".into(),
+                points: tk,
+                line: false,
+            }],
+            log_x: true,
+            log_y: true,
+            legend_low: true,
+            references_from: None,
+        },
+    ));
+    if let Some(r1) = at_last(&1).and_then(|r| r.3) {
+        let ratio: Vec<(f64, f64, f64)> = all
+            .iter()
+            .filter_map(|k| at_last(k).and_then(|r| r.3.map(|m| (*k as f64, m / r1, r.4 / r1))))
+            .collect();
+        figs.push((
+            format!("point-{point:04}-msd-ratio-vs-k"),
+            Figure {
+                title: title(&format!("MSD ratios at t = {last}")),
+                x_label: "species k = m_k/m_1".into(),
+                y_label: "<R_k^2> / <R_1^2>".into(),
+                series: vec![Series {
+                    label: "DSMC".into(),
+                    points: ratio,
+                    line: false,
+                }],
                 log_x: true,
                 log_y: true,
                 legend_low: false,
                 references_from: None,
             },
         ));
-        if !msd.is_empty() {
-            figs.push((
-                format!("point-{point:04}-msd"),
-                Figure {
-                    title: title("mean-squared displacement"),
-                    x_label: "time t".into(),
-                    y_label: "MSD <R_k^2(t)>".into(),
-                    series: msd,
-                    log_x: true,
-                    log_y: true,
-                    legend_low: true,
-                    references_from: None,
-                },
-            ));
-        }
-        if all.len() > 3 {
-            let last = species
-                .values()
-                .filter_map(|rows| rows.last().map(|r| r.0))
-                .fold(0.0, f64::max);
-            let at_last = |k: &u32| species[k].iter().find(|r| r.0 == last).copied();
-            let tk: Vec<(f64, f64, f64)> = all
-                .iter()
-                .filter_map(|k| at_last(k).map(|r| (*k as f64, r.1, r.2)))
-                .collect();
-            figs.push((
-                format!("point-{point:04}-temperature-vs-k"),
-                Figure {
-                    title: title(&format!("T_k at t = {last}")),
-                    x_label: "species k = m_k/m_1".into(),
-                    y_label: "temperature T_k".into(),
-                    series: vec![Series {
-                        label: "DSMC".into(),
-                        points: tk,
-                        line: false,
-                    }],
-                    log_x: true,
-                    log_y: true,
-                    legend_low: true,
-                    references_from: None,
-                },
-            ));
-            if let Some(r1) = at_last(&1).and_then(|r| r.3) {
-                let ratio: Vec<(f64, f64, f64)> = all
-                    .iter()
-                    .filter_map(|k| {
-                        at_last(k).and_then(|r| r.3.map(|m| (*k as f64, m / r1, r.4 / r1)))
-                    })
-                    .collect();
-                figs.push((
-                    format!("point-{point:04}-msd-ratio-vs-k"),
-                    Figure {
-                        title: title(&format!("MSD ratios at t = {last}")),
-                        x_label: "species k = m_k/m_1".into(),
-                        y_label: "<R_k^2> / <R_1^2>".into(),
-                        series: vec![Series {
-                            label: "DSMC".into(),
-                            points: ratio,
-                            line: false,
-                        }],
-                        log_x: true,
-                        log_y: true,
-                        legend_low: false,
-                        references_from: None,
-                    },
-                ));
-            }
-        }
     }
-    Ok(figs)
+    figs
 }

@@ -7,16 +7,14 @@
 //! the runs were scheduled.
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 
-use arrow_array::{ArrayRef, RecordBatch};
-use arrow_schema::{DataType, Field, Schema};
+use arrow_array::RecordBatch;
 
 use super::params::DsmcParams;
 use super::tables::*;
 use crate::math::stats::{mean_sem, replica_mean_sem};
 use crate::models::CampaignView;
-use crate::store::cols::{get_f64, get_u32, get_u64, opt};
+use crate::store::cols::{get_f64, get_u32, get_u64, opt, table};
 use crate::store::parquet_io::StoreError;
 
 type View<'a, 'b> = &'a CampaignView<'b, DsmcParams>;
@@ -62,7 +60,7 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
     let n_points = c.points.len() as u32;
 
     let theory = read_theory(c)?;
-    let mut out = SummaryColumns::default();
+    let mut out: Vec<SummaryRow> = Vec::new();
     let mut p0 = 0u32;
     while p0 < n_points {
         let p1 = (p0 + points_per_chunk).min(n_points);
@@ -111,22 +109,26 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                 (None, None)
             };
             let th = theory.get(&key).copied();
-            out.push(
-                key.0,
-                f64::from_bits(key.1),
-                key.2,
-                v.len() as u32,
+            out.push(SummaryRow {
+                point: key.0,
+                t: f64::from_bits(key.1),
+                species: key.2,
+                n: v.len() as u32,
                 tm,
                 ts,
                 mm,
                 ms,
-                th,
-            );
+                t_th: th.map(|x| x.0),
+                m_th: th.and_then(|x| x.1),
+            });
         }
         p0 = p1;
     }
-    c.data
-        .write_whole(DSMC_SPECIES_SUMMARY, "summary.parquet", &out.finish())
+    c.data.write_whole(
+        DSMC_SPECIES_SUMMARY,
+        "summary.parquet",
+        &species_summary(&out),
+    )
 }
 
 type TamsdKey = (u32, u32, u64); // point, species, lag bits
@@ -141,7 +143,7 @@ fn write_tamsd_summary(c: View) -> Result<(), StoreError> {
     });
     let n_points = c.points.len() as u32;
     let theory = read_tamsd_theory(c)?;
-    let mut cols = TamsdSummaryColumns::default();
+    let mut rows: Vec<TamsdSummaryRow> = Vec::new();
     let mut p0 = 0u32;
     while p0 < n_points && !files.is_empty() {
         let p1 = (p0 + points_per_chunk).min(n_points);
@@ -175,18 +177,20 @@ fn write_tamsd_summary(c: View) -> Result<(), StoreError> {
         });
         for key in order {
             let (n, mean, sem) = replica_mean_sem(acc.remove(&key).expect("key"));
-            cols.point.push(key.0);
-            cols.species.push(key.1);
-            cols.lag.push(f64::from_bits(key.2));
-            cols.n.push(n);
-            cols.mean.push(mean);
-            cols.sem.push(sem);
-            cols.theory.push(theory.get(&key).copied());
+            rows.push(TamsdSummaryRow {
+                point: key.0,
+                species: key.1,
+                lag: f64::from_bits(key.2),
+                n,
+                mean,
+                sem,
+                theory: theory.get(&key).copied(),
+            });
         }
         p0 = p1;
     }
     c.data
-        .write_whole(DSMC_TAMSD_SUMMARY, "summary.parquet", &cols.finish())
+        .write_whole(DSMC_TAMSD_SUMMARY, "summary.parquet", &tamsd_summary(&rows))
 }
 
 /// Theory (27) by (point, species, lag bits), if the table exists.
@@ -207,54 +211,73 @@ fn read_tamsd_theory(c: View) -> Result<BTreeMap<TamsdKey, f64>, StoreError> {
     Ok(out)
 }
 
-#[derive(Default)]
-struct TamsdSummaryColumns {
-    point: Vec<u32>,
-    species: Vec<u32>,
-    lag: Vec<f64>,
-    n: Vec<u32>,
-    mean: Vec<f64>,
-    sem: Vec<Option<f64>>,
-    theory: Vec<Option<f64>>,
+/// One row of `dsmc_tamsd_summary`.
+struct TamsdSummaryRow {
+    point: u32,
+    species: u32,
+    lag: f64,
+    n: u32,
+    mean: f64,
+    sem: Option<f64>,
+    theory: Option<f64>,
 }
 
-impl TamsdSummaryColumns {
-    fn finish(self) -> RecordBatch {
-        let schema = Schema::new(vec![
-            Field::new("point_id", DataType::UInt32, false),
-            Field::new("species", DataType::UInt32, false),
-            Field::new("lag", DataType::Float64, false),
-            Field::new("n_replicas", DataType::UInt32, false),
-            Field::new("tamsd_mean", DataType::Float64, false),
-            Field::new("tamsd_sem", DataType::Float64, true),
-            Field::new("tamsd_theory", DataType::Float64, true),
-        ]);
-        let arrays: Vec<ArrayRef> = vec![
-            Arc::new(arrow_array::UInt32Array::from(self.point)),
-            Arc::new(arrow_array::UInt32Array::from(self.species)),
-            Arc::new(arrow_array::Float64Array::from(self.lag)),
-            Arc::new(arrow_array::UInt32Array::from(self.n)),
-            Arc::new(arrow_array::Float64Array::from(self.mean)),
-            Arc::new(arrow_array::Float64Array::from(self.sem)),
-            Arc::new(arrow_array::Float64Array::from(self.theory)),
-        ];
-        RecordBatch::try_new(Arc::new(schema), arrays)
-            .expect("tamsd summary batch matches its schema")
+fn tamsd_summary(rows: &[TamsdSummaryRow]) -> RecordBatch {
+    table(rows, |c| {
+        vec![
+            c.u32("point_id", |r| r.point),
+            c.u32("species", |r| r.species),
+            c.f64("lag", |r| r.lag),
+            c.u32("n_replicas", |r| r.n),
+            c.f64("tamsd_mean", |r| r.mean),
+            c.opt_f64("tamsd_sem", |r| r.sem),
+            c.opt_f64("tamsd_theory", |r| r.theory),
+        ]
+    })
+}
+
+/// One row of `dsmc_species_summary` before the deviations.
+struct SummaryRow {
+    point: u32,
+    t: f64,
+    species: u32,
+    n: u32,
+    tm: f64,
+    ts: Option<f64>,
+    mm: Option<f64>,
+    ms: Option<f64>,
+    t_th: Option<f64>,
+    m_th: Option<f64>,
+}
+
+impl SummaryRow {
+    fn temperature_dev(&self) -> (Option<f64>, Option<f64>) {
+        deviations(Some(self.tm), self.ts, self.t_th)
+    }
+    fn msd_dev(&self) -> (Option<f64>, Option<f64>) {
+        deviations(self.mm, self.ms, self.m_th)
     }
 }
 
-#[derive(Default)]
-struct SummaryColumns {
-    point: Vec<u32>,
-    t: Vec<f64>,
-    species: Vec<u32>,
-    n: Vec<u32>,
-    tm: Vec<f64>,
-    ts: Vec<Option<f64>>,
-    mm: Vec<Option<f64>>,
-    ms: Vec<Option<f64>>,
-    t_th: Vec<Option<f64>>,
-    m_th: Vec<Option<f64>>,
+fn species_summary(rows: &[SummaryRow]) -> RecordBatch {
+    table(rows, |c| {
+        vec![
+            c.u32("point_id", |r| r.point),
+            c.f64("t", |r| r.t),
+            c.u32("species", |r| r.species),
+            c.u32("n_replicas", |r| r.n),
+            c.f64("temperature_mean", |r| r.tm),
+            c.opt_f64("temperature_sem", |r| r.ts),
+            c.opt_f64("msd_mean", |r| r.mm),
+            c.opt_f64("msd_sem", |r| r.ms),
+            c.opt_f64("temperature_theory", |r| r.t_th),
+            c.opt_f64("msd_theory", |r| r.m_th),
+            c.opt_f64("temperature_dev_sigma", |r| r.temperature_dev().0),
+            c.opt_f64("temperature_dev_rel", |r| r.temperature_dev().1),
+            c.opt_f64("msd_dev_sigma", |r| r.msd_dev().0),
+            c.opt_f64("msd_dev_rel", |r| r.msd_dev().1),
+        ]
+    })
 }
 
 /// (mean - theory) / sem and (mean - theory) / theory.
@@ -292,82 +315,4 @@ fn read_theory(c: View) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreError>
         }
     }
     Ok(out)
-}
-
-impl SummaryColumns {
-    #[allow(clippy::too_many_arguments)]
-    fn push(
-        &mut self,
-        p: u32,
-        t: f64,
-        s: u32,
-        n: u32,
-        tm: f64,
-        ts: Option<f64>,
-        mm: Option<f64>,
-        ms: Option<f64>,
-        th: Option<(f64, Option<f64>)>,
-    ) {
-        self.t_th.push(th.map(|x| x.0));
-        self.m_th.push(th.and_then(|x| x.1));
-        self.point.push(p);
-        self.t.push(t);
-        self.species.push(s);
-        self.n.push(n);
-        self.tm.push(tm);
-        self.ts.push(ts);
-        self.mm.push(mm);
-        self.ms.push(ms);
-    }
-
-    fn finish(self) -> RecordBatch {
-        let schema = Schema::new(vec![
-            Field::new("point_id", DataType::UInt32, false),
-            Field::new("t", DataType::Float64, false),
-            Field::new("species", DataType::UInt32, false),
-            Field::new("n_replicas", DataType::UInt32, false),
-            Field::new("temperature_mean", DataType::Float64, false),
-            Field::new("temperature_sem", DataType::Float64, true),
-            Field::new("msd_mean", DataType::Float64, true),
-            Field::new("msd_sem", DataType::Float64, true),
-            Field::new("temperature_theory", DataType::Float64, true),
-            Field::new("msd_theory", DataType::Float64, true),
-            Field::new("temperature_dev_sigma", DataType::Float64, true),
-            Field::new("temperature_dev_rel", DataType::Float64, true),
-            Field::new("msd_dev_sigma", DataType::Float64, true),
-            Field::new("msd_dev_rel", DataType::Float64, true),
-        ]);
-        let n = self.point.len();
-        let (mut tds, mut tdr, mut mds, mut mdr) = (
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
-        );
-        for j in 0..n {
-            let (a, b) = deviations(Some(self.tm[j]), self.ts[j], self.t_th[j]);
-            tds.push(a);
-            tdr.push(b);
-            let (a, b) = deviations(self.mm[j], self.ms[j], self.m_th[j]);
-            mds.push(a);
-            mdr.push(b);
-        }
-        let arrays: Vec<ArrayRef> = vec![
-            Arc::new(arrow_array::UInt32Array::from(self.point)),
-            Arc::new(arrow_array::Float64Array::from(self.t)),
-            Arc::new(arrow_array::UInt32Array::from(self.species)),
-            Arc::new(arrow_array::UInt32Array::from(self.n)),
-            Arc::new(arrow_array::Float64Array::from(self.tm)),
-            Arc::new(arrow_array::Float64Array::from(self.ts)),
-            Arc::new(arrow_array::Float64Array::from(self.mm)),
-            Arc::new(arrow_array::Float64Array::from(self.ms)),
-            Arc::new(arrow_array::Float64Array::from(self.t_th)),
-            Arc::new(arrow_array::Float64Array::from(self.m_th)),
-            Arc::new(arrow_array::Float64Array::from(tds)),
-            Arc::new(arrow_array::Float64Array::from(tdr)),
-            Arc::new(arrow_array::Float64Array::from(mds)),
-            Arc::new(arrow_array::Float64Array::from(mdr)),
-        ];
-        RecordBatch::try_new(Arc::new(schema), arrays).expect("summary batch matches its schema")
-    }
 }

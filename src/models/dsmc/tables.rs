@@ -6,12 +6,11 @@ use std::sync::Arc;
 
 use arrow_array::builder::{Float64Builder, ListBuilder};
 use arrow_array::{ArrayRef, RecordBatch};
-use arrow_schema::{DataType, Field, Schema};
 
 use crate::dsmc::predict::{TamsdTheoryRow, TheoryRow};
 use crate::dsmc::{SpeciesRow, TamsdRow};
 use crate::models::{run_batch, RunIds};
-use crate::store::cols::{f64s, field, field_opt, opt_f64s, u32s, u64s};
+use crate::store::cols::table;
 
 pub const DSMC_SPECIES: &str = "dsmc_species";
 pub const DSMC_SPECIES_SUMMARY: &str = "dsmc_species_summary";
@@ -21,121 +20,75 @@ pub const DSMC_THEORY: &str = "dsmc_theory";
 pub const DSMC_THEORY_TAMSD: &str = "dsmc_theory_tamsd";
 pub const DSMC_THEORY_POINT: &str = "dsmc_theory_point";
 
-use DataType::{Float64 as F64, UInt32 as U32, UInt64 as U64};
-
 /// `dsmc_species`: per output time and species.
 pub fn species_batch(ids: RunIds, rows: &[SpeciesRow]) -> RecordBatch {
-    run_batch(
-        ids,
-        rows.len(),
+    run_batch(ids, rows, |c| {
         vec![
-            field("t", F64),
-            field("species", U32),
-            field("mass", F64),
-            field("diameter", F64),
-            field("count", U64),
-            field("temperature", F64),
-            field_opt("msd", F64),
-            field("collisions", U64),
-        ],
-        vec![
-            f64s(rows, |r| r.t),
-            u32s(rows, |r| r.species),
-            f64s(rows, |r| r.mass),
-            f64s(rows, |r| r.diameter),
-            u64s(rows, |r| r.count),
-            f64s(rows, |r| r.temperature),
-            opt_f64s(rows, |r| r.msd),
-            u64s(rows, |r| r.collisions),
-        ],
-    )
+            c.f64("t", |r| r.t),
+            c.u32("species", |r| r.species),
+            c.f64("mass", |r| r.mass),
+            c.f64("diameter", |r| r.diameter),
+            c.u64("count", |r| r.count),
+            c.f64("temperature", |r| r.temperature),
+            c.opt_f64("msd", |r| r.msd),
+            c.u64("collisions", |r| r.collisions),
+        ]
+    })
 }
 
 /// `dsmc_tamsd`: per species and lag.
 pub fn tamsd_batch(ids: RunIds, rows: &[TamsdRow]) -> RecordBatch {
-    run_batch(
-        ids,
-        rows.len(),
+    run_batch(ids, rows, |c| {
         vec![
-            field("species", U32),
-            field("lag", F64),
-            field("tamsd", F64),
-            field("t_total", F64),
-        ],
-        vec![
-            u32s(rows, |r| r.species),
-            f64s(rows, |r| r.lag),
-            f64s(rows, |r| r.tamsd),
-            f64s(rows, |r| r.t_total),
-        ],
-    )
-}
-
-fn batch(fields: Vec<Field>, arrays: Vec<ArrayRef>) -> RecordBatch {
-    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).expect("batch matches its schema")
+            c.u32("species", |r| r.species),
+            c.f64("lag", |r| r.lag),
+            c.f64("tamsd", |r| r.tamsd),
+            c.f64("t_total", |r| r.t_total),
+        ]
+    })
 }
 
 /// `dsmc_theory`: the kinetic-theory prediction per point, time and species.
 pub fn theory_batch(rows: &[(u32, TheoryRow)]) -> RecordBatch {
-    batch(
+    table(rows, |c| {
         vec![
-            field("point_id", U32),
-            field("t", F64),
-            field("species", U32),
-            field("temperature", F64),
-            field_opt("msd", F64),
-            field("tau_v", F64),
-        ],
-        vec![
-            u32s(rows, |r| r.0),
-            f64s(rows, |r| r.1.t),
-            u32s(rows, |r| r.1.species),
-            f64s(rows, |r| r.1.temperature),
-            opt_f64s(rows, |r| r.1.msd),
-            f64s(rows, |r| r.1.tau_v),
-        ],
-    )
+            c.u32("point_id", |r| r.0),
+            c.f64("t", |r| r.1.t),
+            c.u32("species", |r| r.1.species),
+            c.f64("temperature", |r| r.1.temperature),
+            c.opt_f64("msd", |r| r.1.msd),
+            c.f64("tau_v", |r| r.1.tau_v),
+        ]
+    })
 }
 
 /// `dsmc_theory_tamsd`: the TAMSD (27) per point, species and lag (measured over [0, t_end]).
 pub fn theory_tamsd_batch(rows: &[(u32, TamsdTheoryRow)]) -> RecordBatch {
-    batch(
+    table(rows, |c| {
         vec![
-            field("point_id", U32),
-            field("species", U32),
-            field("lag", F64),
-            field("tamsd", F64),
-        ],
-        vec![
-            u32s(rows, |r| r.0),
-            u32s(rows, |r| r.1.species),
-            f64s(rows, |r| r.1.lag),
-            f64s(rows, |r| r.1.tamsd),
-        ],
-    )
+            c.u32("point_id", |r| r.0),
+            c.u32("species", |r| r.1.species),
+            c.f64("lag", |r| r.1.lag),
+            c.f64("tamsd", |r| r.1.tamsd),
+        ]
+    })
 }
 
 /// `dsmc_theory_point`: per point, tau_0 (21) and the initial temperatures actually used.
 pub fn theory_point_batch(points: &[(u32, f64, Vec<f64>)]) -> RecordBatch {
-    let mut temps = ListBuilder::new(Float64Builder::new());
-    for (_, _, t) in points {
-        temps.values().append_slice(t);
-        temps.append(true);
-    }
-    let temps = temps.finish();
-    batch(
+    let temperatures = |v: &[(u32, f64, Vec<f64>)]| -> ArrayRef {
+        let mut temps = ListBuilder::new(Float64Builder::new());
+        for (_, _, t) in v {
+            temps.values().append_slice(t);
+            temps.append(true);
+        }
+        Arc::new(temps.finish())
+    };
+    table(points, |c| {
         vec![
-            field("point_id", U32),
-            field("tau_0", F64),
-            field(
-                "initial_temperatures",
-                arrow_array::Array::data_type(&temps).clone(),
-            ),
-        ],
-        vec![
-            u32s(points, |p| p.0),
-            f64s(points, |p| p.1),
-            Arc::new(temps),
-        ],
-    )
+            c.u32("point_id", |p| p.0),
+            c.f64("tau_0", |p| p.1),
+            c.array("initial_temperatures", false, temperatures),
+        ]
+    })
 }

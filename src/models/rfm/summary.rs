@@ -9,27 +9,23 @@
 //! `rfm_radial_distribution_summary` (point, bin: pair counts summed, mean and sem of g and C).
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 
-use arrow_array::{ArrayRef, RecordBatch};
-use arrow_schema::{DataType, Field, Schema};
+use arrow_array::RecordBatch;
 
 use super::params::RfmParams;
 use super::tables::*;
 use crate::math::stats::{mean_sem, replica_mean_sem};
 use crate::models::CampaignView;
-use crate::store::cols::{f64s, field, field_opt, get_f64, get_str, get_u32, get_u64, opt_f64s};
-use crate::store::cols::{strs, u32s, u64s};
+use crate::store::cols::{get_f64, get_str, get_u32, get_u64, table};
 use crate::store::parquet_io::StoreError;
 
 type View<'a, 'b> = &'a CampaignView<'b, RfmParams>;
 
-use DataType::{Float64 as F64, UInt32 as U32, UInt64 as U64, Utf8};
-
 /// Write the summaries of the raw tables the campaign has.
 pub fn write(c: View, present: &[&str]) -> Result<(), StoreError> {
     timeseries(c)?;
-    let summaries: [(&str, fn(View) -> Result<(), StoreError>); 6] = [
+    type Summary = fn(View) -> Result<(), StoreError>;
+    let summaries: [(&str, Summary); 6] = [
         (RFM_MOMENTS, moments),
         (RFM_HISTOGRAMS, histograms),
         (RFM_FREE_PATH_MOMENTS, free_path_moments),
@@ -48,8 +44,11 @@ pub fn write(c: View, present: &[&str]) -> Result<(), StoreError> {
 /// Per key: the replicas' values (each a fixed-length vector).
 type Groups<K> = BTreeMap<K, Vec<(u64, Vec<f64>)>>;
 
-/// Every batch of `table` with the replica of each row (None: the run is not done).
-fn done_batches(c: View, table: &str) -> Result<Vec<(RecordBatch, Vec<Option<u64>>)>, StoreError> {
+/// A batch with the replica of each row (None: the run is not done).
+type DoneBatch = (RecordBatch, Vec<Option<u64>>);
+
+/// Every batch of `table` with the replicas of its rows.
+fn done_batches(c: View, table: &str) -> Result<Vec<DoneBatch>, StoreError> {
     c.data
         .read(table)?
         .into_iter()
@@ -83,18 +82,8 @@ fn stats(mut v: Vec<(u64, Vec<f64>)>) -> (u32, Vec<(f64, Option<f64>)>) {
     (n, out)
 }
 
-fn batch(fields: Vec<Field>, arrays: Vec<ArrayRef>) -> RecordBatch {
-    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).expect("summary matches its schema")
-}
-
-fn write_summary(
-    c: View,
-    table: &str,
-    fields: Vec<Field>,
-    arrays: Vec<ArrayRef>,
-) -> Result<(), StoreError> {
-    c.data
-        .write_whole(table, "summary.parquet", &batch(fields, arrays))
+fn write_summary(c: View, name: &str, batch: RecordBatch) -> Result<(), StoreError> {
+    c.data.write_whole(name, "summary.parquet", &batch)
 }
 
 /// (point, t) -> temperature mean and sem over replicas.
@@ -125,20 +114,15 @@ fn timeseries(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_TIMESERIES_SUMMARY,
-        vec![
-            field("point_id", U32),
-            field("t", F64),
-            field("n_replicas", U32),
-            field("temperature_mean", F64),
-            field_opt("temperature_sem", F64),
-        ],
-        vec![
-            u32s(&rows, |r| r.0 .0),
-            f64s(&rows, |r| f64::from_bits(r.0 .1)),
-            u32s(&rows, |r| r.1 .0),
-            f64s(&rows, |r| r.1 .1),
-            opt_f64s(&rows, |r| r.1 .2),
-        ],
+        table(&rows, |col| {
+            vec![
+                col.u32("point_id", |r| r.0 .0),
+                col.f64("t", |r| f64::from_bits(r.0 .1)),
+                col.u32("n_replicas", |r| r.1 .0),
+                col.f64("temperature_mean", |r| r.1 .1),
+                col.opt_f64("temperature_sem", |r| r.1 .2),
+            ]
+        }),
     )
 }
 
@@ -164,20 +148,15 @@ fn moments(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_MOMENTS_SUMMARY,
-        vec![
-            field("point_id", U32),
-            field("order", U32),
-            field("n_replicas", U32),
-            field("mean", F64),
-            field_opt("sem", F64),
-        ],
-        vec![
-            u32s(&rows, |r| r.0 .0),
-            u32s(&rows, |r| r.0 .1),
-            u32s(&rows, |r| r.1 .0),
-            f64s(&rows, |r| r.1 .1),
-            opt_f64s(&rows, |r| r.1 .2),
-        ],
+        table(&rows, |col| {
+            vec![
+                col.u32("point_id", |r| r.0 .0),
+                col.u32("order", |r| r.0 .1),
+                col.u32("n_replicas", |r| r.1 .0),
+                col.f64("mean", |r| r.1 .1),
+                col.opt_f64("sem", |r| r.1 .2),
+            ]
+        }),
     )
 }
 
@@ -226,24 +205,17 @@ fn histograms(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_HISTOGRAMS_SUMMARY,
-        vec![
-            field("point_id", U32),
-            field("kind", Utf8),
-            field("h", U32),
-            field("lo", F64),
-            field("hi", F64),
-            field("count", U64),
-            field_opt("density", F64),
-        ],
-        vec![
-            u32s(&rows, |r| r.0 .0),
-            strs(&rows, |r| r.0 .1.as_str()),
-            u32s(&rows, |r| r.0 .2),
-            f64s(&rows, |r| f64::from_bits(r.0 .3)),
-            f64s(&rows, |r| r.1 .0),
-            u64s(&rows, |r| r.1 .1),
-            opt_f64s(&rows, |r| density(&r.0, &r.1)),
-        ],
+        table(&rows, |col| {
+            vec![
+                col.u32("point_id", |r| r.0 .0),
+                col.str("kind", |r| r.0 .1.as_str()),
+                col.u32("h", |r| r.0 .2),
+                col.f64("lo", |r| f64::from_bits(r.0 .3)),
+                col.f64("hi", |r| r.1 .0),
+                col.u64("count", |r| r.1 .1),
+                col.opt_f64("density", |r| density(&r.0, &r.1)),
+            ]
+        }),
     )
 }
 
@@ -274,22 +246,16 @@ fn free_path_moments(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_FREE_PATH_MOMENTS_SUMMARY,
-        vec![
-            field("point_id", U32),
-            field("order", U32),
-            field("n_replicas", U32),
-            field("mean", F64),
-            field_opt("sem", F64),
-            field("n_paths", U64),
-        ],
-        vec![
-            u32s(&rows, |r| r.0 .0),
-            u32s(&rows, |r| r.0 .1),
-            u32s(&rows, |r| r.1 .0),
-            f64s(&rows, |r| r.1 .1[0].0),
-            opt_f64s(&rows, |r| r.1 .1[0].1),
-            u64s(&rows, |r| r.2),
-        ],
+        table(&rows, |col| {
+            vec![
+                col.u32("point_id", |r| r.0 .0),
+                col.u32("order", |r| r.0 .1),
+                col.u32("n_replicas", |r| r.1 .0),
+                col.f64("mean", |r| r.1 .1[0].0),
+                col.opt_f64("sem", |r| r.1 .1[0].1),
+                col.u64("n_paths", |r| r.2),
+            ]
+        }),
     )
 }
 
@@ -314,22 +280,16 @@ fn neighbour_moments(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_NEIGHBOUR_MOMENTS_SUMMARY,
-        vec![
-            field("point_id", U32),
-            field("h", U32),
-            field("order", U32),
-            field("n_replicas", U32),
-            field("mean", F64),
-            field_opt("sem", F64),
-        ],
-        vec![
-            u32s(&rows, |r| r.0 .0),
-            u32s(&rows, |r| r.0 .1),
-            u32s(&rows, |r| r.0 .2),
-            u32s(&rows, |r| r.1 .0),
-            f64s(&rows, |r| r.1 .1[0].0),
-            opt_f64s(&rows, |r| r.1 .1[0].1),
-        ],
+        table(&rows, |col| {
+            vec![
+                col.u32("point_id", |r| r.0 .0),
+                col.u32("h", |r| r.0 .1),
+                col.u32("order", |r| r.0 .2),
+                col.u32("n_replicas", |r| r.1 .0),
+                col.f64("mean", |r| r.1 .1[0].0),
+                col.opt_f64("sem", |r| r.1 .1[0].1),
+            ]
+        }),
     )
 }
 
@@ -356,24 +316,17 @@ fn structure_factor(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_STRUCTURE_FACTOR_SUMMARY,
-        vec![
-            field("point_id", U32),
-            field("n2", U64),
-            field("k", F64),
-            field("n_vectors", U64),
-            field("n_replicas", U32),
-            field("s_mean", F64),
-            field_opt("s_sem", F64),
-        ],
-        vec![
-            u32s(&rows, |r| r.0 .0),
-            u64s(&rows, |r| r.0 .1),
-            f64s(&rows, |r| r.1 .1[0].0),
-            u64s(&rows, |r| r.1 .1[1].0 as u64),
-            u32s(&rows, |r| r.1 .0),
-            f64s(&rows, |r| r.1 .1[2].0),
-            opt_f64s(&rows, |r| r.1 .1[2].1),
-        ],
+        table(&rows, |col| {
+            vec![
+                col.u32("point_id", |r| r.0 .0),
+                col.u64("n2", |r| r.0 .1),
+                col.f64("k", |r| r.1 .1[0].0),
+                col.u64("n_vectors", |r| r.1 .1[1].0 as u64),
+                col.u32("n_replicas", |r| r.1 .0),
+                col.f64("s_mean", |r| r.1 .1[2].0),
+                col.opt_f64("s_sem", |r| r.1 .1[2].1),
+            ]
+        }),
     )
 }
 
@@ -415,27 +368,18 @@ fn radial(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_RADIAL_SUMMARY,
-        vec![
-            field("point_id", U32),
-            field("r_lo", F64),
-            field("r_hi", F64),
-            field("n_replicas", U32),
-            field("count", U64),
-            field("g_mean", F64),
-            field_opt("g_sem", F64),
-            field("c_mean", F64),
-            field_opt("c_sem", F64),
-        ],
-        vec![
-            u32s(&rows, |r| r.0 .0),
-            f64s(&rows, |r| r.2 .1[0].0),
-            f64s(&rows, |r| r.2 .1[1].0),
-            u32s(&rows, |r| r.2 .0),
-            u64s(&rows, |r| r.1),
-            f64s(&rows, |r| r.2 .1[3].0),
-            opt_f64s(&rows, |r| r.2 .1[3].1),
-            f64s(&rows, |r| r.2 .1[4].0),
-            opt_f64s(&rows, |r| r.2 .1[4].1),
-        ],
+        table(&rows, |col| {
+            vec![
+                col.u32("point_id", |r| r.0 .0),
+                col.f64("r_lo", |r| r.2 .1[0].0),
+                col.f64("r_hi", |r| r.2 .1[1].0),
+                col.u32("n_replicas", |r| r.2 .0),
+                col.u64("count", |r| r.1),
+                col.f64("g_mean", |r| r.2 .1[3].0),
+                col.opt_f64("g_sem", |r| r.2 .1[3].1),
+                col.f64("c_mean", |r| r.2 .1[4].0),
+                col.opt_f64("c_sem", |r| r.2 .1[4].1),
+            ]
+        }),
     )
 }
