@@ -3,6 +3,8 @@
 //! - `architecture`: the import graph of `src/` has no circles and no forbidden arrows.
 //! - `models`: every registered model restores bitwise from a checkpoint at a random point and
 //!   runs a campaign whose tables the generic reader reads.
+//! - `cli_flags`: every numeric flag of every command refused (exit 2, flag named, nothing
+//!   written) for NaN, inf, negative and absurd values; valid values accepted.
 //! - `manifests`: data-driven validation of `tests/manifests/{good,bad}/*.json`.
 //! - `resume`: kill -9 / resume, thread count and sharding give bit-identical tables;
 //!   directory refusal, re-running a finished campaign, `status --json`.

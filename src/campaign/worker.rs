@@ -43,13 +43,9 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
         let _ = tx.send((Event::Warning { message }, None));
     };
     let (engine, wall_before, resumed_from) = match restore(&dir, spec, params, tx, &warn) {
-        Some((e, wall, t)) => (Some(e), wall, Some(t)),
-        None => (None, 0.0, None),
-    };
-    let mut engine = match engine {
-        Some(e) => e,
+        Some((e, wall, t)) => (e, wall, Some(t)),
         None => match params.start(spec.seed) {
-            Ok(e) => e,
+            Ok(e) => (e, 0.0, None),
             Err(reason) => return finish(tx, spec, RunEnd::Failed { reason, t: 0.0 }, 0.0, None),
         },
     };
@@ -60,105 +56,126 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
         },
         None,
     ));
-    let mut last_ckpt = Instant::now();
-    let mut last_ckpt_t = resumed_from;
-    let mut last_progress = Instant::now();
-    let wall = |started: &Instant| wall_before + started.elapsed().as_secs_f64();
-    let save = |engine: &mut Engine, last_ckpt_t: &mut Option<f64>| -> Result<(), String> {
-        let header = CheckpointHeader {
-            run_id: spec.run_id,
-            seed: spec.seed,
-            code_version: CODE_VERSION.into(),
-            state_format: params.state_format().into(),
-            wall_seconds: wall(&started),
-            t: engine.time(),
-        };
-        let payload = engine.state_bytes();
-        checkpoint::write(&dir, &header, &payload).map_err(|e| e.to_string())?;
-        *last_ckpt_t = Some(header.t);
-        Ok(())
+    let mut run = Running {
+        spec,
+        params,
+        dir: &dir,
+        engine,
+        started,
+        wall_before,
+        last_ckpt_t: resumed_from,
     };
-    loop {
-        if opts.interrupt.load(Ordering::Relaxed) > 0 {
-            if let Err(e) = save(&mut engine, &mut last_ckpt_t) {
-                let _ = tx.send((
-                    Event::Warning {
-                        message: format!("run {}: checkpoint failed: {e}", spec.run_id),
-                    },
-                    None,
-                ));
-            }
+    match run.advance_to_end(opts, tx) {
+        Some(RunEnd::Interrupted) => {
             let _ = tx.send((
                 Event::Interrupted {
                     run_id: spec.run_id,
                 },
                 None,
             ));
-            return;
         }
-        match engine.advance(WORK_CHUNK) {
-            Ok(true) => break,
-            Ok(false) => {}
-            Err(pe) => {
-                let reason = format!(
-                    "{} (run {}, seed {}, last checkpoint at t = {})",
-                    pe.reason,
-                    spec.run_id,
-                    spec.seed,
-                    last_ckpt_t
-                        .map(|t| t.to_string())
-                        .unwrap_or_else(|| "none".into())
-                );
-                return finish(
-                    tx,
-                    spec,
-                    RunEnd::Failed { reason, t: pe.t },
-                    wall(&started),
-                    None,
-                );
-            }
-        }
-        if last_ckpt.elapsed() >= opts.checkpoint_every {
-            if let Err(e) = save(&mut engine, &mut last_ckpt_t) {
-                let _ = tx.send((
-                    Event::Warning {
-                        message: format!("run {}: checkpoint failed: {e}", spec.run_id),
-                    },
-                    None,
-                ));
-            } else {
-                let _ = tx.send((
-                    Event::Checkpointed {
-                        run_id: spec.run_id,
-                        t: engine.time(),
-                    },
-                    None,
-                ));
-            }
-            last_ckpt = Instant::now();
-        }
-        if last_progress.elapsed().as_millis() >= 250 {
-            last_progress = Instant::now();
-            let _ = tx.send((
-                Event::Progress {
-                    run_id: spec.run_id,
-                    fraction: engine.progress(),
-                },
-                None,
-            ));
+        Some(end) => finish(tx, spec, end, run.wall(), None),
+        None => {
+            let t = run.engine.time();
+            let wall = run.wall();
+            let ids = RunIds {
+                run_id: spec.run_id,
+                point_id: spec.point_id,
+            };
+            finish(
+                tx,
+                spec,
+                RunEnd::Done(run.engine.finish(ids)),
+                wall,
+                Some(t),
+            )
         }
     }
-    let t = engine.time();
-    finish(
-        tx,
-        spec,
-        RunEnd::Done(engine.finish(RunIds {
-            run_id: spec.run_id,
-            point_id: spec.point_id,
-        })),
-        wall(&started),
-        Some(t),
-    )
+}
+
+/// A run on its worker: the engine and what its checkpoints need.
+struct Running<'a> {
+    spec: &'a RunSpec,
+    params: &'a ModelParams,
+    dir: &'a std::path::Path,
+    engine: Engine,
+    started: Instant,
+    /// Wall time spent before this session (from the checkpoint resumed).
+    wall_before: f64,
+    /// Simulated time of the last checkpoint written (or resumed from).
+    last_ckpt_t: Option<f64>,
+}
+
+impl Running<'_> {
+    fn wall(&self) -> f64 {
+        self.wall_before + self.started.elapsed().as_secs_f64()
+    }
+
+    fn save(&mut self) -> Result<(), String> {
+        let header = CheckpointHeader {
+            run_id: self.spec.run_id,
+            seed: self.spec.seed,
+            code_version: CODE_VERSION.into(),
+            state_format: self.params.state_format().into(),
+            wall_seconds: self.wall(),
+            t: self.engine.time(),
+        };
+        let payload = self.engine.state_bytes();
+        checkpoint::write(self.dir, &header, &payload).map_err(|e| e.to_string())?;
+        self.last_ckpt_t = Some(header.t);
+        Ok(())
+    }
+
+    /// Advance in chunks, checkpointing every `checkpoint_every` and on interrupt, reporting
+    /// progress; None when the run is complete, else how it ended (interrupted after its
+    /// checkpoint, or failed).
+    fn advance_to_end(&mut self, opts: &RunOptions, tx: &mut Tx) -> Option<RunEnd> {
+        let run_id = self.spec.run_id;
+        let mut last_ckpt = Instant::now();
+        let mut last_progress = Instant::now();
+        loop {
+            if opts.interrupt.load(Ordering::Relaxed) > 0 {
+                if let Err(e) = self.save() {
+                    let message = format!("run {run_id}: checkpoint failed: {e}");
+                    let _ = tx.send((Event::Warning { message }, None));
+                }
+                return Some(RunEnd::Interrupted);
+            }
+            match self.engine.advance(WORK_CHUNK) {
+                Ok(true) => return None,
+                Ok(false) => {}
+                Err(pe) => {
+                    let reason = format!(
+                        "{} (run {run_id}, seed {}, last checkpoint at t = {})",
+                        pe.reason,
+                        self.spec.seed,
+                        self.last_ckpt_t
+                            .map(|t| t.to_string())
+                            .unwrap_or_else(|| "none".into())
+                    );
+                    return Some(RunEnd::Failed { reason, t: pe.t });
+                }
+            }
+            if last_ckpt.elapsed() >= opts.checkpoint_every {
+                let event = match self.save() {
+                    Err(e) => Event::Warning {
+                        message: format!("run {run_id}: checkpoint failed: {e}"),
+                    },
+                    Ok(()) => Event::Checkpointed {
+                        run_id,
+                        t: self.engine.time(),
+                    },
+                };
+                let _ = tx.send((event, None));
+                last_ckpt = Instant::now();
+            }
+            if last_progress.elapsed().as_millis() >= 250 {
+                last_progress = Instant::now();
+                let fraction = self.engine.progress();
+                let _ = tx.send((Event::Progress { run_id, fraction }, None));
+            }
+        }
+    }
 }
 
 /// The run's engine restored from its newest usable checkpoint, with the wall time spent and
