@@ -1,18 +1,18 @@
 //! `granular`: ensembles of granular-gas simulations turned into Parquet tables.
 //!
-//! Layers (see `ARCHITECTURE.md`):
-//! - [`manifest`]: the JSON manifest as serde types, its JSON Schema, and validation that
-//!   reports every error at once with its JSON path.
-//! - [`plan`]: expands a manifest's sweep into points and runs with stable ids and seeds.
-//! - [`dsmc`]: the DSMC simulators (low-rank and Bird) of polydisperse granular gases.
-//! - [`aux_models`]: the thesis's auxiliary models (bisection, cascade, single particle).
-//! - [`theory`]: kinetic theory (pure functions, usable without simulating).
-//! - [`store`]: Parquet tables, atomic part files, checkpoints.
-//! - [`campaign`]: the engine: worker pool, dispatcher, ledger, locks, resume, status.
-//! - [`engine`]: the closed set of simulators the campaign drives.
-//!
-//! The physics never imports the campaign or the store: a simulator hands rows and
-//! checkpoint bytes to whoever drives it.
+//! Layers (see `ARCHITECTURE.md`; `tests/it/architecture.rs` checks the arrows):
+//! - [`cli`]: the command line, one file per command; the only layer that prints.
+//! - [`campaign`]: the engine, the same for every model: plan, worker pool, dispatcher,
+//!   writer, ledger, locks, resume, status, SLURM, compaction, verification.
+//! - [`manifest`]: the JSON manifest's envelope, its JSON Schema, stages 1-2 of validation.
+//! - [`models`]: one home per model (params, tables, summaries, theory, figures) behind the
+//!   `Model` trait, and the closed list of models.
+//! - the simulators [`dsmc`], [`rfm`], [`aux_models`] (with [`physics`], [`rng`]): they know
+//!   no manifest, table or campaign; a simulator hands rows and checkpoint bytes to whoever
+//!   drives it.
+//! - [`theory`]: kinetic theory (pure functions, usable without simulating), on [`math`].
+//! - [`store`]: Parquet tables, datasets, atomic files, checkpoints; knows no physics.
+//! - [`analysis`]: the thesis's fits of finished campaigns; [`plot`]: the figure renderer.
 
 pub mod analysis;
 pub mod aux_models;

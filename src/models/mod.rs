@@ -56,8 +56,9 @@ pub trait Model {
     /// Layout version of the simulation's checkpoint payload; bump it when the state changes
     /// (a checkpoint of another layout is then not restored, and the run starts over).
     const STATE_FORMAT: &'static str;
-    /// Small valid `params` (a run of well under a second): every model runs through the
-    /// generic tests with them.
+    /// Small valid `params`: a run of well under a second that still takes at least 4 chunks
+    /// of 2000 work units (every model runs through the generic tests with them, restored at
+    /// a random chunk).
     const EXAMPLE: &'static str;
 
     /// The cross-field rules the JSON Schema cannot express; errors at JSON pointers below
@@ -120,8 +121,9 @@ pub struct RunIds {
 pub struct RunRows {
     /// The `runs` table's `collisions`: accepted collisions (DSMC), else 0.
     pub collisions: u64,
-    /// The `runs` table's `trials`, the model's unit of work: DSMC trials, RFM time steps,
-    /// bisection and cascade realisations, SPM walk steps.
+    /// The `runs` table's `trials`, the model's count of work done (each model's `finish`
+    /// says what: DSMC trials, RFM time steps, bisection and cascade realisations, SPM walk
+    /// steps).
     pub trials: u64,
     /// The rows per table, each batch led by `run_id` and `point_id`.
     pub tables: Vec<(&'static str, RecordBatch)>,
