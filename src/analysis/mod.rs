@@ -174,39 +174,53 @@ struct RfmData {
     radial: BTreeMap<(u32, u64), (f64, f64, PerRun)>,
 }
 
+/// Each batch of `table` with the indices of its rows from finished runs.
+fn finished_rows(
+    c: &Campaign,
+    table: &str,
+    done: &BTreeMap<u64, u32>,
+) -> Result<Vec<(RecordBatch, Vec<usize>)>, StoreError> {
+    batches(c, table)?
+        .into_iter()
+        .map(|b| {
+            let r = u64s(&b, table, "run_id")?;
+            let rows = (0..b.num_rows())
+                .filter(|&i| done.contains_key(&r.value(i)))
+                .collect();
+            Ok((b, rows))
+        })
+        .collect()
+}
+
 fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreError> {
     let mut d = RfmData::default();
     let t = rt::RFM_MOMENTS;
-    for b in batches(c, t)? {
-        let (r, p, o, v, s) = (
-            u64s(&b, t, "run_id")?,
+    for (b, rows) in finished_rows(c, t, done)? {
+        let (p, o, v, s) = (
             u32s(&b, t, "point_id")?,
             u32s(&b, t, "order")?,
             f64s(&b, t, "value")?,
             f64s(&b, t, "sem")?,
         );
-        for i in 0..b.num_rows() {
-            if done.contains_key(&r.value(i)) {
-                let sem = (!s.is_null(i)).then(|| s.value(i));
-                d.moments
-                    .entry((p.value(i), o.value(i)))
-                    .or_default()
-                    .push((v.value(i), sem));
-            }
+        for i in rows {
+            let sem = (!s.is_null(i)).then(|| s.value(i));
+            d.moments
+                .entry((p.value(i), o.value(i)))
+                .or_default()
+                .push((v.value(i), sem));
         }
     }
     let t = rt::RFM_NEIGHBOUR_MOMENTS;
-    for b in batches(c, t)? {
-        let (r, p, h, o, v, s) = (
-            u64s(&b, t, "run_id")?,
+    for (b, rows) in finished_rows(c, t, done)? {
+        let (p, h, o, v, s) = (
             u32s(&b, t, "point_id")?,
             u32s(&b, t, "h")?,
             u32s(&b, t, "order")?,
             f64s(&b, t, "value")?,
             f64s(&b, t, "sem")?,
         );
-        for i in 0..b.num_rows() {
-            if done.contains_key(&r.value(i)) && h.value(i) == 1 {
+        for i in rows {
+            if h.value(i) == 1 {
                 let sem = (!s.is_null(i)).then(|| s.value(i));
                 d.neighbour
                     .entry((p.value(i), o.value(i)))
@@ -216,9 +230,8 @@ fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreErr
         }
     }
     let t = rt::RFM_HISTOGRAMS;
-    for b in batches(c, t)? {
-        let (r, p, kind, h, lo, hi, n) = (
-            u64s(&b, t, "run_id")?,
+    for (b, rows) in finished_rows(c, t, done)? {
+        let (p, kind, h, lo, hi, n) = (
             u32s(&b, t, "point_id")?,
             get_str(&b, t, "kind")?,
             u32s(&b, t, "h")?,
@@ -226,8 +239,8 @@ fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreErr
             f64s(&b, t, "hi")?,
             u64s(&b, t, "count")?,
         );
-        for i in 0..b.num_rows() {
-            if !done.contains_key(&r.value(i)) || h.value(i) > 1 {
+        for i in rows {
+            if h.value(i) > 1 {
                 continue;
             }
             let e = d
@@ -240,41 +253,35 @@ fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreErr
         }
     }
     let t = rt::RFM_STRUCTURE_FACTOR;
-    for b in batches(c, t)? {
-        let (r, p, n2, k, s, sem) = (
-            u64s(&b, t, "run_id")?,
+    for (b, rows) in finished_rows(c, t, done)? {
+        let (p, n2, k, s, sem) = (
             u32s(&b, t, "point_id")?,
             u64s(&b, t, "n2")?,
             f64s(&b, t, "k")?,
             f64s(&b, t, "s")?,
             f64s(&b, t, "sem")?,
         );
-        for i in 0..b.num_rows() {
-            if done.contains_key(&r.value(i)) {
-                let e =
-                    d.sk.entry((p.value(i), n2.value(i)))
-                        .or_insert((k.value(i), Vec::new()));
-                e.1.push((s.value(i), (!sem.is_null(i)).then(|| sem.value(i))));
-            }
+        for i in rows {
+            let e =
+                d.sk.entry((p.value(i), n2.value(i)))
+                    .or_insert((k.value(i), Vec::new()));
+            e.1.push((s.value(i), (!sem.is_null(i)).then(|| sem.value(i))));
         }
     }
     let t = rt::RFM_RADIAL;
-    for b in batches(c, t)? {
-        let (r, p, lo, hi, cv) = (
-            u64s(&b, t, "run_id")?,
+    for (b, rows) in finished_rows(c, t, done)? {
+        let (p, lo, hi, cv) = (
             u32s(&b, t, "point_id")?,
             f64s(&b, t, "r_lo")?,
             f64s(&b, t, "r_hi")?,
             f64s(&b, t, "c")?,
         );
-        for i in 0..b.num_rows() {
-            if done.contains_key(&r.value(i)) {
-                let e = d
-                    .radial
-                    .entry((p.value(i), lo.value(i).to_bits()))
-                    .or_insert((lo.value(i), hi.value(i), Vec::new()));
-                e.2.push((cv.value(i), None));
-            }
+        for i in rows {
+            let e = d
+                .radial
+                .entry((p.value(i), lo.value(i).to_bits()))
+                .or_insert((lo.value(i), hi.value(i), Vec::new()));
+            e.2.push((cv.value(i), None));
         }
     }
     Ok(d)

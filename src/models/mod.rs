@@ -38,6 +38,21 @@ pub const WORK_CHUNK: u64 = 1 << 20;
 /// Problems in a model's params: (JSON pointer, message).
 pub type ParamErrors = Vec<(String, String)>;
 
+/// Check a velocity range [v_min, v_max] (finite, v_min < v_max) at JSON pointer `at`.
+pub fn check_velocity_range(range: [f64; 2], at: String, errors: &mut ParamErrors) {
+    if !(range[0] < range[1] && range[0].is_finite() && range[1].is_finite()) {
+        errors.push((
+            at,
+            format!("expected [v_min, v_max] with v_min < v_max, got {range:?}"),
+        ));
+    }
+}
+
+/// The params of model `M` among `points`.
+fn typed<'p, M: Registered>(points: &[&'p ModelParams]) -> Vec<&'p M::Params> {
+    points.iter().filter_map(|p| M::params(p)).collect()
+}
+
 /// Everything granular needs of a model.
 pub trait Model {
     /// The manifest's `params` of this model (`deny_unknown_fields` serde types; the JSON
@@ -289,13 +304,7 @@ macro_rules! models {
             /// Every table of a campaign of this model with these points.
             pub fn tables(self, points: &[&ModelParams]) -> Vec<&'static str> {
                 match self {
-                    $(ModelKind::$variant => {
-                        let typed: Vec<_> = points
-                            .iter()
-                            .filter_map(|p| <$model as Registered>::params(p))
-                            .collect();
-                        <$model as Model>::tables(&typed)
-                    })+
+                    $(ModelKind::$variant => <$model as Model>::tables(&typed::<$model>(points)),)+
                 }
             }
 
@@ -303,11 +312,7 @@ macro_rules! models {
             pub fn theory_tables(self, points: &[&ModelParams]) -> Vec<&'static str> {
                 match self {
                     $(ModelKind::$variant => {
-                        let typed: Vec<_> = points
-                            .iter()
-                            .filter_map(|p| <$model as Registered>::params(p))
-                            .collect();
-                        <$model as Model>::theory_tables(&typed)
+                        <$model as Model>::theory_tables(&typed::<$model>(points))
                     })+
                 }
             }

@@ -445,24 +445,13 @@ impl DsmcParams {
         })
     }
 
-    /// Particles per species, without resolving the rest of the system (no theory is solved).
-    fn counts(&self) -> Vec<u64> {
-        match &self.species {
-            SpeciesSpec::PowerLaw(pl) => (1u64..=1_000_001)
-                .map(|k| (pl.n1_count as f64 * (k as f64).powf(-pl.theta)).round())
-                .take_while(|c| *c >= 1.0)
-                .map(|c| c as u64)
-                .collect(),
-            SpeciesSpec::List(list) => list.iter().map(|s| s.count).collect(),
-        }
-    }
-
     /// An estimate of the bytes a run holds at its peak: the particle arrays (velocities,
     /// and displacements, particle ids, Bird's speed weights when used), the TAMSD tracks and
     /// the recorded rows, twice (a checkpoint serialises the state once more), plus the
     /// per-species tables.
     pub fn memory_estimate(&self) -> u64 {
-        let counts = self.counts();
+        // Beyond 10^6 species the run is refused elsewhere; count none.
+        let counts = self.species_counts().unwrap_or_default();
         let n = counts.iter().fold(0u64, |a, c| a.saturating_add(*c));
         let low_rank = self.method == DsmcMethod::LowRank;
         let disp = self.wants_msd() || self.wants_tamsd();
@@ -499,24 +488,13 @@ impl DsmcParams {
         self.observables.contains(&DsmcObservable::Tamsd)
     }
 
-    /// Particle counts N_k as `DsmcSystem` resolves them (None for a power law with more than
-    /// 1e6 species, which `DsmcSystem::from_params` refuses anyway).
-    fn species_counts(&self) -> Option<Vec<u64>> {
+    /// Particle counts N_k as [`DsmcParams::system`] resolves them, without solving any
+    /// theory (None for a power law with more than 1e6 species, which `system` refuses).
+    pub fn species_counts(&self) -> Option<Vec<u64>> {
         match &self.species {
-            SpeciesSpec::PowerLaw(pl) => {
-                let mut counts = Vec::new();
-                for k in 1u64.. {
-                    let count = (pl.n1_count as f64 * (k as f64).powf(-pl.theta)).round();
-                    if count < 1.0 {
-                        break;
-                    }
-                    counts.push(count as u64);
-                    if counts.len() > 1_000_000 {
-                        return None;
-                    }
-                }
-                Some(counts)
-            }
+            SpeciesSpec::PowerLaw(pl) => power_law_species(pl.n1_count, pl.theta, 1.0)
+                .ok()
+                .map(|s| s.iter().map(|x| x.count).collect()),
             SpeciesSpec::List(list) => Some(list.iter().map(|s| s.count).collect()),
         }
     }

@@ -47,9 +47,9 @@ fn points_per_chunk(c: View, rows_per_run: impl Fn(&DsmcParams) -> u64) -> u32 {
     (CHUNK_ROWS / rows_per_point).max(1) as u32
 }
 
-/// Species of a point (1 if its system does not resolve).
+/// Species of a point (1 if it has none).
 fn species_count(d: &DsmcParams) -> u64 {
-    d.system().map(|s| s.species.len()).unwrap_or(1) as u64
+    d.species_counts().map_or(1, |c| c.len().max(1)) as u64
 }
 
 fn write_species_summary(c: View) -> Result<(), StoreError> {

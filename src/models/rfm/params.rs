@@ -6,6 +6,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::models::check_velocity_range;
+
 use crate::rfm::freepath::FreePathConfig;
 use crate::rfm::observe::{HistogramConfig, RunConfig};
 use crate::rfm::params::{
@@ -535,15 +537,11 @@ impl RfmParams {
             }
         }
         if let Some(h) = &self.post_collision_velocity {
-            if !(h.range[0] < h.range[1] && h.range[0].is_finite() && h.range[1].is_finite()) {
-                errors.push((
-                    format!("{path}/post_collision_velocity/range"),
-                    format!(
-                        "expected [v_min, v_max] with v_min < v_max, got {:?}",
-                        h.range
-                    ),
-                ));
-            }
+            check_velocity_range(
+                h.range,
+                format!("{path}/post_collision_velocity/range"),
+                errors,
+            );
         }
         if self.config().validate().is_err() {
             return;
@@ -794,15 +792,7 @@ impl RfmParams {
             ));
         }
         if let Some(h) = &self.velocity_histogram {
-            if !(h.range[0] < h.range[1] && h.range[0].is_finite() && h.range[1].is_finite()) {
-                errors.push((
-                    format!("{path}/velocity_histogram/range"),
-                    format!(
-                        "expected [v_min, v_max] with v_min < v_max, got {:?}",
-                        h.range
-                    ),
-                ));
-            }
+            check_velocity_range(h.range, format!("{path}/velocity_histogram/range"), errors);
         }
         self.check_structure(path, errors);
         self.check_snapshot(path, errors);

@@ -5,6 +5,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::models::check_velocity_range;
+
 use crate::aux_models::spm::{FreePath, SpmConfig};
 use crate::rfm::params::{THESIS_MASS, THESIS_NOISE};
 
@@ -285,15 +287,7 @@ impl SpmParams {
             }
         }
         if let Some(h) = &self.velocity_histogram {
-            if !(h.range[0] < h.range[1] && h.range[0].is_finite() && h.range[1].is_finite()) {
-                errors.push((
-                    format!("{path}/velocity_histogram/range"),
-                    format!(
-                        "expected [v_min, v_max] with v_min < v_max, got {:?}",
-                        h.range
-                    ),
-                ));
-            }
+            check_velocity_range(h.range, format!("{path}/velocity_histogram/range"), errors);
         }
         for (key, w) in [
             ("gaussian_fit", self.gaussian_fit),
