@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use crate::campaign::resources;
 use crate::exit_codes;
 
 #[derive(clap::Args)]
@@ -21,6 +22,12 @@ pub fn run(a: Args) -> i32 {
                 plan.replicas,
                 plan.n_runs()
             );
+            // Valid anywhere, but say so if this machine cannot run it (`run` refuses it).
+            if let Some(mem) = resources::Memory::of_this_machine() {
+                if let Err(why) = resources::check(&plan, mem) {
+                    tracing::warn!("not on this machine: {why}");
+                }
+            }
             exit_codes::OK
         }
         Err(e) => {
