@@ -87,7 +87,7 @@ impl DsmcSim {
             let va = self.st.vel[a];
             let vb = self.st.vel[b];
             let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
-            let mut gne = g[0] * e[0] + g[1] * e[1] + g[2] * e[2];
+            let gne = g[0] * e[0] + g[1] * e[1] + g[2] * e[2];
             let (i, k) = (self.species_of(a), self.species_of(b));
             let (si, sk) = (self.sys.species[i].diameter, self.sys.species[k].diameter);
             let sig2 = 0.25 * (si + sk) * (si + sk);
@@ -95,54 +95,146 @@ impl DsmcSim {
                 continue;
             }
             let t = self.gap_time();
-            if self.next_event <= t && self.outputs_before(t)? {
-                break Ok(true);
-            }
-            self.st.t = t;
-            // (41) is invariant under e -> -e: use the orientation with g.e > 0.
-            let e = if gne < 0.0 {
-                gne = -gne;
-                [-e[0], -e[1], -e[2]]
-            } else {
-                e
+            let hit = Hit {
+                a,
+                b,
+                e,
+                t,
+                va,
+                vb,
+                gne,
+                i,
+                k,
             };
-            if msd {
-                drift(&mut self.st.disp[a], va, t);
-                drift(&mut self.st.disp[b], vb, t);
-            }
-            let (ma, mb) = (self.sys.species[i].mass, self.sys.species[k].mass);
-            let (mut na, mut nb) = (va, vb);
-            let eps = self.eps.eps(i, k, gne);
-            collide(&mut na, &mut nb, ma, mb, eps, e, gne);
-            self.st.vel[a] = na;
-            self.st.vel[b] = nb;
-            self.speed[a] = bird_weight(&na, si, sig_max);
-            self.speed[b] = bird_weight(&nb, sk, sig_max);
-            self.st.collisions += 1;
-            self.st.species_collisions[i] += 1;
-            self.st.species_collisions[k] += 1;
-            let mut raised = false;
-            for (s, v) in [(si, na), (sk, nb)] {
-                let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                let c = 0.25 * (s + sig_max) * (s + sig_max) * speed;
-                if c > self.st.bird_bound {
-                    self.st.bird_bound = c * RAISE_SLACK;
-                    raised = true;
-                }
-            }
-            if raised {
-                // Candidates do not depend on the bound: keep the pipeline.
-                self.st.bound_raises += 1;
-                self.rebuild_rates();
-            }
-            if self.refresh_due() {
-                self.refresh_bounds();
-            }
-            if self.rate <= 0.0 {
-                break self.idle_to_end();
+            if let Some(done) = self.bird_collide(hit, msd, sig_max)? {
+                break Ok(done);
             }
         };
         self.st.trials += trials;
         result
     }
+
+    /// An accepted collision `hit` at its time: the outputs before it first, then (41) and
+    /// the bounds. Some(done) when the run ends here (its end reached: the collision is not
+    /// applied, it is the run's stop; or every particle at rest).
+    #[inline(always)]
+    fn bird_collide(
+        &mut self,
+        hit: Hit,
+        msd: bool,
+        sig_max: f64,
+    ) -> Result<Option<bool>, PhysicsError> {
+        let Hit {
+            a,
+            b,
+            e,
+            t,
+            va,
+            vb,
+            mut gne,
+            i,
+            k,
+        } = hit;
+        if self.next_event <= t && self.outputs_before(t)? {
+            self.stop = Some(super::Stop::Bird {
+                a: a as u32,
+                b: b as u32,
+                e,
+                t,
+            });
+            return Ok(Some(true));
+        }
+        self.st.t = t;
+        // (41) is invariant under e -> -e: use the orientation with g.e > 0.
+        let e = if gne < 0.0 {
+            gne = -gne;
+            [-e[0], -e[1], -e[2]]
+        } else {
+            e
+        };
+        if msd {
+            drift(&mut self.st.disp[a], va, t);
+            drift(&mut self.st.disp[b], vb, t);
+        }
+        let (si, sk) = (self.sys.species[i].diameter, self.sys.species[k].diameter);
+        let (ma, mb) = (self.sys.species[i].mass, self.sys.species[k].mass);
+        let (mut na, mut nb) = (va, vb);
+        let eps = self.eps.eps(i, k, gne);
+        collide(&mut na, &mut nb, ma, mb, eps, e, gne);
+        self.st.vel[a] = na;
+        self.st.vel[b] = nb;
+        self.speed[a] = bird_weight(&na, si, sig_max);
+        self.speed[b] = bird_weight(&nb, sk, sig_max);
+        self.st.collisions += 1;
+        self.st.species_collisions[i] += 1;
+        self.st.species_collisions[k] += 1;
+        let mut raised = false;
+        for (s, v) in [(si, na), (sk, nb)] {
+            let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let c = 0.25 * (s + sig_max) * (s + sig_max) * speed;
+            if c > self.st.bird_bound {
+                self.st.bird_bound = c * RAISE_SLACK;
+                raised = true;
+            }
+        }
+        if raised {
+            // Candidates do not depend on the bound: keep the pipeline.
+            self.st.bound_raises += 1;
+            self.rebuild_rates();
+        }
+        if self.refresh_due() {
+            self.refresh_bounds();
+        }
+        if self.rate <= 0.0 {
+            return self.idle_to_end().map(Some);
+        }
+        Ok(None)
+    }
+
+    /// Continue a run that stopped at the collision of a and b (impact direction e) at time
+    /// t: apply it as the longer run does. True if the run is done again.
+    pub(super) fn resume_bird(
+        &mut self,
+        a: usize,
+        b: usize,
+        e: [f64; 3],
+        t: f64,
+    ) -> Result<bool, PhysicsError> {
+        let sig_max = self
+            .sys
+            .species
+            .iter()
+            .map(|s| s.diameter)
+            .fold(0.0, f64::max);
+        let (va, vb) = (self.st.vel[a], self.st.vel[b]);
+        let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
+        let hit = Hit {
+            a,
+            b,
+            e,
+            t,
+            va,
+            vb,
+            gne: g[0] * e[0] + g[1] * e[1] + g[2] * e[2],
+            i: self.species_of(a),
+            k: self.species_of(b),
+        };
+        Ok(self
+            .bird_collide(hit, self.sys.displacements(), sig_max)?
+            .unwrap_or(false))
+    }
+}
+
+/// An accepted Bird trial: particles a, b (species i, k) with their velocities, the impact
+/// direction e drawn for them, g.e, and the time.
+struct Hit {
+    a: usize,
+    b: usize,
+    e: [f64; 3],
+    t: f64,
+    va: [f64; 3],
+    vb: [f64; 3],
+    gne: f64,
+    i: usize,
+    k: usize,
 }

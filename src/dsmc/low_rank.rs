@@ -338,6 +338,18 @@ enum BatchEnd {
     More,
     /// The run reached t_end.
     Done,
+    /// A collision changed the proposal tables (within a batch only).
+    Void,
+}
+
+/// What an accepted collision led to.
+enum Accepted {
+    /// Go on with the batch.
+    Go,
+    /// Its time is past the run's end: the run is done (the collision is not applied).
+    Done,
+    /// It changed the proposal tables: the queued candidates are void.
+    Void,
 }
 
 impl DsmcSim {
@@ -700,18 +712,18 @@ impl DsmcSim {
         }
     }
 
-    /// One batch: fill the queue, then try its first BATCH candidates in order, each
-    /// resolved against the current groups. An accepted collision is applied at once (its
-    /// particles change groups at once), after the outputs before its time; when it changes
-    /// the proposal tables the queue is void and the batch ends. Adds the trials (void ones
-    /// excluded) to `trials`.
-    fn low_rank_batch(&mut self, trials: &mut u64) -> Result<BatchEnd, PhysicsError> {
+    /// One batch: fill the queue, then try its candidates `start..BATCH` in order (a batch
+    /// starts at 0; a continued run finishes the batch of its stop), each resolved against
+    /// the current groups. An accepted collision is applied at once (its particles change
+    /// groups at once), after the outputs before its time; when it changes the proposal
+    /// tables the queue is void and the batch ends. Adds the trials (void ones excluded) to
+    /// `trials`.
+    fn low_rank_batch(&mut self, start: usize, trials: &mut u64) -> Result<BatchEnd, PhysicsError> {
         self.fill();
         let lazy = self.lazy_time();
         let mut tried = BATCH;
         let mut end = BatchEnd::More;
-        let mut void = false;
-        for j in 0..BATCH {
+        for j in start..BATCH {
             // The queue holds AHEAD candidates until this loop ends (a void clears it and
             // leaves the loop). The next batch's candidates are prefetched one per trial, so
             // that the misses are spread over the batch (a burst of them stalls on the miss
@@ -734,44 +746,112 @@ impl DsmcSim {
             if ub * ub >= g2 {
                 continue;
             }
-            // Accepted: the collision happens at t_c; outputs before it see the old state.
-            // With lazy times t_c is computed only when it may be at or after the next
-            // output (it then becomes the new `st.t`).
-            let t = if !lazy || self.st.gap_prod <= self.lazy_thr {
-                let t = self.gap_time();
-                self.st.t = t;
-                if self.next_event <= t && self.outputs_before(t)? {
+            match self.accepted(j, &c, (a, b), (va, vb), (g, g2), lazy, None)? {
+                Accepted::Go => {}
+                Accepted::Done => {
                     tried = j + 1;
                     end = BatchEnd::Done;
                     break;
                 }
-                self.update_lazy_threshold();
-                t
-            } else {
-                f64::NAN
-            };
-            let (i, k) = ((c.i & SPECIES_MASK) as usize, c.k as usize);
-            let rate = self.rate;
-            if self.collide_now((a, i), (b, k), va, vb, g, g2, t) {
-                if lazy {
-                    // The tables changed: fix the time of this collision (at the old rate).
-                    self.st.t += self.gap_elapsed(rate);
+                Accepted::Void => {
+                    tried = j + 1;
+                    end = BatchEnd::Void;
+                    break;
                 }
-                tried = j + 1;
-                void = true;
-                break;
             }
         }
-        if void {
-            self.batch.clear();
-            self.st.gap_prod = 1.0;
-            self.st.gap_log = 0.0;
-            self.update_lazy_threshold();
-        } else if !matches!(end, BatchEnd::Done) {
-            self.batch.advance(tried);
+        match end {
+            BatchEnd::Void => {
+                self.void_queue();
+                end = BatchEnd::More;
+            }
+            BatchEnd::More => self.batch.advance(tried),
+            BatchEnd::Done => {}
         }
-        *trials += tried as u64;
+        *trials += (tried - start) as u64;
         Ok(end)
+    }
+
+    /// An accepted collision (candidate `j` of the batch: a and b, their velocities, g and
+    /// |g|^2) at the time of its trial (`fixed`: a time already computed, for the stop of a
+    /// continued run). Outputs before its time see the old state; with lazy times the time
+    /// is computed only when it may be at or after the next output (it then becomes the new
+    /// `st.t`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn accepted(
+        &mut self,
+        j: usize,
+        c: &Candidate,
+        (a, b): (usize, usize),
+        (va, vb): ([f64; 3], [f64; 3]),
+        (g, g2): ([f64; 3], f64),
+        lazy: bool,
+        fixed: Option<f64>,
+    ) -> Result<Accepted, PhysicsError> {
+        let t = if fixed.is_some() || !lazy || self.st.gap_prod <= self.lazy_thr {
+            let t = match fixed {
+                Some(t) => t,
+                None => self.gap_time(),
+            };
+            self.st.t = t;
+            if self.next_event <= t && self.outputs_before(t)? {
+                self.stop = Some(super::Stop::LowRank { slot: j as u32, t });
+                return Ok(Accepted::Done);
+            }
+            self.update_lazy_threshold();
+            t
+        } else {
+            f64::NAN
+        };
+        let (i, k) = ((c.i & SPECIES_MASK) as usize, c.k as usize);
+        let rate = self.rate;
+        if self.collide_now((a, i), (b, k), va, vb, g, g2, t) {
+            if lazy {
+                // The tables changed: fix the time of this collision (at the old rate).
+                self.st.t += self.gap_elapsed(rate);
+            }
+            return Ok(Accepted::Void);
+        }
+        Ok(Accepted::Go)
+    }
+
+    /// The candidates drawn ahead came from tables that changed: drop them.
+    fn void_queue(&mut self) {
+        self.batch.clear();
+        self.st.gap_prod = 1.0;
+        self.st.gap_log = 0.0;
+        self.update_lazy_threshold();
+    }
+
+    /// Whether queued candidate `slot` resolves to a particle.
+    pub(super) fn resolvable(&self, slot: usize) -> bool {
+        slot < self.batch.len() && self.resolve(&self.batch.get(slot)).0.is_some()
+    }
+
+    /// Continue a run that stopped at candidate `slot` of its batch, accepted at time `t`:
+    /// apply it as the longer run does, then try the rest of the batch. True if the run is
+    /// done again.
+    pub(super) fn resume_low_rank(&mut self, slot: usize, t: f64) -> Result<bool, PhysicsError> {
+        let c = self.batch.get(slot);
+        let a = self.resolve(&c).0.expect("checked by continue_from");
+        let b = c.b as usize;
+        let (va, vb) = (self.st.vel[a], self.st.vel[b]);
+        let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
+        let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+        let lazy = self.lazy_time();
+        let mut trials = 0;
+        let end = match self.accepted(slot, &c, (a, b), (va, vb), (g, g2), lazy, Some(t))? {
+            Accepted::Go => self.low_rank_batch(slot + 1, &mut trials)?,
+            Accepted::Done => BatchEnd::Done,
+            Accepted::Void => {
+                self.void_queue();
+                BatchEnd::More
+            }
+        };
+        self.st.trials += trials;
+        self.flush_displacements();
+        Ok(matches!(end, BatchEnd::Done))
     }
 
     pub(super) fn advance_low_rank(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
@@ -783,8 +863,8 @@ impl DsmcSim {
             if trials >= max_trials {
                 break Ok(false);
             }
-            match self.low_rank_batch(&mut trials) {
-                Ok(BatchEnd::More) => {}
+            match self.low_rank_batch(0, &mut trials) {
+                Ok(BatchEnd::More | BatchEnd::Void) => {}
                 Ok(BatchEnd::Done) => break Ok(true),
                 Err(e) => break Err(e),
             }

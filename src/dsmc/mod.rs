@@ -78,6 +78,41 @@ pub const PIPELINE_DEPTH: usize = 32;
 /// Layout version of [`DsmcState`] in checkpoints (5: the low-rank queue holds two batches
 /// and collisions are applied when accepted, so a dsmc/4 pipeline would resume differently).
 pub const STATE_FORMAT: &str = "dsmc/5";
+/// Layout version of a finished run's [`FinalState`] (it embeds a [`STATE_FORMAT`] state).
+pub const FINAL_FORMAT: &str = "dsmc/5+final/1";
+
+/// Where a finished run stopped: the first collision accepted past its last output, whose
+/// time ended the run. It is not applied: a longer run of the same trajectory applies it
+/// first ([`DsmcSim::continue_from`]).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+pub enum Stop {
+    /// Low-rank: the candidate at `slot` of the batch being tried, accepted at time `t`.
+    LowRank { slot: u32, t: f64 },
+    /// Bird: particles `a` and `b` with the impact direction `e` drawn for them, accepted at
+    /// time `t`.
+    Bird { a: u32, b: u32, e: [f64; 3], t: f64 },
+}
+
+impl Stop {
+    pub fn t(&self) -> f64 {
+        match *self {
+            Stop::LowRank { t, .. } | Stop::Bird { t, .. } => t,
+        }
+    }
+}
+
+/// What a finished run keeps so that a longer run can continue it (layout [`FINAL_FORMAT`]).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct FinalState {
+    /// The run's end and output times: a longer run continues it only if its output times
+    /// begin with exactly these (so every decision the shorter run made is the longer one's).
+    pub t_end: f64,
+    pub output_times: Vec<f64>,
+    /// None when the run ended without a collision pending (every particle at rest).
+    pub stop: Option<Stop>,
+    /// The state at the end ([`DsmcSim::state_bytes`], with every row recorded).
+    pub state: Vec<u8>,
+}
 
 /// A raised speed bound gets this much head-room, so that it is not raised again at once.
 pub const RAISE_SLACK: f64 = 1.05;
@@ -171,6 +206,11 @@ pub struct DsmcSim {
     /// quantity, so most trials are rejected without touching the velocity lines. Derived
     /// from `vel`; empty for low-rank.
     speed: Vec<f32>,
+    /// A finished run: where it stopped. A continued run: the stop to apply first.
+    stop: Option<Stop>,
+    /// Whether `stop` is known for a finished run (not for one restored from a checkpoint
+    /// taken after its end: such a run keeps no final state).
+    stop_known: bool,
 }
 
 /// A fixed ring of pre-drawn candidates.
@@ -311,6 +351,7 @@ impl DsmcSim {
                 .collect();
         }
         let eps = EpsModel::new(&sys);
+        let st_done = st.done;
         let mut sim = DsmcSim {
             eps,
             sys,
@@ -332,6 +373,8 @@ impl DsmcSim {
             ring,
             batch,
             speed,
+            stop: None,
+            stop_known: !st_done,
         };
         if sim.sys.method == Method::LowRank {
             sim.tracer_pos = sim.tracer_positions();
@@ -428,6 +471,83 @@ impl DsmcSim {
             st.tracks.reserve_exact(total - st.tracks.len());
         }
         Ok(Self::assemble(sys, st, rng))
+    }
+
+    /// A finished run's [`FinalState`] (layout [`FINAL_FORMAT`]); None for a run that is not
+    /// finished or whose stop is unknown.
+    pub fn final_state(&mut self) -> Option<Vec<u8>> {
+        if !self.st.done || !self.stop_known {
+            return None;
+        }
+        let f = FinalState {
+            t_end: self.sys.t_end,
+            output_times: self.sys.output_times.clone(),
+            stop: self.stop,
+            state: self.state_bytes(),
+        };
+        Some(postcard::to_stdvec(&f).expect("final state serialises"))
+    }
+
+    /// The run `sys` continued from a finished run's [`FinalState`], bit for bit the run made
+    /// straight to `sys.t_end`: the stopping collision is applied with the rest of its batch,
+    /// then the run goes on (see [`continuable`]; the time-averaged MSD, recorded on a grid
+    /// that spans [0, t_end], cannot be continued).
+    pub fn continue_from(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
+        let f: FinalState = postcard::from_bytes(bytes)
+            .map_err(|e| format!("final state does not decode: {e}"))?;
+        if sys.tamsd.is_some() {
+            return Err("the time-averaged MSD is recorded on a grid that spans [0, t_end]".into());
+        }
+        continuable(f.t_end, &f.output_times, sys.t_end, &sys.output_times)?;
+        let mut sim = Self::from_state_bytes(sys, &f.state)?;
+        if !sim.st.done || sim.st.next_output != f.output_times.len() {
+            return Err("final state is not that of a finished run".into());
+        }
+        if let Some(stop) = f.stop {
+            let n = sim.st.vel.len();
+            let ok = stop.t().is_finite()
+                && stop.t() >= f.t_end
+                && match stop {
+                    Stop::LowRank { slot, .. } => {
+                        (slot as usize) < low_rank::BATCH
+                            && sim.batch.len() == low_rank::AHEAD
+                            && sim.resolvable(slot as usize)
+                    }
+                    Stop::Bird { a, b, e, .. } => {
+                        a != b
+                            && (a as usize) < n
+                            && (b as usize) < n
+                            && e.iter().all(|x| x.is_finite())
+                    }
+                };
+            if !ok {
+                return Err("final state's stopping collision does not match the run".into());
+            }
+            sim.st.t = stop.t();
+        }
+        sim.st.done = false;
+        sim.stop_known = true;
+        sim.update_next_event();
+        // Apply the stop now, so that no checkpoint is taken with it pending.
+        match f.stop {
+            Some(stop) => {
+                sim.apply_stop(stop).map_err(|e| {
+                    format!("continuing at t = {}: {}", e.t, e.reason)
+                })?;
+            }
+            None => {}
+        }
+        Ok(sim)
+    }
+
+    /// Apply the collision that stopped a shorter run (outputs before it first), as the
+    /// longer run applies it; true if the run is done again.
+    fn apply_stop(&mut self, stop: Stop) -> Result<bool, PhysicsError> {
+        let done = match stop {
+            Stop::LowRank { slot, t } => self.resume_low_rank(slot as usize, t)?,
+            Stop::Bird { a, b, e, t } => self.resume_bird(a as usize, b as usize, e, t)?,
+        };
+        Ok(done)
     }
 
     pub fn is_done(&self) -> bool {
@@ -845,6 +965,27 @@ impl EpsModel {
     }
 }
 
+/// Whether a finished run with end `t_end` and output times `old` can be continued to a run
+/// with end `new_end` and output times `new`: a later end, and output times that begin with
+/// exactly `old` (the decisions of the shorter run, which depend on its next output time, are
+/// then those of the longer one). Err says why not.
+pub fn continuable(t_end: f64, old: &[f64], new_end: f64, new: &[f64]) -> Result<(), String> {
+    if !(new_end > t_end) {
+        return Err(format!("t_end {new_end} is not past the run's end {t_end}"));
+    }
+    let differs = |j: usize| new.get(j).map(|x| x.to_bits()) != Some(old[j].to_bits());
+    if let Some(j) = (0..old.len()).find(|&j| differs(j)) {
+        let n = new.get(j).copied().unwrap_or(f64::NAN);
+        return Err(format!(
+            "the new output times differ from the run's before its end t = {t_end} (the \
+             run's output {j} is at t = {}, the new one at t = {n}); listing {t_end} in \
+             `output_times.list` keeps the old end on the grid",
+            old[j]
+        ));
+    }
+    Ok(())
+}
+
 /// Offsets of the species' particle ranges (M + 1 entries, the last one N).
 pub fn species_offsets(sys: &DsmcSystem) -> Vec<usize> {
     let mut off = Vec::with_capacity(sys.species.len() + 1);
@@ -898,3 +1039,6 @@ fn prefetch<T>(p: *const T) {
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;
 }
+
+#[cfg(test)]
+mod tests;
