@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The tests: `cargo test --release`, then a tiny campaign run with the release binary whose
-# tables are read back with DuckDB, pyarrow and Polars (scripts/check_tables.py).
+# tables are read back with DuckDB, pyarrow and Polars (scripts/check_tables.py), grown and
+# compared with the campaign of its final manifest (scripts/compare_tables.py --current).
 # Needs scripts/setup.sh to have been run once (for .venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -42,6 +43,22 @@ bin=target/release/granular
 "$bin" status "$tmp/runs"
 
 echo "== table check"
+.venv/bin/python scripts/check_tables.py "$tmp/runs"
+
+echo "== growth: a third replica and t_end 20 (the old end kept as an output, so runs continue)"
+.venv/bin/python - "$tmp/tiny.json" "$tmp/grown.json" <<'PY'
+import json, sys
+m = json.load(open(sys.argv[1]))
+m["replicas"] = 3
+m["params"]["t_end"] = 20.0
+m["params"]["output_times"]["log"]["to"] = 20.0
+m["params"]["output_times"]["list"] = [10.0]
+json.dump(m, open(sys.argv[2], "w"))
+PY
+"$bin" plan "$tmp/grown.json" --out "$tmp/runs"
+"$bin" run "$tmp/grown.json" --out "$tmp/runs" --quiet
+"$bin" run "$tmp/grown.json" --out "$tmp/direct" --quiet
+.venv/bin/python scripts/compare_tables.py "$tmp/runs" "$tmp/direct" --current
 .venv/bin/python scripts/check_tables.py "$tmp/runs"
 
 echo "== compaction while readers read, then the tables again"

@@ -15,10 +15,12 @@ out = sys.argv[1]
 con = duckdb.connect()
 rows = con.sql(f"""
 with r as (
-  select point_id, method, species_power_law_N1 as n1, avg(wall_seconds) as wall, count(*) as reps,
+  select point_id, p.method, p.species_power_law_N1 as n1, avg(wall_seconds) as wall, count(*) as reps,
          avg(collisions) as collisions, avg(trials) as trials
-  from read_parquet('{out}/tables/runs/*.parquet') where status = 'done'
-  group by point_id, method, species_power_law_N1
+  from read_parquet('{out}/tables/runs/*.parquet')
+  join read_parquet('{out}/tables/points/*.parquet') p using (point_id)
+  where status = 'done'
+  group by point_id, p.method, p.species_power_law_N1
 )
 select r.method, r.n1, r.reps, r.wall, r.collisions, r.trials, s.t,
        s.temperature_dev_rel, s.temperature_sem / s.temperature_theory as t_noise,

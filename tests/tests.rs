@@ -9,6 +9,9 @@
 //! - `resume`: kill -9 / resume, thread count and sharding give bit-identical tables;
 //!   directory refusal, re-running a finished campaign, `status --json`.
 //! - `physics`: Haff's law, bitwise checkpoint/restore, conservation laws, low-rank vs Bird.
+//! - `growth`: campaigns grown by replicas, sweep values, a new sweep key, given seeds and a
+//!   longer t_end equal the campaign of their final manifest; refused growth changes nothing;
+//!   kill -9 during growth; a format-1 campaign (committed fixture) upgraded and continued.
 //! - `interrupt`: Ctrl-C once checkpoints and stops (exit 130), resume is bit-identical;
 //!   twice exits at once.
 //! - `rfm`: a Random Force Model campaign, its tables, kill + resume bit-identity.
@@ -29,6 +32,7 @@ mod it {
     pub mod aux_models;
     pub mod cli_flags;
     pub mod drills;
+    pub mod growth;
     pub mod interrupt;
     pub mod manifests;
     pub mod models;

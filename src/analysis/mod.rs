@@ -527,7 +527,7 @@ fn write_table(
 ) -> Result<(), AnalysisError> {
     let path = out.join(format!("{table}.parquet"));
     let tmp = crate::fsutil::temp_path(&path);
-    parquet_io::write_file(&tmp, batch, table, &c.manifest_json)?;
+    parquet_io::write_file(&tmp, batch, table, c.stamp())?;
     std::fs::rename(&tmp, &path)
         .map_err(|e| AnalysisError::Io(format!("{}: {e}", path.display())))?;
     crate::fsutil::sync_dir(out).map_err(|e| AnalysisError::Io(format!("{}: {e}", out.display())))

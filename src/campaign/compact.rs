@@ -100,7 +100,7 @@ fn list_parts(c: &Campaign, table: &str, dir: &Path) -> Result<Vec<Part>, Campai
         let (info, builder) = parquet_io::inspect(&path).map_err(|e| {
             CampaignError::Refused(format!("{e}; move it out of the table to compact"))
         })?;
-        parquet_io::check_part(&path, &info, table, Some(&c.manifest_json)).map_err(|e| {
+        parquet_io::check_part(&path, &info, table, Some(&c.identity)).map_err(|e| {
             CampaignError::Refused(format!("{e}; move it out of the table to compact"))
         })?;
         let schema = std::sync::Arc::new(
@@ -218,14 +218,14 @@ fn compact_table(
         let mut want = 0u64;
         for &i in g {
             batches.extend(
-                parquet_io::read_campaign_file(&parts[i].path, table, &c.manifest_json)
+                parquet_io::read_campaign_file(&parts[i].path, table, &c.identity)
                     .map_err(|e| CampaignError::Io(e.to_string()))?,
             );
             want += parts[i].rows;
         }
         let out = ndir.join(format!("compact-{next:08}-{merged:05}.parquet"));
         merged += 1;
-        parquet_io::write_batches(&out, &batches, table, &c.manifest_json)
+        parquet_io::write_batches(&out, &batches, table, c.stamp())
             .map_err(|e| CampaignError::Io(e.to_string()))?;
         let (info, _) = parquet_io::inspect(&out).map_err(|e| CampaignError::Io(e.to_string()))?;
         if info.rows != want {

@@ -33,9 +33,11 @@ pub fn run(
     }
     let finished =
         ledger::finished_runs(&ledger::read_commits(&c.root).map_err(CampaignError::Refused)?);
-    let mine: Vec<RunSpec> = (0..c.plan.n_runs())
-        .filter(|r| opts.shard.contains(*r))
-        .map(|r| c.plan.run(r))
+    // The runs of this shard that the latest manifest asks for.
+    let mine: Vec<RunSpec> = c
+        .plan
+        .current_runs()
+        .filter(|r| opts.shard.contains(r.run_id))
         .collect();
     let pending: Vec<RunSpec> = mine
         .iter()
@@ -97,7 +99,10 @@ pub fn run(
     if outcome.remaining == 0 {
         outcome.interrupted = false;
     }
-    if finished.len() as u64 == c.plan.n_runs() {
+    if c.plan
+        .current_runs()
+        .all(|r| finished.contains_key(&r.run_id))
+    {
         c.write_summaries(&finished)
             .map_err(|e| CampaignError::Io(e.to_string()))?;
         outcome.complete = true;

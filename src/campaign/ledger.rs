@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::campaign::plan::Shard;
 use crate::fsutil;
-use crate::store::FORMAT_VERSION;
+use crate::store::LEDGER_FORMAT;
 
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -89,9 +89,9 @@ pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
     };
     let ix: LedgerIndex = serde_json::from_str(&text)
         .map_err(|e| format!("{}: corrupt ledger index: {e}", p.display()))?;
-    if ix.kind != INDEX_KIND || ix.format_version != FORMAT_VERSION {
+    if ix.kind != INDEX_KIND || ix.format_version != LEDGER_FORMAT {
         return Err(format!(
-            "{}: not a ledger index of format {FORMAT_VERSION} (kind {:?}, format {})",
+            "{}: not a ledger index of format {LEDGER_FORMAT} (kind {:?}, format {})",
             p.display(),
             ix.kind,
             ix.format_version
@@ -124,7 +124,7 @@ impl LedgerIndex {
             }
         }
         LedgerIndex {
-            format_version: FORMAT_VERSION,
+            format_version: LEDGER_FORMAT,
             kind: INDEX_KIND.into(),
             folded,
             done,
@@ -149,7 +149,7 @@ impl LedgerIndex {
             .collect();
         runs.sort_by_key(|r| r.run_id);
         Commit {
-            format_version: FORMAT_VERSION,
+            format_version: LEDGER_FORMAT,
             shard: INDEX_SHARD.into(),
             seq: 0,
             runs,
@@ -233,9 +233,9 @@ fn read_commits_once(root: &Path) -> Result<Option<Vec<Commit>>, String> {
             };
             let c: Commit = serde_json::from_str(&text)
                 .map_err(|e| format!("{}: corrupt commit record: {e}", f.display()))?;
-            if c.format_version != FORMAT_VERSION {
+            if c.format_version != LEDGER_FORMAT {
                 return Err(format!(
-                    "{}: format version {}, this granular reads {FORMAT_VERSION}",
+                    "{}: format version {}, this granular reads {LEDGER_FORMAT}",
                     f.display(),
                     c.format_version
                 ));
@@ -362,6 +362,7 @@ fn remove_stale_temporaries(root: &Path) -> Vec<String> {
     let mut dirs = vec![
         root.to_path_buf(),
         root.join("checkpoints"),
+        root.join("finals"),
         root.join("locks"),
         root.join("tables"),
         root.join("ledger"),

@@ -4,8 +4,10 @@
 //!
 //! Directory layout:
 //! ```text
-//! <out>/campaign.json            format, code version, frozen manifest
-//! <out>/manifest.json            the manifest as given
+//! <out>/campaign.json            format, code version, latest manifest, registry of points and runs
+//! <out>/manifest.json            the latest manifest as given
+//! <out>/manifests/<k>.json       every accepted manifest, as given (history in campaign.json)
+//! <out>/finals/run-*.final       final states of finished runs that can be continued
 //! <out>/locks/<shard>.lock       who runs a shard (pid, host); <shard>.running.json heartbeat
 //! <out>/ledger/<shard>/commit-*.json   finished runs and their table parts (see ledger)
 //! <out>/checkpoints/run-*.ckpt   running simulations
@@ -14,12 +16,16 @@
 
 pub mod compact;
 pub mod dispatch;
+pub mod history;
 pub mod ledger;
 pub mod plan;
+pub mod preview;
+pub mod registry;
 pub mod resources;
 pub mod slurm;
 pub mod status;
 pub mod tables;
+pub mod upgrade;
 pub mod verify;
 pub mod worker;
 pub mod writer;
@@ -38,10 +44,12 @@ use crate::manifest::validate::ManifestErrors;
 use crate::manifest::Manifest;
 use crate::models::{CampaignView, ModelParams, PointView};
 use crate::store::dataset::Dataset;
+use crate::store::parquet_io::Stamp;
 use crate::store::FORMAT_VERSION;
 use crate::CODE_VERSION;
 use ledger::RunStatus;
 use plan::{canonical, Plan, Shard};
+use registry::{Asked, Growth, Registry};
 
 #[derive(Debug, thiserror::Error)]
 pub enum CampaignError {
@@ -57,23 +65,36 @@ pub enum CampaignError {
     TooLarge(String),
 }
 
-/// `campaign.json`.
+/// `campaign.json`: what makes a directory a campaign, written atomically; its registry
+/// changes only when a grown manifest is accepted.
 #[derive(Serialize, Deserialize, Clone, Debug)]
 pub struct CampaignInfo {
     pub format_version: u32,
     pub code_version: String,
     pub name: String,
     pub n_runs: u64,
+    /// The latest accepted manifest.
     pub manifest: Value,
+    /// Every point and run (format 2; absent in format 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub registry: Option<Registry>,
+    /// Every accepted manifest (the latest last).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub history: Vec<history::Accepted>,
 }
 
 /// An opened campaign directory.
 pub struct Campaign {
     pub root: PathBuf,
+    /// The latest accepted manifest.
     pub manifest: Manifest,
     pub plan: Plan,
-    /// Canonical JSON of the manifest (stored in every table file's metadata).
+    /// Canonical JSON of the latest manifest (in the metadata of the table files written).
     pub manifest_json: String,
+    /// The campaign's identity (name, model, seed as canonical JSON), in every table file.
+    pub identity: String,
+    /// Every accepted manifest.
+    pub history: Vec<history::Accepted>,
 }
 
 pub(crate) fn io_err(p: &Path, e: impl std::fmt::Display) -> CampaignError {
@@ -81,36 +102,29 @@ pub(crate) fn io_err(p: &Path, e: impl std::fmt::Display) -> CampaignError {
 }
 
 impl Campaign {
-    /// Validate `manifest_path` and create `out` for it, or open `out` if it already holds
-    /// the same campaign (a different one is refused). Nothing is written for a bad manifest.
+    /// Validate `manifest_path` and create `out` for it, or open `out` and accept the manifest
+    /// as the campaign's latest: a grown one registers its new points and runs (see
+    /// `registry`); a different campaign (name, model or seed), a shorter run, or growth while
+    /// a shard runs is refused. Nothing is written for a bad manifest or a refusal.
     pub fn create_or_open(manifest_path: &Path, out: &Path) -> Result<Campaign, CampaignError> {
-        let (manifest, plan) = plan::load(manifest_path)?;
+        Self::prepare(manifest_path, out, true).map(|(c, _)| c)
+    }
+
+    /// As `create_or_open`; with `apply` false nothing is written (what would be: the
+    /// campaign as it would be, and what the manifest adds).
+    pub fn prepare(
+        manifest_path: &Path,
+        out: &Path,
+        apply: bool,
+    ) -> Result<(Campaign, Growth), CampaignError> {
+        let (manifest, fresh) = plan::load(manifest_path)?;
         if let Some(mem) = resources::Memory::of_this_machine() {
-            resources::check(&plan, mem).map_err(CampaignError::TooLarge)?;
+            resources::check(&fresh, mem).map_err(CampaignError::TooLarge)?;
         }
-        let value = serde_json::to_value(&manifest).expect("manifest serialises");
-        let info_path = out.join("campaign.json");
-        if info_path.exists() {
+        let text = std::fs::read(manifest_path).map_err(|e| io_err(manifest_path, e))?;
+        if out.join("campaign.json").exists() {
             let existing = Self::open(out)?;
-            let old = serde_json::to_value(&existing.manifest).expect("manifest serialises");
-            if canonical(&old) != canonical(&value) {
-                let mut diffs = Vec::new();
-                if let (Some(a), Some(b)) = (old.as_object(), value.as_object()) {
-                    for k in a.keys().chain(b.keys()) {
-                        if a.get(k) != b.get(k) && !diffs.contains(k) {
-                            diffs.push(k.clone());
-                        }
-                    }
-                }
-                return Err(CampaignError::Refused(format!(
-                    "{} holds a different campaign ({:?}; differs in: {}); use another --out, or `granular resume {}`",
-                    out.display(),
-                    existing.manifest.name,
-                    diffs.join(", "),
-                    out.display()
-                )));
-            }
-            return Ok(existing);
+            return existing.accept(manifest, &text, apply);
         }
         if out.exists() {
             let non_empty = std::fs::read_dir(out)
@@ -124,26 +138,100 @@ impl Campaign {
                 )));
             }
         }
-        fsutil::create_dir_durable(out).map_err(|e| io_err(out, e))?;
-        let text = std::fs::read(manifest_path).map_err(|e| io_err(manifest_path, e))?;
+        let growth = everything(&fresh);
+        let mut c = Campaign {
+            root: out.to_path_buf(),
+            manifest_json: canonical(&serde_json::to_value(&manifest).expect("serialises")),
+            identity: manifest.identity(),
+            manifest,
+            plan: fresh,
+            history: Vec::new(),
+        };
+        if apply {
+            fsutil::create_dir_durable(out).map_err(|e| io_err(out, e))?;
+            c.record(&text, growth.new_runs.len() as u64)?;
+        }
+        Ok((c, growth))
+    }
+
+    /// Accept `manifest` as this campaign's latest (see `create_or_open`).
+    fn accept(
+        mut self,
+        manifest: Manifest,
+        text: &[u8],
+        apply: bool,
+    ) -> Result<(Campaign, Growth), CampaignError> {
+        let differs = history::identity_differences(&self.manifest, &manifest);
+        if !differs.is_empty() {
+            return Err(CampaignError::Refused(format!(
+                "{} holds another campaign: {}; a campaign keeps its name, model and seed (use another --out)",
+                self.root.display(),
+                differs.join(", ")
+            )));
+        }
+        let value = serde_json::to_value(&manifest).expect("manifest serialises");
+        if canonical(&value) == self.manifest_json {
+            return Ok((self, Growth::default()));
+        }
+        let expansion = plan::expand(&manifest).map_err(|errs| {
+            CampaignError::Manifest(ManifestErrors::new(
+                "manifest",
+                errs.into_iter()
+                    .map(|(path, message)| crate::manifest::validate::ManifestError {
+                        path,
+                        message,
+                    })
+                    .collect(),
+            ))
+        })?;
+        let mut registry = self.plan.registry.clone();
+        let runs = manifest.runs_per_point();
+        let old_plan = &self.plan;
+        let growth = registry
+            .grow(
+                &Asked {
+                    model: manifest.model,
+                    points: &expansion.points,
+                    runs: &runs,
+                },
+                &|b, r| old_plan.seed(b, r),
+            )
+            .map_err(|errs| CampaignError::Refused(errs.join("; ")))?;
+        let plan = Plan::new(&manifest, expansion, registry).map_err(CampaignError::Refused)?;
+        self.plan = plan;
+        self.manifest = manifest;
+        self.manifest_json = canonical(&value);
+        if apply {
+            // No shard may run while the registry changes (they hold the old one).
+            let _lock = ledger::CompactLock::acquire(&self.root)
+                .map_err(|e| CampaignError::Refused(format!("cannot change the campaign: {e}")))?;
+            self.record(text, growth.new_runs.len() as u64)?;
+        }
+        Ok((self, growth))
+    }
+
+    /// Write the accepted manifest into the history and campaign.json (the commit point: it
+    /// alone makes the directory a campaign and holds the registry), then manifest.json.
+    fn record(&mut self, text: &[u8], runs_added: u64) -> Result<(), CampaignError> {
+        let entry = history::write(&self.root, self.history.len(), text, runs_added)
+            .map_err(CampaignError::Io)?;
+        let mut history = self.history.clone();
+        history.push(entry);
         let info = CampaignInfo {
             format_version: FORMAT_VERSION,
             code_version: CODE_VERSION.into(),
-            name: manifest.name.clone(),
-            n_runs: plan.n_runs(),
-            manifest: value.clone(),
+            name: self.manifest.name.clone(),
+            n_runs: self.plan.n_runs(),
+            manifest: serde_json::to_value(&self.manifest).expect("manifest serialises"),
+            registry: Some(self.plan.registry.clone()),
+            history: history.clone(),
         };
+        let info_path = self.root.join("campaign.json");
         let bytes = serde_json::to_vec_pretty(&info).expect("info serialises");
-        // campaign.json first: it alone makes the directory a campaign (manifest.json is a copy
-        // for people), so a kill between the two writes leaves a resumable directory.
         fsutil::write_atomic(&info_path, &bytes).map_err(|e| io_err(&info_path, e))?;
-        fsutil::write_atomic(&out.join("manifest.json"), &text).map_err(|e| io_err(out, e))?;
-        Ok(Campaign {
-            root: out.to_path_buf(),
-            manifest,
-            plan,
-            manifest_json: canonical(&value),
-        })
+        self.history = history;
+        fsutil::write_atomic(&self.root.join("manifest.json"), text)
+            .map_err(|e| io_err(&self.root, e))
     }
 
     /// Open an existing campaign directory.
@@ -161,6 +249,14 @@ impl Campaign {
                 info_path.display()
             ))
         })?;
+        if info.format_version < FORMAT_VERSION {
+            return Err(CampaignError::Refused(format!(
+                "{}: a campaign directory of format version {} (an earlier granular); upgrade it in place with `granular upgrade {}`",
+                root.display(),
+                info.format_version,
+                root.display()
+            )));
+        }
         if info.format_version != FORMAT_VERSION {
             return Err(CampaignError::Refused(format!(
                 "{}: format version {}, this granular reads {FORMAT_VERSION}",
@@ -171,19 +267,41 @@ impl Campaign {
         if info.code_version != CODE_VERSION {
             tracing::warn!(was = %info.code_version, now = CODE_VERSION, "campaign was started by another code version");
         }
-        let text = serde_json::to_string(&info.manifest).expect("value serialises");
-        let (manifest, plan) = plan::parse(&text, &info_path.display().to_string())?;
+        let corrupt = |why: String| {
+            CampaignError::Refused(format!(
+                "{}: corrupt campaign file: {why}",
+                info_path.display()
+            ))
+        };
+        let registry = info
+            .registry
+            .ok_or_else(|| corrupt("no registry of points and runs".into()))?;
+        let manifest_text = serde_json::to_string(&info.manifest).expect("value serialises");
+        let file = info_path.display().to_string();
+        let manifest = crate::manifest::validate::parse(&manifest_text, &file)?;
+        let expansion = plan::expand(&manifest).map_err(|e| corrupt(format!("{e:?}")))?;
+        let plan = Plan::new(&manifest, expansion, registry).map_err(corrupt)?;
         Ok(Campaign {
             root: root.to_path_buf(),
+            identity: manifest.identity(),
             manifest,
             plan,
             manifest_json: canonical(&info.manifest),
+            history: info.history,
         })
+    }
+
+    /// The stamp of the table files this campaign writes.
+    pub fn stamp(&self) -> Stamp<'_> {
+        Stamp {
+            campaign: &self.identity,
+            manifest: &self.manifest_json,
+        }
     }
 
     /// The campaign's tables.
     pub fn data(&self) -> Dataset {
-        Dataset::new(&self.root, &self.manifest_json)
+        Dataset::new(&self.root, &self.identity, &self.manifest_json)
     }
 
     /// The campaign as its model sees it; `done` maps the runs finished with status done to
@@ -205,7 +323,7 @@ impl Campaign {
                     label: self.plan.label(p.point_id),
                 })
                 .collect(),
-            replicas: self.plan.replicas,
+            replicas: self.plan.max_runs_per_point(),
             done,
             data,
         }
@@ -258,6 +376,25 @@ impl Campaign {
     pub fn checkpoint_dir(&self) -> PathBuf {
         self.root.join("checkpoints")
     }
+
+    /// Final states of finished runs (what a longer run of their point continues from).
+    pub fn finals_dir(&self) -> PathBuf {
+        self.root.join("finals")
+    }
+}
+
+/// A new campaign's growth: every point and run.
+fn everything(plan: &Plan) -> Growth {
+    Growth {
+        new_points: plan.points.iter().map(|p| p.point_id).collect(),
+        new_runs: (0..plan.n_runs())
+            .map(|r| {
+                let s = plan.run(r);
+                (s.point_id, s.replica, r)
+            })
+            .collect(),
+        ..Growth::default()
+    }
 }
 
 /// Runtime options shared by `run` and `resume`.
@@ -270,6 +407,8 @@ pub struct RunOptions {
     pub interrupt: Arc<AtomicU8>,
     /// Flush finished runs to the tables at least this often.
     pub flush_every: Duration,
+    /// Keep each finished run's final state (`finals/`), so that a longer run continues it.
+    pub keep_final_states: bool,
 }
 
 impl Default for RunOptions {
@@ -280,6 +419,7 @@ impl Default for RunOptions {
             shard: Shard::ALL,
             interrupt: Arc::new(AtomicU8::new(0)),
             flush_every: Duration::from_secs(30),
+            keep_final_states: true,
         }
     }
 }

@@ -10,29 +10,41 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha20Rng;
 use serde_json::Value;
 
+use super::registry::{run_identity, Asked, Registry, RunBlock, SeedSource};
 pub use crate::manifest::sweep::canonical;
 use crate::manifest::sweep::{path_exists, pointer_escape, set_path, sweep_key_errors};
 use crate::manifest::validate::{self, params_schema_errors};
 use crate::manifest::validate::{ManifestError, ManifestErrors};
-use crate::manifest::Manifest;
+use crate::manifest::{Manifest, RunsPerPoint};
 use crate::models::{ModelKind, ModelParams};
 
+/// A point of the campaign (registered by this or an earlier manifest).
 #[derive(Clone, Debug)]
 pub struct Point {
     pub point_id: u32,
-    /// The swept values of this point, one per sweep key (in `Plan::sweep_keys` order).
+    /// The swept values of this point, one per sweep key of the latest manifest (in
+    /// `Plan::sweep_keys` order): the value at the key's path in its params (null where its
+    /// params have none).
     pub values: Vec<Value>,
     pub params: ModelParams,
+    /// Whether the latest manifest asks for this point.
+    pub current: bool,
+    /// Hash of the runs' identity (model, params without the horizon keys) for their seeds.
+    identity: [u64; 2],
 }
 
+/// Every point and run of a campaign, and what its latest manifest asks for.
 #[derive(Clone, Debug)]
 pub struct Plan {
     pub model: ModelKind,
     pub campaign_seed: u64,
-    pub replicas: u32,
-    /// Dotted sweep paths into `params`, in manifest order.
+    /// The runs each point of the latest manifest asks for.
+    pub runs_per_point: RunsPerPoint,
+    /// Dotted sweep paths into `params`, in the latest manifest's order.
     pub sweep_keys: Vec<String>,
+    /// Every registered point, indexed by `point_id`.
     pub points: Vec<Point>,
+    pub registry: Registry,
 }
 
 /// One run of the campaign.
@@ -42,6 +54,8 @@ pub struct RunSpec {
     pub point_id: u32,
     pub replica: u32,
     pub seed: u64,
+    /// The finished run this one continues from its final state (a longer horizon).
+    pub continues: Option<u64>,
 }
 
 /// A deterministic subset of runs: `index` in 1..=`count`; run r belongs to shard
@@ -90,26 +104,116 @@ impl std::fmt::Display for Shard {
 }
 
 impl Plan {
+    /// The plan of a campaign whose registry is `registry` and latest manifest expanded to
+    /// `current` (the points it asks for, registered).
+    pub fn new(m: &Manifest, expansion: Expansion, registry: Registry) -> Result<Plan, String> {
+        let current: std::collections::BTreeSet<String> = expansion
+            .points
+            .iter()
+            .map(|p| canonical(&p.to_value()))
+            .collect();
+        let mut points = Vec::with_capacity(registry.points.len());
+        for rp in &registry.points {
+            let mut errs = Vec::new();
+            let params = m
+                .model
+                .params_from(&rp.params, "", &mut errs)
+                .ok_or_else(|| format!("registered point {} does not parse: {errs:?}", rp.id))?;
+            let value = params.to_value();
+            let values = expansion
+                .sweep_keys
+                .iter()
+                .map(|k| value_at(&value, k))
+                .collect();
+            points.push(Point {
+                point_id: rp.id,
+                values,
+                current: current.contains(&canonical(&value)),
+                identity: identity_hash(&run_identity(m.model, &value)),
+                params,
+            });
+        }
+        Ok(Plan {
+            model: m.model,
+            campaign_seed: m.seed,
+            runs_per_point: m.runs_per_point(),
+            sweep_keys: expansion.sweep_keys,
+            points,
+            registry,
+        })
+    }
+
     pub fn n_runs(&self) -> u64 {
-        self.points.len() as u64 * self.replicas as u64
+        self.registry.n_runs()
+    }
+
+    /// The most runs any point has.
+    pub fn max_runs_per_point(&self) -> u32 {
+        let mut per = vec![0u32; self.points.len()];
+        for b in &self.registry.blocks {
+            per[b.point as usize] += b.count;
+        }
+        per.into_iter().max().unwrap_or(0)
+    }
+
+    /// What the latest manifest asks per point, in words (`2 replicas`, `3 seeds`).
+    pub fn runs_per_point_text(&self) -> String {
+        match &self.runs_per_point {
+            RunsPerPoint::Replicas(r) => format!("{r} replicas"),
+            RunsPerPoint::Seeds(s) => format!("{} seeds", s.len()),
+        }
+    }
+
+    /// The block holding run `run_id`.
+    fn block(&self, run_id: u64) -> &RunBlock {
+        let blocks = &self.registry.blocks;
+        let i = blocks.partition_point(|b| b.first_run <= run_id) - 1;
+        &blocks[i]
     }
 
     pub fn run(&self, run_id: u64) -> RunSpec {
-        let point_id = (run_id / self.replicas as u64) as u32;
-        let replica = self.replica_of(run_id);
-        let point = &self.points[point_id as usize];
+        let b = self.block(run_id);
+        let replica = b.first_replica + (run_id - b.first_run) as u32;
         RunSpec {
             run_id,
-            point_id,
+            point_id: b.point,
             replica,
-            seed: derive_seed(
+            seed: self.seed(b, replica),
+            continues: b
+                .continues
+                .and_then(|old| self.registry.run_of(old, replica)),
+        }
+    }
+
+    /// The seed of replica `replica` of block `b`.
+    pub fn seed(&self, b: &RunBlock, replica: u32) -> u64 {
+        match &b.seeds {
+            SeedSource::Params => derive_seed(
                 self.campaign_seed,
-                self.model,
-                &self.sweep_keys,
-                &point.values,
+                self.points[b.point as usize].identity,
                 replica,
             ),
+            SeedSource::Swept { keys, values } => {
+                derive_seed_swept(self.campaign_seed, self.model, keys, values, replica)
+            }
+            SeedSource::Given(s) => s[(replica - b.first_replica) as usize],
         }
+    }
+
+    /// Whether the latest manifest asks for this run.
+    pub fn is_current(&self, r: &RunSpec) -> bool {
+        self.points[r.point_id as usize].current
+            && match &self.runs_per_point {
+                RunsPerPoint::Replicas(n) => r.replica < *n,
+                RunsPerPoint::Seeds(s) => s.contains(&r.seed),
+            }
+    }
+
+    /// Every run the latest manifest asks for, in run order.
+    pub fn current_runs(&self) -> impl Iterator<Item = RunSpec> + '_ {
+        (0..self.n_runs())
+            .map(|r| self.run(r))
+            .filter(|r| self.is_current(r))
     }
 
     /// The model's kinetic-theory tables for these points (none for models without theory).
@@ -120,7 +224,8 @@ impl Plan {
 
     /// The replica number of a run.
     pub fn replica_of(&self, run_id: u64) -> u32 {
-        (run_id % self.replicas as u64) as u32
+        let b = self.block(run_id);
+        b.first_replica + (run_id - b.first_run) as u32
     }
 
     /// The swept values of a point, `key=value, ...` (empty without a sweep).
@@ -143,9 +248,26 @@ impl Plan {
     }
 }
 
-/// FNV-1a, 64 bit: a stable hash of identity bytes (not for security).
-fn fnv1a(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf29ce484222325;
+/// The value at a dotted sweep path of params (null where there is none).
+fn value_at(params: &Value, key: &str) -> Value {
+    let mut cur = params;
+    for part in key.split('.') {
+        let next = match cur {
+            Value::Object(o) => o.get(part),
+            Value::Array(a) => part.parse::<usize>().ok().and_then(|i| a.get(i)),
+            _ => None,
+        };
+        match next {
+            Some(n) => cur = n,
+            None => return Value::Null,
+        }
+    }
+    cur.clone()
+}
+
+/// FNV-1a, 64 bit, from `basis`: a stable hash of identity bytes (not for security).
+fn fnv1a(bytes: &[u8], basis: u64) -> u64 {
+    let mut h: u64 = basis;
     for b in bytes {
         h ^= *b as u64;
         h = h.wrapping_mul(0x100000001b3);
@@ -153,8 +275,32 @@ fn fnv1a(bytes: &[u8]) -> u64 {
     h
 }
 
-/// The run's seed: ChaCha20 keyed by (campaign seed, hash of the run's identity).
-pub fn derive_seed(
+/// A 128-bit hash of a run identity (two FNV-1a of different bases).
+fn identity_hash(identity: &str) -> [u64; 2] {
+    [
+        fnv1a(identity.as_bytes(), 0xcbf29ce484222325),
+        fnv1a(identity.as_bytes(), 0x84222325cbf29ce4),
+    ]
+}
+
+/// A run's seed: the first word of ChaCha20 keyed by the campaign seed, the hash of the run's
+/// identity (model and params without the horizon keys: `registry::run_identity`) and the
+/// replica. It depends on nothing else: not on the run's id, the sweep's order, the thread
+/// count or the shard.
+pub fn derive_seed(campaign_seed: u64, identity: [u64; 2], replica: u32) -> u64 {
+    let mut key = [0u8; 32];
+    key[..8].copy_from_slice(&campaign_seed.to_le_bytes());
+    key[8..16].copy_from_slice(&identity[0].to_le_bytes());
+    key[16..24].copy_from_slice(&identity[1].to_le_bytes());
+    key[24..28].copy_from_slice(&replica.to_le_bytes());
+    key[28..32].copy_from_slice(b"grn2");
+    ChaCha20Rng::from_seed(key).next_u64()
+}
+
+/// The seeds of campaign directories of format 1: ChaCha20 keyed by (campaign seed, FNV-1a of
+/// `model ␟ key=canonical(value) ... ␟ replica=r`, `"granular"`), the swept keys and values of
+/// the point at the time. Runs registered then keep them.
+pub fn derive_seed_swept(
     campaign_seed: u64,
     model: ModelKind,
     keys: &[String],
@@ -171,7 +317,7 @@ pub fn derive_seed(
     identity.push_str(&format!("\u{1f}replica={replica}"));
     let mut key = [0u8; 32];
     key[..8].copy_from_slice(&campaign_seed.to_le_bytes());
-    key[8..16].copy_from_slice(&fnv1a(identity.as_bytes()).to_le_bytes());
+    key[8..16].copy_from_slice(&fnv1a(identity.as_bytes(), 0xcbf29ce484222325).to_le_bytes());
     key[16..24].copy_from_slice(b"granular");
     ChaCha20Rng::from_seed(key).next_u64()
 }
@@ -186,15 +332,44 @@ pub fn load(path: &std::path::Path) -> Result<(Manifest, Plan), ManifestErrors> 
 /// Validate manifest text; `file` names it in errors.
 pub fn parse(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors> {
     let manifest = validate::parse(text, file)?;
-    match expand(&manifest) {
-        Ok(plan) => Ok((manifest, plan)),
-        Err(errs) => Err(ManifestErrors::new(
+    let to_errors = |errs: Vec<(String, String)>| {
+        ManifestErrors::new(
             file,
             errs.into_iter()
                 .map(|(path, message)| ManifestError { path, message })
                 .collect(),
-        )),
-    }
+        )
+    };
+    let expansion = expand(&manifest).map_err(to_errors)?;
+    let plan = fresh(&manifest, expansion).map_err(|e| to_errors(vec![(String::new(), e)]))?;
+    Ok((manifest, plan))
+}
+
+/// The plan of a new campaign of `m`: its points and runs registered in sweep order.
+pub fn fresh(m: &Manifest, expansion: Expansion) -> Result<Plan, String> {
+    let mut registry = Registry::default();
+    let runs = m.runs_per_point();
+    registry
+        .grow(
+            &Asked {
+                model: m.model,
+                points: &expansion.points,
+                runs: &runs,
+            },
+            &|_, _| 0,
+        )
+        .map_err(|e| e.join("; "))?;
+    Plan::new(m, expansion, registry)
+}
+
+/// A manifest's points in sweep order (first key outermost), typed and checked.
+#[derive(Clone, Debug)]
+pub struct Expansion {
+    /// Dotted sweep paths into `params`, in manifest order.
+    pub sweep_keys: Vec<String>,
+    pub points: Vec<ModelParams>,
+    /// Each point's swept values, as the sweep lists give them.
+    pub values: Vec<Vec<Value>>,
 }
 
 fn typed(
@@ -212,8 +387,8 @@ fn typed(
 }
 
 /// Expand the sweep; every problem is returned as (JSON pointer, message).
-pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
-    let mut errors = Vec::new();
+pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
+    let mut errors = runs_errors(m);
     let base = Value::Object(m.params.clone());
     let base_typed = typed(m.model, &base, "/params", &mut errors);
 
@@ -262,16 +437,21 @@ pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
 
     // Cartesian product, first key outermost.
     let n_points: usize = lists.iter().map(|l| l.len()).product();
-    if n_points as u64 * m.replicas as u64 > u32::MAX as u64 {
+    let per_point = match m.runs_per_point() {
+        RunsPerPoint::Replicas(r) => r as u64,
+        RunsPerPoint::Seeds(s) => s.len() as u64,
+    };
+    if n_points as u64 * per_point > u32::MAX as u64 {
         return Err(vec![(
             "/sweep".into(),
             format!(
                 "{} runs is more than this version supports",
-                n_points as u64 * m.replicas as u64
+                n_points as u64 * per_point
             ),
         )]);
     }
     let mut points = Vec::with_capacity(n_points);
+    let mut swept = Vec::with_capacity(n_points);
     for point_id in 0..n_points {
         let mut rem = point_id;
         let mut idx = vec![0usize; lists.len()];
@@ -305,23 +485,40 @@ pub fn expand(m: &Manifest) -> Result<Plan, Vec<(String, String)>> {
             t
         };
         if let Some(params) = params {
-            points.push(Point {
-                point_id: point_id as u32,
-                values,
-                params,
-            });
+            points.push(params);
+            swept.push(values);
         }
     }
     if !errors.is_empty() {
         return Err(errors);
     }
-    Ok(Plan {
-        model: m.model,
-        campaign_seed: m.seed,
-        replicas: m.replicas,
+    Ok(Expansion {
         sweep_keys: keys,
         points,
+        values: swept,
     })
+}
+
+/// `replicas` and `seeds` exclude each other; given seeds are distinct.
+fn runs_errors(m: &Manifest) -> Vec<(String, String)> {
+    let mut errors = Vec::new();
+    if m.replicas.is_some() && m.seeds.is_some() {
+        errors.push((
+            "/seeds".into(),
+            "give `replicas` or `seeds`, not both".into(),
+        ));
+    }
+    if let Some(seeds) = &m.seeds {
+        for (i, s) in seeds.iter().enumerate() {
+            if seeds[..i].contains(s) {
+                errors.push((
+                    format!("/seeds/{i}"),
+                    format!("duplicate seed {s} (would make the same run twice)"),
+                ));
+            }
+        }
+    }
+    errors
 }
 
 #[cfg(test)]

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use super::ledger;
 use super::{Campaign, CampaignError};
 use crate::fsutil;
-use crate::store::FORMAT_VERSION;
+use crate::store::LEDGER_FORMAT;
 
 pub const SUBMISSION_KIND: &str = "granular.slurm_submission";
 
@@ -111,9 +111,9 @@ pub fn read_record(root: &Path) -> Result<Option<SubmissionRecord>, String> {
     };
     let r: SubmissionRecord = serde_json::from_str(&text)
         .map_err(|e| format!("{}: corrupt submission record: {e}", p.display()))?;
-    if r.kind != SUBMISSION_KIND || r.format_version != FORMAT_VERSION {
+    if r.kind != SUBMISSION_KIND || r.format_version != LEDGER_FORMAT {
         return Err(format!(
-            "{}: not a submission record of format {FORMAT_VERSION}",
+            "{}: not a submission record of format {LEDGER_FORMAT}",
             p.display()
         ));
     }
@@ -447,7 +447,7 @@ pub fn plan(
     let mut rec = match (&existing, missing) {
         (Some(_), false) => {
             return Err(CampaignError::Refused(format!(
-                "{} was already submitted to SLURM (slurm/submission.json); resubmit unfinished work with `granular submit --missing {}`",
+                "{} was already submitted to SLURM (slurm/submission.json); resubmit unfinished work with `granular submit --missing {}`, or submit a grown manifest",
                 root.display(),
                 root.display()
             )))
@@ -479,7 +479,7 @@ pub fn plan(
                 ));
             }
             SubmissionRecord {
-                format_version: FORMAT_VERSION,
+                format_version: LEDGER_FORMAT,
                 kind: SUBMISSION_KIND.into(),
                 shards,
                 runs_per_shard: per,
@@ -498,9 +498,9 @@ pub fn plan(
         let commits = ledger::read_commits(root).map_err(CampaignError::Refused)?;
         let finished = ledger::finished_runs(&commits);
         let mut unfinished = BTreeSet::new();
-        for r in 0..c.plan.n_runs() {
-            if !finished.contains_key(&r) {
-                unfinished.insert(r % n);
+        for r in c.plan.current_runs() {
+            if !finished.contains_key(&r.run_id) {
+                unfinished.insert(r.run_id % n);
             }
         }
         let live: BTreeSet<u64> = ledger::live_locks(root)

@@ -18,6 +18,9 @@ pub struct Counts {
     pub pending: u64,
     /// Pending or running runs that have a checkpoint to resume from.
     pub checkpointed: u64,
+    /// Unfinished runs the latest manifest no longer asks for (they do not run).
+    #[serde(default)]
+    pub dropped: u64,
 }
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -25,6 +28,9 @@ pub struct PointStatus {
     pub point_id: u32,
     /// The swept values of the point, `key=value`.
     pub point: String,
+    /// Whether the latest manifest asks for this point (a point it no longer lists keeps its
+    /// finished runs).
+    pub in_manifest: bool,
     #[serde(flatten)]
     pub counts: Counts,
 }
@@ -32,9 +38,18 @@ pub struct PointStatus {
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct CampaignStatus {
     pub name: String,
+    /// Every run of the campaign (of every accepted manifest).
     pub runs: u64,
     #[serde(flatten)]
     pub counts: Counts,
+    /// The runs the latest manifest asks for, and their counts.
+    #[serde(default)]
+    pub current_runs: u64,
+    #[serde(default)]
+    pub current: Counts,
+    /// Manifests accepted so far (the latest is the campaign's).
+    #[serde(default)]
+    pub manifests: usize,
     pub live_shards: Vec<String>,
     pub points: Vec<PointStatus>,
     /// SLURM submissions (`granular submit`), with their jobs' states when squeue answers.
@@ -105,13 +120,28 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
                 .map(|(k, v)| format!("{k}={v}"))
                 .collect::<Vec<_>>()
                 .join(" "),
+            in_manifest: p.current,
             counts: Counts::default(),
         })
         .collect();
     let mut total = Counts::default();
+    let mut current = Counts::default();
+    let mut current_runs = 0;
     for run_id in 0..c.plan.n_runs() {
-        let point = (run_id / c.plan.replicas as u64) as usize;
-        let pc = &mut points[point].counts;
+        let spec = c.plan.run(run_id);
+        let pc = &mut points[spec.point_id as usize].counts;
+        if c.plan.is_current(&spec) {
+            current_runs += 1;
+            match finished.get(&run_id) {
+                Some(RunStatus::Done) => current.done += 1,
+                Some(RunStatus::Failed) => current.failed += 1,
+                None if running.contains(&run_id) => current.running += 1,
+                None => current.pending += 1,
+            }
+            if !finished.contains_key(&run_id) && ckpts.contains(&run_id) {
+                current.checkpointed += 1;
+            }
+        }
         match finished.get(&run_id) {
             Some(RunStatus::Done) => {
                 pc.done += 1;
@@ -120,6 +150,10 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
             Some(RunStatus::Failed) => {
                 pc.failed += 1;
                 total.failed += 1
+            }
+            None if !c.plan.is_current(&spec) => {
+                pc.dropped += 1;
+                total.dropped += 1;
             }
             None => {
                 if running.contains(&run_id) {
@@ -140,6 +174,9 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
         name: c.manifest.name.clone(),
         runs: c.plan.n_runs(),
         counts: total,
+        current_runs,
+        current,
+        manifests: c.history.len(),
         live_shards: live
             .iter()
             .map(|l| format!("{} (pid {} on {})", l.shard, l.pid, l.host))

@@ -1,5 +1,6 @@
 //! The campaign's own tables, whatever the model: `runs` (one row per finished run) and
-//! `points` (one row per sweep point), with the swept parameters as typed columns.
+//! `points` (one row per registered point, with the swept parameters of the latest manifest as
+//! typed columns and whether it still asks for the point).
 
 use std::sync::Arc;
 
@@ -9,6 +10,7 @@ use arrow_schema::{DataType, Field, Schema};
 use serde_json::Value;
 
 use super::plan::{canonical, Plan};
+use crate::store::cols::table;
 
 pub const RUNS: &str = "runs";
 pub const POINTS: &str = "points";
@@ -30,13 +32,18 @@ pub struct SweepColumn {
     pub kind: SweepKind,
 }
 
-/// The typed sweep columns of a plan.
+/// The typed sweep columns of a plan (points without a value at a key hold null there).
 pub fn sweep_columns(plan: &Plan) -> Vec<SweepColumn> {
     plan.sweep_keys
         .iter()
         .enumerate()
         .map(|(j, key)| {
-            let vals: Vec<&Value> = plan.points.iter().map(|p| &p.values[j]).collect();
+            let vals: Vec<&Value> = plan
+                .points
+                .iter()
+                .map(|p| &p.values[j])
+                .filter(|v| !v.is_null())
+                .collect();
             let kind = if vals.iter().all(|v| v.is_i64() || v.is_u64()) {
                 SweepKind::Int
             } else if vals.iter().all(|v| v.is_number()) {
@@ -65,7 +72,7 @@ fn sweep_fields(cols: &[SweepColumn]) -> Vec<Field> {
                 SweepKind::Bool => DataType::Boolean,
                 SweepKind::Str | SweepKind::Json => DataType::Utf8,
             };
-            Field::new(&c.name, dt, false)
+            Field::new(&c.name, dt, true)
         })
         .collect()
 }
@@ -74,38 +81,44 @@ fn sweep_arrays(cols: &[SweepColumn], values: &[&[Value]]) -> Vec<ArrayRef> {
     cols.iter()
         .enumerate()
         .map(|(j, c)| -> ArrayRef {
+            let at =
+                |v: &&[Value]| -> Option<Value> { Some(v[j].clone()).filter(|x| !x.is_null()) };
             match c.kind {
                 SweepKind::Int => {
                     let mut b = Int64Builder::new();
                     values.iter().for_each(|v| {
-                        b.append_value(v[j].as_i64().unwrap_or(v[j].as_u64().unwrap_or(0) as i64))
+                        b.append_option(
+                            at(v).map(|x| x.as_i64().unwrap_or(x.as_u64().unwrap_or(0) as i64)),
+                        )
                     });
                     Arc::new(b.finish())
                 }
                 SweepKind::Float => {
                     let mut b = Float64Builder::new();
-                    values
-                        .iter()
-                        .for_each(|v| b.append_value(v[j].as_f64().unwrap_or(f64::NAN)));
+                    values.iter().for_each(|v| {
+                        b.append_option(at(v).map(|x| x.as_f64().unwrap_or(f64::NAN)))
+                    });
                     Arc::new(b.finish())
                 }
                 SweepKind::Bool => {
                     let mut b = BooleanBuilder::new();
                     values
                         .iter()
-                        .for_each(|v| b.append_value(v[j].as_bool().unwrap_or(false)));
+                        .for_each(|v| b.append_option(at(v).map(|x| x.as_bool().unwrap_or(false))));
                     Arc::new(b.finish())
                 }
                 SweepKind::Str => {
                     let mut b = StringBuilder::new();
-                    values
-                        .iter()
-                        .for_each(|v| b.append_value(v[j].as_str().unwrap_or("")));
+                    values.iter().for_each(|v| {
+                        b.append_option(at(v).map(|x| x.as_str().unwrap_or("").to_string()))
+                    });
                     Arc::new(b.finish())
                 }
                 SweepKind::Json => {
                     let mut b = StringBuilder::new();
-                    values.iter().for_each(|v| b.append_value(canonical(&v[j])));
+                    values
+                        .iter()
+                        .for_each(|v| b.append_option(at(v).map(|x| canonical(&x))));
                     Arc::new(b.finish())
                 }
             }
@@ -128,98 +141,38 @@ pub struct RunRow {
     pub wall_seconds: f64,
     pub collisions: u64,
     pub trials: u64,
+    /// The run this one continued from its final state (a longer horizon of its point).
+    pub continued_from: Option<u64>,
 }
 
-pub fn runs_batch(plan: &Plan, cols: &[SweepColumn], rows: &[RunRow]) -> RecordBatch {
-    let mut fields = vec![
-        Field::new("run_id", DataType::UInt64, false),
-        Field::new("point_id", DataType::UInt32, false),
-        Field::new("replica", DataType::UInt32, false),
-        Field::new("seed", DataType::UInt64, false),
-    ];
-    fields.extend(sweep_fields(cols));
-    fields.extend([
-        Field::new("status", DataType::Utf8, false),
-        Field::new("reason", DataType::Utf8, true),
-        Field::new("t_failed", DataType::Float64, true),
-        Field::new("wall_seconds", DataType::Float64, false),
-        Field::new("collisions", DataType::UInt64, false),
-        Field::new("trials", DataType::UInt64, false),
-        Field::new("code_version", DataType::Utf8, false),
-    ]);
-    let mut arrays: Vec<ArrayRef> = vec![
-        Arc::new(
-            rows.iter()
-                .map(|r| r.run_id)
-                .collect::<arrow_array::UInt64Array>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.point_id)
-                .collect::<arrow_array::UInt32Array>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.replica)
-                .collect::<arrow_array::UInt32Array>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.seed)
-                .collect::<arrow_array::UInt64Array>(),
-        ),
-    ];
-    let values: Vec<&[Value]> = rows
-        .iter()
-        .map(|r| plan.point(r.point_id).values.as_slice())
-        .collect();
-    arrays.extend(sweep_arrays(cols, &values));
-    arrays.extend::<[ArrayRef; 7]>([
-        Arc::new(
-            rows.iter()
-                .map(|r| Some(r.status.as_str()))
-                .collect::<arrow_array::StringArray>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.reason.as_deref())
-                .collect::<arrow_array::StringArray>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.t_failed)
-                .collect::<arrow_array::Float64Array>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.wall_seconds)
-                .collect::<arrow_array::Float64Array>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.collisions)
-                .collect::<arrow_array::UInt64Array>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|r| r.trials)
-                .collect::<arrow_array::UInt64Array>(),
-        ),
-        Arc::new(
-            rows.iter()
-                .map(|_| Some(crate::CODE_VERSION))
-                .collect::<arrow_array::StringArray>(),
-        ),
-    ]);
-    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays)
-        .expect("runs batch matches its schema")
+/// `runs`: one row per finished run (its point's parameters are in `points`).
+pub fn runs_batch(rows: &[RunRow]) -> RecordBatch {
+    table(rows, |c| {
+        vec![
+            c.u64("run_id", |r| r.run_id),
+            c.u32("point_id", |r| r.point_id),
+            c.u32("replica", |r| r.replica),
+            c.u64("seed", |r| r.seed),
+            c.str("status", |r| &r.status),
+            c.opt_str("reason", |r| r.reason.as_deref()),
+            c.opt_f64("t_failed", |r| r.t_failed),
+            c.f64("wall_seconds", |r| r.wall_seconds),
+            c.u64("collisions", |r| r.collisions),
+            c.u64("trials", |r| r.trials),
+            c.opt_u64("continued_from", |r| r.continued_from),
+            c.const_str("code_version", crate::CODE_VERSION),
+        ]
+    })
 }
 
-/// The `points` table: one row per sweep point with its swept values and full params.
-pub fn points_batch(plan: &Plan, cols: &[SweepColumn], params_json: &[String]) -> RecordBatch {
+/// The `points` table: every registered point with its swept values (the latest manifest's
+/// keys), full params, and whether the latest manifest asks for it.
+pub fn points_batch(plan: &Plan) -> RecordBatch {
+    let cols = sweep_columns(plan);
     let mut fields = vec![Field::new("point_id", DataType::UInt32, false)];
-    fields.extend(sweep_fields(cols));
+    fields.extend(sweep_fields(&cols));
     fields.push(Field::new("params", DataType::Utf8, false));
+    fields.push(Field::new("in_manifest", DataType::Boolean, false));
     let mut arrays: Vec<ArrayRef> = vec![Arc::new(
         plan.points
             .iter()
@@ -227,12 +180,18 @@ pub fn points_batch(plan: &Plan, cols: &[SweepColumn], params_json: &[String]) -
             .collect::<arrow_array::UInt32Array>(),
     )];
     let values: Vec<&[Value]> = plan.points.iter().map(|p| p.values.as_slice()).collect();
-    arrays.extend(sweep_arrays(cols, &values));
+    arrays.extend(sweep_arrays(&cols, &values));
     arrays.push(Arc::new(
-        params_json
+        plan.points
             .iter()
-            .map(|s| Some(s.as_str()))
+            .map(|p| Some(canonical(&p.params.to_value())))
             .collect::<arrow_array::StringArray>(),
+    ));
+    arrays.push(Arc::new(
+        plan.points
+            .iter()
+            .map(|p| Some(p.current))
+            .collect::<arrow_array::BooleanArray>(),
     ));
     RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays)
         .expect("points batch matches its schema")

@@ -58,7 +58,7 @@ pub fn verify(c: &Campaign) -> Result<VerifyReport, String> {
             }
             files += 1;
             let checked = parquet_io::inspect(&path).and_then(|(info, _)| {
-                parquet_io::check_part(&path, &info, &table, Some(&c.manifest_json))?;
+                parquet_io::check_part(&path, &info, &table, Some(&c.identity))?;
                 Ok(info)
             });
             match checked {
@@ -69,7 +69,7 @@ pub fn verify(c: &Campaign) -> Result<VerifyReport, String> {
                 }
             }
             if table == tables::RUNS {
-                match parquet_io::read_campaign_file(&path, &table, &c.manifest_json) {
+                match parquet_io::read_campaign_file(&path, &table, &c.identity) {
                     Ok(batches) => {
                         for b in batches {
                             let Some(col) = b.column_by_name("run_id") else {

@@ -1,5 +1,7 @@
-//! One run on a worker thread: start or restore from its checkpoint, advance in bounded
-//! chunks, checkpoint every `checkpoint_every` and on interruption, report by events.
+//! One run on a worker thread: restore it from its checkpoint, or continue the run it
+//! extends from that run's final state, or start it; advance in bounded chunks, checkpoint
+//! every `checkpoint_every` and on interruption, keep its final state at the end, report by
+//! events.
 
 use std::sync::atomic::Ordering;
 use std::sync::mpsc::Sender;
@@ -28,6 +30,8 @@ pub struct RunResult {
     pub spec: RunSpec,
     pub end: RunEnd,
     pub wall_seconds: f64,
+    /// The run it continued from its final state (None: it ran from t = 0).
+    pub continued_from: Option<u64>,
 }
 
 type Tx = Sender<(Event, Option<RunResult>)>;
@@ -42,12 +46,30 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
     let warn = |tx: &mut Tx, message: String| {
         let _ = tx.send((Event::Warning { message }, None));
     };
-    let (engine, wall_before, resumed_from) = match restore(&dir, spec, params, tx, &warn) {
-        Some((e, wall, t)) => (e, wall, Some(t)),
-        None => match params.start(spec.seed) {
-            Ok(e) => (e, 0.0, None),
-            Err(reason) => return finish(tx, spec, RunEnd::Failed { reason, t: 0.0 }, 0.0, None),
+    let (engine, from) = match restore(&dir, spec, params, tx, &warn) {
+        Some((e, h)) => (
+            e,
+            From::Checkpoint {
+                wall: h.wall_seconds,
+                t: h.t,
+                continued_from: h.continued_from,
+            },
+        ),
+        None => match start(c, spec, params, tx, &warn) {
+            Ok(started) => started,
+            Err(reason) => {
+                return finish(tx, spec, RunEnd::Failed { reason, t: 0.0 }, 0.0, None, None)
+            }
         },
+    };
+    let (wall_before, resumed_from, continued_from) = match from {
+        From::Start => (0.0, None, None),
+        From::Checkpoint {
+            wall,
+            t,
+            continued_from,
+        } => (wall, Some(t), continued_from),
+        From::Final { wall, t } => (wall, Some(t), spec.continues),
     };
     let _ = tx.send((
         Event::Started {
@@ -64,6 +86,7 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
         started,
         wall_before,
         last_ckpt_t: resumed_from,
+        continued_from,
     };
     match run.advance_to_end(opts, tx) {
         Some(RunEnd::Interrupted) => {
@@ -74,10 +97,22 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
                 None,
             ));
         }
-        Some(end) => finish(tx, spec, end, run.wall(), None),
+        Some(end) => finish(tx, spec, end, run.wall(), None, continued_from),
         None => {
             let t = run.engine.time();
             let wall = run.wall();
+            if opts.keep_final_states {
+                if let Err(e) = run.keep_final(c) {
+                    warn(
+                        tx,
+                        format!(
+                            "run {}: final state not kept ({e}); a longer run of its point will \
+                             run it again from t = 0",
+                            spec.run_id
+                        ),
+                    );
+                }
+            }
             let ids = RunIds {
                 run_id: spec.run_id,
                 point_id: spec.point_id,
@@ -88,9 +123,68 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
                 RunEnd::Done(run.engine.finish(ids)),
                 wall,
                 Some(t),
+                continued_from,
             )
         }
     }
+}
+
+/// Where a run's engine came from.
+enum From {
+    /// t = 0.
+    Start,
+    /// Its own checkpoint: the wall time spent and the simulated time reached before, and
+    /// the run it had continued.
+    Checkpoint {
+        wall: f64,
+        t: f64,
+        continued_from: Option<u64>,
+    },
+    /// The final state of the run it continues: that run's wall time and end.
+    Final { wall: f64, t: f64 },
+}
+
+/// A run that has no checkpoint: it continues the run `spec.continues` from its final state
+/// when that exists and can be continued (else it starts from t = 0, with a warning), or it
+/// starts from t = 0.
+fn start(
+    c: &Campaign,
+    spec: &RunSpec,
+    params: &ModelParams,
+    tx: &mut Tx,
+    warn: &dyn Fn(&mut Tx, String),
+) -> Result<(Engine, From), String> {
+    if let Some(old) = spec.continues {
+        let why = match checkpoint::load_final(&c.finals_dir(), old, spec.seed) {
+            Ok(Some((h, payload))) if h.state_format == params.state_format() => {
+                match params.continue_from(&payload) {
+                    Ok(e) => {
+                        let from = From::Final {
+                            wall: h.wall_seconds,
+                            t: h.t,
+                        };
+                        return Ok((e, from));
+                    }
+                    Err(e) => e,
+                }
+            }
+            Ok(Some((h, _))) => format!(
+                "its state format is {:?}, this granular writes {:?}",
+                h.state_format,
+                params.state_format()
+            ),
+            Ok(None) => "it has no final state".into(),
+            Err(e) => e,
+        };
+        warn(
+            tx,
+            format!(
+                "run {}: cannot continue run {old} ({why}); running it from t = 0",
+                spec.run_id
+            ),
+        );
+    }
+    Ok((params.start(spec.seed)?, From::Start))
 }
 
 /// A run on its worker: the engine and what its checkpoints need.
@@ -104,11 +198,30 @@ struct Running<'a> {
     wall_before: f64,
     /// Simulated time of the last checkpoint written (or resumed from).
     last_ckpt_t: Option<f64>,
+    /// The run it continued from its final state.
+    continued_from: Option<u64>,
 }
 
 impl Running<'_> {
     fn wall(&self) -> f64 {
         self.wall_before + self.started.elapsed().as_secs_f64()
+    }
+
+    /// Write the finished run's final state, if its model keeps one.
+    fn keep_final(&mut self, c: &Campaign) -> Result<(), String> {
+        let Some(payload) = self.engine.final_state() else {
+            return Ok(());
+        };
+        let header = CheckpointHeader {
+            run_id: self.spec.run_id,
+            seed: self.spec.seed,
+            code_version: CODE_VERSION.into(),
+            state_format: self.params.state_format().into(),
+            wall_seconds: self.wall(),
+            t: self.engine.time(),
+            continued_from: self.continued_from,
+        };
+        checkpoint::write_final(&c.finals_dir(), &header, &payload).map_err(|e| e.to_string())
     }
 
     fn save(&mut self) -> Result<(), String> {
@@ -119,6 +232,7 @@ impl Running<'_> {
             state_format: self.params.state_format().into(),
             wall_seconds: self.wall(),
             t: self.engine.time(),
+            continued_from: self.continued_from,
         };
         let payload = self.engine.state_bytes();
         checkpoint::write(self.dir, &header, &payload).map_err(|e| e.to_string())?;
@@ -186,7 +300,7 @@ fn restore(
     params: &ModelParams,
     tx: &mut Tx,
     warn: &dyn Fn(&mut Tx, String),
-) -> Option<(Engine, f64, f64)> {
+) -> Option<(Engine, CheckpointHeader)> {
     let loaded = match checkpoint::load(dir, spec.run_id, spec.seed) {
         Ok(Some(loaded)) => loaded,
         Ok(None) => return None,
@@ -218,7 +332,7 @@ fn restore(
         ))
     };
     match restored {
-        Ok(e) => Some((e, loaded.header.wall_seconds, loaded.header.t)),
+        Ok(e) => Some((e, loaded.header)),
         Err(e) => {
             warn(
                 tx,
@@ -232,7 +346,14 @@ fn restore(
     }
 }
 
-fn finish(tx: &mut Tx, spec: &RunSpec, end: RunEnd, wall_seconds: f64, t: Option<f64>) {
+fn finish(
+    tx: &mut Tx,
+    spec: &RunSpec,
+    end: RunEnd,
+    wall_seconds: f64,
+    t: Option<f64>,
+    continued_from: Option<u64>,
+) {
     let (status, reason, t) = match &end {
         RunEnd::Done(_) => (RunStatus::Done, None, t.unwrap_or(0.0)),
         RunEnd::Failed { reason, t } => (RunStatus::Failed, Some(reason.clone()), *t),
@@ -252,6 +373,7 @@ fn finish(tx: &mut Tx, spec: &RunSpec, end: RunEnd, wall_seconds: f64, t: Option
             spec: *spec,
             end,
             wall_seconds,
+            continued_from,
         }),
     ));
 }

@@ -9,13 +9,12 @@ use std::time::{Duration, Instant};
 use arrow_array::RecordBatch;
 
 use super::ledger::{self, Commit, CommittedRun, RunStatus};
-use super::plan::canonical;
-use super::tables::{self, RunRow, SweepColumn};
+use super::tables::{self, RunRow};
 use super::worker::{RunEnd, RunResult};
 use super::Campaign;
 use crate::fsutil;
 use crate::store::parquet_io::{self, StoreError};
-use crate::store::{checkpoint, FORMAT_VERSION};
+use crate::store::{checkpoint, FORMAT_VERSION, LEDGER_FORMAT};
 
 /// Flush when this many rows are buffered, whatever the time.
 const FLUSH_ROWS: usize = 1_000_000;
@@ -24,7 +23,6 @@ pub struct Writer<'c> {
     c: &'c Campaign,
     tag: String,
     seq: u64,
-    cols: Vec<SweepColumn>,
     /// The campaign's tables, in the order parts are written.
     order: Vec<&'static str>,
     runs: Vec<RunRow>,
@@ -47,7 +45,6 @@ impl<'c> Writer<'c> {
             c,
             tag: tag.to_string(),
             seq: ledger::next_seq(&c.root, tag),
-            cols: tables::sweep_columns(&c.plan),
             order,
             runs: Vec::new(),
             rows: BTreeMap::new(),
@@ -56,21 +53,25 @@ impl<'c> Writer<'c> {
         })
     }
 
-    /// Write the `points` table once (it depends only on the manifest).
+    /// Write the `points` table unless it is that of the latest manifest (it depends only on
+    /// the registry and the latest manifest; rewritten whole, atomically, when they change).
     pub fn ensure_points(&self) -> Result<(), StoreError> {
         let data = self.c.data();
-        if data.has(tables::POINTS, "points.parquet") {
+        let path = data.dir(tables::POINTS).join("points.parquet");
+        let current = path.exists()
+            && parquet_io::inspect(&path).ok().is_some_and(|(info, _)| {
+                info.format_version == Some(FORMAT_VERSION)
+                    && info.manifest.as_deref() == Some(self.c.manifest_json.as_str())
+                    && info.rows == self.c.plan.points.len() as u64
+            });
+        if current {
             return Ok(());
         }
-        let params: Vec<String> = self
-            .c
-            .plan
-            .points
-            .iter()
-            .map(|p| canonical(&p.params.to_value()))
-            .collect();
-        let batch = tables::points_batch(&self.c.plan, &self.cols, &params);
-        data.write_whole(tables::POINTS, "points.parquet", &batch)
+        data.write_whole(
+            tables::POINTS,
+            "points.parquet",
+            &tables::points_batch(&self.c.plan),
+        )
     }
 
     /// Write the model's kinetic-theory tables once (they depend only on the manifest).
@@ -79,6 +80,7 @@ impl<'c> Writer<'c> {
     }
 
     pub fn add(&mut self, r: RunResult) {
+        let continued_from = r.continued_from;
         let (status, reason, t_failed, collisions, trials) = match r.end {
             RunEnd::Done(out) => {
                 for (table, batch) in out.tables {
@@ -104,6 +106,7 @@ impl<'c> Writer<'c> {
             wall_seconds: r.wall_seconds,
             collisions,
             trials,
+            continued_from,
         });
         self.since.get_or_insert_with(Instant::now);
     }
@@ -121,10 +124,7 @@ impl<'c> Writer<'c> {
 
     /// The buffered parts, `runs` first, then the model's tables in their order.
     fn batches(&mut self) -> Vec<(&'static str, Vec<RecordBatch>)> {
-        let mut out = vec![(
-            tables::RUNS,
-            vec![tables::runs_batch(&self.c.plan, &self.cols, &self.runs)],
-        )];
+        let mut out = vec![(tables::RUNS, vec![tables::runs_batch(&self.runs)])];
         for t in &self.order {
             if let Some(b) = self.rows.remove(t) {
                 out.push((t, b));
@@ -149,8 +149,7 @@ impl<'c> Writer<'c> {
         for (table, parts) in &batches {
             let (rel, abs) = self.part(table);
             let pending = ledger::pending_path(&abs);
-            if let Err(e) = parquet_io::write_batches(&pending, parts, table, &self.c.manifest_json)
-            {
+            if let Err(e) = parquet_io::write_batches(&pending, parts, table, self.c.stamp()) {
                 for p in &written {
                     let _ = std::fs::remove_file(p);
                 }
@@ -161,7 +160,7 @@ impl<'c> Writer<'c> {
         }
         // 2. the commit record (the commit point)
         let commit = Commit {
-            format_version: FORMAT_VERSION,
+            format_version: LEDGER_FORMAT,
             shard: self.tag.clone(),
             seq: self.seq,
             runs: self
@@ -196,10 +195,15 @@ impl<'c> Writer<'c> {
             let d = self.c.root.join("tables").join(table);
             fsutil::sync_dir(&d).map_err(|e| StoreError::io(&d, e))?;
         }
-        // 4. checkpoints of committed runs are no longer needed
+        // 4. checkpoints of committed runs are no longer needed, nor the final states of the
+        //    runs they continued (their own replace them)
         let dir = self.c.checkpoint_dir();
+        let finals = self.c.finals_dir();
         for r in &self.runs {
             checkpoint::remove(&dir, r.run_id);
+            if let (Some(old), "done") = (r.continued_from, r.status.as_str()) {
+                checkpoint::remove_final(&finals, old);
+            }
         }
         let n = self.runs.len();
         let seq = self.seq;

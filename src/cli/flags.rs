@@ -52,6 +52,10 @@ pub struct Execution {
     #[arg(long, value_name = "SECONDS", default_value_t = DEFAULT_FLUSH_EVERY,
           allow_hyphen_values = true, value_parser = flush_seconds)]
     pub flush_every: f64,
+    /// Keep no final states of finished runs (`finals/`): a longer `t_end` then runs them again
+    /// from t = 0 instead of continuing them.
+    #[arg(long)]
+    pub no_final_states: bool,
 }
 
 /// `--checkpoint-every`, the one declaration for every command that has it.

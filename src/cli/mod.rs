@@ -10,6 +10,7 @@
 mod analyze;
 mod compact;
 mod flags;
+mod plan;
 mod plot;
 mod reporter;
 mod run;
@@ -18,6 +19,7 @@ mod slurm_task;
 mod status;
 mod submit;
 mod theory;
+mod upgrade;
 mod validate;
 mod verify;
 
@@ -50,8 +52,12 @@ enum LogFormat {
 enum Command {
     /// Check a manifest; print every error with its JSON path (exit 2 if any).
     Validate(validate::Args),
-    /// Run a campaign into a directory (continues it if the directory holds the same one).
+    /// Run a campaign into a directory: a new one, or more of the campaign there (a grown
+    /// manifest: more replicas, sweep values, longer runs; finished runs are never redone).
     Run(run::RunArgs),
+    /// What running a manifest into a directory would do (new points and runs, continued and
+    /// kept runs, an estimate of the cost); writes nothing.
+    Plan(plan::Args),
     /// Continue a campaign; finished runs are never redone.
     Resume(run::ResumeArgs),
     /// Done / running / pending / failed runs, per point, across all shards.
@@ -75,6 +81,8 @@ enum Command {
     Verify(verify::Args),
     /// Draw the standard figures (PNG and SVG) of a campaign's summary tables.
     Plot(plot::Args),
+    /// Upgrade a campaign directory written by an earlier granular, in place (logged).
+    Upgrade(upgrade::Args),
     /// Fit the thesis's observables of an rfm campaign (xi_m, zeta_m, D_f, alpha, (5.32),
     /// (4.25), ...) into the table analysis_fits, the figure data analysis_curves and figures.
     /// Uses the finished runs (warns if some are missing).
@@ -98,6 +106,8 @@ pub fn main() -> i32 {
     match cli.command {
         Command::Validate(a) => validate::run(a),
         Command::Run(a) => run::run(a),
+        Command::Plan(a) => plan::run(a),
+        Command::Upgrade(a) => upgrade::run(a),
         Command::Resume(a) => run::resume(a),
         Command::Status(a) => status::run(a),
         Command::Schema(a) => schema::run(a),

@@ -19,6 +19,9 @@ pub struct RunArgs {
     /// Campaign directory.
     #[arg(long)]
     out: PathBuf,
+    /// Print what would run (as `granular plan`) and write nothing.
+    #[arg(long)]
+    dry_run: bool,
     #[command(flatten)]
     runtime: Runtime,
 }
@@ -32,9 +35,26 @@ pub struct ResumeArgs {
 
 /// `run`: create (or continue) the campaign, then execute it.
 pub fn run(a: RunArgs) -> i32 {
+    if a.dry_run {
+        return super::plan::show(&a.manifest, &a.out, false);
+    }
     let opts = options(&a.runtime.exec, 0, a.runtime.shard);
-    match Campaign::create_or_open(&a.manifest, &a.out) {
-        Ok(c) => execute(&c, opts, a.runtime.quiet),
+    let existed = a.out.join("campaign.json").exists();
+    match Campaign::prepare(&a.manifest, &a.out, true) {
+        Ok((c, growth)) => {
+            if existed && !growth.is_empty() {
+                tracing::info!(
+                    new_points = growth.new_points.len(),
+                    new_runs = growth.new_runs.len(),
+                    continued = growth.continued.len(),
+                    "campaign grown (see `granular status`)"
+                );
+            }
+            for n in &growth.notes {
+                tracing::warn!("{n}");
+            }
+            execute(&c, opts, a.runtime.quiet)
+        }
         Err(e) => report_error(e),
     }
 }
@@ -56,6 +76,7 @@ pub(super) fn options(exec: &Execution, default_threads: usize, shard: Shard) ->
         shard,
         interrupt: Arc::new(AtomicU8::new(0)),
         flush_every: exec.flush_every(),
+        keep_final_states: !exec.no_final_states,
     }
 }
 

@@ -48,6 +48,14 @@ fn write_text(out: &mut impl Write, s: &CampaignStatus) -> std::io::Result<()> {
         s.counts.pending,
         s.counts.checkpointed
     )?;
+    if s.manifests > 1 || s.current_runs != s.runs {
+        let c = &s.current;
+        writeln!(
+            out,
+            "  latest manifest (of {} accepted): {} runs: {} done, {} failed, {} running, {} pending",
+            s.manifests, s.current_runs, c.done, c.failed, c.running, c.pending
+        )?;
+    }
     for l in &s.live_shards {
         writeln!(out, "  live shard {l}")?;
     }
@@ -71,11 +79,22 @@ fn write_text(out: &mut impl Write, s: &CampaignStatus) -> std::io::Result<()> {
         )?;
     }
     for p in &s.points {
-        writeln!(
+        write!(
             out,
             "  point {:>4} {:<40} done {:>3}  failed {:>3}  running {:>3}  pending {:>3}",
             p.point_id, p.point, p.counts.done, p.counts.failed, p.counts.running, p.counts.pending
         )?;
+        if !p.in_manifest {
+            write!(out, "  (not in the latest manifest)")?;
+        }
+        if p.counts.dropped > 0 {
+            write!(
+                out,
+                "  ({} unfinished, no longer asked for)",
+                p.counts.dropped
+            )?;
+        }
+        writeln!(out)?;
     }
     Ok(())
 }

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use super::flags::{self, CheckpointEvery};
 use super::{fail, report_error};
 use crate::campaign::slurm::{self, SlurmOptions};
-use crate::campaign::{Campaign, CampaignError};
+use crate::campaign::Campaign;
 use crate::exit_codes;
 
 #[derive(clap::Args)]
@@ -65,19 +65,23 @@ pub fn run(a: Args) -> i32 {
 fn submit(a: &Args) -> Result<i32, Stop> {
     let binary = binary()?;
     // The campaign (created unless --dry-run) and its absolute directory.
-    let (c, root) = if a.missing {
-        existing_campaign(a)?
+    // A grown manifest of a submitted campaign resubmits its new and longer runs (as
+    // `--missing` does the unfinished ones).
+    let (c, root, grown) = if a.missing {
+        let (c, root) = existing_campaign(a)?;
+        (c, root, false)
     } else {
         new_campaign(a)?
     };
+    let resubmit = a.missing || grown;
     let previous = slurm::read_record(&root).map_err(|e| fail(exit_codes::DIRECTORY_REFUSED, e))?;
-    let options = options(a, previous.map(|r| r.options));
+    let options = options(a, resubmit, previous.map(|r| r.options));
     let (max_array, note) = slurm::max_array_size();
     if let Some(n) = note {
         tracing::info!("{n}");
     }
     let plan =
-        slurm::plan(&c, &root, options, a.missing, &binary, max_array).map_err(report_error)?;
+        slurm::plan(&c, &root, options, resubmit, &binary, max_array).map_err(report_error)?;
     for n in &plan.notes {
         tracing::warn!("{n}");
     }
@@ -121,15 +125,17 @@ fn existing_campaign(a: &Args) -> Result<(Campaign, PathBuf), Stop> {
     Ok((c, root))
 }
 
-/// A first submission: the campaign of manifest `target` in `--out` (created, or only
-/// planned in memory with `--dry-run`).
-fn new_campaign(a: &Args) -> Result<(Campaign, PathBuf), Stop> {
+/// A submission of manifest `target` in `--out`: a first one, or a grown manifest of a
+/// campaign submitted before (then true); the campaign is created or grown, or only planned in
+/// memory with `--dry-run`.
+fn new_campaign(a: &Args) -> Result<(Campaign, PathBuf, bool), Stop> {
     let Some(out) = a.out.clone() else {
         return Err(fail(
             exit_codes::INVALID_INPUT,
             "a first submission needs --out DIR (or use --missing DIR)",
         ));
     };
+    let submitted = out.join("slurm").join("submission.json").exists();
     let missing_flags: Vec<&str> = [
         ("--time", a.time.is_none()),
         ("--tasks", a.tasks.is_none()),
@@ -138,39 +144,27 @@ fn new_campaign(a: &Args) -> Result<(Campaign, PathBuf), Stop> {
     .into_iter()
     .filter_map(|(flag, absent)| absent.then_some(flag))
     .collect();
-    if !missing_flags.is_empty() {
+    if !missing_flags.is_empty() && !submitted {
         return Err(fail(
             exit_codes::INVALID_INPUT,
             format!("a first submission needs {}", missing_flags.join(", ")),
         ));
     }
-    if a.dry_run {
-        return planned_campaign(&a.target, out);
-    }
-    let c = Campaign::create_or_open(&a.target, &out).map_err(report_error)?;
-    let root = out.canonicalize().unwrap_or(out);
-    Ok((c, root))
-}
-
-/// The campaign of `manifest` in `out`, in memory only (nothing is written).
-fn planned_campaign(manifest: &Path, out: PathBuf) -> Result<(Campaign, PathBuf), Stop> {
-    let (manifest, plan) = crate::campaign::plan::load(manifest)
-        .map_err(|e| report_error(CampaignError::Manifest(e)))?;
-    let value = serde_json::to_value(&manifest).expect("manifest serialises");
-    let c = Campaign {
-        root: out.clone(),
-        manifest,
-        plan,
-        manifest_json: crate::campaign::plan::canonical(&value),
+    let existed = out.join("campaign.json").exists();
+    let (c, growth) = Campaign::prepare(&a.target, &out, !a.dry_run).map_err(report_error)?;
+    let root = if a.dry_run {
+        std::path::absolute(&out).unwrap_or(out)
+    } else {
+        out.canonicalize().unwrap_or(out)
     };
-    let root = std::path::absolute(&out).unwrap_or(out);
-    Ok((c, root))
+    Ok((c, root, existed && submitted && !growth.is_empty()))
 }
 
-/// The submission's options: the flags of a first submission; with `--missing`, the
-/// previous submission's options with the flags given overriding them (None without one).
-fn options(a: &Args, previous: Option<SlurmOptions>) -> Option<SlurmOptions> {
-    if a.missing {
+/// The submission's options: the flags of a first submission; for a resubmission (`--missing`,
+/// a grown manifest), the previous submission's options with the flags given overriding them
+/// (None without one).
+fn options(a: &Args, resubmit: bool, previous: Option<SlurmOptions>) -> Option<SlurmOptions> {
+    if resubmit {
         return previous.map(|mut o| {
             if let Some(t) = a.tasks {
                 o.throttle = t;

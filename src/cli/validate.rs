@@ -14,12 +14,12 @@ pub fn run(a: Args) -> i32 {
     match crate::campaign::plan::load(&a.manifest) {
         Ok((m, plan)) => {
             println!(
-                "{}: valid: campaign {:?}, model {}, {} points x {} replicas = {} runs",
+                "{}: valid: campaign {:?}, model {}, {} points x {} = {} runs",
                 a.manifest.display(),
                 m.name,
                 m.model.as_str(),
                 plan.points.len(),
-                plan.replicas,
+                plan.runs_per_point_text(),
                 plan.n_runs()
             );
             // Valid anywhere, but say so if this machine cannot run it (`run` refuses it).

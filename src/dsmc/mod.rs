@@ -493,8 +493,8 @@ impl DsmcSim {
     /// then the run goes on (see [`continuable`]; the time-averaged MSD, recorded on a grid
     /// that spans [0, t_end], cannot be continued).
     pub fn continue_from(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
-        let f: FinalState = postcard::from_bytes(bytes)
-            .map_err(|e| format!("final state does not decode: {e}"))?;
+        let f: FinalState =
+            postcard::from_bytes(bytes).map_err(|e| format!("final state does not decode: {e}"))?;
         if sys.tamsd.is_some() {
             return Err("the time-averaged MSD is recorded on a grid that spans [0, t_end]".into());
         }
@@ -529,13 +529,9 @@ impl DsmcSim {
         sim.stop_known = true;
         sim.update_next_event();
         // Apply the stop now, so that no checkpoint is taken with it pending.
-        match f.stop {
-            Some(stop) => {
-                sim.apply_stop(stop).map_err(|e| {
-                    format!("continuing at t = {}: {}", e.t, e.reason)
-                })?;
-            }
-            None => {}
+        if let Some(stop) = f.stop {
+            sim.apply_stop(stop)
+                .map_err(|e| format!("continuing at t = {}: {}", e.t, e.reason))?;
         }
         Ok(sim)
     }
@@ -970,7 +966,7 @@ impl EpsModel {
 /// exactly `old` (the decisions of the shorter run, which depend on its next output time, are
 /// then those of the longer one). Err says why not.
 pub fn continuable(t_end: f64, old: &[f64], new_end: f64, new: &[f64]) -> Result<(), String> {
-    if !(new_end > t_end) {
+    if new_end <= t_end || new_end.is_nan() {
         return Err(format!("t_end {new_end} is not past the run's end {t_end}"));
     }
     let differs = |j: usize| new.get(j).map(|x| x.to_bits()) != Some(old[j].to_bits());

@@ -62,16 +62,14 @@ fn continued_runs_equal_direct_runs() {
                 };
                 let mut d1 = direct(t1);
                 let fin1 = d1.final_state().expect("a finished run has a final state");
-                let mut c2 =
-                    DsmcSim::continue_from(sys(t2), &fin1).unwrap();
+                let mut c2 = DsmcSim::continue_from(sys(t2), &fin1).unwrap();
                 run(&mut c2, 977);
                 let mut d2 = direct(t2);
                 let what = format!("{method:?} msd={msd} visco={visco} {t1} -> {t2}");
                 assert!(c2.state_bytes() == d2.state_bytes(), "{what}");
                 let fin2 = c2.final_state().unwrap();
                 assert!(fin2 == d2.final_state().unwrap(), "{what}: final states");
-                let mut c3 =
-                    DsmcSim::continue_from(sys(t3), &fin2).unwrap();
+                let mut c3 = DsmcSim::continue_from(sys(t3), &fin2).unwrap();
                 run(&mut c3, 1 << 20);
                 let mut d3 = direct(t3);
                 assert!(d3.st.rows.len() > d1.st.rows.len());
@@ -108,10 +106,22 @@ fn continuation_refusals() {
     let mut d = DsmcSim::new(system(Method::LowRank, false, false, 7.0, TIMES), 3);
     run(&mut d, u64::MAX);
     let fin = d.final_state().unwrap();
-    let other_grid = system(Method::LowRank, false, false, 20.0, &[0.0, 0.5, 1.0, 3.5, 7.0]);
+    let other_grid = system(
+        Method::LowRank,
+        false,
+        false,
+        20.0,
+        &[0.0, 0.5, 1.0, 3.5, 7.0],
+    );
     let err = DsmcSim::continue_from(other_grid, &fin).err().unwrap();
     assert!(err.contains("output 3"), "{err}");
-    let no_old_end = system(Method::LowRank, false, false, 20.0, &[0.0, 0.5, 1.0, 3.0, 12.0]);
+    let no_old_end = system(
+        Method::LowRank,
+        false,
+        false,
+        20.0,
+        &[0.0, 0.5, 1.0, 3.0, 12.0],
+    );
     let err = DsmcSim::continue_from(no_old_end, &fin).err().unwrap();
     assert!(err.contains("listing 7"), "{err}");
     let same = system(Method::LowRank, false, false, 7.0, TIMES);

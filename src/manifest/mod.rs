@@ -30,10 +30,15 @@ pub struct Manifest {
     pub model: ModelKind,
     /// Campaign seed; every run's seed derives from it and the run's identity.
     pub seed: u64,
-    /// Independent runs (seeds) per sweep point.
-    #[serde(default = "default_replicas")]
-    #[schemars(range(min = 1))]
-    pub replicas: u32,
+    /// Independent runs (seeds) per sweep point (default 1; not with `seeds`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u32", range(min = 1))]
+    pub replicas: Option<u32>,
+    /// The runs' seeds, given: each point runs one replica per listed seed (in place of
+    /// `replicas`; a run of any campaign's `runs` table can so be run again bit for bit).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Vec<u64>", length(min = 1))]
+    pub seeds: Option<Vec<u64>>,
     /// Model parameters (see the model's parameter schema).
     pub params: Map<String, Value>,
     /// Sweep: dotted paths into `params` -> lists of values. The campaign is the cartesian
@@ -48,8 +53,31 @@ pub struct Manifest {
 #[allow(dead_code)]
 struct SweepValues(#[schemars(length(min = 1))] Vec<Value>);
 
-fn default_replicas() -> u32 {
-    1
+impl Manifest {
+    /// The runs each point asks for: `replicas` (default 1) or the given `seeds`.
+    pub fn runs_per_point(&self) -> RunsPerPoint {
+        match &self.seeds {
+            Some(s) => RunsPerPoint::Seeds(s.clone()),
+            None => RunsPerPoint::Replicas(self.replicas.unwrap_or(1)),
+        }
+    }
+
+    /// The campaign's identity: what a campaign directory keeps for ever (name, model, seed),
+    /// as canonical JSON; every table file carries it.
+    pub fn identity(&self) -> String {
+        sweep::canonical(&serde_json::json!({
+            "name": self.name,
+            "model": self.model.as_str(),
+            "seed": self.seed,
+        }))
+    }
+}
+
+/// The runs of each point: a number of replicas with derived seeds, or the given seeds.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum RunsPerPoint {
+    Replicas(u32),
+    Seeds(Vec<u64>),
 }
 
 /// The manifest's JSON Schema (draft 2020-12), generated from the Rust types: the envelope

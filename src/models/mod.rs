@@ -76,6 +76,11 @@ pub trait Model {
     /// a random chunk).
     const EXAMPLE: &'static str;
 
+    /// The top-level `params` keys that decide only how long a run goes on or what it reports
+    /// on its way, never its trajectory: they are left out of the run's seed, so a longer run
+    /// of the same point has the seeds of the shorter one and can continue it. None by default.
+    const HORIZON: &'static [&'static str] = &[];
+
     /// The cross-field rules the JSON Schema cannot express; errors at JSON pointers below
     /// `path`.
     fn check(p: &Self::Params, path: &str, errors: &mut ParamErrors);
@@ -86,6 +91,21 @@ pub trait Model {
     fn restore(p: &Self::Params, state: &[u8]) -> Result<Self::Sim, String>;
     /// The rows of a finished run.
     fn finish(sim: Self::Sim, ids: RunIds) -> RunRows;
+    /// What becomes of the finished runs of `old` when a manifest asks for `new`, two params
+    /// that differ only in `HORIZON` keys.
+    fn carry_over(_old: &Self::Params, _new: &Self::Params) -> CarryOver {
+        CarryOver::Rerun("the model cannot continue a finished run".into())
+    }
+    /// The state a finished run keeps so that it can be continued (`None`: it cannot be). Its
+    /// layout belongs to `STATE_FORMAT`: bump that when it changes.
+    fn final_state(_sim: &mut Self::Sim) -> Option<Vec<u8>> {
+        None
+    }
+    /// A run of `new` continuing, bit for bit as a run made straight to the new end, from a
+    /// finished run's `final_state` (of a point that `carry_over` said `Continue` for).
+    fn continue_from(_new: &Self::Params, _state: &[u8]) -> Result<Self::Sim, String> {
+        Err("the model cannot continue a finished run".into())
+    }
     /// Every table a campaign of these points has (raw, summaries, theory), in the order the
     /// parts of a commit are written.
     fn tables(points: &[&Self::Params]) -> Vec<&'static str>;
@@ -122,6 +142,18 @@ pub trait Simulation: Send {
     fn time(&self) -> f64;
     /// Everything the run needs to continue bit for bit.
     fn state_bytes(&mut self) -> Vec<u8>;
+}
+
+/// What becomes of the finished runs of a point when the manifest asks for the same point with
+/// another horizon (`Model::HORIZON`: `t_end`, `duration`, ...).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CarryOver {
+    /// Longer: each run continues from its final state to the new end.
+    Continue,
+    /// Longer, but the runs cannot be continued (why): they are run again from the start.
+    Rerun(String),
+    /// Shorter than the runs already made (why): refused.
+    Shorter(String),
 }
 
 /// The identity of a run in its rows.
@@ -343,6 +375,13 @@ macro_rules! models {
                 }
             }
 
+            /// See [`Model::HORIZON`].
+            pub fn horizon(self) -> &'static [&'static str] {
+                match self {
+                    $(ModelKind::$variant => <$model as Model>::HORIZON,)+
+                }
+            }
+
             /// The example params of the model (see [`Model::EXAMPLE`]).
             pub fn example(self) -> &'static str {
                 match self {
@@ -388,6 +427,26 @@ macro_rules! models {
                 }
             }
 
+            /// See [`Model::carry_over`] (params of another model: a rerun).
+            pub fn carry_over(&self, new: &ModelParams) -> CarryOver {
+                match (self, new) {
+                    $((ModelParams::$variant(old), ModelParams::$variant(new)) => {
+                        <$model as Model>::carry_over(old, new)
+                    })+
+                    #[allow(unreachable_patterns)]
+                    _ => CarryOver::Rerun("another model".into()),
+                }
+            }
+
+            /// See [`Model::continue_from`].
+            pub fn continue_from(&self, state: &[u8]) -> Result<Engine, String> {
+                match self {
+                    $(ModelParams::$variant(p) => Ok(Engine::$variant(Box::new(
+                        <$model as Model>::continue_from(p, state)?,
+                    ))),)+
+                }
+            }
+
             pub fn restore(&self, state: &[u8]) -> Result<Engine, String> {
                 match self {
                     $(ModelParams::$variant(p) => {
@@ -407,6 +466,13 @@ macro_rules! models {
             fn sim_mut(&mut self) -> &mut dyn Simulation {
                 match self {
                     $(Engine::$variant(s) => s.as_mut(),)+
+                }
+            }
+
+            /// See [`Model::final_state`].
+            pub fn final_state(&mut self) -> Option<Vec<u8>> {
+                match self {
+                    $(Engine::$variant(s) => <$model as Model>::final_state(s),)+
                 }
             }
 

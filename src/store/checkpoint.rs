@@ -1,5 +1,6 @@
 //! Checkpoints of running simulations: versioned, checksummed, written atomically; the
-//! previous good checkpoint is kept as `.prev` until the next one is durable.
+//! previous good checkpoint is kept as `.prev` until the next one is durable. Final states of
+//! finished runs (`run-<id>.final`, what a longer run continues from) share the container.
 //!
 //! Layout: magic `GRNLCKPT`, format (u32 LE), header length (u32 LE), payload length (u64 LE),
 //! CRC-32 of header + payload (u32 LE), header (JSON), payload (the simulator's state).
@@ -9,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::FORMAT_VERSION;
+use super::CHECKPOINT_FORMAT;
 use crate::fsutil;
 
 const MAGIC: &[u8; 8] = b"GRNLCKPT";
@@ -26,6 +27,9 @@ pub struct CheckpointHeader {
     pub wall_seconds: f64,
     /// Simulated time reached.
     pub t: f64,
+    /// The run this one continues from its final state (absent: it ran from t = 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub continued_from: Option<u64>,
 }
 
 pub fn path(dir: &Path, run_id: u64) -> PathBuf {
@@ -43,7 +47,7 @@ pub fn encode(header: &CheckpointHeader, payload: &[u8]) -> Vec<u8> {
     crc.update(payload);
     let mut out = Vec::with_capacity(28 + h.len() + payload.len());
     out.extend_from_slice(MAGIC);
-    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    out.extend_from_slice(&CHECKPOINT_FORMAT.to_le_bytes());
     out.extend_from_slice(&(h.len() as u32).to_le_bytes());
     out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
     out.extend_from_slice(&crc.finalize().to_le_bytes());
@@ -58,9 +62,9 @@ pub fn decode(bytes: &[u8]) -> Result<(CheckpointHeader, &[u8]), String> {
     }
     let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().expect("4 bytes"));
     let format = u32_at(8);
-    if format != FORMAT_VERSION {
+    if format != CHECKPOINT_FORMAT {
         return Err(format!(
-            "checkpoint format {format}, this granular reads {FORMAT_VERSION}"
+            "checkpoint format {format}, this granular reads {CHECKPOINT_FORMAT}"
         ));
     }
     let hlen = u32_at(12) as usize;
@@ -154,6 +158,48 @@ pub fn load(dir: &Path, run_id: u64, seed: u64) -> Result<Option<Loaded>, Vec<St
     }
 }
 
+/// The final state of run `run_id` in `dir`.
+pub fn final_path(dir: &Path, run_id: u64) -> PathBuf {
+    dir.join(format!("run-{run_id:010}.final"))
+}
+
+/// Write a finished run's final state atomically (the directory is created if needed).
+pub fn write_final(dir: &Path, header: &CheckpointHeader, payload: &[u8]) -> std::io::Result<()> {
+    if !dir.is_dir() {
+        fsutil::create_dir_durable(dir)?;
+    }
+    fsutil::write_atomic(&final_path(dir, header.run_id), &encode(header, payload))
+}
+
+/// A finished run's final state; `Ok(None)` if there is none, Err if it is unusable (why).
+pub fn load_final(
+    dir: &Path,
+    run_id: u64,
+    seed: u64,
+) -> Result<Option<(CheckpointHeader, Vec<u8>)>, String> {
+    let p = final_path(dir, run_id);
+    let bytes = match fs::read(&p) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("{}: {e}", p.display())),
+    };
+    let (header, payload) = decode(&bytes).map_err(|e| format!("{}: {e}", p.display()))?;
+    if header.run_id != run_id || header.seed != seed {
+        return Err(format!(
+            "{}: belongs to run {} seed {}, expected run {run_id} seed {seed}",
+            p.display(),
+            header.run_id,
+            header.seed
+        ));
+    }
+    Ok(Some((header, payload.to_vec())))
+}
+
+/// Remove a run's final state (once a longer run continuing it is committed).
+pub fn remove_final(dir: &Path, run_id: u64) {
+    let _ = fs::remove_file(final_path(dir, run_id));
+}
+
 /// Remove a run's checkpoints (after its rows are committed).
 pub fn remove(dir: &Path, run_id: u64) {
     let _ = fs::remove_file(path(dir, run_id));
@@ -172,6 +218,7 @@ mod tests {
             state_format: "dsmc/1".into(),
             wall_seconds: 1.5,
             t: 2.0,
+            continued_from: None,
         }
     }
 
@@ -187,6 +234,24 @@ mod tests {
             assert!(decode(&bad).is_err(), "flipped byte {i} not detected");
         }
         assert!(decode(&bytes[..bytes.len() - 1]).is_err());
+    }
+
+    #[test]
+    fn final_states_round_trip_and_check_their_run() {
+        let dir = tempfile::tempdir().unwrap();
+        let finals = dir.path().join("finals");
+        assert_eq!(load_final(&finals, 3, 9), Ok(None));
+        write_final(&finals, &header(), b"end").unwrap();
+        let (h, p) = load_final(&finals, 3, 9).unwrap().unwrap();
+        assert_eq!((h, p.as_slice()), (header(), &b"end"[..]));
+        assert!(load_final(&finals, 3, 10).unwrap_err().contains("seed 9"));
+        let f = final_path(&finals, 3);
+        let mut b = fs::read(&f).unwrap();
+        b[30] ^= 1;
+        fs::write(&f, b).unwrap();
+        assert!(load_final(&finals, 3, 9).unwrap_err().contains("checksum"));
+        remove_final(&finals, 3);
+        assert_eq!(load_final(&finals, 3, 9), Ok(None));
     }
 
     #[test]

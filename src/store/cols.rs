@@ -9,7 +9,7 @@ use std::sync::Arc;
 use arrow_array::cast::AsArray;
 use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
 use arrow_array::{
-    Array, ArrayRef, Float64Array, RecordBatch, StringArray, UInt32Array, UInt64Array,
+    Array, ArrayRef, BooleanArray, Float64Array, RecordBatch, StringArray, UInt32Array, UInt64Array,
 };
 use arrow_schema::{DataType, Field, Schema};
 
@@ -83,6 +83,20 @@ impl<T> Columns<T> {
     }
     pub fn str<'a>(&self, name: &'static str, f: impl Fn(&T) -> &str + 'a) -> Column<'a, T> {
         Column::new(name, false, move |v| strs(v, &f))
+    }
+    pub fn opt_str<'a>(
+        &self,
+        name: &'static str,
+        f: impl Fn(&T) -> Option<&str> + 'a,
+    ) -> Column<'a, T> {
+        Column::new(name, true, move |v| {
+            Arc::new(v.iter().map(&f).collect::<StringArray>())
+        })
+    }
+    pub fn bool<'a>(&self, name: &'static str, f: impl Fn(&T) -> bool + 'a) -> Column<'a, T> {
+        Column::new(name, false, move |v| {
+            Arc::new(v.iter().map(|r| Some(f(r))).collect::<BooleanArray>())
+        })
     }
     /// The same text in every row.
     pub fn const_str<'a>(&self, name: &'static str, value: &'a str) -> Column<'a, T> {

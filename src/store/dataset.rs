@@ -1,13 +1,14 @@
 //! A campaign's tables as the storage sees them: a directory per table under `tables/`
-//! (see [`super::layout`]), each file stamped with the campaign's identity (its canonical
-//! manifest) and read back only if it is this campaign's and this table's.
+//! (see [`super::layout`]), each file stamped with the campaign's identity (name, model,
+//! seed) and the manifest it was written under, and read back only if it is this campaign's
+//! and this table's.
 
 use std::path::{Path, PathBuf};
 
 use arrow_array::RecordBatch;
 
 use super::layout;
-use super::parquet_io::{self, StoreError};
+use super::parquet_io::{self, Stamp, StoreError};
 use crate::fsutil;
 
 /// The tables of one campaign directory.
@@ -15,14 +16,17 @@ use crate::fsutil;
 pub struct Dataset {
     root: PathBuf,
     identity: String,
+    manifest: String,
 }
 
 impl Dataset {
-    /// The tables under `root/tables`, of the campaign whose canonical manifest is `identity`.
-    pub fn new(root: &Path, identity: &str) -> Self {
+    /// The tables under `root/tables` of the campaign whose identity is `identity`; files
+    /// written are stamped with `manifest` (canonical JSON).
+    pub fn new(root: &Path, identity: &str, manifest: &str) -> Self {
         Dataset {
             root: root.to_path_buf(),
             identity: identity.to_string(),
+            manifest: manifest.to_string(),
         }
     }
 
@@ -30,9 +34,12 @@ impl Dataset {
         &self.root
     }
 
-    /// The canonical manifest every file of the campaign carries in its footer.
-    pub fn identity(&self) -> &str {
-        &self.identity
+    /// The stamp of the files this dataset writes.
+    pub fn stamp(&self) -> Stamp<'_> {
+        Stamp {
+            campaign: &self.identity,
+            manifest: &self.manifest,
+        }
     }
 
     /// `root/tables/<table>` (through the table's generation link).
@@ -100,7 +107,7 @@ impl Dataset {
         let path = self.dir(table).join(name);
         self.ensure(table)?;
         let tmp = fsutil::temp_path(&path);
-        parquet_io::write_file(&tmp, batch, table, &self.identity)?;
+        parquet_io::write_file(&tmp, batch, table, self.stamp())?;
         std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
         fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))
     }

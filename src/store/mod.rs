@@ -9,5 +9,14 @@ pub mod dataset;
 pub mod layout;
 pub mod parquet_io;
 
-/// Version of the on-disk layout (tables, ledger, checkpoints); written everywhere.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of a campaign directory's layout (`campaign.json` and the tables). 2: the registry
+/// of points and runs in `campaign.json` (campaigns grow), `runs` without the sweep columns
+/// (they are in `points`), table files stamped with the campaign's identity. A directory of an
+/// earlier version is upgraded in place by `granular upgrade` (`campaign::upgrade`).
+pub const FORMAT_VERSION: u32 = 2;
+
+/// Version of the ledger's commit records and index, and of SLURM submission records.
+pub const LEDGER_FORMAT: u32 = 1;
+
+/// Version of the checkpoint file format (the payload's layout is the model's `STATE_FORMAT`).
+pub const CHECKPOINT_FORMAT: u32 = 1;

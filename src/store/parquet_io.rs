@@ -17,25 +17,38 @@ use parquet::file::properties::WriterProperties;
 use super::FORMAT_VERSION;
 use crate::CODE_VERSION;
 
+/// Formats of table files this granular reads (format 1's tables are format 2's, but for
+/// the sweep columns of `runs`, which an upgrade removes).
+pub const READABLE_FORMATS: [u32; 2] = [1, FORMAT_VERSION];
+
+/// Whose a table file is: the campaign's identity (name, model, seed: what a campaign keeps
+/// for ever) and the manifest it was written under (provenance).
+#[derive(Clone, Copy, Debug)]
+pub struct Stamp<'a> {
+    pub campaign: &'a str,
+    pub manifest: &'a str,
+}
+
 /// Key-value metadata of every table file.
-pub fn file_metadata(table: &str, manifest_json: &str) -> Vec<(String, String)> {
+pub fn file_metadata(table: &str, stamp: Stamp) -> Vec<(String, String)> {
     vec![
         ("granular.format_version".into(), FORMAT_VERSION.to_string()),
         ("granular.table".into(), table.into()),
         ("granular.code_version".into(), CODE_VERSION.into()),
-        ("granular.manifest".into(), manifest_json.into()),
+        ("granular.campaign".into(), stamp.campaign.into()),
+        ("granular.manifest".into(), stamp.manifest.into()),
     ]
 }
 
 /// The writer properties of every table file.
-pub fn writer_properties(table: &str, manifest_json: &str) -> WriterProperties {
+pub fn writer_properties(table: &str, stamp: Stamp) -> WriterProperties {
     WriterProperties::builder()
         .set_compression(Compression::ZSTD(
             ZstdLevel::try_new(3).expect("valid level"),
         ))
         .set_created_by(CODE_VERSION.to_string())
         .set_key_value_metadata(Some(
-            file_metadata(table, manifest_json)
+            file_metadata(table, stamp)
                 .into_iter()
                 .map(|(k, v)| KeyValue::new(k, v))
                 .collect(),
@@ -45,8 +58,8 @@ pub fn writer_properties(table: &str, manifest_json: &str) -> WriterProperties {
 }
 
 /// The schema with the same metadata (pyarrow shows `schema.metadata`).
-pub fn schema_with_metadata(schema: &Schema, table: &str, manifest_json: &str) -> Arc<Schema> {
-    let md: HashMap<String, String> = file_metadata(table, manifest_json).into_iter().collect();
+pub fn schema_with_metadata(schema: &Schema, table: &str, stamp: Stamp) -> Arc<Schema> {
+    let md: HashMap<String, String> = file_metadata(table, stamp).into_iter().collect();
     Arc::new(schema.clone().with_metadata(md))
 }
 
@@ -55,9 +68,9 @@ pub fn write_file(
     tmp: &Path,
     batch: &RecordBatch,
     table: &str,
-    manifest_json: &str,
+    stamp: Stamp,
 ) -> Result<(), StoreError> {
-    write_batches(tmp, std::slice::from_ref(batch), table, manifest_json)
+    write_batches(tmp, std::slice::from_ref(batch), table, stamp)
 }
 
 /// Write `batches` (one schema) as one Parquet file at `tmp` (fsynced). On failure (a full
@@ -66,9 +79,9 @@ pub fn write_batches(
     tmp: &Path,
     batches: &[RecordBatch],
     table: &str,
-    manifest_json: &str,
+    stamp: Stamp,
 ) -> Result<(), StoreError> {
-    let r = write_batches_inner(tmp, batches, table, manifest_json);
+    let r = write_batches_inner(tmp, batches, table, stamp);
     if r.is_err() {
         let _ = std::fs::remove_file(tmp);
     }
@@ -79,7 +92,7 @@ fn write_batches_inner(
     tmp: &Path,
     batches: &[RecordBatch],
     table: &str,
-    manifest_json: &str,
+    stamp: Stamp,
 ) -> Result<(), StoreError> {
     let Some(first) = batches.first() else {
         return Err(StoreError::Arrow(format!(
@@ -87,14 +100,10 @@ fn write_batches_inner(
             tmp.display()
         )));
     };
-    let schema = schema_with_metadata(first.schema().as_ref(), table, manifest_json);
+    let schema = schema_with_metadata(first.schema().as_ref(), table, stamp);
     let file = File::create(tmp).map_err(|e| StoreError::io(tmp, e))?;
-    let mut w = ArrowWriter::try_new(
-        file,
-        schema.clone(),
-        Some(writer_properties(table, manifest_json)),
-    )
-    .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
+    let mut w = ArrowWriter::try_new(file, schema.clone(), Some(writer_properties(table, stamp)))
+        .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
     for batch in batches {
         let batch = batch
             .clone()
@@ -115,7 +124,10 @@ fn write_batches_inner(
 pub struct PartInfo {
     pub table: String,
     pub format_version: Option<u32>,
-    /// Canonical JSON of the campaign manifest the file was written for.
+    /// The identity of the campaign the file was written for (name, model, seed: canonical
+    /// JSON), from `granular.campaign`, or for files of format 1 from their manifest.
+    pub campaign: Option<String>,
+    /// Canonical JSON of the manifest the file was written under.
     pub manifest: Option<String>,
     pub code_version: Option<String>,
     pub rows: u64,
@@ -146,52 +158,68 @@ pub fn inspect(
             "is not a granular table file (no granular.table metadata)".into(),
         ));
     };
+    let manifest = get("granular.manifest");
     let info = PartInfo {
         table,
         format_version: get("granular.format_version").and_then(|v| v.parse().ok()),
-        manifest: get("granular.manifest"),
+        campaign: get("granular.campaign").or_else(|| manifest.as_deref().and_then(identity_of)),
+        manifest,
         code_version: get("granular.code_version"),
         rows: builder.metadata().file_metadata().num_rows().max(0) as u64,
     };
     Ok((info, builder))
 }
 
-/// Check a file's footer against the expected table (and campaign, when given).
+/// A campaign's identity (name, model, seed as canonical JSON) from its manifest's JSON.
+pub fn identity_of(manifest_json: &str) -> Option<String> {
+    let m: serde_json::Value = serde_json::from_str(manifest_json).ok()?;
+    let id = serde_json::json!({
+        "model": m.get("model")?,
+        "name": m.get("name")?,
+        "seed": m.get("seed")?,
+    });
+    Some(id.to_string())
+}
+
+/// Check a file's footer against the expected table (and campaign identity, when given).
 pub fn check_part(
     path: &Path,
     info: &PartInfo,
     table: &str,
-    manifest_json: Option<&str>,
+    campaign: Option<&str>,
 ) -> Result<(), StoreError> {
     let bad = |why: String| Err(StoreError::Corrupt(path.display().to_string(), why));
     if info.table != table {
         return bad(format!("holds table {:?}, expected {table:?}", info.table));
     }
-    if info.format_version != Some(FORMAT_VERSION) {
+    if !info
+        .format_version
+        .is_some_and(|v| READABLE_FORMATS.contains(&v))
+    {
         return bad(format!(
-            "has format version {:?}; this granular reads {FORMAT_VERSION}",
+            "has format version {:?}; this granular reads {READABLE_FORMATS:?}",
             info.format_version
         ));
     }
-    if let Some(m) = manifest_json {
-        if info.manifest.as_deref() != Some(m) {
-            return bad(
-                "belongs to another campaign (its granular.manifest differs from campaign.json)"
-                    .into(),
-            );
+    if let Some(id) = campaign {
+        if info.campaign.as_deref() != Some(id) {
+            return bad(format!(
+                "belongs to another campaign ({}; this one is {id})",
+                info.campaign.as_deref().unwrap_or("unknown")
+            ));
         }
     }
     Ok(())
 }
 
-/// Read every batch of a table file of the campaign whose canonical manifest is
-/// `manifest_json`: a file of another table, format or campaign is an error, never data.
+/// Read every batch of a table file of the campaign whose identity is `campaign`: a file of
+/// another table, format or campaign is an error, never data.
 pub fn read_campaign_file(
     path: &Path,
     table: &str,
-    manifest_json: &str,
+    campaign: &str,
 ) -> Result<Vec<RecordBatch>, StoreError> {
-    read_checked(path, table, Some(manifest_json))
+    read_checked(path, table, Some(campaign))
 }
 
 /// Read every batch of a table file, checking that it is one of ours and of this format.
@@ -202,10 +230,10 @@ pub fn read_file(path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreErro
 fn read_checked(
     path: &Path,
     table: &str,
-    manifest_json: Option<&str>,
+    campaign: Option<&str>,
 ) -> Result<Vec<RecordBatch>, StoreError> {
     let (info, builder) = inspect(path)?;
-    check_part(path, &info, table, manifest_json)?;
+    check_part(path, &info, table, campaign)?;
     let reader = builder
         .build()
         .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))?;

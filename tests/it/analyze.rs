@@ -299,16 +299,14 @@ fn write_cascade_table(campaign: &Path) {
     .unwrap();
     let dir = campaign.join("tables").join("cascade_structure_factor");
     std::fs::create_dir_all(&dir).unwrap();
-    // Written for this campaign (analyze reads only parts whose granular.manifest is the
-    // campaign's).
-    let manifest_json = granular::campaign::Campaign::open(campaign)
-        .unwrap()
-        .manifest_json;
+    // Written for this campaign (analyze reads only parts stamped with the campaign's
+    // identity).
+    let c = granular::campaign::Campaign::open(campaign).unwrap();
     granular::store::parquet_io::write_file(
         &dir.join("summary.parquet"),
         &batch,
         "cascade_structure_factor",
-        &manifest_json,
+        c.stamp(),
     )
     .unwrap();
 }

@@ -68,7 +68,10 @@ fn good_manifests_validate() {
         match load_manifest(f) {
             Ok((m, plan)) => {
                 assert!(plan.n_runs() >= 1, "{}: no runs", f.display());
-                assert_eq!(plan.n_runs(), plan.points.len() as u64 * m.replicas as u64);
+                assert_eq!(
+                    plan.n_runs(),
+                    plan.points.len() as u64 * m.replicas.unwrap_or(1) as u64
+                );
             }
             Err(e) => failures.push(e.to_string()),
         }

@@ -476,9 +476,10 @@ fn threads_and_shards_give_identical_tables() {
     );
 }
 
-/// A directory holding another campaign is refused (exit 3) and left exactly as it was (and
-/// so is a non-empty directory that is no campaign); running the same manifest again on the
-/// finished directory exits 0 and changes no table.
+/// A directory holding another campaign (another name, seed or model) is refused (exit 3) and
+/// left exactly as it was (and so is a non-empty directory that is no campaign); running the
+/// same manifest again on the finished directory exits 0 and changes no table. (A grown
+/// manifest of the same campaign is accepted: tests/it/growth.rs.)
 #[test]
 fn other_campaign_refused_and_rerun_adds_nothing() {
     let _g = heavy();
@@ -499,11 +500,14 @@ fn other_campaign_refused_and_rerun_adds_nothing() {
 
     let mut other_seed = small_manifest(2);
     other_seed["name"] = json!("small-other");
-    let mut other_replicas = small_manifest(1);
-    other_replicas["replicas"] = json!(3);
-    let mut other_params = small_manifest(1);
-    other_params["params"]["restitution"]["constant"] = json!(0.8);
-    for (i, m) in [other_seed, other_replicas, other_params]
+    let mut other_name = small_manifest(1);
+    other_name["name"] = json!("small-renamed");
+    let only_seed = small_manifest(2);
+    let mut other_model = small_manifest(1);
+    other_model["model"] = json!("rfm");
+    other_model["params"] = json!({"dim": 1, "n_particles": 20, "reduced_length": 1.0, "warmup": 0.01, "duration": 0.02, "sample_every": 100});
+    other_model.as_object_mut().unwrap().remove("sweep");
+    for (i, m) in [other_seed, other_name, only_seed, other_model]
         .iter()
         .enumerate()
     {

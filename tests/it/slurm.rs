@@ -2,7 +2,7 @@
 //! one-node cluster is `scripts/slurm-test.sh`): scripts and record written, MaxArraySize
 //! respected by packing, the compaction chained with afterok, `--dry-run` writes nothing,
 //! `--missing` resubmits exactly the unfinished shards that are not queued, bad input refused;
-//! array tasks run by hand give the single-machine tables.
+//! array tasks run by hand give the single-machine tables; a grown manifest is resubmitted.
 
 use std::fs;
 use std::os::unix::fs::PermissionsExt;
@@ -221,4 +221,47 @@ fn submit_packs_chains_and_resubmits_missing_shards() {
         Some(0)
     );
     util::assert_tables_identical(&read_tables(&r), &read_tables(&c), "SLURM tasks vs one run");
+
+    // The campaign grows (2 more replicas per point): `submit` with the grown manifest is a
+    // resubmission of the shards that now have unfinished runs; the same manifest again is
+    // refused like any second first submission (naming --missing), and --missing has nothing
+    // to submit while those are queued. Run, the tables equal a single-machine run of the grown
+    // manifest.
+    let mut grown = manifest();
+    grown["replicas"] = json!(7);
+    let mg = t.join("grown.json");
+    write_json(&mg, &grown);
+    fs::write(t.join("squeue.out"), "").unwrap();
+    let (code, out) = submit(t, &[s(&mg), "--out", s(&c), "--slurm"], &log);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    // New runs 10..13 fall in shards 1, 2, 0, 1 of 3.
+    assert!(
+        out.contains("array 0-2%2") && out.contains("job 105"),
+        "{out}"
+    );
+    fs::write(
+        t.join("squeue.out"),
+        "105 0 PENDING\n105 1 PENDING\n105 2 PENDING\n",
+    )
+    .unwrap();
+    let (code, _) = submit(t, &[s(&mg), "--out", s(&c), "--slurm"], &log);
+    assert_eq!(code, Some(3), "log:\n{}", log_text(&log));
+    assert!(log_text(&log).contains("granular submit --missing"));
+    let (code, out) = submit(t, &["--missing", s(&c)], &log);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    assert!(out.contains("nothing to submit"), "{out}");
+    for i in ["0", "1", "2"] {
+        let code = run_granular(
+            &["slurm-task", s(&c), "--shards", "3", "--index", i],
+            &log,
+            LIMIT,
+        );
+        assert_eq!(code, Some(0), "task {i}; log:\n{}", log_text(&log));
+    }
+    let rg = t.join("RG");
+    assert_eq!(
+        run_granular(&["run", s(&mg), "--out", s(&rg), "--quiet"], &log, LIMIT),
+        Some(0)
+    );
+    util::assert_same_current(&c, &rg, "grown SLURM campaign vs one run");
 }

@@ -525,3 +525,117 @@ pub fn status_json(dir: &Path, log: &Path) -> Value {
 pub fn write_json(path: &Path, v: &Value) {
     fs::write(path, serde_json::to_string_pretty(v).unwrap()).expect("write json");
 }
+
+/// Every table of a campaign directory (every visible Parquet file of `tables/<t>`).
+pub fn read_all(dir: &Path) -> BTreeMap<String, Table> {
+    fs::read_dir(dir.join("tables"))
+        .expect("tables dir")
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.starts_with('.'))
+        .map(|t| (t.clone(), read_table(dir, &t)))
+        .collect()
+}
+
+/// The rows of every table for the points the latest manifest asks for (`in_manifest`), with
+/// `point_id` replaced by the point's params and `run_id` by params and replica (ids depend
+/// on the order in which a campaign grew; params and replica do not), `runs.wall_seconds`
+/// and `runs.continued_from` blanked, rows sorted: comparable between a grown campaign and
+/// one started from its final manifest.
+pub fn current_view(
+    t: &BTreeMap<String, Table>,
+) -> BTreeMap<String, (Vec<String>, Vec<Vec<Cell>>)> {
+    let points = &t["points"];
+    let (pid, params, cur) = (
+        points.col("point_id"),
+        points.col("params"),
+        points.col("in_manifest"),
+    );
+    let point: BTreeMap<u64, (Cell, bool)> = points
+        .rows
+        .iter()
+        .map(|r| {
+            (
+                r[pid].as_u64(),
+                (r[params].clone(), r[cur] == Cell::Bool(true)),
+            )
+        })
+        .collect();
+    let runs = &t["runs"];
+    let (rid, rpoint, rrep) = (
+        runs.col("run_id"),
+        runs.col("point_id"),
+        runs.col("replica"),
+    );
+    let run: BTreeMap<u64, Cell> = runs
+        .rows
+        .iter()
+        .map(|r| {
+            let p = point[&r[rpoint].as_u64()].0.as_str().to_string();
+            (r[rid].as_u64(), Cell::S(format!("{p} replica {}", r[rrep])))
+        })
+        .collect();
+    t.iter()
+        .map(|(name, table)| {
+            let names: Vec<String> = table.columns.iter().map(|c| c.0.clone()).collect();
+            let col = |c: &str| names.iter().position(|n| n == c);
+            let (p, r) = (col("point_id"), col("run_id"));
+            let blank: Vec<usize> = if name == "runs" {
+                ["wall_seconds", "continued_from"]
+                    .iter()
+                    .filter_map(|c| col(c))
+                    .collect()
+            } else {
+                Vec::new()
+            };
+            let mut rows: Vec<Vec<Cell>> = table
+                .rows
+                .iter()
+                .filter(|row| p.is_none_or(|j| point[&row[j].as_u64()].1))
+                .map(|row| {
+                    let mut row = row.clone();
+                    if let Some(j) = r {
+                        row[j] = run[&row[j].as_u64()].clone();
+                    }
+                    if let Some(j) = p {
+                        row[j] = point[&row[j].as_u64()].0.clone();
+                    }
+                    for &j in &blank {
+                        row[j] = Cell::Null;
+                    }
+                    row
+                })
+                .collect();
+            rows.sort();
+            (name.clone(), (names, rows))
+        })
+        .collect()
+}
+
+/// Assert two campaigns' current views equal, naming the first differences.
+pub fn assert_same_current(a: &Path, b: &Path, what: &str) {
+    let (va, vb) = (current_view(&read_all(a)), current_view(&read_all(b)));
+    assert_eq!(
+        va.keys().collect::<Vec<_>>(),
+        vb.keys().collect::<Vec<_>>(),
+        "{what}: different tables"
+    );
+    for (name, (ca, ra)) in &va {
+        let (cb, rb) = &vb[name];
+        assert_eq!(ca, cb, "{what}: {name}: columns differ");
+        assert_eq!(ra.len(), rb.len(), "{what}: {name}: row counts differ");
+        if let Some(i) = (0..ra.len()).find(|&i| ra[i] != rb[i]) {
+            let show = |r: &Vec<Cell>| {
+                r.iter()
+                    .map(|c| c.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            panic!(
+                "{what}: {name}: rows differ (first of {} sorted rows, index {i}):\n  {}\n  {}",
+                ra.len(),
+                show(&ra[i]),
+                show(&rb[i])
+            );
+        }
+    }
+}

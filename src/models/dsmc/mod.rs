@@ -14,7 +14,7 @@ pub mod tables;
 pub mod theory;
 
 use crate::dsmc::DsmcSim;
-use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
 use crate::store::parquet_io::StoreError;
@@ -41,6 +41,9 @@ impl Model for Dsmc {
         "tamsd": {"lags": [1, 4], "tracers": 10, "grid": 40}
     }"#;
 
+    /// The end and the output times: a longer run of a point continues the shorter one.
+    const HORIZON: &'static [&'static str] = &["t_end", "output_times"];
+
     fn check(p: &DsmcParams, path: &str, errors: &mut ParamErrors) {
         p.check(path, errors)
     }
@@ -55,6 +58,39 @@ impl Model for Dsmc {
 
     fn restore(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, String> {
         DsmcSim::from_state_bytes(p.system()?, state)
+    }
+
+    fn carry_over(old: &DsmcParams, new: &DsmcParams) -> CarryOver {
+        if new.t_end < old.t_end {
+            return CarryOver::Shorter(format!(
+                "t_end {} is before the runs' end {}",
+                new.t_end, old.t_end
+            ));
+        }
+        if new.t_end == old.t_end {
+            return CarryOver::Rerun("the same t_end with other output times".into());
+        }
+        if new.wants_tamsd() {
+            return CarryOver::Rerun(
+                "the time-averaged MSD is recorded on a grid that spans [0, t_end]".into(),
+            );
+        }
+        let (a, b) = (
+            old.output_times.resolve(old.t_end),
+            new.output_times.resolve(new.t_end),
+        );
+        match crate::dsmc::continuable(old.t_end, &a, new.t_end, &b) {
+            Ok(()) => CarryOver::Continue,
+            Err(why) => CarryOver::Rerun(why),
+        }
+    }
+
+    fn final_state(sim: &mut DsmcSim) -> Option<Vec<u8>> {
+        sim.final_state()
+    }
+
+    fn continue_from(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, String> {
+        DsmcSim::continue_from(p.system()?, state)
     }
 
     fn finish(mut sim: DsmcSim, ids: RunIds) -> RunRows {

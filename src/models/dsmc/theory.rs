@@ -1,8 +1,15 @@
 //! The kinetic-theory tables of a DSMC campaign (`dsmc_theory`, `dsmc_theory_point`,
-//! `dsmc_theory_tamsd`): the predictions of every point, computed in parallel. They depend
-//! only on the manifest, so each is written once; a campaign directory of an older version
-//! gains the tables it lacks, and existing ones are never rewritten.
+//! `dsmc_theory_tamsd`): the predictions of every point, computed in parallel. A point's
+//! predictions depend only on its params, so they are written once: the first manifest's
+//! points in one file per table, the points a grown manifest adds in files of their own
+//! (`theory-<first point>.parquet`, ...). Files are never rewritten; a campaign directory of
+//! an older version gains the tables it lacks. `dsmc_theory_point` (one row per point) says
+//! which points are covered, and is written last.
 
+use std::collections::BTreeSet;
+
+use arrow_array::cast::AsArray;
+use arrow_array::types::UInt32Type;
 use rayon::prelude::*;
 
 use super::params::DsmcParams;
@@ -15,24 +22,39 @@ const THEORY_FILE: &str = "theory.parquet";
 const POINT_FILE: &str = "theory_point.parquet";
 const TAMSD_FILE: &str = "theory_tamsd.parquet";
 
-/// Write the theory tables that do not exist yet.
+/// Write the theory rows of the points that have none yet (of every point, for a table that
+/// has no file at all).
 pub fn write(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {
-    let points: Vec<&DsmcParams> = c.points.iter().map(|p| p.params).collect();
-    let with_tamsd = super::observes_tamsd(&points);
-    let mut missing = vec![(DSMC_THEORY, THEORY_FILE), (DSMC_THEORY_POINT, POINT_FILE)];
-    if with_tamsd {
-        missing.push((DSMC_THEORY_TAMSD, TAMSD_FILE));
+    let covered = covered_points(c)?;
+    let all: Vec<&DsmcParams> = c.points.iter().map(|p| p.params).collect();
+    let mut tables = vec![DSMC_THEORY];
+    if super::observes_tamsd(&all) {
+        tables.push(DSMC_THEORY_TAMSD);
     }
-    missing.retain(|(t, f)| !c.data.has(t, f));
-    if missing.is_empty() {
-        return Ok(());
+    // Last: its rows say which points are done.
+    tables.push(DSMC_THEORY_POINT);
+    // The points each table needs.
+    let mut needs: Vec<(&str, BTreeSet<u32>)> = Vec::new();
+    for table in tables {
+        let whole = table != DSMC_THEORY_POINT && c.data.files(table)?.is_empty();
+        let ids: BTreeSet<u32> = c
+            .points
+            .iter()
+            .map(|p| p.point_id)
+            .filter(|id| whole || !covered.contains(id))
+            .collect();
+        if !ids.is_empty() {
+            needs.push((table, ids));
+        }
     }
-    for (t, _) in &missing {
-        c.data.ensure(t)?;
-    }
+    let wanted: BTreeSet<u32> = needs
+        .iter()
+        .flat_map(|(_, ids)| ids.iter().copied())
+        .collect();
     let preds: Vec<(u32, Prediction)> = c
         .points
         .par_iter()
+        .filter(|p| wanted.contains(&p.point_id))
         .filter_map(|p| {
             p.params
                 .system()
@@ -40,31 +62,60 @@ pub fn write(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {
                 .map(|sys| (p.point_id, predict(&sys)))
         })
         .collect();
-    for (table, file) in missing {
+    for (table, ids) in needs {
+        let first = *ids.first().expect("not empty");
+        let preds = preds.iter().filter(|(p, _)| ids.contains(p));
         let batch = match table {
             DSMC_THEORY => {
                 let rows: Vec<(u32, TheoryRow)> = preds
-                    .iter()
                     .flat_map(|(p, pr)| pr.rows.iter().map(move |r| (*p, r.clone())))
                     .collect();
                 theory_batch(&rows)
             }
             DSMC_THEORY_POINT => {
                 let points: Vec<(u32, f64, Vec<f64>)> = preds
-                    .iter()
                     .map(|(p, pr)| (*p, pr.tau0, pr.initial_temperatures.clone()))
                     .collect();
                 theory_point_batch(&points)
             }
             _ => {
                 let rows: Vec<(u32, TamsdTheoryRow)> = preds
-                    .iter()
                     .flat_map(|(p, pr)| pr.tamsd.iter().map(move |r| (*p, r.clone())))
                     .collect();
                 theory_tamsd_batch(&rows)
             }
         };
-        c.data.write_whole(table, file, &batch)?;
+        c.data
+            .write_whole(table, &file_name(table, first), &batch)?;
     }
     Ok(())
+}
+
+/// The file of `table` holding the points from `first` on: the first manifest's points have
+/// the table's original file name.
+fn file_name(table: &str, first: u32) -> String {
+    let base = match table {
+        DSMC_THEORY => THEORY_FILE,
+        DSMC_THEORY_POINT => POINT_FILE,
+        _ => TAMSD_FILE,
+    };
+    match first {
+        0 => base.to_string(),
+        _ => format!("{}-{first:08}.parquet", base.trim_end_matches(".parquet")),
+    }
+}
+
+/// The points `dsmc_theory_point` has rows for.
+fn covered_points(c: &CampaignView<'_, DsmcParams>) -> Result<BTreeSet<u32>, StoreError> {
+    let mut out = BTreeSet::new();
+    for b in c.data.read(DSMC_THEORY_POINT)? {
+        let ids = b
+            .column_by_name("point_id")
+            .and_then(|a| a.as_primitive_opt::<UInt32Type>())
+            .ok_or_else(|| {
+                StoreError::Corrupt(DSMC_THEORY_POINT.into(), "has no point_id column".into())
+            })?;
+        out.extend(ids.iter().flatten());
+    }
+    Ok(out)
 }

@@ -13,7 +13,7 @@ pub mod tables;
 #[cfg(test)]
 mod tests;
 
-use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
 use crate::rfm::observe::RfmRun;
 use crate::store::parquet_io::StoreError;
@@ -43,6 +43,9 @@ impl Model for Rfm {
         "snapshot": {"times": [0.005]}
     }"#;
 
+    /// The sampled time: a longer run of a point has the seed of the shorter one.
+    const HORIZON: &'static [&'static str] = &["duration"];
+
     fn check(p: &RfmParams, path: &str, errors: &mut ParamErrors) {
         p.check(path, errors)
     }
@@ -57,6 +60,23 @@ impl Model for Rfm {
 
     fn restore(p: &RfmParams, state: &[u8]) -> Result<RfmRun, String> {
         RfmRun::from_state_bytes(&p.run_config(), state)
+    }
+
+    fn carry_over(old: &RfmParams, new: &RfmParams) -> CarryOver {
+        if new.duration < old.duration {
+            CarryOver::Shorter(format!(
+                "duration {} is shorter than the runs' {}",
+                new.duration, old.duration
+            ))
+        } else {
+            // The 10 blocks of the errors cut the whole sampled time: a longer run puts every
+            // sample in other blocks, which the sums of a finished run cannot be regrouped into.
+            CarryOver::Rerun(
+                "the 10 blocks of the errors span the whole sampled time, so a longer run \
+                 regroups every sample"
+                    .into(),
+            )
+        }
     }
 
     fn finish(run: RfmRun, ids: RunIds) -> RunRows {

@@ -1,0 +1,375 @@
+//! The campaign's registry: every point and run it has ever had, with ids that never change.
+//!
+//! A manifest asks for points (its sweep) and runs per point (`replicas` or `seeds`). The first
+//! manifest registers its points in sweep order (`point_id` 0, 1, ...) and their runs point by
+//! point (`run_id = point_id * replicas + replica`, as before growth existed). A grown manifest
+//! (more replicas, more sweep values, a new sweep key, another fixed value, a longer run)
+//! registers only what is new, after what exists: a point is the same point when its full
+//! params are (canonical JSON), a run the same run when its point and replica are (or, with
+//! given seeds, its point and seed). Nothing is ever removed: points and runs that a later
+//! manifest no longer asks for stay, finished, in the tables.
+//!
+//! Runs are kept in blocks (a point's replicas `first_replica..first_replica + count` with ids
+//! `first_run..`), each with the source of its seeds (`SeedSource`). A block may continue the
+//! runs of another point (`continues`): the same point with a longer horizon, whose finished
+//! runs carry over (`CarryOver::Continue`) from their final states.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::manifest::sweep::canonical;
+use crate::manifest::RunsPerPoint;
+use crate::models::{CarryOver, ModelKind, ModelParams};
+
+/// Where the seeds of a block's runs come from.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(rename_all = "snake_case")]
+pub enum SeedSource {
+    /// `plan::derive_seed`: the campaign seed, the model, the point's params without the
+    /// model's horizon keys, and the replica.
+    Params,
+    /// The derivation of campaign directories of format 1 (before growth): the model, the sweep
+    /// keys and the point's values at the time, and the replica.
+    Swept {
+        keys: Vec<String>,
+        values: Vec<Value>,
+    },
+    /// Given by the manifest (`seeds`): the i-th run of the block has the i-th seed.
+    Given(Vec<u64>),
+}
+
+/// A registered point: its id and full params (what identifies it).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RegPoint {
+    pub id: u32,
+    pub params: Value,
+}
+
+/// Runs `first_run..first_run + count` of point `point`, replicas `first_replica..`.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RunBlock {
+    pub point: u32,
+    pub first_run: u64,
+    pub first_replica: u32,
+    pub count: u32,
+    pub seeds: SeedSource,
+    /// The point whose finished runs (same replicas) these runs continue.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub continues: Option<u32>,
+}
+
+/// Every point and run of a campaign.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
+pub struct Registry {
+    pub points: Vec<RegPoint>,
+    pub blocks: Vec<RunBlock>,
+}
+
+/// A manifest's points (full params, typed) and the runs it asks for per point.
+pub struct Asked<'a> {
+    pub model: ModelKind,
+    pub points: &'a [ModelParams],
+    pub runs: &'a RunsPerPoint,
+}
+
+/// What a manifest adds to a registry.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Growth {
+    /// Points registered now (ids).
+    pub new_points: Vec<u32>,
+    /// Runs registered now: (point, replica, run_id).
+    pub new_runs: Vec<(u32, u32, u64)>,
+    /// Of those, runs continuing a finished run of a shorter point: (run_id, run it continues).
+    pub continued: Vec<(u64, u64)>,
+    /// Registered points the manifest does not ask for.
+    pub retired_points: Vec<u32>,
+    /// Notes (points of a longer horizon that are run again from the start, and why).
+    pub notes: Vec<String>,
+}
+
+impl Growth {
+    pub fn is_empty(&self) -> bool {
+        self.new_points.is_empty() && self.new_runs.is_empty()
+    }
+}
+
+/// The identity of a point's runs: its model and params without the horizon keys.
+pub fn run_identity(model: ModelKind, params: &Value) -> String {
+    let mut p = params.clone();
+    if let Some(o) = p.as_object_mut() {
+        for k in model.horizon() {
+            o.remove(*k);
+        }
+    }
+    format!("{}\u{1f}{}", model.as_str(), canonical(&p))
+}
+
+impl Registry {
+    pub fn n_runs(&self) -> u64 {
+        self.blocks
+            .last()
+            .map_or(0, |b| b.first_run + b.count as u64)
+    }
+
+    /// The point with these full params.
+    pub fn find(&self, params: &Value) -> Option<u32> {
+        let key = canonical(params);
+        self.points
+            .iter()
+            .find(|p| canonical(&p.params) == key)
+            .map(|p| p.id)
+    }
+
+    /// The blocks of a point.
+    pub fn blocks_of(&self, point: u32) -> impl Iterator<Item = &RunBlock> {
+        self.blocks.iter().filter(move |b| b.point == point)
+    }
+
+    /// The seed of replica `r` of a block, or None for a derived seed (`Params`, `Swept`).
+    pub fn given_seed(b: &RunBlock, replica: u32) -> Option<u64> {
+        match &b.seeds {
+            SeedSource::Given(s) => s.get((replica - b.first_replica) as usize).copied(),
+            _ => None,
+        }
+    }
+
+    fn push_block(&mut self, mut b: RunBlock, growth: &mut Growth) {
+        b.first_run = self.n_runs();
+        for i in 0..b.count {
+            growth
+                .new_runs
+                .push((b.point, b.first_replica + i, b.first_run + i as u64));
+        }
+        self.blocks.push(b);
+    }
+
+    /// Register what `asked` adds: new points, and per point the runs it asks for that do not
+    /// exist. `seed_of` gives a registered run's seed (to match given seeds).
+    /// A point whose horizon is shorter than a registered point's of the same run identity is
+    /// refused (every error is returned).
+    pub fn grow(
+        &mut self,
+        asked: &Asked,
+        seed_of: &dyn Fn(&RunBlock, u32) -> u64,
+    ) -> Result<Growth, Vec<String>> {
+        let mut growth = Growth::default();
+        let mut refused = Vec::new();
+        let mut asked_ids = BTreeSet::new();
+        let before: Vec<RegPoint> = self.points.clone();
+        for params in asked.points {
+            let value = params.to_value();
+            let id = match self.find(&value) {
+                Some(id) => id,
+                None => {
+                    let id = self.points.len() as u32;
+                    self.points.push(RegPoint {
+                        id,
+                        params: value.clone(),
+                    });
+                    growth.new_points.push(id);
+                    id
+                }
+            };
+            asked_ids.insert(id);
+            // A longer run of a point registered before: its runs continue (or rerun) those.
+            let is_new = growth.new_points.contains(&id);
+            if is_new {
+                refused.extend(shorter_than_before(&before, asked.model, params));
+            }
+            let shorter = is_new
+                .then(|| self.shorter_point(&before, asked.model, params, &mut growth))
+                .flatten();
+            self.grow_point(id, asked.runs, shorter, seed_of, &mut growth);
+        }
+        if !refused.is_empty() {
+            return Err(refused);
+        }
+        growth.retired_points = self
+            .points
+            .iter()
+            .map(|p| p.id)
+            .filter(|id| !asked_ids.contains(id))
+            .collect();
+        Ok(growth)
+    }
+
+    /// A registered point with the same run identity as `params` (differing only in the
+    /// horizon) whose runs carry over; notes a rerun.
+    fn shorter_point(
+        &self,
+        before: &[RegPoint],
+        model: ModelKind,
+        params: &ModelParams,
+        growth: &mut Growth,
+    ) -> Option<u32> {
+        let identity = run_identity(model, &params.to_value());
+        let mut candidates: Vec<(u32, ModelParams)> = before
+            .iter()
+            .filter(|p| run_identity(model, &p.params) == identity)
+            .filter_map(|p| {
+                let mut errs = Vec::new();
+                model
+                    .params_from(&p.params, "", &mut errs)
+                    .map(|typed| (p.id, typed))
+            })
+            .filter(|(_, old)| old.carry_over(params) == CarryOver::Continue)
+            .collect();
+        // The longest of them (the last registered among equals).
+        candidates.sort_by_key(|c| c.0);
+        if let Some((id, _)) = candidates.pop() {
+            return Some(id);
+        }
+        for p in before
+            .iter()
+            .filter(|p| run_identity(model, &p.params) == identity)
+        {
+            let mut errs = Vec::new();
+            if let Some(old) = model.params_from(&p.params, "", &mut errs) {
+                if let CarryOver::Rerun(why) = old.carry_over(params) {
+                    growth.notes.push(format!(
+                        "point {} is run again from the start for the new horizon: {why}",
+                        p.id
+                    ));
+                }
+            }
+        }
+        None
+    }
+
+    /// Register the runs point `id` is asked for and does not have. A point that continues a
+    /// shorter one takes, for each replica (or given seed) the shorter has, that run's seed.
+    fn grow_point(
+        &mut self,
+        id: u32,
+        runs: &RunsPerPoint,
+        continues: Option<u32>,
+        seed_of: &dyn Fn(&RunBlock, u32) -> u64,
+        growth: &mut Growth,
+    ) {
+        let replicas_of = |point: u32| -> BTreeMap<u32, u64> {
+            self.blocks_of(point)
+                .flat_map(|b| {
+                    (0..b.count)
+                        .map(move |i| (b.first_replica + i, seed_of(b, b.first_replica + i)))
+                })
+                .collect()
+        };
+        let have = replicas_of(id);
+        let old = continues.map(replicas_of).unwrap_or_default();
+        // The old run's seed source, for a replica the shorter point has.
+        let inherited = |replica: u32| -> Option<SeedSource> {
+            let b = self
+                .blocks_of(continues?)
+                .find(|b| replica >= b.first_replica && replica < b.first_replica + b.count)?;
+            Some(match &b.seeds {
+                SeedSource::Given(s) => {
+                    SeedSource::Given(vec![s[(replica - b.first_replica) as usize]])
+                }
+                other => other.clone(),
+            })
+        };
+        // (replica, seed source, continued)
+        let mut wanted: Vec<(u32, SeedSource, bool)> = Vec::new();
+        match runs {
+            RunsPerPoint::Replicas(r) => {
+                for x in (0..*r).filter(|x| !have.contains_key(x)) {
+                    match inherited(x) {
+                        Some(src) => wanted.push((x, src, true)),
+                        None => wanted.push((x, SeedSource::Params, false)),
+                    }
+                }
+            }
+            RunsPerPoint::Seeds(seeds) => {
+                let known: BTreeSet<u64> = have.values().copied().collect();
+                let mut taken: BTreeSet<u32> = have.keys().copied().collect();
+                taken.extend(old.keys());
+                let mut next = taken.iter().next_back().map_or(0, |r| r + 1);
+                for s in seeds.iter().filter(|s| !known.contains(s)) {
+                    match old.iter().find(|(_, seed)| *seed == s) {
+                        Some((&r, _)) => wanted.push((r, inherited(r).expect("old run"), true)),
+                        None => {
+                            wanted.push((next, SeedSource::Given(vec![*s]), false));
+                            next += 1;
+                        }
+                    }
+                }
+                wanted.sort_by_key(|w| w.0);
+            }
+        }
+        // Consecutive replicas of one kind form one block.
+        let mut blocks: Vec<RunBlock> = Vec::new();
+        for (replica, seeds, cont) in wanted {
+            let cont = cont.then_some(continues).flatten();
+            match blocks.last_mut() {
+                Some(b)
+                    if b.first_replica + b.count == replica
+                        && b.continues == cont
+                        && mergeable(&b.seeds, &seeds) =>
+                {
+                    if let (SeedSource::Given(v), SeedSource::Given(w)) = (&mut b.seeds, &seeds) {
+                        v.extend(w);
+                    }
+                    b.count += 1;
+                }
+                _ => blocks.push(RunBlock {
+                    point: id,
+                    first_run: 0,
+                    first_replica: replica,
+                    count: 1,
+                    seeds,
+                    continues: cont,
+                }),
+            }
+        }
+        for b in blocks {
+            let (first_replica, count, cont) = (b.first_replica, b.count, b.continues);
+            let first = self.n_runs();
+            self.push_block(b, growth);
+            if let Some(old) = cont {
+                for i in 0..count {
+                    if let Some(old_run) = self.run_of(old, first_replica + i) {
+                        growth.continued.push((first + i as u64, old_run));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The run of `point` with replica `replica`.
+    pub fn run_of(&self, point: u32, replica: u32) -> Option<u64> {
+        self.blocks_of(point)
+            .find(|b| replica >= b.first_replica && replica < b.first_replica + b.count)
+            .map(|b| b.first_run + (replica - b.first_replica) as u64)
+    }
+}
+
+/// Why `params` is refused: a registered point of the same run identity ran longer.
+fn shorter_than_before(before: &[RegPoint], model: ModelKind, params: &ModelParams) -> Vec<String> {
+    let identity = run_identity(model, &params.to_value());
+    before
+        .iter()
+        .filter(|p| run_identity(model, &p.params) == identity)
+        .filter_map(|p| {
+            let mut errs = Vec::new();
+            let old = model.params_from(&p.params, "", &mut errs)?;
+            match old.carry_over(params) {
+                CarryOver::Shorter(why) => Some(format!(
+                    "point {} has been run further: {why} (a campaign never shortens its runs; \
+                     use another --out for shorter ones)",
+                    p.id
+                )),
+                _ => None,
+            }
+        })
+        .collect()
+}
+
+/// Whether a run of `b` can join a block of `a`.
+fn mergeable(a: &SeedSource, b: &SeedSource) -> bool {
+    match (a, b) {
+        (SeedSource::Given(_), SeedSource::Given(_)) => true,
+        (x, y) => x == y,
+    }
+}
