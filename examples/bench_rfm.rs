@@ -20,7 +20,7 @@ fn time(label: &str, cfg: RfmConfig, steps: u64, free_paths: bool) {
             bins_per_decade: 20,
             velocity: Some(([-5.0, 5.0], 2000)),
             from_step: 0,
-            window_steps: 2 * steps,
+            sample_every: steps,
         });
     }
     // Let the noise heat the system first (velocities, contacts and list rebuilds typical).

@@ -7,6 +7,10 @@ Every table (tables/<t>/*.parquet) must exist in both and hold the same multiset
 (EXCEPT ALL in both directions, so order, file layout and compaction do not matter; doubled
 rows do). `runs.wall_seconds` (a clock reading) is always ignored. Exits 1 on any difference.
 
+--rtol X compares, in a table that differs, every pair of rows (ordered by their non-float
+columns, then the floats) with a relative tolerance X on floats (exact on everything else),
+and prints each float column's largest relative difference: for a change that reorders sums.
+
 --current compares only what each directory's latest manifest asks for (points with
 `in_manifest`), with rows keyed by their point's params and their run's replica instead of
 `point_id` and `run_id` (which depend on the order in which a campaign grew), and without
@@ -50,12 +54,39 @@ def current(d: Path, t: str, keep: list[str], src) -> str:
     return sel + frm + " WHERE p.in_manifest"
 
 
+def within(con, qa: str, qb: str, rtol: float) -> tuple[bool, str]:
+    """Rows of qa and qb paired in order (non-float columns first, then floats), floats within
+    rtol (relative to the larger magnitude; equal non-finite values match), the rest exact."""
+    desc = con.execute(f"DESCRIBE {qa}").fetchall()
+    names = [r[0] for r in desc]
+    floats = {r[0] for r in desc if r[1] in ("DOUBLE", "FLOAT")}
+    order = ", ".join(f'"{c}"' for c in [c for c in names if c not in floats] + [c for c in names if c in floats])
+    ra = con.execute(f"SELECT * FROM ({qa}) ORDER BY {order}").fetchall()
+    rb = con.execute(f"SELECT * FROM ({qb}) ORDER BY {order}").fetchall()
+    worst = {c: 0.0 for c in floats}
+    for x, y in zip(ra, rb):
+        for c, u, v in zip(names, x, y):
+            if c in floats and u is not None and v is not None:
+                if u == v or (u != u and v != v):
+                    continue
+                scale = max(abs(u), abs(v))
+                rel = abs(u - v) / scale if scale > 0 else float("inf")
+                worst[c] = max(worst[c], rel)
+            elif u != v:
+                return False, f"column {c}: {u!r} vs {v!r} (not a float)"
+    big = {c: w for c, w in worst.items() if w > 0}
+    ok = all(w <= rtol for w in worst.values())
+    detail = ", ".join(f"{c} {w:.1e}" for c, w in sorted(big.items())) or "no float differs"
+    return ok, f"largest relative differences: {detail}"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("a", type=Path)
     ap.add_argument("b", type=Path)
     ap.add_argument("--ignore", nargs="*", default=[])
     ap.add_argument("--current", action="store_true")
+    ap.add_argument("--rtol", type=float, default=None)
     args = ap.parse_args()
     ignore = {"runs.wall_seconds", *args.ignore}
     if args.current:
@@ -66,6 +97,7 @@ def main() -> int:
         return 1
     con = duckdb.connect()
     bad = 0
+    approx = 0
     for t in ta:
         src = lambda d, t=t: f"read_parquet('{d}/tables/{t}/*.parquet')"
         cols = [r[0] for r in con.execute(f"DESCRIBE SELECT * FROM {src(args.a)}").fetchall()]
@@ -80,12 +112,21 @@ def main() -> int:
         d1 = con.execute(f"SELECT count(*) FROM ({qa} EXCEPT ALL {qb})").fetchone()[0]
         d2 = con.execute(f"SELECT count(*) FROM ({qb} EXCEPT ALL {qa})").fetchone()[0]
         same = na == nb and d1 == 0 and d2 == 0
+        if not same and args.rtol is not None and na == nb:
+            ok, detail = within(con, qa, qb, args.rtol)
+            print(f"  {'~ok ' if ok else 'FAIL'}  {t}: {na} rows, {d1} differ exactly; {detail}")
+            bad += not ok
+            approx += ok
+            continue
         print(f"  {'ok  ' if same else 'FAIL'}  {t}: {na} vs {nb} rows, {d1} only in A, {d2} only in B")
         bad += not same
     if bad:
         print(f"{bad} table(s) differ")
         return 1
-    print("all tables identical")
+    if approx:
+        print(f"all tables identical but {approx}, which agree within --rtol {args.rtol}")
+    else:
+        print("all tables identical")
     return 0
 
 

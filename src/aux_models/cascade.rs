@@ -605,10 +605,10 @@ impl CascadeRun {
                 every: 1,
             });
             let mut w = acc.work();
-            acc.add(&mut w, &flat, c.box_length, 0);
+            acc.add(&mut w, &flat, c.box_length);
             let start = sk.len();
             sk.extend(
-                acc.rows(pl.xy.len(), c.box_length)
+                acc.rows(pl.xy.len(), c.box_length, 1)
                     .into_iter()
                     .map(|row| SkRow {
                         source: "placement".into(),

@@ -30,7 +30,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::blocks::{block_sem, HistRow, BLOCKS};
+use super::blocks::{block_of, block_sem, HistRow, BLOCKS};
 
 /// Highest moment <l^m> recorded.
 pub const FREE_PATH_ORDERS: usize = 4;
@@ -46,9 +46,11 @@ pub struct FreePathConfig {
     pub bins_per_decade: u32,
     /// Post-collision velocity histogram ([v_min, v_max], bins); None: not recorded.
     pub velocity: Option<([f64; 2], u32)>,
-    /// First step of the sampled window and its length in steps.
+    /// First step of the sampled window, and the steps between samples: a path ending at
+    /// step `from_step + k sample_every + r` (0 <= r < sample_every) belongs to sample interval
+    /// k, and its block is that of sample k.
     pub from_step: u64,
-    pub window_steps: u64,
+    pub sample_every: u64,
 }
 
 impl FreePathConfig {
@@ -76,7 +78,8 @@ pub struct FreePathMomentRow {
     pub order: u32,
     /// <l^m> (m^m).
     pub value: f64,
-    /// From the 10 blocks of the sampled window (paths binned by their end).
+    /// From the 10 blocks of the sampled window (paths binned by the sample interval of their
+    /// end).
     pub sem: Option<f64>,
     pub n_paths: u64,
 }
@@ -98,9 +101,10 @@ pub struct FreePathAcc {
     pub l_counts: Vec<u64>,
     /// Post-collision velocity counts: bins + 2 (below, above).
     pub v_counts: Vec<u64>,
-    /// Per block: sums of l^m (index m - 1) and the number of paths.
-    pub block_sums: Vec<[f64; FREE_PATH_ORDERS]>,
-    pub block_counts: Vec<u64>,
+    /// Per sample interval: the sums of l^m (index m - 1) of the paths ending in it, from 0,
+    /// and their number; grouped into the blocks by `rows`.
+    pub interval_sums: Vec<[f64; FREE_PATH_ORDERS]>,
+    pub interval_counts: Vec<u64>,
 }
 
 impl FreePathAcc {
@@ -121,8 +125,8 @@ impl FreePathAcc {
             in_contact: vec![false; n],
             open: vec![false; n],
             start: vec![0.0; n * dim as usize],
-            block_sums: vec![[0.0; FREE_PATH_ORDERS]; BLOCKS],
-            block_counts: vec![0; BLOCKS],
+            interval_sums: Vec::new(),
+            interval_counts: Vec::new(),
             cfg,
         }
     }
@@ -169,10 +173,10 @@ impl FreePathAcc {
         }
     }
 
-    /// The open path of particle i (if any) ends at `pos`; recorded when `block` is Some
+    /// The open path of particle i (if any) ends at `pos`; recorded when `interval` is Some
     /// (the end lies in the window).
-    fn end(&mut self, i: usize, pos: &[f64], block: Option<usize>) {
-        let Some(block) = block else {
+    fn end(&mut self, i: usize, pos: &[f64], interval: Option<usize>) {
+        let Some(k) = interval else {
             self.open[i] = false;
             return;
         };
@@ -188,16 +192,21 @@ impl FreePathAcc {
             .sqrt();
         let idx = self.bin(l);
         self.l_counts[idx] += 1;
+        if self.interval_sums.len() <= k {
+            self.interval_sums.resize(k + 1, [0.0; FREE_PATH_ORDERS]);
+            self.interval_counts.resize(k + 1, 0);
+        }
         let mut pw = 1.0;
-        for s in self.block_sums[block].iter_mut() {
+        for s in self.interval_sums[k].iter_mut() {
             pw *= l;
             *s += pw;
         }
-        self.block_counts[block] += 1;
+        self.interval_counts[k] += 1;
     }
 
-    /// Histogram rows (kinds "free_path" and "post_collision_velocity") and moment rows.
-    pub fn rows(&self) -> (Vec<HistRow>, Vec<FreePathMomentRow>) {
+    /// Histogram rows (kinds "free_path" and "post_collision_velocity") and moment rows, the
+    /// errors from the blocks of a run of `samples` samples.
+    pub fn rows(&self, samples: u64) -> (Vec<HistRow>, Vec<FreePathMomentRow>) {
         let mut hist = Vec::new();
         let mut moments = Vec::new();
         let row = |kind: &str, lo: f64, hi: f64, count: u64, density: Option<f64>| HistRow {
@@ -236,13 +245,26 @@ impl FreePathAcc {
                 self.l_counts[nb + 1],
                 None,
             ));
-            let n: u64 = self.block_counts.iter().sum();
+            let mut block_sums = vec![[0.0; FREE_PATH_ORDERS]; BLOCKS];
+            let mut block_counts = vec![0u64; BLOCKS];
+            for (k, (sums, &c)) in self
+                .interval_sums
+                .iter()
+                .zip(&self.interval_counts)
+                .enumerate()
+            {
+                let b = block_of(k as u64, samples);
+                for (a, x) in block_sums[b].iter_mut().zip(sums) {
+                    *a += x;
+                }
+                block_counts[b] += c;
+            }
+            let n: u64 = block_counts.iter().sum();
             for m in 0..FREE_PATH_ORDERS {
-                let value = self.block_sums.iter().map(|b| b[m]).sum::<f64>() / n.max(1) as f64;
-                let blocks: Vec<f64> = self
-                    .block_sums
+                let value = block_sums.iter().map(|b| b[m]).sum::<f64>() / n.max(1) as f64;
+                let blocks: Vec<f64> = block_sums
                     .iter()
-                    .zip(&self.block_counts)
+                    .zip(&block_counts)
                     .filter(|(_, &c)| c > 0)
                     .map(|(b, &c)| b[m] / c as f64)
                     .collect();
@@ -359,11 +381,7 @@ impl<const D: usize> FreePaths<D> {
     pub fn post(&mut self, x: &[[f64; D]], v: &[[f64; D]], h: f64, step: u64) {
         let cfg = &self.acc.cfg;
         let rec = step >= cfg.from_step;
-        let block = rec.then(|| {
-            (((step - cfg.from_step) as u128 * BLOCKS as u128 / cfg.window_steps.max(1) as u128)
-                as usize)
-                .min(BLOCKS - 1)
-        });
+        let interval = rec.then(|| ((step - cfg.from_step) / cfg.sample_every.max(1)) as usize);
         let mut ev = std::mem::take(&mut self.ev);
         ev.sort_unstable_by(|a, b| a.i.cmp(&b.i).then(a.t_on.total_cmp(&b.t_on)));
         let mut next = std::mem::take(&mut self.busy_next);
@@ -398,7 +416,7 @@ impl<const D: usize> FreePaths<D> {
                 if now != state {
                     if now {
                         let pos: [f64; D] = std::array::from_fn(|q| x0[q] + vf[q] * t);
-                        self.acc.end(i, &pos, block);
+                        self.acc.end(i, &pos, interval);
                     } else {
                         let pos: [f64; D] = std::array::from_fn(|q| x[i][q] - v[i][q] * (h - t));
                         self.acc.begin(i, &pos, &v[i], rec);
@@ -450,7 +468,7 @@ mod tests {
             bins_per_decade: 20,
             velocity,
             from_step: 0,
-            window_steps: 1_000_000,
+            sample_every: 100_000,
         }
     }
 
@@ -479,7 +497,7 @@ mod tests {
         let v = sim.velocities();
         eprintln!("head-on: post-collision v_x = {:.15} {:.15}", v[0], v[2]);
         assert!((v[0] + 0.3).abs() < 1e-10 && (v[2] - 0.3).abs() < 1e-10);
-        let (hist, moments) = sim.free_path_rows();
+        let (hist, moments) = sim.free_path_rows(1);
         let pcv: Vec<&HistRow> = hist
             .iter()
             .filter(|h| h.kind == "post_collision_velocity" && h.count > 0)
@@ -538,7 +556,7 @@ mod tests {
             paths.push(b.abs() * tau);
         }
         sim.advance((t_end / cfg.dt()).round() as u64);
-        let (_, moments) = sim.free_path_rows();
+        let (_, moments) = sim.free_path_rows(1);
         assert_eq!(moments[0].n_paths as usize, paths.len());
         for m in 1..=4 {
             let want = paths.iter().map(|l| l.powi(m)).sum::<f64>() / paths.len() as f64;

@@ -76,9 +76,11 @@ pub struct Sampler {
     pub samples_done: u64,
     pub series: Vec<TimeRow>,
     pub moments: bool,
-    /// Per block: sums of |v_c|^m (index m - 1) and the number of values.
-    pub block_sums: Vec<[f64; MAX_ORDER]>,
-    pub block_counts: Vec<u64>,
+    /// Per sample: the sum of |v_c|^m over every particle's components (index m - 1), from 0;
+    /// grouped into the blocks when the rows are made (`blocks`).
+    pub moment_sums: Vec<[f64; MAX_ORDER]>,
+    /// Values per sample (particles x dimension).
+    pub moment_values: u64,
     pub hist: Option<HistogramConfig>,
     /// bins + 2 (below, above).
     pub counts: Vec<u64>,
@@ -116,24 +118,40 @@ pub struct TemperatureBlockRow {
 }
 
 impl Sampler {
-    /// The block of the current sample.
-    fn block(&self) -> usize {
-        ((self.samples_done as usize * BLOCKS) / self.samples_total.max(1) as usize).min(BLOCKS - 1)
-    }
-
     /// Same observables and settings (a checkpoint's sampler against a fresh one).
     fn same_shape(&self, o: &Sampler) -> bool {
-        self.samples_total == o.samples_total
-            && self.counts.len() == o.counts.len()
+        self.samples_total == o.samples_total && self.same_observables(o)
+    }
+
+    /// Same observables and settings, whatever the number of samples (a finished run's
+    /// sampler against that of a longer run).
+    fn same_observables(&self, o: &Sampler) -> bool {
+        self.counts.len() == o.counts.len()
             && self.moments == o.moments
             && self.hist == o.hist
             && self.neighbours.as_ref().map(|a| (&a.cfg, a.counts.len()))
                 == o.neighbours.as_ref().map(|a| (&a.cfg, a.counts.len()))
-            && self.sk.as_ref().map(|a| (&a.cfg, a.block_sums.len()))
-                == o.sk.as_ref().map(|a| (&a.cfg, a.block_sums.len()))
-            && self.radial.as_ref().map(|a| (&a.cfg, a.counts.len()))
-                == o.radial.as_ref().map(|a| (&a.cfg, a.counts.len()))
+            && self.sk.as_ref().map(|a| (&a.cfg, a.n2.len()))
+                == o.sk.as_ref().map(|a| (&a.cfg, a.n2.len()))
+            && self.radial.as_ref().map(|a| &a.cfg) == o.radial.as_ref().map(|a| &a.cfg)
             && self.snap_times == o.snap_times
+    }
+
+    /// The logs hold one entry per sample (or evaluation) done.
+    fn logs_consistent(&self) -> bool {
+        let done = self.samples_done;
+        let evals = |every: u32| done.div_ceil(every.max(1) as u64);
+        (!self.moments || self.moment_sums.len() as u64 == done)
+            && self.series.len() as u64 == done
+            && self.neighbours.as_ref().is_none_or(|a| a.samples() == done)
+            && self
+                .sk
+                .as_ref()
+                .is_none_or(|a| a.evals() == evals(a.cfg.every))
+            && self
+                .radial
+                .as_ref()
+                .is_none_or(|a| a.evals() == evals(a.cfg.every))
     }
 }
 
@@ -180,8 +198,8 @@ impl RfmRun {
             samples_done: 0,
             series: Vec::new(),
             moments: rc.moments,
-            block_sums: vec![[0.0; MAX_ORDER]; BLOCKS],
-            block_counts: vec![0; BLOCKS],
+            moment_sums: Vec::new(),
+            moment_values: (rc.sim.n_particles * rc.sim.dim as usize) as u64,
             counts: hist
                 .as_ref()
                 .map(|h| vec![0; h.bins as usize + 2])
@@ -228,7 +246,7 @@ impl RfmRun {
         let st: RunState = postcard::from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         let fresh = Self::sampler_for(rc);
-        if !fresh.same_shape(&st.sampler) {
+        if !fresh.same_shape(&st.sampler) || !st.sampler.logs_consistent() {
             return Err("checkpoint does not match the run's observables".into());
         }
         let sim = RfmSim::from_state_bytes(rc.sim.clone(), &st.sim)?;
@@ -236,6 +254,40 @@ impl RfmRun {
             return Err("checkpoint does not match the run's observables".into());
         }
         Ok(Self::assemble(sim, st.sampler, &rc.sim))
+    }
+
+    /// A finished run's state, which a longer run continues (`continue_from`); None before the
+    /// end.
+    pub fn final_state(&self) -> Option<Vec<u8>> {
+        self.is_done().then(|| self.state_bytes())
+    }
+
+    /// The run `rc` (a longer duration) continued from a finished run's `final_state`: the
+    /// samples taken stay, the blocks are formed from them with the new number of samples at
+    /// the end, and the simulation goes on; bit for bit the run made straight to the new end.
+    pub fn continue_from(rc: &RunConfig, bytes: &[u8]) -> Result<Self, String> {
+        let st: RunState =
+            postcard::from_bytes(bytes).map_err(|e| format!("final state does not decode: {e}"))?;
+        let fresh = Self::sampler_for(rc);
+        let mut sampler = st.sampler;
+        if !fresh.same_observables(&sampler) || !sampler.logs_consistent() {
+            return Err("final state does not match the run's observables".into());
+        }
+        if sampler.samples_done != sampler.samples_total {
+            return Err("final state is not that of a finished run".into());
+        }
+        if fresh.samples_total < sampler.samples_total {
+            return Err(format!(
+                "{} samples, fewer than the finished run's {}",
+                fresh.samples_total, sampler.samples_total
+            ));
+        }
+        let sim = RfmSim::from_state_bytes(rc.sim.clone(), &st.sim)?;
+        if sim.free_path_config() != rc.free_paths.as_ref() {
+            return Err("final state does not match the run's observables".into());
+        }
+        sampler.samples_total = fresh.samples_total;
+        Ok(Self::assemble(sim, sampler, &rc.sim))
     }
 
     pub fn is_done(&self) -> bool {
@@ -305,14 +357,13 @@ impl RfmRun {
             for m in mean.iter_mut().take(d) {
                 *m /= n as f64;
             }
-            let block = s.block();
+            let mut sums = [0.0; MAX_ORDER];
             for p in v.chunks_exact(d) {
                 for c in 0..d {
                     let x = p[c] - mean[c];
                     if s.moments {
                         let a = x.abs();
                         let mut pw = 1.0;
-                        let sums = &mut s.block_sums[block];
                         for sm in sums.iter_mut() {
                             pw *= a;
                             *sm += pw;
@@ -333,10 +384,9 @@ impl RfmRun {
                 }
             }
             if s.moments {
-                s.block_counts[block] += (n * d) as u64;
+                s.moment_sums.push(sums);
             }
         }
-        let block = s.block();
         // S(k) and g(R) at every `every`-th snapshot.
         let sk_now =
             s.sk.as_ref()
@@ -351,14 +401,14 @@ impl RfmRun {
             let cfg = self.sim.config();
             let (l, d) = (cfg.box_length(), cfg.diameter());
             if let Some(a) = &mut s.neighbours {
-                a.add(&x, l, d, block);
+                a.add(&x, l, d);
             }
             if let (Some(a), true) = (&mut s.sk, sk_now) {
                 let w = self.sk_work.as_mut().expect("S(k) scratch");
-                a.add(w, &x, l, block);
+                a.add(w, &x, l);
             }
             if let (Some(a), true) = (&mut s.radial, radial_now) {
-                a.add(&mut self.pair_buf, &x, block);
+                a.add(&mut self.pair_buf, &x);
             }
         }
         s.samples_done += 1;
@@ -397,13 +447,15 @@ impl RfmRun {
         }
         let mut moments = Vec::new();
         if s.moments {
-            let total: u64 = s.block_counts.iter().sum();
+            let (block_sums, block_samples) = super::blocks::group(&s.moment_sums, s.samples_total);
+            let block_counts: Vec<u64> =
+                block_samples.iter().map(|n| n * s.moment_values).collect();
+            let total: u64 = block_counts.iter().sum();
             for m in 0..MAX_ORDER {
-                let value = s.block_sums.iter().map(|b| b[m]).sum::<f64>() / total.max(1) as f64;
-                let blocks: Vec<f64> = s
-                    .block_sums
+                let value = block_sums.iter().map(|b| b[m]).sum::<f64>() / total.max(1) as f64;
+                let blocks: Vec<f64> = block_sums
                     .iter()
-                    .zip(&s.block_counts)
+                    .zip(&block_counts)
                     .filter(|(_, &c)| c > 0)
                     .map(|(b, &c)| b[m] / c as f64)
                     .collect();
@@ -454,11 +506,11 @@ impl RfmRun {
         }
         let mut neighbour_moments = Vec::new();
         if let Some(a) = &s.neighbours {
-            let (h, m) = a.rows();
+            let (h, m) = a.rows(s.samples_total);
             histograms.extend(h);
             neighbour_moments = m;
         }
-        let (fp_hist, free_path_moments) = self.sim.free_path_rows();
+        let (fp_hist, free_path_moments) = self.sim.free_path_rows(s.samples_total);
         histograms.extend(fp_hist);
         let cfg = self.sim.config();
         RfmOutput {
@@ -469,9 +521,13 @@ impl RfmRun {
             structure_factor: s
                 .sk
                 .as_ref()
-                .map(|a| a.rows(cfg.n_particles, cfg.box_length()))
+                .map(|a| a.rows(cfg.n_particles, cfg.box_length(), s.samples_total))
                 .unwrap_or_default(),
-            radial: s.radial.as_ref().map(|a| a.rows()).unwrap_or_default(),
+            radial: s
+                .radial
+                .as_ref()
+                .map(|a| a.rows(s.samples_total))
+                .unwrap_or_default(),
             temperature_blocks,
             snapshots: s.snapshots,
             free_path_moments,

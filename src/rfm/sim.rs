@@ -543,9 +543,12 @@ impl RfmSim {
         }
     }
 
-    /// Histogram rows ("free_path", "post_collision_velocity") and free-path moments.
-    pub fn free_path_rows(&self) -> (Vec<HistRow>, Vec<FreePathMomentRow>) {
-        self.free_path_acc().map(|a| a.rows()).unwrap_or_default()
+    /// Histogram rows ("free_path", "post_collision_velocity") and free-path moments, the
+    /// errors from the blocks of a run of `samples` samples.
+    pub fn free_path_rows(&self, samples: u64) -> (Vec<HistRow>, Vec<FreePathMomentRow>) {
+        self.free_path_acc()
+            .map(|a| a.rows(samples))
+            .unwrap_or_default()
     }
 
     /// The checkpoint payload.

@@ -18,7 +18,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::blocks::block_sem;
-use super::blocks::{HistRow, BLOCKS};
+use super::blocks::{block_of, HistRow, BLOCKS};
 
 /// Highest moment <R^m> of the neighbour separations.
 pub const NEIGHBOUR_ORDERS: usize = 9;
@@ -65,10 +65,11 @@ pub struct NeighbourAcc {
     pub edges: Vec<f64>,
     /// Per h (index h - 1): bins + 2 counts (below, above).
     pub counts: Vec<u64>,
-    /// Per h and block (index (h - 1) * BLOCKS + block): sums of R^m (index m - 1).
-    pub block_sums: Vec<[f64; NEIGHBOUR_ORDERS]>,
-    /// Separations per block and h.
-    pub block_counts: Vec<u64>,
+    /// Per sample and h (index sample * h_max + h - 1): the sums of R^m (index m - 1) over
+    /// the sample's separations, from 0; grouped into the blocks by `rows`.
+    pub sample_sums: Vec<[f64; NEIGHBOUR_ORDERS]>,
+    /// Separations per sample and h (same index).
+    pub sample_counts: Vec<u64>,
 }
 
 /// The h-th neighbour separations R_{i,i+h}, i = 0..N-1, of ordered ring positions `x`
@@ -95,8 +96,8 @@ impl NeighbourAcc {
         let hm = cfg.h_max as usize;
         NeighbourAcc {
             counts: vec![0; hm * (bins + 2)],
-            block_sums: vec![[0.0; NEIGHBOUR_ORDERS]; hm * BLOCKS],
-            block_counts: vec![0; hm * BLOCKS],
+            sample_sums: Vec::new(),
+            sample_counts: Vec::new(),
             edges,
             cfg,
         }
@@ -104,6 +105,11 @@ impl NeighbourAcc {
 
     pub fn bins(&self) -> usize {
         self.edges.len() - 1
+    }
+
+    /// Samples added.
+    pub fn samples(&self) -> u64 {
+        (self.sample_sums.len() / (self.cfg.h_max as usize).max(1)) as u64
     }
 
     fn bin(&self, r: f64) -> usize {
@@ -127,7 +133,7 @@ impl NeighbourAcc {
     }
 
     /// One snapshot of 1D positions (ordered, unwrapped), box length `l`, rod width `d`.
-    pub fn add(&mut self, x: &[f64], l: f64, d: f64, block: usize) {
+    pub fn add(&mut self, x: &[f64], l: f64, d: f64) {
         let nb = self.bins();
         for h in 1..=self.cfg.h_max as usize {
             let mut sums = [0.0; NEIGHBOUR_ORDERS];
@@ -142,16 +148,15 @@ impl NeighbourAcc {
                 }
                 count += 1;
             }
-            let k = (h - 1) * BLOCKS + block;
-            for (a, s) in self.block_sums[k].iter_mut().zip(sums) {
-                *a += s;
-            }
-            self.block_counts[k] += count;
+            self.sample_sums.push(sums);
+            self.sample_counts.push(count);
         }
     }
 
-    /// Histogram rows (kind "neighbour_distance") and moment rows.
-    pub fn rows(&self) -> (Vec<HistRow>, Vec<NeighbourMomentRow>) {
+    /// Histogram rows (kind "neighbour_distance") and moment rows, the errors from the blocks
+    /// of a run of `samples` samples.
+    pub fn rows(&self, samples: u64) -> (Vec<HistRow>, Vec<NeighbourMomentRow>) {
+        let hm = (self.cfg.h_max as usize).max(1);
         let nb = self.bins();
         let mut hist = Vec::new();
         let mut moments = Vec::new();
@@ -177,14 +182,28 @@ impl NeighbourAcc {
             }
             hist.push(row(f64::NEG_INFINITY, self.edges[0], c[nb], None));
             hist.push(row(self.edges[nb], f64::INFINITY, c[nb + 1], None));
-            let bs = &self.block_sums[(h - 1) * BLOCKS..h * BLOCKS];
-            let bc = &self.block_counts[(h - 1) * BLOCKS..h * BLOCKS];
+            let mut bs = vec![[0.0; NEIGHBOUR_ORDERS]; BLOCKS];
+            let mut bc = vec![0u64; BLOCKS];
+            for (j, (sums, &count)) in self
+                .sample_sums
+                .iter()
+                .zip(&self.sample_counts)
+                .skip(h - 1)
+                .step_by(hm)
+                .enumerate()
+            {
+                let b = block_of(j as u64, samples);
+                for (a, x) in bs[b].iter_mut().zip(sums) {
+                    *a += x;
+                }
+                bc[b] += count;
+            }
             let n: u64 = bc.iter().sum();
             for m in 0..NEIGHBOUR_ORDERS {
                 let value = bs.iter().map(|b| b[m]).sum::<f64>() / n.max(1) as f64;
                 let blocks: Vec<f64> = bs
                     .iter()
-                    .zip(bc)
+                    .zip(&bc)
                     .filter(|(_, &c)| c > 0)
                     .map(|(b, &c)| b[m] / c as f64)
                     .collect();
@@ -287,11 +306,10 @@ pub struct SkAcc {
     /// Shells (ascending |n|^2) and their full vector counts.
     pub n2: Vec<u64>,
     pub n_vectors: Vec<u64>,
-    /// Per block and shell (index block * shells + shell): sum of |rho_k|^2 over the computed
-    /// vectors of the shell.
-    pub block_sums: Vec<f64>,
-    /// Evaluations per block.
-    pub block_evals: Vec<u64>,
+    /// Per evaluation and shell (index evaluation * shells + shell): the sum of |rho_k|^2 over
+    /// the computed vectors of the shell, from 0; grouped into the blocks by `rows`
+    /// (evaluation e is sample e x `every`).
+    pub eval_sums: Vec<f64>,
 }
 
 impl SkAcc {
@@ -306,8 +324,7 @@ impl SkAcc {
             n_vectors[s] += 2;
         }
         SkAcc {
-            block_sums: vec![0.0; n2.len() * BLOCKS],
-            block_evals: vec![0; BLOCKS],
+            eval_sums: Vec::new(),
             n2,
             n_vectors,
             cfg,
@@ -339,29 +356,45 @@ impl SkAcc {
         self.n_vectors.iter().sum::<u64>() / 2
     }
 
+    /// Evaluations done.
+    pub fn evals(&self) -> u64 {
+        (self.eval_sums.len() / self.n2.len().max(1)) as u64
+    }
+
     /// One snapshot of 2D positions (flat, particle-major), box side `l`.
-    pub fn add(&mut self, w: &mut SkWork, x: &[f64], l: f64, block: usize) {
+    pub fn add(&mut self, w: &mut SkWork, x: &[f64], l: f64) {
         rho_k(w, x, l);
         let ns = self.n2.len();
-        let sums = &mut self.block_sums[block * ns..(block + 1) * ns];
+        let start = self.eval_sums.len();
+        self.eval_sums.resize(start + ns, 0.0);
+        let sums = &mut self.eval_sums[start..];
         for ((re, im), &s) in w.rho_re.iter().zip(&w.rho_im).zip(&w.shell_of) {
             sums[s as usize] += re * re + im * im;
         }
-        self.block_evals[block] += 1;
     }
 
-    /// Rows (one per shell); `n` particles, box side `l`.
-    pub fn rows(&self, n: usize, l: f64) -> Vec<SkRow> {
+    /// Rows (one per shell); `n` particles, box side `l`, the errors from the blocks of a run
+    /// of `samples` samples.
+    pub fn rows(&self, n: usize, l: f64, samples: u64) -> Vec<SkRow> {
         let ns = self.n2.len();
-        let evals: u64 = self.block_evals.iter().sum();
+        let mut block_sums = vec![0.0; ns * BLOCKS];
+        let mut block_evals = vec![0u64; BLOCKS];
+        for (e, sums) in self.eval_sums.chunks_exact(ns.max(1)).enumerate() {
+            let b = block_of(e as u64 * self.cfg.every as u64, samples);
+            for (a, x) in block_sums[b * ns..(b + 1) * ns].iter_mut().zip(sums) {
+                *a += x;
+            }
+            block_evals[b] += 1;
+        }
+        let evals: u64 = block_evals.iter().sum();
         (0..ns)
             .map(|s| {
                 let half = (self.n_vectors[s] / 2) as f64;
                 let norm = |e: u64| half * e as f64 * n as f64;
-                let total: f64 = (0..BLOCKS).map(|b| self.block_sums[b * ns + s]).sum();
+                let total: f64 = (0..BLOCKS).map(|b| block_sums[b * ns + s]).sum();
                 let blocks: Vec<f64> = (0..BLOCKS)
-                    .filter(|&b| self.block_evals[b] > 0)
-                    .map(|b| self.block_sums[b * ns + s] / norm(self.block_evals[b]))
+                    .filter(|&b| block_evals[b] > 0)
+                    .map(|b| block_sums[b * ns + s] / norm(block_evals[b]))
                     .collect();
                 SkRow {
                     n2: self.n2[s],
@@ -479,22 +512,26 @@ pub struct RadialRow {
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct RadialAcc {
     pub cfg: RadialConfig,
-    /// Per block and bin (index block * bins + bin).
+    /// Per evaluation and bin (index evaluation * bins + bin): pair counts; grouped into the
+    /// blocks by `rows` (evaluation e is sample e x `every`).
     pub counts: Vec<u64>,
-    pub block_evals: Vec<u64>,
 }
 
 impl RadialAcc {
     pub fn new(cfg: RadialConfig) -> Self {
         RadialAcc {
-            counts: vec![0; cfg.bins as usize * BLOCKS],
-            block_evals: vec![0; BLOCKS],
+            counts: Vec::new(),
             cfg,
         }
     }
 
+    /// Evaluations done.
+    pub fn evals(&self) -> u64 {
+        (self.counts.len() / (self.cfg.bins as usize).max(1)) as u64
+    }
+
     /// One snapshot of 2D positions (flat); `buf` is scratch.
-    pub fn add(&mut self, buf: &mut Vec<f64>, x: &[f64], block: usize) {
+    pub fn add(&mut self, buf: &mut Vec<f64>, x: &[f64]) {
         let l = self.cfg.l;
         let n = x.len() / 2;
         let bins = self.cfg.bins as usize;
@@ -506,7 +543,9 @@ impl RadialAcc {
         let half = 0.5 * l;
         let r2max = self.cfg.r_max * self.cfg.r_max;
         let inv_dr = bins as f64 / self.cfg.r_max;
-        let counts = &mut self.counts[block * bins..(block + 1) * bins];
+        let start = self.counts.len();
+        self.counts.resize(start + bins, 0);
+        let counts = &mut self.counts[start..];
         buf.resize(n, 0.0);
         for i in 0..n {
             let (xi, yi) = (xs[i], ys[i]);
@@ -527,27 +566,34 @@ impl RadialAcc {
                 }
             }
         }
-        self.block_evals[block] += 1;
     }
 
-    pub fn rows(&self) -> Vec<RadialRow> {
+    /// Rows (one per bin), the errors from the blocks of a run of `samples` samples.
+    pub fn rows(&self, samples: u64) -> Vec<RadialRow> {
         let bins = self.cfg.bins as usize;
+        let mut block_counts = vec![0u64; bins * BLOCKS];
+        let mut block_evals = vec![0u64; BLOCKS];
+        for (e, c) in self.counts.chunks_exact(bins.max(1)).enumerate() {
+            let b = block_of(e as u64 * self.cfg.every as u64, samples);
+            for (a, x) in block_counts[b * bins..(b + 1) * bins].iter_mut().zip(c) {
+                *a += x;
+            }
+            block_evals[b] += 1;
+        }
         let (n, l) = (self.cfg.n as f64, self.cfg.l);
         let dr = self.cfg.r_max / bins as f64;
-        let evals: u64 = self.block_evals.iter().sum();
+        let evals: u64 = block_evals.iter().sum();
         let pairs = 0.5 * n * (n - 1.0);
         let mut cum = 0u64;
         (0..bins)
             .map(|j| {
                 let (r_lo, r_hi) = (j as f64 * dr, (j + 1) as f64 * dr);
                 let ideal = pairs * std::f64::consts::PI * (r_hi * r_hi - r_lo * r_lo) / (l * l);
-                let count: u64 = (0..BLOCKS).map(|b| self.counts[b * bins + j]).sum();
+                let count: u64 = (0..BLOCKS).map(|b| block_counts[b * bins + j]).sum();
                 cum += count;
                 let blocks: Vec<f64> = (0..BLOCKS)
-                    .filter(|&b| self.block_evals[b] > 0)
-                    .map(|b| {
-                        self.counts[b * bins + j] as f64 / (ideal * self.block_evals[b] as f64)
-                    })
+                    .filter(|&b| block_evals[b] > 0)
+                    .map(|b| block_counts[b * bins + j] as f64 / (ideal * block_evals[b] as f64))
                     .collect();
                 RadialRow {
                     r_lo,

@@ -284,9 +284,9 @@ fn given_seeds_grow_like_replicas() {
     );
 }
 
-/// An RFM campaign grows by replicas and then by a longer duration: the longer runs are run
-/// again from t = 0 (their block errors span the whole sampled time), with a note in the
-/// plan, and the campaign equals the one of the final manifest.
+/// An RFM campaign grows by replicas and then by a longer duration (40 -> 85 samples: the 10
+/// blocks of the errors move): the longer runs continue the finished ones from their final
+/// states, and the campaign equals the one of the final manifest.
 #[test]
 fn rfm_growth_equals_a_direct_campaign() {
     let _g = heavy();
@@ -299,15 +299,18 @@ fn rfm_growth_equals_a_direct_campaign() {
         "replicas": 1,
         "params": {
             "dim": 2, "n_particles": 40, "packing_fraction": 0.3,
-            "warmup": 0.002, "duration": 0.006, "sample_every": 500,
-            "observables": ["temperature", "velocity_moments"]
+            "warmup": 0.002, "duration": 0.02, "sample_every": 500,
+            "observables": ["temperature", "velocity_moments", "structure_factor",
+                            "radial_distribution", "free_paths"],
+            "structure_factor": {"k_max": 5, "every": 2},
+            "radial_distribution": {"bins": 20, "every": 3}
         },
         "sweep": {"n_particles": [30, 40]}
     });
     let mut b = a.clone();
     b["replicas"] = json!(2);
     let mut c = b.clone();
-    c["params"]["duration"] = json!(0.012);
+    c["params"]["duration"] = json!(0.0425);
     let grown = dir.path().join("grown");
     let paths: Vec<PathBuf> = (0..3)
         .map(|k| dir.path().join(format!("r{k}.json")))
@@ -321,12 +324,22 @@ fn rfm_growth_equals_a_direct_campaign() {
     let p = plan(&paths[2], &grown, &log);
     assert_eq!(
         (p["new_runs"].as_u64(), p["continued_runs"].as_u64()),
-        (Some(4), Some(0))
+        (Some(4), Some(4))
     );
-    let notes = p["notes"].to_string();
-    assert!(notes.contains("run again from the start"), "{p:#}");
+    assert_eq!(p["notes"], json!([]), "{p:#}");
     run_ok(&paths[2], &grown, &log);
     assert_eq!(n_runs(&grown), 8);
+    assert!(
+        !log_text(&log).contains("cannot continue"),
+        "{}",
+        log_text(&log)
+    );
+    let runs = read_table(&grown, "runs");
+    let cont = runs.col("continued_from");
+    assert_eq!(
+        runs.rows.iter().filter(|r| r[cont] != Cell::Null).count(),
+        4
+    );
     let direct = dir.path().join("direct");
     run_ok(&paths[2], &direct, &log);
     assert_same_current(&grown, &direct, "rfm grown vs direct");

@@ -20,8 +20,9 @@ use crate::store::parquet_io::StoreError;
 pub use params::{RfmObservable, RfmParams};
 use tables::*;
 
-/// Layout version of the RFM checkpoint payload.
-pub const STATE_FORMAT: &str = "rfm/4";
+/// Layout version of the RFM checkpoint payload and final state (5: the blocked accumulators
+/// keep per-sample sums, grouped into blocks at the end).
+pub const STATE_FORMAT: &str = "rfm/5";
 
 /// The `rfm` model.
 pub struct Rfm;
@@ -43,7 +44,8 @@ impl Model for Rfm {
         "snapshot": {"times": [0.005]}
     }"#;
 
-    /// The sampled time: a longer run of a point has the seed of the shorter one.
+    /// The sampled time: a longer run of a point has the seed of the shorter one and continues
+    /// it (the blocks of the errors are formed at the end, from per-sample sums).
     const HORIZON: &'static [&'static str] = &["duration"];
 
     fn check(p: &RfmParams, path: &str, errors: &mut ParamErrors) {
@@ -69,14 +71,16 @@ impl Model for Rfm {
                 new.duration, old.duration
             ))
         } else {
-            // The 10 blocks of the errors cut the whole sampled time: a longer run puts every
-            // sample in other blocks, which the sums of a finished run cannot be regrouped into.
-            CarryOver::Rerun(
-                "the 10 blocks of the errors span the whole sampled time, so a longer run \
-                 regroups every sample"
-                    .into(),
-            )
+            CarryOver::Continue
         }
+    }
+
+    fn final_state(run: &mut RfmRun) -> Option<Vec<u8>> {
+        run.final_state()
+    }
+
+    fn continue_from(p: &RfmParams, state: &[u8]) -> Result<RfmRun, String> {
+        RfmRun::continue_from(&p.run_config(), state)
     }
 
     fn finish(run: RfmRun, ids: RunIds) -> RunRows {

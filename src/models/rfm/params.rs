@@ -380,19 +380,40 @@ impl RfmParams {
         if let Some(h) = &self.post_collision_velocity {
             bytes = bytes.saturating_add(hist(h.bins));
         }
-        if self.config().validate().is_ok() {
+        let cfg = self.config();
+        if cfg.validate().is_ok() {
+            // The accumulators keep their sums per sample (or evaluation) until the end.
+            let samples = cfg.duration_steps() / cfg.sample_every.max(1);
+            let evals = |every: u32| samples.div_ceil(every.max(1) as u64);
+            // The temperature series.
+            bytes = bytes.saturating_add(samples.saturating_mul(16));
+            if self.wants(RfmObservable::VelocityMoments) {
+                bytes = bytes.saturating_add(samples.saturating_mul(8 * 12));
+            }
+            if let Some(nc) = self.neighbour_config() {
+                let per = (nc.h_max as u64).saturating_mul(8 * 10);
+                bytes = bytes.saturating_add(samples.saturating_mul(per));
+            }
             if let Some(sk) = self.structure_factor_config() {
-                // Half the lattice vectors in |n| <= n_max, a sum pair each, per block.
+                // Half the lattice vectors in |n| <= n_max, their phase sums; one sum per
+                // shell (at most n_max^2 + 1 shells) per evaluation.
                 let vectors = (std::f64::consts::PI * sk.n_max * sk.n_max / 2.0).ceil() as u64;
-                bytes = bytes.saturating_add(vectors.saturating_mul(8 * 16));
+                let shells = ((sk.n_max * sk.n_max).min(1e12) as u64 + 1).min(vectors.max(1));
+                bytes = bytes
+                    .saturating_add(vectors.saturating_mul(8 * 16))
+                    .saturating_add(evals(sk.every).saturating_mul(shells).saturating_mul(8));
             }
             if let Some(r) = self.radial_config() {
-                bytes = bytes.saturating_add((r.bins as u64).saturating_mul(8 * 14));
+                let per = (r.bins as u64).saturating_mul(8);
+                bytes = bytes
+                    .saturating_add(per.saturating_mul(14))
+                    .saturating_add(evals(r.every).saturating_mul(per));
             }
             if let Some(f) = self.free_path_config() {
                 bytes = bytes
                     .saturating_add(n.saturating_mul(48))
-                    .saturating_add((f.bins().min(1e12) as u64).saturating_mul(16));
+                    .saturating_add((f.bins().min(1e12) as u64).saturating_mul(16))
+                    .saturating_add(samples.saturating_mul(40));
             }
         }
         if let Some(s) = &self.snapshot {
@@ -511,7 +532,7 @@ impl RfmParams {
             bins_per_decade: spec.bins_per_decade,
             velocity,
             from_step: cfg.warmup_steps(),
-            window_steps: (cfg.duration_steps() / cfg.sample_every) * cfg.sample_every,
+            sample_every: cfg.sample_every,
         })
     }
 

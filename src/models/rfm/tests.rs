@@ -93,6 +93,63 @@ mod run {
         }
     }
 
+    /// A finished run continued to a longer duration equals, bit for bit, the run made
+    /// straight to it: every observable of each dimension, sample counts that are not
+    /// multiples of the 10 blocks (60 -> 73 -> 137), the last extension in two steps; the
+    /// final states of the continued and the direct run are equal too. A shorter duration or
+    /// other observables are refused.
+    #[test]
+    fn continued_runs_equal_direct_runs() {
+        for dim in [1, 2] {
+            let with = |duration: f64| {
+                let mut p = params_all(dim);
+                p.duration = duration;
+                p.run_config()
+            };
+            // 0.03 s = 60 samples of 500 steps at dt = 1e-6.
+            let (d1, d2, d3) = (0.03, 0.0365, 0.0685);
+            assert_eq!(with(d1).sim.duration_steps() / 500, 60);
+            let direct = |d: f64| {
+                let mut r = RfmRun::new(&with(d), 9).unwrap();
+                while !r.advance(1 << 20).unwrap() {}
+                r
+            };
+            let first = direct(d1);
+            let fin = first
+                .final_state()
+                .expect("a finished run has a final state");
+            let mut second = RfmRun::continue_from(&with(d2), &fin).unwrap();
+            assert!(!second.is_done());
+            while !second.advance(3_333).unwrap() {}
+            let want2 = direct(d2);
+            assert!(
+                second.final_state() == want2.final_state(),
+                "dim {dim}: final states"
+            );
+            let fin2 = second.final_state().unwrap();
+            assert_eq!(second.finish(), want2.finish(), "dim {dim}: {d1} -> {d2}");
+            let mut third = RfmRun::continue_from(&with(d3), &fin2).unwrap();
+            while !third.advance(50_000).unwrap() {}
+            let want3 = direct(d3);
+            let (got, want) = (third.finish(), want3.finish());
+            assert!(got.timeseries.len() == 137 && !got.moments.is_empty());
+            assert_eq!(got, want, "dim {dim}: {d1} -> {d2} -> {d3}");
+            // The blocks moved: the first run's moments are not a prefix of the longer ones.
+            assert_ne!(direct(d1).finish().moments, want.moments);
+            assert!(RfmRun::continue_from(&with(0.02), &fin).is_err(), "shorter");
+            let mut other = params(dim);
+            other.duration = d2;
+            assert!(
+                RfmRun::continue_from(&other.run_config(), &fin).is_err(),
+                "observables"
+            );
+            // Not finished: no final state.
+            let mut running = RfmRun::new(&with(d1), 9).unwrap();
+            running.advance(5_000).unwrap();
+            assert!(running.final_state().is_none());
+        }
+    }
+
     /// 1D engine (eps = 0.6, N = 300, L' = 0.5): the neighbour histograms hold N separations
     /// per h and snapshot, <R_h> = h L'/N (the gaps sum to L'; soft overlaps counted with
     /// |.| add a little), and the moments are non-degenerate (<R^2> >= <R>^2).
@@ -239,7 +296,7 @@ mod run {
             bins_per_decade: 20,
             velocity: Some(([-10.0, 10.0], 200)),
             from_step: warm,
-            window_steps: window,
+            sample_every: cfg.sample_every,
         });
         let d = cfg.diameter();
         let phi = 0.01;
@@ -247,13 +304,24 @@ mod run {
         let chi = (1.0 - 7.0 * phi / 16.0) / (1.0 - phi).powi(2);
         let t0 = std::time::Instant::now();
         sim.advance(warm + window);
-        let (hist, m) = sim.free_path_rows();
+        let samples = window / cfg.sample_every;
+        let (hist, m) = sim.free_path_rows(samples);
         let acc = sim.free_path_acc().unwrap();
+        let (sums, _) = crate::rfm::blocks::group(&acc.interval_sums, samples);
+        let counts: Vec<u64> = (0..crate::rfm::blocks::BLOCKS)
+            .map(|b| {
+                acc.interval_counts
+                    .iter()
+                    .enumerate()
+                    .filter(|(k, _)| crate::rfm::blocks::block_of(*k as u64, samples) == b)
+                    .map(|(_, c)| c)
+                    .sum()
+            })
+            .collect();
         eprintln!(
             "dilute gas: block means {:?}",
-            acc.block_sums
-                .iter()
-                .zip(&acc.block_counts)
+            sums.iter()
+                .zip(&counts)
                 .map(|(s, &c)| format!("{:.4} ({c})", s[0] / c as f64))
                 .collect::<Vec<_>>()
         );

@@ -20,10 +20,10 @@ fn neighbour_distances_of_even_spacing() {
         bins_per_decade: 20,
     };
     let mut acc = NeighbourAcc::new(cfg);
-    for b in 0..BLOCKS {
-        acc.add(&x, l, d, b);
+    for _ in 0..BLOCKS {
+        acc.add(&x, l, d);
     }
-    let (hist, moments) = acc.rows();
+    let (hist, moments) = acc.rows(BLOCKS as u64);
     for h in 1..=4u32 {
         let want = h as f64 * lr / n as f64;
         for r in neighbour_separations(&x, l, d, h as usize) {
@@ -86,7 +86,7 @@ fn neighbour_moments_agree_with_histogram() {
     };
     let mut acc = NeighbourAcc::new(cfg);
     let snaps = 20;
-    for s in 0..snaps {
+    for _ in 0..snaps {
         // Gaps: exponential (the ideal gas of reduced points), scaled to sum to L'.
         let g: Vec<f64> = (0..n).map(|_| -(1.0 - rng.f64()).ln()).collect();
         let sum: f64 = g.iter().sum();
@@ -96,9 +96,9 @@ fn neighbour_moments_agree_with_histogram() {
             x.push(pos);
             pos += gi / sum * lr + d;
         }
-        acc.add(&x, l, d, s * BLOCKS / snaps);
+        acc.add(&x, l, d);
     }
-    let (hist, moments) = acc.rows();
+    let (hist, moments) = acc.rows(snaps as u64);
     for h in 1..=3u32 {
         let rows: Vec<_> = hist.iter().filter(|r| r.h == h).collect();
         let total: u64 = rows.iter().map(|r| r.count).sum();
@@ -164,8 +164,8 @@ fn structure_factor_matches_direct_sum() {
             *a -= 0.01;
         }
     }
-    acc.add(&mut w, &x, l, 0);
-    let rows = acc.rows(n, l);
+    acc.add(&mut w, &x, l);
+    let rows = acc.rows(n, l, 1);
     let cut = cfg.n2_cut() as i64;
     let m = (cfg.n_max as i64) + 1;
     let mut direct: std::collections::BTreeMap<u64, (f64, u64)> = Default::default();
@@ -220,11 +220,11 @@ fn structure_factor_of_ideal_gas_is_one() {
     });
     let mut w = acc.work();
     let snaps = 10;
-    for b in 0..snaps {
+    for _ in 0..snaps {
         let x = uniform_2d(&mut rng, n, l);
-        acc.add(&mut w, &x, l, b);
+        acc.add(&mut w, &x, l);
     }
-    let rows = acc.rows(n, l);
+    let rows = acc.rows(n, l, snaps as u64);
     let (mut sum, mut m, mut groups, mut worst) = (0.0, 0.0, 0, 0.0f64);
     let mut all = (0.0, 0.0);
     for r in &rows {
@@ -286,7 +286,7 @@ fn radial_distribution_of_ideal_gas() {
                 _ => {}
             }
         }
-        acc.add(&mut buf, &x, b);
+        acc.add(&mut buf, &x);
         if b == 0 {
             for i in 0..n {
                 for j in i + 1..n {
@@ -301,7 +301,7 @@ fn radial_distribution_of_ideal_gas() {
             assert_eq!(&acc.counts[..60], &brute[..], "pair counts vs brute force");
         }
     }
-    let rows = acc.rows();
+    let rows = acc.rows(snaps as u64);
     let pairs = 0.5 * (n * (n - 1)) as f64;
     let mut worst = 0.0f64;
     for r in &rows {
@@ -342,8 +342,8 @@ fn timing_thesis_system() {
     });
     let mut w = acc.work();
     let t = std::time::Instant::now();
-    for b in 0..3 {
-        acc.add(&mut w, &x, l, b);
+    for _ in 0..3 {
+        acc.add(&mut w, &x, l);
     }
     let dt = t.elapsed().as_secs_f64() / 3.0;
     let macs = acc.computed_vectors() as f64 * n as f64;
@@ -363,8 +363,8 @@ fn timing_thesis_system() {
     });
     let mut buf = Vec::new();
     let t = std::time::Instant::now();
-    for b in 0..3 {
-        g.add(&mut buf, &x, b);
+    for _ in 0..3 {
+        g.add(&mut buf, &x);
     }
     let dt = t.elapsed().as_secs_f64() / 3.0;
     eprintln!(
