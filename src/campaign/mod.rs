@@ -171,6 +171,9 @@ impl Campaign {
         }
         let value = serde_json::to_value(&manifest).expect("manifest serialises");
         if canonical(&value) == self.manifest_json {
+            if apply {
+                self.repair_manifest_copy();
+            }
             return Ok((self, Growth::default()));
         }
         let expansion = plan::expand(&manifest).map_err(|errs| {
@@ -232,6 +235,21 @@ impl Campaign {
         self.history = history;
         fsutil::write_atomic(&self.root.join("manifest.json"), text)
             .map_err(|e| io_err(&self.root, e))
+    }
+
+    /// `manifest.json` is written after campaign.json: a crash between the two leaves the
+    /// previous manifest there. Rewrite it from the history's latest entry if it differs
+    /// (best effort: it is a copy for people, nothing reads it).
+    fn repair_manifest_copy(&self) {
+        let Some(latest) = self.history.last() else {
+            return;
+        };
+        let copy = self.root.join("manifest.json");
+        if let Ok(text) = std::fs::read(self.root.join(&latest.file)) {
+            if std::fs::read(&copy).ok().as_deref() != Some(text.as_slice()) {
+                let _ = fsutil::write_atomic(&copy, &text);
+            }
+        }
     }
 
     /// Open an existing campaign directory.
