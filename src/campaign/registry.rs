@@ -373,3 +373,143 @@ fn mergeable(a: &SeedSource, b: &SeedSource) -> bool {
         (x, y) => x == y,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    /// A small DSMC point with restitution `eps`, end `t_end` (outputs 1 and the ends given).
+    fn point(eps: f64, t_end: f64, outputs: &[f64]) -> ModelParams {
+        let v = json!({
+            "method": "low_rank",
+            "species": {"power_law": {"n1": 0.1, "N1": 100, "theta": 3}},
+            "restitution": {"constant": eps},
+            "t_end": t_end,
+            "output_times": {"list": outputs},
+        });
+        let mut errs = Vec::new();
+        let p = ModelKind::Dsmc.params_from(&v, "", &mut errs);
+        assert!(errs.is_empty(), "{errs:?}");
+        p.unwrap()
+    }
+
+    /// Seeds as a plan would give them: given ones, else a stand-in derived from the block.
+    fn seed_of(b: &RunBlock, r: u32) -> u64 {
+        Registry::given_seed(b, r).unwrap_or(1000 * b.point as u64 + r as u64)
+    }
+
+    fn grow(reg: &mut Registry, points: &[ModelParams], runs: RunsPerPoint) -> Growth {
+        let asked = Asked {
+            model: ModelKind::Dsmc,
+            points,
+            runs: &runs,
+        };
+        reg.grow(&asked, &seed_of).unwrap()
+    }
+
+    /// Replicas then values: ids are appended, existing ones never change, the same manifest
+    /// again adds nothing, and a point asked for again after a manifest without it is the
+    /// same point (found by its params).
+    #[test]
+    fn growth_appends_and_keeps_ids() {
+        let mut reg = Registry::default();
+        let (a, b) = (point(0.5, 10.0, &[1.0]), point(0.7, 10.0, &[1.0]));
+        let g = grow(&mut reg, &[a.clone(), b.clone()], RunsPerPoint::Replicas(2));
+        assert_eq!((g.new_points.len(), g.new_runs.len()), (2, 4));
+        // As format 1 numbered them: point_id * replicas + replica.
+        assert_eq!(reg.run_of(1, 1), Some(3));
+        let g = grow(&mut reg, &[a.clone(), b.clone()], RunsPerPoint::Replicas(3));
+        assert_eq!(g.new_runs, vec![(0, 2, 4), (1, 2, 5)]);
+        assert!(grow(&mut reg, &[a.clone(), b.clone()], RunsPerPoint::Replicas(3)).is_empty());
+        // Fewer replicas: nothing new, nothing removed.
+        assert!(grow(&mut reg, &[a.clone()], RunsPerPoint::Replicas(1)).is_empty());
+        let g = grow(&mut reg, &[a.clone()], RunsPerPoint::Replicas(1));
+        assert_eq!(g.retired_points, vec![1]);
+        let c = point(0.9, 10.0, &[1.0]);
+        let g = grow(&mut reg, &[c.clone(), b.clone()], RunsPerPoint::Replicas(3));
+        assert_eq!(g.new_points, vec![2]);
+        assert_eq!(g.new_runs, vec![(2, 0, 6), (2, 1, 7), (2, 2, 8)]);
+        assert_eq!(g.retired_points, vec![0]);
+        assert_eq!(reg.n_runs(), 9);
+        assert_eq!(reg.find(&b.to_value()), Some(1));
+    }
+
+    /// Given seeds: a run is its point and seed; new seeds get the next replica numbers, the
+    /// same seeds in another order add nothing.
+    #[test]
+    fn given_seeds() {
+        let mut reg = Registry::default();
+        let a = point(0.5, 10.0, &[1.0]);
+        let g = grow(&mut reg, &[a.clone()], RunsPerPoint::Seeds(vec![5, 17]));
+        assert_eq!(g.new_runs.len(), 2);
+        assert!(grow(&mut reg, &[a.clone()], RunsPerPoint::Seeds(vec![17, 5])).is_empty());
+        let g = grow(&mut reg, &[a.clone()], RunsPerPoint::Seeds(vec![5, 23, 17]));
+        assert_eq!(g.new_runs, vec![(0, 2, 2)]);
+        let seeds: Vec<u64> = reg
+            .blocks
+            .iter()
+            .flat_map(|b| (0..b.count).map(move |i| seed_of(b, b.first_replica + i)))
+            .collect();
+        assert_eq!(seeds, vec![5, 17, 23]);
+    }
+
+    /// A longer t_end whose outputs begin with the old ones continues every run of the
+    /// shorter point with its seed (given seeds by seed, replicas by replica; new replicas run
+    /// from the start); other outputs before the old end rerun it (noted); a shorter t_end is
+    /// refused.
+    #[test]
+    fn horizons() {
+        let mut reg = Registry::default();
+        let short = point(0.5, 10.0, &[1.0]);
+        grow(&mut reg, &[short.clone()], RunsPerPoint::Replicas(2));
+        let long = point(0.5, 20.0, &[1.0, 10.0]);
+        let g = grow(&mut reg, &[long.clone()], RunsPerPoint::Replicas(3));
+        assert_eq!(g.new_points, vec![1]);
+        assert_eq!(g.continued, vec![(2, 0), (3, 1)]);
+        assert_eq!(g.new_runs.len(), 3);
+        let b = reg.blocks_of(1).collect::<Vec<_>>();
+        // The continued replicas keep the shorter runs' seed source (derived from the params
+        // without the horizon: the same seeds).
+        assert_eq!(b[0].continues, Some(0));
+        assert_eq!(b[0].seeds, reg.blocks_of(0).next().unwrap().seeds);
+        assert_eq!(b.last().unwrap().continues, None);
+        // Continuing again goes from the longest run.
+        let longer = point(0.5, 40.0, &[1.0, 10.0, 20.0]);
+        let g = grow(&mut reg, &[longer], RunsPerPoint::Replicas(3));
+        assert_eq!(g.continued, vec![(5, 2), (6, 3), (7, 4)]);
+        // Other outputs before the old end: a rerun, with a note.
+        let other = point(0.5, 50.0, &[2.0]);
+        let g = grow(&mut reg, &[other], RunsPerPoint::Replicas(1));
+        assert!(g.continued.is_empty());
+        assert!(
+            g.notes
+                .iter()
+                .any(|n| n.contains("run again from the start")),
+            "{:?}",
+            g.notes
+        );
+        // Shorter than what exists: refused, nothing registered.
+        let before = reg.clone();
+        let shorter = point(0.5, 5.0, &[1.0]);
+        let asked = Asked {
+            model: ModelKind::Dsmc,
+            points: std::slice::from_ref(&shorter),
+            runs: &RunsPerPoint::Replicas(1),
+        };
+        let mut copy = reg.clone();
+        let err = copy.grow(&asked, &seed_of).unwrap_err();
+        assert!(err[0].contains("never shortens"), "{err:?}");
+        assert_eq!(reg, before);
+        // Given seeds continue by seed.
+        let mut reg = Registry::default();
+        grow(&mut reg, &[short], RunsPerPoint::Seeds(vec![7, 9]));
+        let g = grow(&mut reg, &[long], RunsPerPoint::Seeds(vec![9, 11, 7]));
+        assert_eq!(g.continued, vec![(2, 0), (3, 1)]);
+        let seeds: Vec<u64> = reg
+            .blocks_of(1)
+            .flat_map(|b| (0..b.count).map(move |i| seed_of(b, b.first_replica + i)))
+            .collect();
+        assert_eq!(seeds, vec![7, 9, 11]);
+    }
+}

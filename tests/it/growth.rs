@@ -237,6 +237,87 @@ fn dsmc_growth_equals_a_direct_campaign() {
     let direct = dir.path().join("direct");
     run_ok(&dir.path().join("m4.json"), &direct, &log);
     assert_same_current(&grown, &direct, "grown vs direct");
+    // verify is clean on the grown campaign, and stays so after a compaction, which changes
+    // no row.
+    for cmd in [
+        vec!["verify", s(&grown)],
+        vec!["compact", s(&grown)],
+        vec!["verify", s(&grown)],
+    ] {
+        assert_eq!(
+            run_granular(&cmd, &log, LIMIT),
+            Some(0),
+            "{cmd:?}: {}",
+            log_text(&log)
+        );
+    }
+    assert_same_current(&grown, &direct, "grown and compacted vs direct");
+}
+
+/// Replay one run: a manifest that gives a run's seed (`seeds`) and its point's params runs
+/// it again bit for bit, in another campaign with another campaign seed, and with one more
+/// observable (the displacements do not change the trajectory: the temperatures and
+/// collision counts are the same bits).
+#[test]
+fn a_run_replayed_from_its_seed_and_params() {
+    let _g = heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let c = dir.path().join("c");
+    let mut m = dsmc_base();
+    m["params"]["observables"] = json!(["temperature"]);
+    let mp = dir.path().join("m.json");
+    util::write_json(&mp, &m);
+    run_ok(&mp, &c, &log);
+    let runs = read_table(&c, "runs");
+    let points = read_table(&c, "points");
+    // Run 3: point 1, replica 1.
+    let r = runs
+        .rows
+        .iter()
+        .find(|r| r[runs.col("run_id")].as_u64() == 3)
+        .unwrap();
+    let seed = r[runs.col("seed")].as_u64();
+    let pid = r[runs.col("point_id")].as_u64();
+    let prow = points
+        .rows
+        .iter()
+        .find(|p| p[points.col("point_id")].as_u64() == pid)
+        .unwrap();
+    let params: Value = serde_json::from_str(prow[points.col("params")].as_str()).unwrap();
+    let species = read_table(&c, "dsmc_species");
+    let rows_of = |t: &Table, run: u64, cols: &[&str]| -> Vec<Vec<Cell>> {
+        let idx: Vec<usize> = cols.iter().map(|c| t.col(c)).collect();
+        let mut v: Vec<Vec<Cell>> = t
+            .rows
+            .iter()
+            .filter(|row| row[t.col("run_id")].as_u64() == run)
+            .map(|row| idx.iter().map(|&j| row[j].clone()).collect())
+            .collect();
+        v.sort();
+        v
+    };
+    let cols = ["t", "species", "temperature", "collisions"];
+    let want = rows_of(&species, 3, &cols);
+    assert!(!want.is_empty());
+    for (k, observables) in [json!(["temperature"]), json!(["temperature", "msd"])]
+        .iter()
+        .enumerate()
+    {
+        let mut p = params.clone();
+        p["observables"] = observables.clone();
+        let replay = json!({"name": format!("replay{k}"), "model": "dsmc", "seed": 1,
+                            "seeds": [seed], "params": p});
+        let rp = dir.path().join(format!("replay{k}.json"));
+        util::write_json(&rp, &replay);
+        let out = dir.path().join(format!("replay{k}"));
+        run_ok(&rp, &out, &log);
+        let got = read_table(&out, "dsmc_species");
+        assert_eq!(rows_of(&got, 0, &cols), want, "replay with {observables}");
+        let rr = read_table(&out, "runs");
+        assert_eq!(rr.column("seed"), vec![&Cell::U(seed)]);
+        assert_eq!(rr.column("trials"), vec![&r[runs.col("trials")]]);
+    }
 }
 
 /// Given seeds: a run is its point and seed; more seeds add only their runs, and the result
