@@ -83,6 +83,26 @@ pub struct CampaignInfo {
     pub history: Vec<history::Accepted>,
 }
 
+impl CampaignInfo {
+    /// `root/campaign.json`, of any format version; a missing or unreadable one is refused as
+    /// "not a campaign directory", a corrupt one as such.
+    pub fn read(root: &Path) -> Result<CampaignInfo, CampaignError> {
+        let info_path = root.join("campaign.json");
+        let text = std::fs::read_to_string(&info_path).map_err(|e| {
+            CampaignError::Refused(format!(
+                "{}: not a granular campaign directory ({e})",
+                root.display()
+            ))
+        })?;
+        serde_json::from_str(&text).map_err(|e| {
+            CampaignError::Refused(format!(
+                "{}: corrupt or foreign file: {e}",
+                info_path.display()
+            ))
+        })
+    }
+}
+
 /// An opened campaign directory.
 pub struct Campaign {
     pub root: PathBuf,
@@ -255,18 +275,7 @@ impl Campaign {
     /// Open an existing campaign directory.
     pub fn open(root: &Path) -> Result<Campaign, CampaignError> {
         let info_path = root.join("campaign.json");
-        let text = std::fs::read_to_string(&info_path).map_err(|e| {
-            CampaignError::Refused(format!(
-                "{}: not a granular campaign directory ({e})",
-                root.display()
-            ))
-        })?;
-        let info: CampaignInfo = serde_json::from_str(&text).map_err(|e| {
-            CampaignError::Refused(format!(
-                "{}: corrupt or foreign file: {e}",
-                info_path.display()
-            ))
-        })?;
+        let info = CampaignInfo::read(root)?;
         if info.format_version < FORMAT_VERSION {
             return Err(CampaignError::Refused(format!(
                 "{}: a campaign directory of format version {} (an earlier granular); upgrade it in place with `granular upgrade {}`",

@@ -45,18 +45,7 @@ pub struct UpgradeReport {
 /// Upgrade the campaign directory `root` to this granular's format (nothing to do if it is).
 pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     let info_path = root.join("campaign.json");
-    let text = fs::read_to_string(&info_path).map_err(|e| {
-        CampaignError::Refused(format!(
-            "{}: not a granular campaign directory ({e})",
-            root.display()
-        ))
-    })?;
-    let info: CampaignInfo = serde_json::from_str(&text).map_err(|e| {
-        CampaignError::Refused(format!(
-            "{}: corrupt or foreign file: {e}",
-            info_path.display()
-        ))
-    })?;
+    let info = CampaignInfo::read(root)?;
     let mut report = UpgradeReport {
         from: info.format_version,
         to: FORMAT_VERSION,

@@ -212,20 +212,13 @@ impl Running<'_> {
         let Some(payload) = self.engine.final_state() else {
             return Ok(());
         };
-        let header = CheckpointHeader {
-            run_id: self.spec.run_id,
-            seed: self.spec.seed,
-            code_version: CODE_VERSION.into(),
-            state_format: self.params.state_format().into(),
-            wall_seconds: self.wall(),
-            t: self.engine.time(),
-            continued_from: self.continued_from,
-        };
+        let header = self.header();
         checkpoint::write_final(&c.finals_dir(), &header, &payload).map_err(|e| e.to_string())
     }
 
-    fn save(&mut self) -> Result<(), String> {
-        let header = CheckpointHeader {
+    /// The header of the run's checkpoint or final state, as of now.
+    fn header(&self) -> CheckpointHeader {
+        CheckpointHeader {
             run_id: self.spec.run_id,
             seed: self.spec.seed,
             code_version: CODE_VERSION.into(),
@@ -233,7 +226,11 @@ impl Running<'_> {
             wall_seconds: self.wall(),
             t: self.engine.time(),
             continued_from: self.continued_from,
-        };
+        }
+    }
+
+    fn save(&mut self) -> Result<(), String> {
+        let header = self.header();
         let payload = self.engine.state_bytes();
         checkpoint::write(self.dir, &header, &payload).map_err(|e| e.to_string())?;
         self.last_ckpt_t = Some(header.t);

@@ -35,12 +35,7 @@ impl DsmcSim {
     pub(super) fn advance_bird(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
         let msd = self.sys.displacements();
         let n = self.sys.n_particles();
-        let sig_max = self
-            .sys
-            .species
-            .iter()
-            .map(|s| s.diameter)
-            .fold(0.0, f64::max);
+        let sig_max = self.sys.sigma_max();
         if self.rate <= 0.0 {
             return self.idle_to_end();
         }
@@ -200,12 +195,7 @@ impl DsmcSim {
         e: [f64; 3],
         t: f64,
     ) -> Result<bool, PhysicsError> {
-        let sig_max = self
-            .sys
-            .species
-            .iter()
-            .map(|s| s.diameter)
-            .fold(0.0, f64::max);
+        let sig_max = self.sys.sigma_max();
         let (va, vb) = (self.st.vel[a], self.st.vel[b]);
         let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
         let hit = Hit {

@@ -329,7 +329,7 @@ impl DsmcSim {
         let mut speed = Vec::new();
         if sys.method == Method::Bird {
             speed = crate::memory::huge_vec(st.vel.len(), 0f32);
-            let sig_max = sys.species.iter().map(|s| s.diameter).fold(0.0, f64::max);
+            let sig_max = sys.sigma_max();
             for (k, sp) in sys.species.iter().enumerate() {
                 let range = off[k]..off[k + 1];
                 for (w, v) in speed[range.clone()].iter_mut().zip(&st.vel[range]) {
@@ -640,12 +640,7 @@ impl DsmcSim {
 
     /// Recompute exact speed bounds (they shrink as the gas cools) and the rates.
     fn refresh_bounds(&mut self) {
-        let sig_max = self
-            .sys
-            .species
-            .iter()
-            .map(|s| s.diameter)
-            .fold(0.0, f64::max);
+        let sig_max = self.sys.sigma_max();
         let mut bound: f64 = 0.0;
         for (s, sp) in self.sys.species.iter().enumerate() {
             let mut v2max: f64 = 0.0;

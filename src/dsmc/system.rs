@@ -149,6 +149,11 @@ pub fn power_law_species(
 pub const MAX_PARTICLES: u64 = u32::MAX as u64 - 1;
 
 impl DsmcSystem {
+    /// The largest species diameter sigma_M.
+    pub fn sigma_max(&self) -> f64 {
+        self.species.iter().map(|s| s.diameter).fold(0.0, f64::max)
+    }
+
     /// Whether per-particle displacements are kept (for `msd` and `tamsd`).
     pub fn displacements(&self) -> bool {
         self.msd || self.tamsd.is_some()
