@@ -7,14 +7,16 @@
 #   - status time on the half-done campaign (interrupted by SIGINT), and resume start-up
 #     (process start to the shard plan being logged);
 #   - status after completion, compact, status and verify after compaction.
+#   - verify (the full scrub: SHA-256 of every file) and verify --quick (sizes).
 # Usage: scripts/bench-scale.sh [RUNS_PER_POINT (1000)] [THREADS (2)]
+#        BIN=path/to/granular (default: this checkout's release build), SHARDS=N (1000; 0: none)
 # Targets (issue 6): status < 1 s, resume start-up < 2 s, overhead < 5 ms per run, memory bounded.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 reps=${1:-1000}
 threads=${2:-2}
-cargo build --release -q
-bin=$PWD/target/release/granular
+if [ -z "${BIN:-}" ]; then cargo build --release -q; fi
+bin=${BIN:-$PWD/target/release/granular}
 work=$(mktemp -d /tmp/granular-bench-scale.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 eps=$(python3 -c 'print(",".join(f"{0.5 + 0.005*i:.3f}" for i in range(100)))')
@@ -75,6 +77,10 @@ t0=$(now); "$bin" resume "$d" --quiet > /dev/null 2>&1; t1=$(now)
 echo "resume of the finished, compacted campaign (nothing to do): $(secs $t0 $t1) s"
 t0=$(now); "$bin" verify "$d" | tail -1; t1=$(now)
 echo "verify: $(secs $t0 $t1) s"
+if "$bin" verify --help | grep -q -- --quick; then
+    t0=$(now); "$bin" verify "$d" --quick | tail -1; t1=$(now)
+    echo "verify --quick: $(secs $t0 $t1) s"
+fi
 
 # The same campaign as SLURM runs it: one process per shard (default 1000 shards of 100 runs),
 # so the ledger holds one commit directory per shard until compaction.

@@ -19,6 +19,10 @@
 //! - `schema`: the committed JSON Schema matches the code; `jobs/*.json` validate.
 //! - `drills`: a second process on a running shard, corrupted checkpoints, truncated and
 //!   foreign Parquet parts, a full disk, compaction in the middle of a campaign.
+//! - `damage`: each damage to a campaign directory (flipped bytes, deleted parts, tables,
+//!   records, ledger; corrupt records; foreign and orphan files) named by `verify`, refused by
+//!   `compact`, healed by `resume` to identical tables; stale locks of reused pids; compaction
+//!   killed at any moment.
 //! - `slurm`: `granular submit --slurm` with stand-in sbatch/squeue/scontrol.
 //! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
 //!   kill + resume bit-identity of their tables.
@@ -31,6 +35,7 @@ mod it {
     pub mod architecture;
     pub mod aux_models;
     pub mod cli_flags;
+    pub mod damage;
     pub mod drills;
     pub mod growth;
     pub mod interrupt;

@@ -2,23 +2,38 @@
 //! fold the commit records into one ledger index, without a reader ever seeing missing or
 //! doubled rows.
 //!
-//! Per table (see `store::layout`): the next generation directory is built beside the current
-//! one (hard links to the files kept, merged files written and fsynced), checked (row counts
-//! equal), then published by renaming a new symlink over `tables/<t>`. A crash before the
-//! rename leaves the old generation in place (the half-built one is removed by the next
-//! compaction); after it, the new one is complete. The previous generation is kept for readers
+//! Merging follows the commits: consecutive commits are binned up to the target size (all
+//! their tables together), and a bin becomes one group of the index with one merged file per
+//! table, `part-c<k>-<bin>.parquet` (compaction k), holding exactly the rows of the bin's runs;
+//! a commit of at least half the target stays alone, its files kept. So a damaged file only
+//! ever costs the runs of its group (see `integrity`).
+//!
+//! Per table that changes (see `store::layout`): the next generation directory is built beside
+//! the current one (hard links to the files kept, merged files written, hashed and fsynced),
+//! and checked (row counts equal). Then the journal `ledger/compaction.json` (the new index and
+//! the generations to publish) is written atomically: the commit point. Then each generation
+//! is published by renaming a new symlink over `tables/<t>`, the index is written and the
+//! folded commit records deleted (`ledger::complete_compaction`). A crash before the journal
+//! leaves everything as it was (half-built generations are removed by the next compaction);
+//! after it, `ledger::recover` finishes the job. The previous generation is kept for readers
 //! that listed it just before the switch; older ones are deleted.
 //!
-//! Runs only while no shard runs (`ledger::CompactLock`), after `ledger::recover`.
+//! Runs only while no shard runs (`ledger::CompactLock`), after `ledger::recover`, on a
+//! campaign whose every file checks out (a full scrub; damage is refused, exit 3, and
+//! `granular resume` heals it).
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use super::ledger::{self, CompactLock};
-use super::{Campaign, CampaignError};
+use std::collections::BTreeMap;
+
+use super::ledger::{self, CompactLock, PartCommit};
+use super::{integrity, Campaign, CampaignError};
 use crate::fsutil;
+use crate::store::checksum::FileSum;
 use crate::store::layout::{self, TableDir};
-use crate::store::parquet_io;
+use crate::store::parquet_io::{self, Stamp};
+use crate::store::LEDGER_FORMAT;
 
 /// Default size of a merged file.
 pub const DEFAULT_TARGET_BYTES: u64 = 100 * 1024 * 1024;
@@ -59,9 +74,6 @@ pub struct CompactReport {
 }
 
 struct Part {
-    path: PathBuf,
-    name: String,
-    bytes: u64,
     rows: u64,
     /// Arrow schema without metadata, to merge only files of one schema.
     schema: arrow_schema::SchemaRef,
@@ -78,82 +90,256 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
         notes: ledger::recover(&c.root, ledger::COMPACT_TAG).map_err(CampaignError::Io)?,
         ..Default::default()
     };
-    for table in layout::table_names(&c.root).map_err(|e| io(&c.root.join("tables"), e))? {
-        if let Some(t) = compact_table(c, &table, opts, &mut report.notes)? {
-            report.tables.push(t);
+    let check = integrity::check(c, integrity::Depth::Full).map_err(CampaignError::Io)?;
+    if !check.clean() {
+        return Err(CampaignError::Refused(format!(
+            "{}; nothing compacted. `granular resume {}` heals it (runs whose rows are damaged are run again)",
+            check.problems().join("; "),
+            c.root.display()
+        )));
+    }
+    let ledger = ledger::read_ledger(&c.root).map_err(CampaignError::Io)?;
+    let old_index = ledger.index.clone().unwrap_or_default();
+    let units = ledger.commits;
+    // Schemas and sizes of every committed part.
+    let mut parts: BTreeMap<String, Part> = BTreeMap::new();
+    for u in &units {
+        for f in &u.files {
+            let path = c.root.join(&f.path);
+            let table = table_of(&f.path);
+            parts.insert(f.path.clone(), read_part(c, &table, &path)?);
         }
     }
-    report.commits_folded = ledger::fold_into_index(&c.root).map_err(CampaignError::Io)?;
+    let sizes: Vec<u64> = units
+        .iter()
+        .map(|u| u.files.iter().map(|f| f.bytes).sum())
+        .collect();
+    let schemas: Vec<BTreeMap<String, arrow_schema::SchemaRef>> = units
+        .iter()
+        .map(|u| {
+            u.files
+                .iter()
+                .map(|f| (table_of(&f.path), parts[&f.path].schema.clone()))
+                .collect()
+        })
+        .collect();
+    let groups = bins(&sizes, &schemas, opts.target_bytes);
+    let merging = groups.iter().any(|g| g.len() > 1);
+    // The compaction number: above every `c<k>` shard seen (a rebuilt ledger may hold some).
+    let k = units
+        .iter()
+        .filter_map(|u| u.shard.strip_prefix('c')?.parse::<u64>().ok())
+        .chain([old_index.compactions])
+        .max()
+        .unwrap_or(0)
+        + 1;
+    let tables = c.root.join("tables");
+    // table -> (current generation, its directory, next generation's directory)
+    let mut gens: BTreeMap<String, (u64, PathBuf, PathBuf)> = BTreeMap::new();
+    let mut new_groups = Vec::new();
+    let mut merged_away: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for (bin, g) in groups.iter().enumerate() {
+        if g.len() == 1 {
+            new_groups.push(ledger::Group::of(&units[g[0]]));
+            continue;
+        }
+        let shard = format!("c{k}");
+        let seq = bin as u64 + 1; // sequence numbers start at 1, as a shard's do
+        let mut tables_of_bin: Vec<String> = Vec::new();
+        for &u in g {
+            for f in &units[u].files {
+                let t = table_of(&f.path);
+                if !tables_of_bin.contains(&t) {
+                    tables_of_bin.push(t);
+                }
+            }
+        }
+        if let Some(i) = tables_of_bin.iter().position(|t| t == super::tables::RUNS) {
+            let r = tables_of_bin.remove(i);
+            tables_of_bin.insert(0, r);
+        }
+        let part_commit = serde_json::to_string(&PartCommit {
+            shard: shard.clone(),
+            seq,
+            tables: tables_of_bin.clone(),
+        })
+        .expect("part commit serialises");
+        let mut files = Vec::new();
+        for table in &tables_of_bin {
+            if !gens.contains_key(table) {
+                let (gen, dir) = prepare_generation(c, table, &mut report.notes)?;
+                let next = gens_dir(&tables).join(layout::generation_name(table, gen + 1));
+                if next.exists() {
+                    fs::remove_dir_all(&next).map_err(|e| io(&next, e))?;
+                }
+                fsutil::create_dir_durable(&next).map_err(|e| io(&next, e))?;
+                gens.insert(table.clone(), (gen, dir, next));
+            }
+            let (_, _, next) = &gens[table];
+            let mut batches = Vec::new();
+            let mut want = 0u64;
+            for &u in g {
+                for f in units[u]
+                    .files
+                    .iter()
+                    .filter(|f| table_of(&f.path) == *table)
+                {
+                    let path = c.root.join(&f.path);
+                    batches.extend(
+                        parquet_io::read_campaign_file(&path, table, &c.identity)
+                            .map_err(|e| CampaignError::Io(e.to_string()))?,
+                    );
+                    want += parts[&f.path].rows;
+                    merged_away
+                        .entry(table.clone())
+                        .or_default()
+                        .push(file_name(&f.path));
+                }
+            }
+            let name = format!("part-{shard}-{seq:08}.parquet");
+            let out = next.join(&name);
+            let stamp = Stamp {
+                commit: Some(&part_commit),
+                ..c.stamp()
+            };
+            let w = parquet_io::write_batches(&out, &batches, table, stamp)
+                .map_err(|e| CampaignError::Io(e.to_string()))?;
+            let (info, _) =
+                parquet_io::inspect(&out).map_err(|e| CampaignError::Io(e.to_string()))?;
+            if info.rows != want {
+                return Err(CampaignError::Io(format!(
+                    "{}: merged file has {} rows, its parts {want}; nothing published",
+                    out.display(),
+                    info.rows
+                )));
+            }
+            files.push(FileSum {
+                path: format!("tables/{table}/{name}"),
+                bytes: w.bytes,
+                sha256: w.sha256,
+            });
+        }
+        let mut runs: Vec<ledger::CommittedRun> =
+            g.iter().flat_map(|&u| units[u].runs.clone()).collect();
+        runs.sort_by_key(|r| r.run_id);
+        new_groups.push(ledger::Group::of(&ledger::Commit {
+            format_version: LEDGER_FORMAT,
+            shard,
+            seq,
+            runs,
+            files,
+            in_index: false,
+        }));
+    }
+    // The kept files of each changed table (every visible file not merged away).
+    for (table, (_, dir, next)) in &gens {
+        let away = merged_away.get(table).cloned().unwrap_or_default();
+        for e in fs::read_dir(dir).map_err(|e| io(dir, e))? {
+            let e = e.map_err(|e| io(dir, e))?;
+            let name = e.file_name().to_string_lossy().into_owned();
+            let keep = !name.starts_with('.') && !away.contains(&name);
+            if !keep || next.join(&name).exists() {
+                continue;
+            }
+            let to = next.join(&name);
+            fs::hard_link(e.path(), &to)
+                .or_else(|_| fs::copy(e.path(), &to).map(|_| ()))
+                .map_err(|err| io(&to, err))?;
+        }
+        fsutil::sync_dir(next).map_err(|e| io(next, e))?;
+    }
+    let mut folded = old_index.folded.clone();
+    let mut records = 0;
+    for u in units.iter().filter(|u| !u.in_index) {
+        let e = folded.entry(u.shard.clone()).or_insert(0);
+        *e = (*e).max(u.seq);
+        records += 1;
+    }
+    let index = ledger::LedgerIndex {
+        format_version: LEDGER_FORMAT,
+        kind: ledger::INDEX_KIND.into(),
+        folded,
+        compactions: if merging { k } else { old_index.compactions },
+        groups: new_groups,
+    };
+    let journal = ledger::Journal {
+        format_version: LEDGER_FORMAT,
+        kind: ledger::JOURNAL_KIND.into(),
+        publish: gens
+            .iter()
+            .map(|(t, (g, _, _))| (t.clone(), g + 1))
+            .collect(),
+        index,
+    };
+    // The commit point.
+    let jp = ledger::journal_path(&c.root);
+    fsutil::write_atomic(
+        &jp,
+        &serde_json::to_vec(&journal).expect("journal serialises"),
+    )
+    .map_err(|e| io(&jp, e))?;
+    ledger::complete_compaction(&c.root, &journal).map_err(CampaignError::Io)?;
+    report.commits_folded = records;
+    // The generation before the previous one of each changed table can go now.
+    for (table, (gen, _, _)) in &gens {
+        if *gen > 0 {
+            let old = gens_dir(&tables).join(layout::generation_name(table, gen - 1));
+            if old.exists() {
+                fs::remove_dir_all(&old).map_err(|e| io(&old, e))?;
+            }
+        }
+    }
+    for table in layout::table_names(&c.root).map_err(|e| io(&tables, e))? {
+        report
+            .tables
+            .push(table_report(c, &table, gens.get(&table))?);
+    }
     Ok(report)
 }
 
-fn list_parts(c: &Campaign, table: &str, dir: &Path) -> Result<Vec<Part>, CampaignError> {
-    let mut parts = Vec::new();
-    for e in fs::read_dir(dir).map_err(|e| io(dir, e))? {
-        let e = e.map_err(|e| io(dir, e))?;
-        let name = e.file_name().to_string_lossy().into_owned();
-        if name.starts_with('.') || !name.ends_with(".parquet") {
-            continue;
-        }
-        let path = e.path();
-        let bytes = e.metadata().map_err(|e| io(&path, e))?.len();
-        let (info, builder) = parquet_io::inspect(&path).map_err(|e| {
-            CampaignError::Refused(format!("{e}; move it out of the table to compact"))
-        })?;
-        parquet_io::check_part(&path, &info, table, Some(&c.identity)).map_err(|e| {
-            CampaignError::Refused(format!("{e}; move it out of the table to compact"))
-        })?;
-        let schema = std::sync::Arc::new(
-            builder
-                .schema()
-                .as_ref()
-                .clone()
-                .with_metadata(std::collections::HashMap::new()),
-        );
-        parts.push(Part {
-            path,
-            name,
-            bytes,
-            rows: info.rows,
-            schema,
-        });
-    }
-    parts.sort_by(|a, b| a.name.cmp(&b.name));
-    Ok(parts)
+fn gens_dir(tables: &Path) -> PathBuf {
+    tables.join(layout::GEN_DIR)
 }
 
-/// Group consecutive small parts of one schema into bins of about `target` bytes; parts of
-/// at least half the target stay alone.
-fn bins(parts: &[Part], target: u64) -> Vec<Vec<usize>> {
-    let mut out: Vec<Vec<usize>> = Vec::new();
-    let mut cur: Vec<usize> = Vec::new();
-    let mut size = 0u64;
-    for (i, p) in parts.iter().enumerate() {
-        let big = p.bytes >= target / 2;
-        let same_schema = cur.first().is_none_or(|&j| parts[j].schema == p.schema);
-        if (big || !same_schema || size + p.bytes > target) && !cur.is_empty() {
-            out.push(std::mem::take(&mut cur));
-            size = 0;
-        }
-        if big {
-            out.push(vec![i]);
-        } else {
-            cur.push(i);
-            size += p.bytes;
-        }
-    }
-    if !cur.is_empty() {
-        out.push(cur);
-    }
-    out
+/// `tables/<t>/<name>` -> `<t>`.
+fn table_of(rel: &str) -> String {
+    rel.split('/').nth(1).unwrap_or_default().to_string()
 }
 
-fn compact_table(
+fn file_name(rel: &str) -> String {
+    rel.rsplit('/').next().unwrap_or_default().to_string()
+}
+
+fn read_part(c: &Campaign, table: &str, path: &Path) -> Result<Part, CampaignError> {
+    let (info, builder) = parquet_io::inspect(path).map_err(|e| {
+        CampaignError::Refused(format!(
+            "{e}; `granular resume {}` heals it",
+            c.root.display()
+        ))
+    })?;
+    parquet_io::check_part(path, &info, table, Some(&c.identity))
+        .map_err(|e| CampaignError::Refused(format!("{e}; move it out of the table to compact")))?;
+    let schema = std::sync::Arc::new(
+        builder
+            .schema()
+            .as_ref()
+            .clone()
+            .with_metadata(std::collections::HashMap::new()),
+    );
+    Ok(Part {
+        rows: info.rows,
+        schema,
+    })
+}
+
+/// The table's current generation and directory (a plain directory of an older granular is
+/// moved to generation 0 first); generations other than the current and the previous one
+/// (old, or half-built by a compaction that stopped) are removed.
+fn prepare_generation(
     c: &Campaign,
     table: &str,
-    opts: &CompactOptions,
     notes: &mut Vec<String>,
-) -> Result<Option<TableReport>, CampaignError> {
+) -> Result<(u64, PathBuf), CampaignError> {
     let tables = c.root.join("tables");
     let (gen, dir) = match layout::table_dir(&c.root, table).map_err(|e| io(&tables, e))? {
         TableDir::Generation { gen, dir } => (gen, dir),
@@ -162,17 +348,10 @@ fn compact_table(
             notes.push(format!(
                 "{table}: moved to the generation layout (made by an older granular)"
             ));
-            (
-                0,
-                tables
-                    .join(layout::GEN_DIR)
-                    .join(layout::generation_name(table, 0)),
-            )
+            (0, gens_dir(&tables).join(layout::generation_name(table, 0)))
         }
     };
-    let gens = tables.join(layout::GEN_DIR);
-    // Generations other than the current and the previous one: old or half-built.
-    if let Ok(it) = fs::read_dir(&gens) {
+    if let Ok(it) = fs::read_dir(gens_dir(&tables)) {
         for e in it.filter_map(|e| e.ok()) {
             let name = e.file_name().to_string_lossy().into_owned();
             let Some(g) = name
@@ -186,119 +365,118 @@ fn compact_table(
             }
         }
     }
-    let parts = list_parts(c, table, &dir)?;
-    let rows: u64 = parts.iter().map(|p| p.rows).sum();
-    let bytes_before: u64 = parts.iter().map(|p| p.bytes).sum();
-    let groups = bins(&parts, opts.target_bytes);
-    if groups.iter().all(|g| g.len() < 2) {
-        return Ok(Some(TableReport {
-            table: table.into(),
-            files_before: parts.len(),
-            files_after: parts.len(),
-            rows,
-            bytes_before,
-            bytes_after: bytes_before,
-            generation: gen,
-        }));
-    }
-    let next = gen + 1;
-    let ndir = gens.join(layout::generation_name(table, next));
-    fsutil::create_dir_durable(&ndir).map_err(|e| io(&ndir, e))?;
-    let mut merged = 0usize;
-    for g in &groups {
-        if g.len() == 1 {
-            let p = &parts[g[0]];
-            let to = ndir.join(&p.name);
-            fs::hard_link(&p.path, &to)
-                .or_else(|_| fs::copy(&p.path, &to).map(|_| ()))
-                .map_err(|e| io(&to, e))?;
-            continue;
+    Ok((gen, dir))
+}
+
+fn table_report(
+    c: &Campaign,
+    table: &str,
+    changed: Option<&(u64, PathBuf, PathBuf)>,
+) -> Result<TableReport, CampaignError> {
+    let stats = |dir: &Path| -> Result<(usize, u64, u64), CampaignError> {
+        let (mut files, mut rows, mut bytes) = (0, 0, 0);
+        for e in fs::read_dir(dir).map_err(|e| io(dir, e))? {
+            let e = e.map_err(|e| io(dir, e))?;
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with('.') || !name.ends_with(".parquet") {
+                continue;
+            }
+            files += 1;
+            bytes += e.metadata().map_err(|err| io(&e.path(), err))?.len();
+            rows += parquet_io::inspect(&e.path())
+                .map(|(i, _)| i.rows)
+                .map_err(|err| CampaignError::Io(err.to_string()))?;
         }
-        let mut batches = Vec::new();
-        let mut want = 0u64;
-        for &i in g {
-            batches.extend(
-                parquet_io::read_campaign_file(&parts[i].path, table, &c.identity)
-                    .map_err(|e| CampaignError::Io(e.to_string()))?,
-            );
-            want += parts[i].rows;
+        Ok((files, rows, bytes))
+    };
+    let link = c.root.join("tables").join(table);
+    let (files_after, rows, bytes_after) = stats(&link)?;
+    let generation = match layout::table_dir(&c.root, table) {
+        Ok(TableDir::Generation { gen, .. }) => gen,
+        _ => 0,
+    };
+    let (files_before, bytes_before) = match changed {
+        Some((_, old, _)) => {
+            let (f, _, b) = stats(old)?;
+            (f, b)
         }
-        let out = ndir.join(format!("compact-{next:08}-{merged:05}.parquet"));
-        merged += 1;
-        parquet_io::write_batches(&out, &batches, table, c.stamp())
-            .map_err(|e| CampaignError::Io(e.to_string()))?;
-        let (info, _) = parquet_io::inspect(&out).map_err(|e| CampaignError::Io(e.to_string()))?;
-        if info.rows != want {
-            return Err(CampaignError::Io(format!(
-                "{}: merged file has {} rows, its parts {want}; nothing published",
-                out.display(),
-                info.rows
-            )));
-        }
-    }
-    fsutil::sync_dir(&ndir).map_err(|e| io(&ndir, e))?;
-    let after = list_parts(c, table, &ndir)?;
-    let rows_after: u64 = after.iter().map(|p| p.rows).sum();
-    if rows_after != rows {
-        return Err(CampaignError::Io(format!(
-            "{}: {rows_after} rows in the new generation, {rows} in the current one; nothing published",
-            ndir.display()
-        )));
-    }
-    layout::publish_generation(&c.root, table, next).map_err(|e| io(&tables.join(table), e))?;
-    // The generation before the previous one can go now.
-    if gen > 0 {
-        let old = gens.join(layout::generation_name(table, gen - 1));
-        if old.exists() {
-            fs::remove_dir_all(&old).map_err(|e| io(&old, e))?;
-        }
-    }
-    Ok(Some(TableReport {
+        None => (files_after, bytes_after),
+    };
+    Ok(TableReport {
         table: table.into(),
-        files_before: parts.len(),
-        files_after: after.len(),
+        files_before,
+        files_after,
         rows,
         bytes_before,
-        bytes_after: after.iter().map(|p| p.bytes).sum(),
-        generation: next,
-    }))
+        bytes_after,
+        generation,
+    })
+}
+
+/// Group consecutive commits (their total sizes, and each table's schema) into bins of about
+/// `target` bytes; a commit of at least half the target stays alone, and a bin holds one
+/// schema per table.
+fn bins(
+    sizes: &[u64],
+    schemas: &[BTreeMap<String, arrow_schema::SchemaRef>],
+    target: u64,
+) -> Vec<Vec<usize>> {
+    let mut out: Vec<Vec<usize>> = Vec::new();
+    let mut cur: Vec<usize> = Vec::new();
+    let mut cur_schema: BTreeMap<String, arrow_schema::SchemaRef> = BTreeMap::new();
+    let mut size = 0u64;
+    for (i, &bytes) in sizes.iter().enumerate() {
+        let big = bytes >= target / 2;
+        let same_schema = schemas[i]
+            .iter()
+            .all(|(t, s)| cur_schema.get(t).is_none_or(|c| c == s));
+        if (big || !same_schema || size + bytes > target) && !cur.is_empty() {
+            out.push(std::mem::take(&mut cur));
+            cur_schema.clear();
+            size = 0;
+        }
+        if big {
+            out.push(vec![i]);
+        } else {
+            cur.push(i);
+            size += bytes;
+            for (t, s) in &schemas[i] {
+                cur_schema.entry(t.clone()).or_insert_with(|| s.clone());
+            }
+        }
+    }
+    if !cur.is_empty() {
+        out.push(cur);
+    }
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn part(name: &str, bytes: u64, schema: &arrow_schema::SchemaRef) -> Part {
-        Part {
-            path: PathBuf::from(name),
-            name: name.into(),
-            bytes,
-            rows: 1,
-            schema: schema.clone(),
-        }
-    }
-
     #[test]
-    fn bins_group_small_parts_and_leave_big_ones() {
+    fn bins_group_small_commits_and_leave_big_ones() {
         use arrow_schema::{DataType, Field, Schema};
         let a = std::sync::Arc::new(Schema::new(vec![Field::new("x", DataType::Int64, false)]));
         let b = std::sync::Arc::new(Schema::new(vec![Field::new("y", DataType::Int64, false)]));
-        let parts = vec![
-            part("p0", 30, &a),
-            part("p1", 30, &a),
-            part("p2", 30, &a),
-            part("p3", 60, &a), // >= target/2: alone
-            part("p4", 10, &a),
-            part("p5", 10, &b), // another schema: a new bin
-            part("p6", 10, &b),
-        ];
+        let of = |s: &arrow_schema::SchemaRef| BTreeMap::from([("t".to_string(), s.clone())]);
+        let sizes = [30, 30, 30, 60, 10, 10, 10];
+        // 60 >= target/2: alone; the fifth commit ends a bin, the sixth has another schema.
+        let schemas = [of(&a), of(&a), of(&a), of(&a), of(&a), of(&b), of(&b)];
         assert_eq!(
-            bins(&parts, 100),
+            bins(&sizes, &schemas, 100),
             vec![vec![0, 1, 2], vec![3], vec![4], vec![5, 6]]
         );
         assert_eq!(
-            bins(&parts, 50),
+            bins(&sizes, &schemas, 50),
             vec![vec![0], vec![1], vec![2], vec![3], vec![4], vec![5, 6]]
         );
+        // A table only some commits have does not split a bin.
+        let mixed = [
+            of(&a),
+            BTreeMap::from([("t".to_string(), a.clone()), ("u".to_string(), b.clone())]),
+        ];
+        assert_eq!(bins(&[1, 1], &mixed, 100), vec![vec![0, 1]]);
     }
 }

@@ -7,6 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
+use super::integrity;
 use super::ledger::{self, RunStatus, ShardLock};
 use super::plan::RunSpec;
 use super::resources::{self, Memory};
@@ -31,83 +32,158 @@ pub fn run(
     for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
         reporter.event(&Event::Warning { message: note });
     }
-    let finished =
-        ledger::finished_runs(&ledger::read_commits(&c.root).map_err(CampaignError::Refused)?);
-    // The runs of this shard that the latest manifest asks for.
-    let mine: Vec<RunSpec> = c
-        .plan
-        .current_runs()
-        .filter(|r| opts.shard.contains(r.run_id))
-        .collect();
-    let pending: Vec<RunSpec> = mine
-        .iter()
-        .filter(|r| !finished.contains_key(&r.run_id))
-        .copied()
-        .collect();
-    reporter.event(&Event::Plan {
-        total: mine.len() as u64,
-        already: (mine.len() - pending.len()) as u64,
-        pending: pending.len() as u64,
-    });
-
+    // The tables against the ledger (sizes), healed before anything is planned.
+    heal(c, integrity::Depth::Quick, &tag, reporter)?;
     let ckpt_dir = c.checkpoint_dir();
     fsutil::create_dir_durable(&ckpt_dir).map_err(|e| io_err(&ckpt_dir, e))?;
     let io = |e: crate::store::parquet_io::StoreError| CampaignError::Io(e.to_string());
-    let writer = writer::Writer::new(c, &tag).map_err(io)?;
-    writer.ensure_points().map_err(io)?;
-    writer.ensure_theory().map_err(io)?;
-
     let threads = worker_threads(c, opts, memory, reporter);
-    let mut d = Dispatcher {
-        c,
-        opts,
-        tag: &tag,
-        reporter,
-        writer,
-        outcome: Outcome::default(),
-        fatal: None,
-        running: Default::default(),
-        last_heartbeat: Instant::now() - Duration::from_secs(60),
-    };
-    d.drive(&pending, threads)?;
-    let Dispatcher {
-        mut writer,
-        mut outcome,
-        reporter,
-        ..
-    } = d;
-    if let Some((runs, seq)) = writer
-        .flush()
-        .map_err(|e| CampaignError::Io(format!("writing the tables failed: {e}")))?
-    {
-        reporter.event(&Event::Committed { runs, seq });
+    let mut outcome = Outcome::default();
+    let mut rounds = 0;
+    loop {
+        let finished = finished_runs(c)?;
+        // The runs of this shard that the latest manifest asks for.
+        let mine: Vec<RunSpec> = c
+            .plan
+            .current_runs()
+            .filter(|r| opts.shard.contains(r.run_id))
+            .collect();
+        let pending: Vec<RunSpec> = mine
+            .iter()
+            .filter(|r| !finished.contains_key(&r.run_id))
+            .copied()
+            .collect();
+        reporter.event(&Event::Plan {
+            total: mine.len() as u64,
+            already: (mine.len() - pending.len()) as u64,
+            pending: pending.len() as u64,
+        });
+        let writer = writer::Writer::new(c, &tag).map_err(io)?;
+        writer.ensure_points().map_err(io)?;
+        writer.ensure_theory().map_err(io)?;
+        let mut d = Dispatcher {
+            c,
+            opts,
+            tag: &tag,
+            reporter: &mut *reporter,
+            writer,
+            outcome: std::mem::take(&mut outcome),
+            fatal: None,
+            running: Default::default(),
+            last_heartbeat: Instant::now() - Duration::from_secs(60),
+        };
+        d.drive(&pending, threads)?;
+        let Dispatcher {
+            mut writer,
+            outcome: o,
+            reporter: rep,
+            ..
+        } = d;
+        outcome = o;
+        if let Some((runs, seq)) = writer
+            .flush()
+            .map_err(|e| CampaignError::Io(format!("writing the tables failed: {e}")))?
+        {
+            rep.event(&Event::Committed { runs, seq });
+        }
+        status::remove_heartbeat(&c.root, &tag);
+        if opts.interrupt.load(Ordering::SeqCst) > 0 {
+            outcome.interrupted = true;
+        }
+        let finished = finished_runs(c)?;
+        outcome.remaining = mine
+            .iter()
+            .filter(|r| !finished.contains_key(&r.run_id))
+            .count() as u64;
+        outcome.failed_in_shard = mine
+            .iter()
+            .filter(|r| finished.get(&r.run_id) == Some(&RunStatus::Failed))
+            .count() as u64;
+        if outcome.remaining == 0 {
+            outcome.interrupted = false;
+        }
+        if outcome.interrupted
+            || !c
+                .plan
+                .current_runs()
+                .all(|r| finished.contains_key(&r.run_id))
+        {
+            return Ok(outcome);
+        }
+        // Every run is finished: scrub every file before the summaries read them. Damage
+        // found now is healed and its runs run again (a few rounds at most: damage that keeps
+        // coming back is a failing disk, not something to loop on).
+        let acted = heal(c, integrity::Depth::Full, &tag, reporter)?;
+        if acted == 0 {
+            c.write_summaries(&finished)
+                .map_err(|e| CampaignError::Io(e.to_string()))?;
+            outcome.complete = true;
+            return Ok(outcome);
+        }
+        rounds += 1;
+        if rounds >= 3 {
+            return Err(CampaignError::Io(format!(
+                "{}: the tables were found damaged again after {rounds} rounds of healing; check the disk",
+                c.root.display()
+            )));
+        }
     }
-    status::remove_heartbeat(&c.root, &tag);
-    if opts.interrupt.load(Ordering::SeqCst) > 0 {
-        outcome.interrupted = true;
+}
+
+fn finished_runs(
+    c: &Campaign,
+) -> Result<std::collections::BTreeMap<u64, RunStatus>, CampaignError> {
+    Ok(ledger::finished_runs(
+        &ledger::read_commits(&c.root).map_err(CampaignError::Refused)?,
+    ))
+}
+
+/// Check the tables against the ledger and heal what is found (each action a warning);
+/// returns how many actions were taken (runs undone, tables set aside: another round writes
+/// them again).
+fn heal(
+    c: &Campaign,
+    depth: integrity::Depth,
+    tag: &str,
+    reporter: &mut dyn Reporter,
+) -> Result<usize, CampaignError> {
+    let found = integrity::check(c, depth).map_err(CampaignError::Io)?;
+    if found.clean() {
+        return Ok(0);
     }
-    let finished =
-        ledger::finished_runs(&ledger::read_commits(&c.root).map_err(CampaignError::Refused)?);
-    outcome.remaining = mine
-        .iter()
-        .filter(|r| !finished.contains_key(&r.run_id))
-        .count() as u64;
-    outcome.failed_in_shard = mine
-        .iter()
-        .filter(|r| finished.get(&r.run_id) == Some(&RunStatus::Failed))
-        .count() as u64;
-    if outcome.remaining == 0 {
-        outcome.interrupted = false;
+    for p in found.problems() {
+        reporter.event(&Event::Warning {
+            message: format!("damage: {p}"),
+        });
     }
-    if c.plan
-        .current_runs()
-        .all(|r| finished.contains_key(&r.run_id))
-    {
-        c.write_summaries(&finished)
-            .map_err(|e| CampaignError::Io(e.to_string()))?;
-        outcome.complete = true;
+    let healed = integrity::heal(c, &found, tag).map_err(CampaignError::Io)?;
+    for a in &healed.actions {
+        reporter.event(&Event::Warning {
+            message: format!("healed: {a}"),
+        });
     }
-    Ok(outcome)
+    if let Some(q) = &healed.quarantine {
+        reporter.event(&Event::Warning {
+            message: format!(
+                "what was set aside is in {} (actions.log says what and why); delete it when done",
+                q.display()
+            ),
+        });
+    }
+    // Whatever is still wrong must be a running shard's (left for later), or healing failed.
+    let again = integrity::check(c, integrity::Depth::Quick).map_err(CampaignError::Io)?;
+    if !again.clean() {
+        let message = format!(
+            "{}: damage left: {}",
+            c.root.display(),
+            again.problems().join("; ")
+        );
+        if again.live.iter().all(|t| t == tag) {
+            return Err(CampaignError::Refused(message));
+        }
+        reporter.event(&Event::Warning { message });
+    }
+    Ok(healed.actions.len())
 }
 
 /// Worker threads: `--threads` (0: every core), fewer if the free memory holds fewer runs.

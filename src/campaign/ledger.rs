@@ -10,6 +10,15 @@
 //!
 //! Recovery rolls a crash after (2) forward (renames the pending files) and one before (2)
 //! back (deletes unreferenced pending files), so no row is ever lost or doubled.
+//!
+//! Every committed file is recorded with its size and SHA-256 (`store::checksum`), and every
+//! part carries its commit in its footer (`granular.commit`), so that `campaign::integrity`
+//! can check the tables against the ledger, and rebuild a lost record from the parts.
+//!
+//! `granular compact` folds the commit records into `ledger/index.json`: the same commits
+//! ("groups": runs and files), with the merged files of several in one group. It first writes
+//! its plan to `ledger/compaction.json` (the journal), then publishes the new table generations
+//! and writes the index; a compaction stopped in between is rolled forward by `recover`.
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -19,6 +28,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::campaign::plan::Shard;
 use crate::fsutil;
+use crate::store::checksum::FileSum;
+use crate::store::layout;
 use crate::store::LEDGER_FORMAT;
 
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
@@ -40,8 +51,32 @@ pub struct Commit {
     pub shard: String,
     pub seq: u64,
     pub runs: Vec<CommittedRun>,
-    /// Table files of this commit, relative to the campaign directory.
-    pub files: Vec<String>,
+    /// Table files of this commit (paths relative to the campaign directory), with their
+    /// sizes and SHA-256.
+    pub files: Vec<FileSum>,
+    /// Whether this commit is a group of the folded index (not a record file).
+    #[serde(skip)]
+    pub in_index: bool,
+}
+
+impl Commit {
+    /// `shard/seq`, how messages name a commit.
+    pub fn name(&self) -> String {
+        if self.in_index {
+            format!("{}/{} (ledger/index.json)", self.shard, self.seq)
+        } else {
+            format!("{}/{}", self.shard, self.seq)
+        }
+    }
+}
+
+/// What every part of a commit says of it in its footer (`granular.commit`).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct PartCommit {
+    pub shard: String,
+    pub seq: u64,
+    /// The tables the commit wrote a part of, `runs` first.
+    pub tables: Vec<String>,
 }
 
 pub fn ledger_dir(root: &Path, tag: &str) -> PathBuf {
@@ -52,14 +87,81 @@ pub fn commit_path(root: &Path, tag: &str, seq: u64) -> PathBuf {
     ledger_dir(root, tag).join(format!("commit-{seq:08}.json"))
 }
 
+/// A commit's part of `table`, relative to the campaign directory.
+pub fn part_rel(table: &str, tag: &str, seq: u64) -> String {
+    format!("tables/{table}/part-{tag}-{seq:08}.parquet")
+}
+
 /// The hidden name a table part has until its commit is durable.
 pub fn pending_path(final_path: &Path) -> PathBuf {
     let name = final_path.file_name().expect("file name").to_string_lossy();
     final_path.with_file_name(format!(".{name}.pending"))
 }
 
-/// The folded ledger written by `granular compact`: every run committed by the commit records
-/// it replaced, so that `status` and `resume` read one file instead of one per flush.
+/// One commit of the folded index, its runs as ranges.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
+pub struct Group {
+    pub shard: String,
+    pub seq: u64,
+    /// Runs finished as done, as inclusive ranges of run ids.
+    pub done: Vec<(u64, u64)>,
+    /// Runs finished as failed.
+    pub failed: Vec<u64>,
+    pub files: Vec<FileSum>,
+}
+
+impl Group {
+    pub fn of(c: &Commit) -> Group {
+        let mut ids: Vec<&CommittedRun> = c.runs.iter().collect();
+        ids.sort_by_key(|r| r.run_id);
+        let mut done: Vec<(u64, u64)> = Vec::new();
+        let mut failed = Vec::new();
+        for r in ids {
+            match r.status {
+                RunStatus::Done => match done.last_mut() {
+                    Some((_, hi)) if *hi + 1 == r.run_id => *hi = r.run_id,
+                    _ => done.push((r.run_id, r.run_id)),
+                },
+                RunStatus::Failed => failed.push(r.run_id),
+            }
+        }
+        Group {
+            shard: c.shard.clone(),
+            seq: c.seq,
+            done,
+            failed,
+            files: c.files.clone(),
+        }
+    }
+
+    fn as_commit(&self) -> Commit {
+        let mut runs: Vec<CommittedRun> = self
+            .done
+            .iter()
+            .flat_map(|&(a, b)| a..=b)
+            .map(|run_id| CommittedRun {
+                run_id,
+                status: RunStatus::Done,
+            })
+            .chain(self.failed.iter().map(|&run_id| CommittedRun {
+                run_id,
+                status: RunStatus::Failed,
+            }))
+            .collect();
+        runs.sort_by_key(|r| r.run_id);
+        Commit {
+            format_version: LEDGER_FORMAT,
+            shard: self.shard.clone(),
+            seq: self.seq,
+            runs,
+            files: self.files.clone(),
+            in_index: true,
+        }
+    }
+}
+
+/// The folded ledger written by `granular compact`: the commits it replaced, so that
+/// `status` and `resume` read one file instead of one per flush.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
 pub struct LedgerIndex {
     pub format_version: u32,
@@ -68,10 +170,9 @@ pub struct LedgerIndex {
     /// Per shard tag, the highest commit sequence number folded in (commit records of that
     /// shard up to it are ignored if still present: a compaction stopped before deleting them).
     pub folded: BTreeMap<String, u64>,
-    /// Runs finished as done, as inclusive ranges of run ids.
-    pub done: Vec<(u64, u64)>,
-    /// Runs finished as failed.
-    pub failed: Vec<u64>,
+    /// Compactions so far: the merged files of the next one are `part-c<n+1>-<k>.parquet`.
+    pub compactions: u64,
+    pub groups: Vec<Group>,
 }
 
 pub const INDEX_KIND: &str = "granular.ledger_index";
@@ -79,6 +180,23 @@ pub const INDEX_KIND: &str = "granular.ledger_index";
 pub fn index_path(root: &Path) -> PathBuf {
     root.join("ledger").join("index.json")
 }
+
+/// The journal of a compaction in progress (see the module's text).
+pub fn journal_path(root: &Path) -> PathBuf {
+    root.join("ledger").join("compaction.json")
+}
+
+/// A compaction's journal: the index it will write and the generations it will publish.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct Journal {
+    pub format_version: u32,
+    pub kind: String,
+    /// (table, generation) to publish.
+    pub publish: Vec<(String, u64)>,
+    pub index: LedgerIndex,
+}
+
+pub const JOURNAL_KIND: &str = "granular.compaction_journal";
 
 pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
     let p = index_path(root);
@@ -100,66 +218,14 @@ pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
     Ok(Some(ix))
 }
 
-impl LedgerIndex {
-    /// Build the index of `commits` (the first commit of a run wins).
-    pub fn fold(commits: &[Commit]) -> LedgerIndex {
-        let finished = finished_runs(commits);
-        let mut folded: BTreeMap<String, u64> = BTreeMap::new();
-        for c in commits {
-            if c.shard == INDEX_SHARD {
-                continue;
-            }
-            let e = folded.entry(c.shard.clone()).or_insert(0);
-            *e = (*e).max(c.seq);
-        }
-        let mut done: Vec<(u64, u64)> = Vec::new();
-        let mut failed = Vec::new();
-        for (&r, &st) in &finished {
-            match st {
-                RunStatus::Done => match done.last_mut() {
-                    Some((_, hi)) if *hi + 1 == r => *hi = r,
-                    _ => done.push((r, r)),
-                },
-                RunStatus::Failed => failed.push(r),
-            }
-        }
-        LedgerIndex {
-            format_version: LEDGER_FORMAT,
-            kind: INDEX_KIND.into(),
-            folded,
-            done,
-            failed,
-        }
-    }
-
-    /// The index as one commit (shard `index`, no files), placed before all others.
-    fn as_commit(&self) -> Commit {
-        let mut runs: Vec<CommittedRun> = self
-            .done
-            .iter()
-            .flat_map(|&(a, b)| a..=b)
-            .map(|run_id| CommittedRun {
-                run_id,
-                status: RunStatus::Done,
-            })
-            .chain(self.failed.iter().map(|&run_id| CommittedRun {
-                run_id,
-                status: RunStatus::Failed,
-            }))
-            .collect();
-        runs.sort_by_key(|r| r.run_id);
-        Commit {
-            format_version: LEDGER_FORMAT,
-            shard: INDEX_SHARD.into(),
-            seq: 0,
-            runs,
-            files: Vec::new(),
-        }
-    }
+/// Write the index atomically.
+pub fn write_index(root: &Path, ix: &LedgerIndex) -> Result<(), String> {
+    let p = index_path(root);
+    fsutil::create_dir_durable(&root.join("ledger"))
+        .map_err(|e| format!("{}: {e}", p.display()))?;
+    fsutil::write_atomic(&p, &serde_json::to_vec(ix).expect("index serialises"))
+        .map_err(|e| format!("{}: {e}", p.display()))
 }
-
-/// The shard name of the folded index in `read_commits`' output.
-pub const INDEX_SHARD: &str = "index";
 
 /// Commit record files of a shard directory with their sequence numbers, sorted.
 fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
@@ -180,13 +246,43 @@ fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
     Ok(files)
 }
 
-/// Every commit: the folded index first (if any), then every shard's commit records not
-/// folded into it, ordered by (shard, seq). A record that vanishes while being read (a
-/// compaction folding it into the index at that moment) makes the whole read start again.
-pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
+/// The whole ledger as read: good commits, and what could not be read.
+#[derive(Debug, Clone, Default)]
+pub struct Ledger {
+    /// The index's groups first, then every shard's commit records not folded into it,
+    /// ordered by (shard, seq).
+    pub commits: Vec<Commit>,
+    pub index: Option<LedgerIndex>,
+    /// Commit records that are not readable commits of this format: (path, why).
+    pub bad_records: Vec<(PathBuf, String)>,
+    /// The index, if it exists and is not readable: why.
+    pub bad_index: Option<String>,
+}
+
+impl Ledger {
+    /// Whether something of the ledger could not be read.
+    pub fn damaged(&self) -> bool {
+        !self.bad_records.is_empty() || self.bad_index.is_some()
+    }
+
+    /// The damage, one line each.
+    pub fn damage(&self) -> Vec<String> {
+        let mut v: Vec<String> = self
+            .bad_records
+            .iter()
+            .map(|(p, why)| format!("{}: {why}", p.display()))
+            .collect();
+        v.extend(self.bad_index.iter().cloned());
+        v
+    }
+}
+
+/// Every commit (see `Ledger`). A record that vanishes while being read (a compaction
+/// folding it into the index at that moment) makes the whole read start again.
+pub fn read_ledger(root: &Path) -> Result<Ledger, String> {
     let mut last = String::new();
     for _ in 0..20 {
-        match read_commits_once(root) {
+        match read_ledger_once(root) {
             Ok(Some(v)) => return Ok(v),
             Ok(None) => std::thread::sleep(std::time::Duration::from_millis(50)),
             Err(e) => return Err(e),
@@ -196,12 +292,28 @@ pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
     Err(format!("{}: {last}", root.display()))
 }
 
+/// Every commit, or an error naming the damaged ledger files and the command that heals them.
+pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
+    let l = read_ledger(root)?;
+    if l.damaged() {
+        return Err(format!(
+            "{}; `granular resume {}` sets it aside and rebuilds the commit from its parts",
+            l.damage().join("; "),
+            root.display()
+        ));
+    }
+    Ok(l.commits)
+}
+
 /// `Ok(None)`: a commit record listed was gone when opened.
-fn read_commits_once(root: &Path) -> Result<Option<Vec<Commit>>, String> {
-    let mut out = Vec::new();
-    let index = read_index(root)?;
-    if let Some(ix) = &index {
-        out.push(ix.as_commit());
+fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, String> {
+    let mut out = Ledger::default();
+    match read_index(root) {
+        Ok(ix) => out.index = ix,
+        Err(e) => out.bad_index = Some(e),
+    }
+    if let Some(ix) = &out.index {
+        out.commits.extend(ix.groups.iter().map(Group::as_commit));
     }
     let dir = root.join("ledger");
     let Ok(entries) = fs::read_dir(&dir) else {
@@ -218,7 +330,8 @@ fn read_commits_once(root: &Path) -> Result<Option<Vec<Commit>>, String> {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let folded = index
+        let folded = out
+            .index
             .as_ref()
             .and_then(|ix| ix.folded.get(&name).copied())
             .unwrap_or(0);
@@ -226,51 +339,36 @@ fn read_commits_once(root: &Path) -> Result<Option<Vec<Commit>>, String> {
             if seq <= folded {
                 continue;
             }
-            let text = match fs::read_to_string(&f) {
+            let text = match fs::read(&f) {
                 Ok(t) => t,
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
                 Err(e) => return Err(format!("{}: {e}", f.display())),
             };
-            let c: Commit = serde_json::from_str(&text)
-                .map_err(|e| format!("{}: corrupt commit record: {e}", f.display()))?;
-            if c.format_version != LEDGER_FORMAT {
-                return Err(format!(
-                    "{}: format version {}, this granular reads {LEDGER_FORMAT}",
-                    f.display(),
-                    c.format_version
-                ));
+            match parse_commit(&text, &name, seq) {
+                Ok(c) => out.commits.push(c),
+                Err(why) => out.bad_records.push((f, why)),
             }
-            out.push(c);
         }
     }
     Ok(Some(out))
 }
 
-/// Fold every commit record into `ledger/index.json` and delete the records folded in. Only
-/// for a campaign no process is writing to (`granular compact` holds the compaction lock) and
-/// after `recover` (every commit's parts renamed into place). Returns the records removed.
-pub fn fold_into_index(root: &Path) -> Result<usize, String> {
-    let commits = read_commits(root)?;
-    let ix = LedgerIndex::fold(&commits);
-    let p = index_path(root);
-    fsutil::write_atomic(&p, &serde_json::to_vec(&ix).expect("index serialises"))
-        .map_err(|e| format!("{}: {e}", p.display()))?;
-    let mut removed = 0;
-    for c in &commits {
-        if c.shard == INDEX_SHARD {
-            continue;
-        }
-        let f = commit_path(root, &c.shard, c.seq);
-        if fs::remove_file(&f).is_ok() {
-            removed += 1;
-        }
+fn parse_commit(text: &[u8], tag: &str, seq: u64) -> Result<Commit, String> {
+    let c: Commit =
+        serde_json::from_slice(text).map_err(|e| format!("corrupt commit record: {e}"))?;
+    if c.format_version != LEDGER_FORMAT {
+        return Err(format!(
+            "a commit record of format {}, this granular reads {LEDGER_FORMAT}",
+            c.format_version
+        ));
     }
-    if let Ok(entries) = fs::read_dir(root.join("ledger")) {
-        for d in entries.filter_map(|e| e.ok()).filter(|e| e.path().is_dir()) {
-            let _ = fsutil::sync_dir(&d.path());
-        }
+    if c.shard != tag || c.seq != seq {
+        return Err(format!(
+            "a commit record of {}/{} under the name of {tag}/{seq}",
+            c.shard, c.seq
+        ));
     }
-    Ok(removed)
+    Ok(c)
 }
 
 /// run_id -> status of every committed run (the first commit wins).
@@ -297,20 +395,90 @@ pub fn next_seq(root: &Path, tag: &str) -> u64 {
     files.max(folded) + 1
 }
 
+/// Finish a compaction stopped after its journal was written: publish its generations, write
+/// its index, delete the records it folded, remove the journal. Only while no compaction runs.
+pub fn roll_forward_compaction(root: &Path) -> Result<Option<String>, String> {
+    let jp = journal_path(root);
+    let text = match fs::read(&jp) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("{}: {e}", jp.display())),
+    };
+    let j: Journal = match serde_json::from_slice(&text) {
+        Ok(j) => j,
+        Err(e) => {
+            // The journal is written atomically: unreadable means damaged, not half-written.
+            return Err(format!(
+                "{}: corrupt compaction journal ({e}); move it away and run `granular compact` again",
+                jp.display()
+            ));
+        }
+    };
+    if j.kind != JOURNAL_KIND || j.format_version != LEDGER_FORMAT {
+        return Err(format!(
+            "{}: not a compaction journal of format {LEDGER_FORMAT}",
+            jp.display()
+        ));
+    }
+    complete_compaction(root, &j)?;
+    Ok(Some(format!(
+        "completed an interrupted compaction ({} table generations published, the ledger index written)",
+        j.publish.len()
+    )))
+}
+
+/// Steps 2-4 of a compaction whose journal is durable (idempotent).
+pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), String> {
+    for (table, gen) in &j.publish {
+        let current = match layout::table_dir(root, table) {
+            Ok(layout::TableDir::Generation { gen: g, .. }) => Some(g),
+            _ => None,
+        };
+        if current != Some(*gen) {
+            layout::publish_generation(root, table, *gen)
+                .map_err(|e| format!("{}: {e}", root.join("tables").join(table).display()))?;
+        }
+    }
+    write_index(root, &j.index)?;
+    for (tag, &upto) in &j.index.folded {
+        if let Ok(files) = commit_files(&ledger_dir(root, tag)) {
+            for (seq, f) in files {
+                if seq <= upto {
+                    let _ = fs::remove_file(f);
+                }
+            }
+        }
+        let _ = fsutil::sync_dir(&ledger_dir(root, tag));
+    }
+    let jp = journal_path(root);
+    match fs::remove_file(&jp) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(format!("{}: {e}", jp.display())),
+    }
+    let _ = fsutil::sync_dir(&root.join("ledger"));
+    Ok(())
+}
+
 /// Roll forward committed parts and roll back uncommitted ones, for every shard whose lock
 /// is not held by a live process (our own shard's lock is held by us: pass it as `ours`).
 pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
     let mut notes = Vec::new();
-    let commits = read_commits(root)?;
     let live: Vec<String> = live_locks(root)
         .into_iter()
         .map(|l| l.shard_tag)
         .filter(|t| t != ours)
         .collect();
+    if !live.iter().any(|t| t == COMPACT_TAG) {
+        notes.extend(roll_forward_compaction(root)?);
+    }
+    // Unreadable records are left to `integrity` (they are set aside there); their pending
+    // parts, if any, are rolled back below like those of a commit that never happened.
+    let commits = read_ledger(root)?.commits;
     let mut referenced = std::collections::HashSet::new();
     for c in &commits {
         for f in &c.files {
-            let fin = root.join(f);
+            let fin = root.join(&f.path);
             referenced.insert(pending_path(&fin));
             if live.contains(&c.shard) {
                 continue;
@@ -367,7 +535,7 @@ fn remove_stale_temporaries(root: &Path) -> Vec<String> {
         root.join("tables"),
         root.join("ledger"),
     ];
-    for sub in ["tables", "ledger"] {
+    for sub in ["tables", "ledger", "sums"] {
         if let Ok(it) = fs::read_dir(root.join(sub)) {
             dirs.extend(
                 it.filter_map(|e| e.ok())
@@ -417,6 +585,34 @@ pub struct LockInfo {
     pub shard: String,
     pub shard_tag: String,
     pub shard_count: u32,
+    /// The process's start time (clock ticks after boot, `/proc/<pid>/stat` field 22), so
+    /// that a lock whose pid was reused by another process is seen to be stale.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_time: Option<u64>,
+}
+
+impl LockInfo {
+    /// A lock of this process.
+    pub fn ours(shard: &str, shard_tag: &str, shard_count: u32) -> LockInfo {
+        let pid = std::process::id();
+        LockInfo {
+            pid,
+            host: hostname(),
+            shard: shard.into(),
+            shard_tag: shard_tag.into(),
+            shard_count,
+            start_time: process_start_time(pid),
+        }
+    }
+}
+
+/// When a process of this host started (clock ticks after boot), if it exists.
+pub fn process_start_time(pid: u32) -> Option<u64> {
+    let s = fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // Fields after the command name (which may hold spaces and parentheses): state is field
+    // 3, starttime field 22.
+    let rest = s.rsplit_once(')')?.1;
+    rest.split_whitespace().nth(19)?.parse().ok()
 }
 
 pub fn hostname() -> String {
@@ -448,7 +644,10 @@ pub const COMPACT_TAG: &str = "compact";
 
 fn lock_is_live(root: &Path, l: &LockInfo) -> bool {
     if l.host == hostname() {
-        return pid_alive(l.pid);
+        // A pid now used by another process (started at another time) holds nothing.
+        return pid_alive(l.pid)
+            && l.start_time
+                .is_none_or(|t| process_start_time(l.pid) == Some(t));
     }
     // Another host's process cannot be checked from here: it is live while its heartbeat (or,
     // before the first heartbeat, its lock file) is recent.
@@ -538,13 +737,7 @@ pub struct CompactLock {
 
 impl CompactLock {
     pub fn acquire(root: &Path) -> Result<CompactLock, String> {
-        let info = LockInfo {
-            pid: std::process::id(),
-            host: hostname(),
-            shard: COMPACT_TAG.into(),
-            shard_tag: COMPACT_TAG.into(),
-            shard_count: 0,
-        };
+        let info = LockInfo::ours(COMPACT_TAG, COMPACT_TAG, 0);
         let path = take_lock_file(root, &info)?;
         let lock = CompactLock { path };
         // Take, then check (shards do the same the other way round): of two processes
@@ -607,13 +800,7 @@ impl ShardLock {
                 ));
             }
         }
-        let info = LockInfo {
-            pid: std::process::id(),
-            host: hostname(),
-            shard: shard.to_string(),
-            shard_tag: shard.tag(),
-            shard_count: shard.count,
-        };
+        let info = LockInfo::ours(&shard.to_string(), &shard.tag(), shard.count);
         let path = take_lock_file(root, &info)?;
         let lock = ShardLock { path };
         if let Some(e) = compacting(root) {

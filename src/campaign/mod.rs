@@ -12,11 +12,14 @@
 //! <out>/ledger/<shard>/commit-*.json   finished runs and their table parts (see ledger)
 //! <out>/checkpoints/run-*.ckpt   running simulations
 //! <out>/tables/<table>/*.parquet one dataset per table
+//! <out>/sums/<table>/*.sum.json  size and SHA-256 of the table files written whole
+//! <out>/quarantine/<time>-<pid>/ what healing set aside (see integrity), with actions.log
 //! ```
 
 pub mod compact;
 pub mod dispatch;
 pub mod history;
+pub mod integrity;
 pub mod ledger;
 pub mod plan;
 pub mod preview;
@@ -323,6 +326,7 @@ impl Campaign {
         Stamp {
             campaign: &self.identity,
             manifest: &self.manifest_json,
+            commit: None,
         }
     }
 

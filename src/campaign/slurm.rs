@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use super::ledger;
 use super::{Campaign, CampaignError};
 use crate::fsutil;
-use crate::store::LEDGER_FORMAT;
+use crate::store::SUBMISSION_FORMAT;
 
 pub const SUBMISSION_KIND: &str = "granular.slurm_submission";
 
@@ -111,9 +111,9 @@ pub fn read_record(root: &Path) -> Result<Option<SubmissionRecord>, String> {
     };
     let r: SubmissionRecord = serde_json::from_str(&text)
         .map_err(|e| format!("{}: corrupt submission record: {e}", p.display()))?;
-    if r.kind != SUBMISSION_KIND || r.format_version != LEDGER_FORMAT {
+    if r.kind != SUBMISSION_KIND || r.format_version != SUBMISSION_FORMAT {
         return Err(format!(
-            "{}: not a submission record of format {LEDGER_FORMAT}",
+            "{}: not a submission record of format {SUBMISSION_FORMAT}",
             p.display()
         ));
     }
@@ -479,7 +479,7 @@ pub fn plan(
                 ));
             }
             SubmissionRecord {
-                format_version: LEDGER_FORMAT,
+                format_version: SUBMISSION_FORMAT,
                 kind: SUBMISSION_KIND.into(),
                 shards,
                 runs_per_shard: per,

@@ -1,5 +1,6 @@
 //! Campaign status across all shards: done / failed / running / pending, per point. Reads the
-//! commit records and the live shards' heartbeats, never the tables.
+//! commit records and the live shards' heartbeats; of the tables only their sizes (the quick
+//! integrity check).
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -7,7 +8,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::ledger::{self, RunStatus};
-use super::Campaign;
+use super::{integrity, Campaign};
 use crate::fsutil;
 
 #[derive(Serialize, Deserialize, Clone, Debug, Default, PartialEq)]
@@ -55,6 +56,10 @@ pub struct CampaignStatus {
     /// SLURM submissions (`granular submit`), with their jobs' states when squeue answers.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub slurm: Vec<super::slurm::SubmissionStatus>,
+    /// What the quick check of the tables against the ledger found (see `integrity`); the
+    /// counts above are the ledger's. `granular resume` heals it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub damage: Vec<String>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -77,7 +82,8 @@ pub fn remove_heartbeat(root: &Path, tag: &str) {
 }
 
 pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
-    let commits = ledger::read_commits(&c.root)?;
+    let check = integrity::check(c, integrity::Depth::Quick)?;
+    let commits = ledger::read_ledger(&c.root)?.commits;
     let finished = ledger::finished_runs(&commits);
     let live = ledger::live_locks(&c.root);
     let mut running = BTreeSet::new();
@@ -183,5 +189,6 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
             .collect(),
         points,
         slurm: super::slurm::submission_status(&c.root)?,
+        damage: check.problems(),
     })
 }

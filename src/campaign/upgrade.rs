@@ -14,23 +14,25 @@
 //! 5. `campaign.json` of format 2 is written (the commit point: before it the directory is of
 //!    format 1 and the upgrade can be run again; every step is idempotent).
 
+use std::collections::BTreeMap;
 use std::fs;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use arrow_array::RecordBatch;
 
-use super::history::{self, Accepted};
+use super::history;
 use super::ledger::{self, CompactLock};
 use super::plan::{self, canonical, Plan};
 use super::registry::{Registry, RunBlock, SeedSource};
 use super::tables::{self, POINTS, RUNS};
-use super::{io_err, CampaignError, CampaignInfo};
+use super::{integrity, io_err, CampaignError, CampaignInfo};
 use crate::fsutil;
 use crate::manifest::RunsPerPoint;
+use crate::store::checksum::{self, FileSum};
 use crate::store::dataset::Dataset;
 use crate::store::layout::{self, TableDir};
 use crate::store::parquet_io::{self, Stamp};
-use crate::store::FORMAT_VERSION;
+use crate::store::{FORMAT_VERSION, LEDGER_FORMAT};
 use crate::CODE_VERSION;
 
 /// What an upgrade did.
@@ -53,7 +55,7 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     };
     match info.format_version {
         FORMAT_VERSION => return Ok(report),
-        1 => {}
+        1 | 2 => {}
         v => {
             return Err(CampaignError::Refused(format!(
                 "{}: format version {v}, which this granular ({FORMAT_VERSION}) cannot upgrade",
@@ -63,55 +65,322 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     }
     let _lock = CompactLock::acquire(root)
         .map_err(|e| CampaignError::Refused(format!("cannot upgrade: {e}")))?;
-    report
-        .steps
-        .extend(ledger::recover(root, ledger::COMPACT_TAG).map_err(CampaignError::Io)?);
+    report.steps.extend(recover_ledger1(root)?);
     let manifest_text = serde_json::to_string(&info.manifest).expect("value serialises");
     let manifest =
         crate::manifest::validate::parse(&manifest_text, &info_path.display().to_string())?;
-    let expansion = plan::expand(&manifest).map_err(|errs| {
-        CampaignError::Refused(format!(
-            "{}: frozen manifest: {errs:?}",
-            info_path.display()
-        ))
-    })?;
-    let registry = format1_registry(&manifest, &expansion);
-    let n_runs = registry.n_runs();
-    let keys = expansion.sweep_keys.clone();
-    let plan = Plan::new(&manifest, expansion, registry).map_err(CampaignError::Refused)?;
-    report.steps.push(format!(
-        "registry: {} points, {n_runs} runs, each keeping its seed of format 1",
-        plan.points.len()
-    ));
     let manifest_json = canonical(&info.manifest);
     let identity = manifest.identity();
     let stamp = Stamp {
         campaign: &identity,
         manifest: &manifest_json,
+        commit: None,
     };
-    let sweep_cols: Vec<String> = keys.iter().map(|k| Plan::sweep_column(k)).collect();
-    report.steps.push(rewrite_runs(root, &sweep_cols, stamp)?);
     let data = Dataset::new(root, &identity, &manifest_json);
-    data.write_whole(POINTS, "points.parquet", &tables::points_batch(&plan))
-        .map_err(|e| CampaignError::Io(e.to_string()))?;
-    report.steps.push(format!(
-        "points: rewritten ({} points, in_manifest)",
-        plan.points.len()
-    ));
-    let given = fs::read(root.join("manifest.json")).unwrap_or_else(|_| manifest_text.into_bytes());
-    let mut first = history::write(root, 0, &given, n_runs).map_err(CampaignError::Io)?;
-    first.accepted = created(&info_path);
-    report.steps.push(format!(
-        "history: the frozen manifest kept as {}",
-        first.file
-    ));
-    write_info(root, &info, plan.registry, first)?;
+    let next_info = if info.format_version == 1 {
+        let expansion = plan::expand(&manifest).map_err(|errs| {
+            CampaignError::Refused(format!(
+                "{}: frozen manifest: {errs:?}",
+                info_path.display()
+            ))
+        })?;
+        let registry = format1_registry(&manifest, &expansion);
+        let n_runs = registry.n_runs();
+        let keys = expansion.sweep_keys.clone();
+        let plan = Plan::new(&manifest, expansion, registry).map_err(CampaignError::Refused)?;
+        report.steps.push(format!(
+            "registry: {} points, {n_runs} runs, each keeping its seed of format 1",
+            plan.points.len()
+        ));
+        let sweep_cols: Vec<String> = keys.iter().map(|k| Plan::sweep_column(k)).collect();
+        report.steps.push(rewrite_runs(root, &sweep_cols, stamp)?);
+        data.write_whole(POINTS, "points.parquet", &tables::points_batch(&plan))
+            .map_err(|e| CampaignError::Io(e.to_string()))?;
+        report.steps.push(format!(
+            "points: rewritten ({} points, in_manifest)",
+            plan.points.len()
+        ));
+        let given =
+            fs::read(root.join("manifest.json")).unwrap_or_else(|_| manifest_text.into_bytes());
+        let mut first = history::write(root, 0, &given, n_runs).map_err(CampaignError::Io)?;
+        first.accepted = created(&info_path);
+        report.steps.push(format!(
+            "history: the frozen manifest kept as {}",
+            first.file
+        ));
+        CampaignInfo {
+            format_version: FORMAT_VERSION,
+            code_version: CODE_VERSION.into(),
+            name: info.name.clone(),
+            n_runs: plan.registry.n_runs(),
+            manifest: info.manifest.clone(),
+            registry: Some(plan.registry),
+            history: vec![first],
+        }
+    } else {
+        CampaignInfo {
+            format_version: FORMAT_VERSION,
+            code_version: CODE_VERSION.into(),
+            ..info.clone()
+        }
+    };
+    report.steps.extend(checksum_ledger(root)?);
+    report.steps.push(sidecars(root)?);
+    let path = root.join("campaign.json");
+    fsutil::write_atomic(
+        &path,
+        &serde_json::to_vec_pretty(&next_info).expect("serialises"),
+    )
+    .map_err(|e| io_err(&path, e))?;
     report.steps.push(format!(
         "campaign.json: format {} -> {FORMAT_VERSION}",
         report.from
     ));
     log(root, &report)?;
     Ok(report)
+}
+
+/// A commit record of ledger format 1 (files without sizes or checksums), or one this upgrade
+/// already rewrote (it may have stopped half-way).
+#[derive(serde::Deserialize)]
+struct AnyCommit {
+    shard: String,
+    seq: u64,
+    runs: Vec<ledger::CommittedRun>,
+    files: Vec<AnyFile>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(untagged)]
+enum AnyFile {
+    Path(String),
+    Sum(FileSum),
+}
+
+impl AnyFile {
+    fn path(&self) -> &str {
+        match self {
+            AnyFile::Path(p) => p,
+            AnyFile::Sum(s) => &s.path,
+        }
+    }
+}
+
+/// Every commit record of the ledger (format 1 or 2), with its path.
+fn old_records(root: &Path) -> Result<Vec<(PathBuf, AnyCommit)>, CampaignError> {
+    let mut out = Vec::new();
+    let Ok(tags) = fs::read_dir(root.join("ledger")) else {
+        return Ok(out);
+    };
+    let mut tags: Vec<PathBuf> = tags
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.is_dir())
+        .collect();
+    tags.sort();
+    for t in tags {
+        let mut files: Vec<PathBuf> = fs::read_dir(&t)
+            .map_err(|e| io_err(&t, e))?
+            .filter_map(|e| e.ok())
+            .map(|e| e.path())
+            .filter(|p| {
+                let n = p.file_name().unwrap().to_string_lossy();
+                n.starts_with("commit-") && n.ends_with(".json")
+            })
+            .collect();
+        files.sort();
+        for f in files {
+            let text = fs::read(&f).map_err(|e| io_err(&f, e))?;
+            let c: AnyCommit = serde_json::from_slice(&text).map_err(|e| {
+                CampaignError::Refused(format!(
+                    "{}: corrupt commit record ({e}); move it away and upgrade again (its runs will run again)",
+                    f.display()
+                ))
+            })?;
+            out.push((f, c));
+        }
+    }
+    Ok(out)
+}
+
+/// Recovery of a ledger of format 1: the parts of every record renamed into place, pending
+/// parts no record names deleted (what `ledger::recover` did for format 1).
+fn recover_ledger1(root: &Path) -> Result<Vec<String>, CampaignError> {
+    let mut notes = Vec::new();
+    let records = old_records(root)?;
+    let mut referenced = std::collections::HashSet::new();
+    for (_, c) in &records {
+        for f in &c.files {
+            let fin = root.join(f.path());
+            let pend = ledger::pending_path(&fin);
+            referenced.insert(pend.clone());
+            if !fin.exists() && pend.exists() {
+                fs::rename(&pend, &fin).map_err(|e| io_err(&pend, e))?;
+                notes.push(format!("completed the commit of {}", fin.display()));
+            }
+        }
+    }
+    for table in layout::table_names(root).map_err(|e| io_err(root, e))? {
+        let dir = root.join("tables").join(&table);
+        let Ok(it) = fs::read_dir(&dir) else { continue };
+        for e in it.filter_map(|e| e.ok()) {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.ends_with(".pending") && !referenced.contains(&e.path()) {
+                fs::remove_file(e.path()).map_err(|err| io_err(&e.path(), err))?;
+                notes.push(format!(
+                    "discarded the uncommitted part {}",
+                    e.path().display()
+                ));
+            }
+        }
+    }
+    Ok(notes)
+}
+
+fn sum_of(root: &Path, rel: &str, missing: &mut Vec<String>) -> Result<FileSum, CampaignError> {
+    let path = root.join(rel);
+    match checksum::sum_file(&path) {
+        Ok((bytes, sha256)) => Ok(FileSum {
+            path: rel.into(),
+            bytes,
+            sha256,
+        }),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            missing.push(rel.into());
+            // Recorded as it is: missing (the next `resume` runs its commit's runs again).
+            Ok(FileSum {
+                path: rel.into(),
+                bytes: u64::MAX,
+                sha256: String::new(),
+            })
+        }
+        Err(e) => Err(io_err(&path, e)),
+    }
+}
+
+/// Ledger format 1 -> 2: every commit record and the index rewritten with the size and
+/// SHA-256 of each committed file (the files as they are now are taken to be right). The
+/// index of format 1 (runs only) becomes one group of every committed part that no record
+/// names.
+fn checksum_ledger(root: &Path) -> Result<Vec<String>, CampaignError> {
+    let mut steps = Vec::new();
+    let mut missing = Vec::new();
+    let records = old_records(root)?;
+    let mut named = std::collections::HashSet::new();
+    for (path, c) in &records {
+        let mut files = Vec::new();
+        for f in &c.files {
+            named.insert(f.path().to_string());
+            files.push(sum_of(root, f.path(), &mut missing)?);
+        }
+        let commit = ledger::Commit {
+            format_version: LEDGER_FORMAT,
+            shard: c.shard.clone(),
+            seq: c.seq,
+            runs: c.runs.clone(),
+            files,
+            in_index: false,
+        };
+        fsutil::write_atomic(
+            path,
+            &serde_json::to_vec(&commit).expect("commit serialises"),
+        )
+        .map_err(|e| io_err(path, e))?;
+    }
+    steps.push(format!(
+        "ledger: {} commit record(s) rewritten with the size and SHA-256 of their files (format 2)",
+        records.len()
+    ));
+    let ip = ledger::index_path(root);
+    if let Ok(text) = fs::read(&ip) {
+        #[derive(serde::Deserialize)]
+        struct Index1 {
+            format_version: u32,
+            folded: BTreeMap<String, u64>,
+            #[serde(default)]
+            done: Vec<(u64, u64)>,
+            #[serde(default)]
+            failed: Vec<u64>,
+        }
+        let v: serde_json::Value = serde_json::from_slice(&text).map_err(|e| {
+            CampaignError::Refused(format!("{}: corrupt ledger index: {e}", ip.display()))
+        })?;
+        if v["format_version"] != serde_json::json!(LEDGER_FORMAT) {
+            let ix: Index1 = serde_json::from_value(v).map_err(|e| {
+                CampaignError::Refused(format!("{}: corrupt ledger index: {e}", ip.display()))
+            })?;
+            let _ = ix.format_version;
+            let mut files = Vec::new();
+            for table in layout::table_names(root).map_err(|e| io_err(root, e))? {
+                let dir = root.join("tables").join(&table);
+                let mut names: Vec<String> = fs::read_dir(&dir)
+                    .map_err(|e| io_err(&dir, e))?
+                    .filter_map(|e| e.ok())
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| integrity::is_part_name(n))
+                    .collect();
+                names.sort();
+                for n in names {
+                    let rel = format!("tables/{table}/{n}");
+                    if !named.contains(&rel) {
+                        files.push(sum_of(root, &rel, &mut missing)?);
+                    }
+                }
+            }
+            let n = files.len();
+            let index = ledger::LedgerIndex {
+                format_version: LEDGER_FORMAT,
+                kind: ledger::INDEX_KIND.into(),
+                folded: ix.folded,
+                compactions: 0,
+                groups: vec![ledger::Group {
+                    shard: "index".into(),
+                    seq: 0,
+                    done: ix.done,
+                    failed: ix.failed,
+                    files,
+                }],
+            };
+            ledger::write_index(root, &index).map_err(CampaignError::Io)?;
+            steps.push(format!(
+                "ledger index: its runs and the {n} compacted file(s) no record names, with their sizes and SHA-256, as one group (format 2)"
+            ));
+        }
+    }
+    if !missing.is_empty() {
+        steps.push(format!(
+            "ledger: {} committed file(s) missing, recorded as such (`granular resume` runs their runs again): {}",
+            missing.len(),
+            missing.join(", ")
+        ));
+    }
+    Ok(steps)
+}
+
+/// A checksum sidecar for every file of a table written whole (points, theory, summaries).
+fn sidecars(root: &Path) -> Result<String, CampaignError> {
+    let mut n = 0;
+    for table in layout::table_names(root).map_err(|e| io_err(root, e))? {
+        let dir = root.join("tables").join(&table);
+        let Ok(it) = fs::read_dir(&dir) else { continue };
+        for e in it.filter_map(|e| e.ok()) {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with('.')
+                || !name.ends_with(".parquet")
+                || integrity::is_part_name(&name)
+            {
+                continue;
+            }
+            let (bytes, sha) =
+                checksum::sum_file(&e.path()).map_err(|err| io_err(&e.path(), err))?;
+            checksum::write_sidecar(root, &table, &name, bytes, &sha)
+                .map_err(|err| io_err(&e.path(), err))?;
+            n += 1;
+        }
+    }
+    Ok(format!(
+        "rebuilt tables: a checksum sidecar for each of their {n} file(s)"
+    ))
 }
 
 /// The registry of a campaign of format 1: its points in sweep order, each with its replicas
@@ -236,29 +505,6 @@ fn created(info_path: &Path) -> String {
         .unwrap_or_else(history::utc_now)
 }
 
-fn write_info(
-    root: &Path,
-    old: &CampaignInfo,
-    registry: Registry,
-    first: Accepted,
-) -> Result<(), CampaignError> {
-    let info = CampaignInfo {
-        format_version: FORMAT_VERSION,
-        code_version: CODE_VERSION.into(),
-        name: old.name.clone(),
-        n_runs: registry.n_runs(),
-        manifest: old.manifest.clone(),
-        registry: Some(registry),
-        history: vec![first],
-    };
-    let path = root.join("campaign.json");
-    fsutil::write_atomic(
-        &path,
-        &serde_json::to_vec_pretty(&info).expect("serialises"),
-    )
-    .map_err(|e| io_err(&path, e))
-}
-
 /// Append the upgrade to `upgrade.log` (one line per step, with the time and the version).
 fn log(root: &Path, r: &UpgradeReport) -> Result<(), CampaignError> {
     use std::io::Write;
@@ -268,11 +514,11 @@ fn log(root: &Path, r: &UpgradeReport) -> Result<(), CampaignError> {
         .append(true)
         .open(&path)
         .map_err(|e| io_err(&path, e))?;
+    let path_of_formats: Vec<String> = (r.from..=r.to).map(|v| v.to_string()).collect();
     let mut text = format!(
-        "{} {CODE_VERSION}: format {} -> {}\n",
+        "{} {CODE_VERSION}: format {}\n",
         history::utc_now(),
-        r.from,
-        r.to
+        path_of_formats.join(" -> ")
     );
     for s in &r.steps {
         text.push_str(&format!("  {s}\n"));

@@ -8,12 +8,13 @@ use std::time::{Duration, Instant};
 
 use arrow_array::RecordBatch;
 
-use super::ledger::{self, Commit, CommittedRun, RunStatus};
+use super::ledger::{self, Commit, CommittedRun, PartCommit, RunStatus};
 use super::tables::{self, RunRow};
 use super::worker::{RunEnd, RunResult};
 use super::Campaign;
 use crate::fsutil;
-use crate::store::parquet_io::{self, StoreError};
+use crate::store::checksum::FileSum;
+use crate::store::parquet_io::{self, Stamp, StoreError};
 use crate::store::{checkpoint, FORMAT_VERSION, LEDGER_FORMAT};
 
 /// Flush when this many rows are buffered, whatever the time.
@@ -117,7 +118,7 @@ impl<'c> Writer<'c> {
     }
 
     fn part(&self, table: &str) -> (String, PathBuf) {
-        let rel = format!("tables/{table}/part-{}-{:08}.parquet", self.tag, self.seq);
+        let rel = ledger::part_rel(table, &self.tag, self.seq);
         let abs = self.c.root.join(&rel);
         (rel, abs)
     }
@@ -143,17 +144,37 @@ impl<'c> Writer<'c> {
             return Ok(None);
         }
         let batches = self.batches();
+        // Every part says in its footer which commit it belongs to and which tables that
+        // commit wrote, so that a lost commit record can be rebuilt from the parts.
+        let part_commit = serde_json::to_string(&PartCommit {
+            shard: self.tag.clone(),
+            seq: self.seq,
+            tables: batches.iter().map(|(t, _)| t.to_string()).collect(),
+        })
+        .expect("part commit serialises");
+        let stamp = Stamp {
+            commit: Some(&part_commit),
+            ..self.c.stamp()
+        };
         // 1. pending parts
         let mut files = Vec::new();
+        let mut sums = Vec::new();
         let mut written = Vec::new();
         for (table, parts) in &batches {
             let (rel, abs) = self.part(table);
             let pending = ledger::pending_path(&abs);
-            if let Err(e) = parquet_io::write_batches(&pending, parts, table, self.c.stamp()) {
-                for p in &written {
-                    let _ = std::fs::remove_file(p);
+            match parquet_io::write_batches(&pending, parts, table, stamp) {
+                Ok(w) => sums.push(FileSum {
+                    path: rel.clone(),
+                    bytes: w.bytes,
+                    sha256: w.sha256,
+                }),
+                Err(e) => {
+                    for p in &written {
+                        let _ = std::fs::remove_file(p);
+                    }
+                    return Err(e);
                 }
-                return Err(e);
             }
             written.push(pending);
             files.push((rel, abs));
@@ -175,7 +196,8 @@ impl<'c> Writer<'c> {
                     },
                 })
                 .collect(),
-            files: files.iter().map(|(rel, _)| rel.clone()).collect(),
+            files: sums,
+            in_index: false,
         };
         let cpath = ledger::commit_path(&self.c.root, &self.tag, self.seq);
         if let Err(e) = fsutil::write_atomic(

@@ -10,6 +10,10 @@ use crate::exit_codes;
 #[derive(clap::Args)]
 pub struct Args {
     dir: PathBuf,
+    /// Check presence and sizes only (no file is read): what `status` and `resume` check
+    /// first. The default reads every file and checks its SHA-256.
+    #[arg(long)]
+    quick: bool,
 }
 
 pub fn run(a: Args) -> i32 {
@@ -17,7 +21,13 @@ pub fn run(a: Args) -> i32 {
         Ok(c) => c,
         Err(e) => return report_error(e),
     };
-    let r = match campaign::verify::verify(&c) {
+    let depth = if a.quick {
+        campaign::integrity::Depth::Quick
+    } else {
+        campaign::integrity::Depth::Full
+    };
+    let t0 = std::time::Instant::now();
+    let r = match campaign::verify::verify(&c, depth) {
         Ok(r) => r,
         Err(e) => return fail(exit_codes::DIRECTORY_REFUSED, e),
     };
@@ -29,13 +39,22 @@ pub fn run(a: Args) -> i32 {
     }
     if r.problems.is_empty() {
         println!(
-            "{}: all table files check out; {} committed runs, each once in the runs table",
+            "{}: all table files check out ({} committed files, {} bytes, {} in {:.2} s); {} committed runs, each once in the runs table",
             a.dir.display(),
+            r.files_checked,
+            r.bytes_checked,
+            if a.quick { "sizes checked" } else { "SHA-256 checked" },
+            t0.elapsed().as_secs_f64(),
             r.committed_runs
         );
         exit_codes::OK
     } else {
-        eprintln!("{}: {} problem(s)", a.dir.display(), r.problems.len());
+        eprintln!(
+            "{}: {} problem(s); `granular resume {}` heals them (runs whose rows are damaged run again)",
+            a.dir.display(),
+            r.problems.len(),
+            a.dir.display()
+        );
         exit_codes::DIRECTORY_REFUSED
     }
 }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use arrow_array::RecordBatch;
 
+use super::checksum;
 use super::layout;
 use super::parquet_io::{self, Stamp, StoreError};
 use crate::fsutil;
@@ -39,6 +40,7 @@ impl Dataset {
         Stamp {
             campaign: &self.identity,
             manifest: &self.manifest,
+            commit: None,
         }
     }
 
@@ -96,8 +98,10 @@ impl Dataset {
         self.dir(table).join(name).exists()
     }
 
-    /// Write `tables/<table>/<name>` atomically (write, fsync, rename, fsync the directory):
-    /// a whole table in one file, replacing an earlier one.
+    /// Write `tables/<table>/<name>` atomically (write, fsync, its checksum sidecar, rename,
+    /// fsync the directory): a whole table in one file, replacing an earlier one. Such tables
+    /// are rebuilt from others (points, theory, summaries); the sidecar lets a check tell a
+    /// damaged one (see `checksum`).
     pub fn write_whole(
         &self,
         table: &str,
@@ -107,7 +111,11 @@ impl Dataset {
         let path = self.dir(table).join(name);
         self.ensure(table)?;
         let tmp = fsutil::temp_path(&path);
-        parquet_io::write_file(&tmp, batch, table, self.stamp())?;
+        let w = parquet_io::write_file(&tmp, batch, table, self.stamp())?;
+        if let Err(e) = checksum::write_sidecar(&self.root, table, name, w.bytes, &w.sha256) {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(StoreError::io(&path, e));
+        }
         std::fs::rename(&tmp, &path).map_err(|e| StoreError::io(&path, e))?;
         fsutil::sync_dir(path.parent().expect("dir")).map_err(|e| StoreError::io(&path, e))
     }

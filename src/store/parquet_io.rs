@@ -14,12 +14,14 @@ use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 
+use super::checksum::HashingWriter;
 use super::FORMAT_VERSION;
 use crate::CODE_VERSION;
 
 /// Formats of table files this granular reads (format 1's tables are format 2's, but for
-/// the sweep columns of `runs`, which an upgrade removes).
-pub const READABLE_FORMATS: [u32; 2] = [1, FORMAT_VERSION];
+/// the sweep columns of `runs`, which an upgrade removes; format 3's are format 2's, with the
+/// commit in a part's footer).
+pub const READABLE_FORMATS: [u32; 3] = [1, 2, FORMAT_VERSION];
 
 /// Whose a table file is: the campaign's identity (name, model, seed: what a campaign keeps
 /// for ever) and the manifest it was written under (provenance).
@@ -27,17 +29,24 @@ pub const READABLE_FORMATS: [u32; 2] = [1, FORMAT_VERSION];
 pub struct Stamp<'a> {
     pub campaign: &'a str,
     pub manifest: &'a str,
+    /// For a committed part: its commit (shard, sequence number, the commit's tables, as
+    /// JSON), from which a lost ledger is rebuilt (see `campaign::integrity`).
+    pub commit: Option<&'a str>,
 }
 
 /// Key-value metadata of every table file.
 pub fn file_metadata(table: &str, stamp: Stamp) -> Vec<(String, String)> {
-    vec![
+    let mut v: Vec<(String, String)> = vec![
         ("granular.format_version".into(), FORMAT_VERSION.to_string()),
         ("granular.table".into(), table.into()),
         ("granular.code_version".into(), CODE_VERSION.into()),
         ("granular.campaign".into(), stamp.campaign.into()),
         ("granular.manifest".into(), stamp.manifest.into()),
-    ]
+    ];
+    if let Some(commit) = stamp.commit {
+        v.push(("granular.commit".into(), commit.into()));
+    }
+    v
 }
 
 /// The writer properties of every table file.
@@ -63,24 +72,31 @@ pub fn schema_with_metadata(schema: &Schema, table: &str, stamp: Stamp) -> Arc<S
     Arc::new(schema.clone().with_metadata(md))
 }
 
+/// Size and SHA-256 of a file just written.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Written {
+    pub bytes: u64,
+    pub sha256: String,
+}
+
 /// Write `batch` as a Parquet file at `tmp` (fsynced). The caller renames it into place.
 pub fn write_file(
     tmp: &Path,
     batch: &RecordBatch,
     table: &str,
     stamp: Stamp,
-) -> Result<(), StoreError> {
+) -> Result<Written, StoreError> {
     write_batches(tmp, std::slice::from_ref(batch), table, stamp)
 }
 
-/// Write `batches` (one schema) as one Parquet file at `tmp` (fsynced). On failure (a full
-/// disk, say) the partial file is removed.
+/// Write `batches` (one schema) as one Parquet file at `tmp` (fsynced), hashing it as it is
+/// written. On failure (a full disk, say) the partial file is removed.
 pub fn write_batches(
     tmp: &Path,
     batches: &[RecordBatch],
     table: &str,
     stamp: Stamp,
-) -> Result<(), StoreError> {
+) -> Result<Written, StoreError> {
     let r = write_batches_inner(tmp, batches, table, stamp);
     if r.is_err() {
         let _ = std::fs::remove_file(tmp);
@@ -93,7 +109,7 @@ fn write_batches_inner(
     batches: &[RecordBatch],
     table: &str,
     stamp: Stamp,
-) -> Result<(), StoreError> {
+) -> Result<Written, StoreError> {
     let Some(first) = batches.first() else {
         return Err(StoreError::Arrow(format!(
             "{}: no batches to write",
@@ -101,7 +117,7 @@ fn write_batches_inner(
         )));
     };
     let schema = schema_with_metadata(first.schema().as_ref(), table, stamp);
-    let file = File::create(tmp).map_err(|e| StoreError::io(tmp, e))?;
+    let file = HashingWriter::new(File::create(tmp).map_err(|e| StoreError::io(tmp, e))?);
     let mut w = ArrowWriter::try_new(file, schema.clone(), Some(writer_properties(table, stamp)))
         .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
     for batch in batches {
@@ -115,8 +131,9 @@ fn write_batches_inner(
     let file = w
         .into_inner()
         .map_err(|e| StoreError::Parquet(tmp.display().to_string(), e.to_string()))?;
+    let (file, bytes, sha256) = file.finish();
     file.sync_all().map_err(|e| StoreError::io(tmp, e))?;
-    Ok(())
+    Ok(Written { bytes, sha256 })
 }
 
 /// What a table file says about itself (footer only; the data pages are not read).
@@ -130,6 +147,8 @@ pub struct PartInfo {
     /// Canonical JSON of the manifest the file was written under.
     pub manifest: Option<String>,
     pub code_version: Option<String>,
+    /// The commit a committed part was written by (`granular.commit`, JSON), if recorded.
+    pub commit: Option<String>,
     pub rows: u64,
 }
 
@@ -165,6 +184,7 @@ pub fn inspect(
         campaign: get("granular.campaign").or_else(|| manifest.as_deref().and_then(identity_of)),
         manifest,
         code_version: get("granular.code_version"),
+        commit: get("granular.commit"),
         rows: builder.metadata().file_metadata().num_rows().max(0) as u64,
     };
     Ok((info, builder))

@@ -304,8 +304,10 @@ fn truncated_and_foreign_parquet_parts_are_detected() {
     );
 }
 
-/// The summaries of a campaign whose last shard finishes with a foreign part in its tables
-/// fail with an error naming the file (exit 4) instead of averaging foreign rows.
+/// A foreign part (another campaign's) in the tables of a campaign whose last shard then
+/// finishes is never averaged into the summaries: the shard's check finds a part in no
+/// commit, sets it aside (naming it and why: another campaign's) and finishes (exit 0) with
+/// `verify` clean and the foreign part out of the tables.
 #[test]
 fn summaries_refuse_a_foreign_part() {
     let _g = heavy();
@@ -325,12 +327,27 @@ fn summaries_refuse_a_foreign_part() {
         .join("part-x-00000001.parquet");
     fs::copy(first_part(&other, "dsmc_species"), &foreign).unwrap();
     let code = run_granular(&["resume", s(&c), "--shard", "2/2", "--quiet"], &log, LIMIT);
-    assert_eq!(code, Some(4), "log:\n{}", log_text(&log));
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     assert!(
         log_text(&log).contains("part-x-00000001.parquet")
-            && log_text(&log).contains("another campaign"),
+            && log_text(&log).contains("another campaign")
+            && log_text(&log).contains("set aside"),
         "log:\n{}",
         log_text(&log)
+    );
+    assert!(!foreign.exists(), "the foreign part is still in the table");
+    let (code, out) = run_capture(&["verify", s(&c)], &log);
+    assert_eq!(code, Some(0), "{out}\n{}", log_text(&log));
+    // The summaries average this campaign's runs only: those of a campaign run whole.
+    let whole = dir.path().join("whole");
+    assert_eq!(
+        run_granular(&["run", s(&m), "--out", s(&whole), "--quiet"], &log, LIMIT),
+        Some(0)
+    );
+    util::assert_tables_identical(
+        &read_tables(&whole),
+        &read_tables(&c),
+        "after a foreign part",
     );
 }
 

@@ -606,6 +606,39 @@ fn kill_9_during_growth_then_rerun_gives_the_direct_tables() {
     assert_same_current(&c, &direct, "killed growth vs direct");
 }
 
+/// Two campaigns' tables hold the same rows (sorted), but for `runs.wall_seconds` and
+/// `runs.code_version`.
+fn assert_same_rows(a: &Path, b: &Path, what: &str) {
+    let ignore = [("runs", "wall_seconds"), ("runs", "code_version")];
+    let (tc, ti) = (read_all(a), read_all(b));
+    assert_eq!(tc.keys().collect::<Vec<_>>(), ti.keys().collect::<Vec<_>>());
+    for (name, t) in &tc {
+        let u = &ti[name];
+        assert_eq!(t.columns, u.columns, "{name}");
+        let strip = |t: &Table| {
+            let skip: Vec<usize> = ignore
+                .iter()
+                .filter(|(tt, _)| tt == name)
+                .filter_map(|(_, c)| t.columns.iter().position(|x| x.0 == *c))
+                .collect();
+            let mut rows: Vec<Vec<Cell>> = t
+                .rows
+                .iter()
+                .map(|r| {
+                    let mut r = r.clone();
+                    for &j in &skip {
+                        r[j] = Cell::Null;
+                    }
+                    r
+                })
+                .collect();
+            rows.sort();
+            rows
+        };
+        assert!(strip(t) == strip(u), "{name}: {what}: rows differ");
+    }
+}
+
 /// The committed fixture `tests/fixtures/format1.tar.gz` (made by granular b2aa8d6, the
 /// version before this format; see tests/fixtures/README.md): a complete campaign and the same
 /// campaign interrupted (2 runs done, 1 checkpointed, 1 pending). The new binary refuses them
@@ -659,7 +692,8 @@ fn format1_campaigns_upgrade_and_continue() {
         assert!(upgrade_log.contains("format 1 -> 2"), "{upgrade_log}");
         let info: Value =
             serde_json::from_slice(&fs::read(d.join("campaign.json")).unwrap()).unwrap();
-        assert_eq!(info["format_version"], json!(2));
+        // Format 1 is upgraded through 2 to today's 3 (checksums).
+        assert_eq!(info["format_version"], json!(3));
         // Upgrading again does nothing.
         let again = util::snapshot(d);
         assert_eq!(run_granular(&["upgrade", s(d)], &log, LIMIT), Some(0));
@@ -673,37 +707,11 @@ fn format1_campaigns_upgrade_and_continue() {
         "the old checkpoint was not resumed:\n{}",
         log_text(&log)
     );
-    let ignore = [("runs", "wall_seconds"), ("runs", "code_version")];
-    let (tc, ti) = (read_all(&complete), read_all(&interrupted));
-    assert_eq!(tc.keys().collect::<Vec<_>>(), ti.keys().collect::<Vec<_>>());
-    for (name, t) in &tc {
-        let u = &ti[name];
-        assert_eq!(t.columns, u.columns, "{name}");
-        let strip = |t: &Table| {
-            let skip: Vec<usize> = ignore
-                .iter()
-                .filter(|(tt, _)| tt == name)
-                .filter_map(|(_, c)| t.columns.iter().position(|x| x.0 == *c))
-                .collect();
-            let mut rows: Vec<Vec<Cell>> = t
-                .rows
-                .iter()
-                .map(|r| {
-                    let mut r = r.clone();
-                    for &j in &skip {
-                        r[j] = Cell::Null;
-                    }
-                    r
-                })
-                .collect();
-            rows.sort();
-            rows
-        };
-        assert!(
-            strip(t) == strip(u),
-            "{name}: the resumed campaign differs from the complete one"
-        );
-    }
+    assert_same_rows(
+        &complete,
+        &interrupted,
+        "the resumed campaign vs the complete one",
+    );
     // Growth of the upgraded campaign: a third replica and a longer t_end (the old end kept as
     // an output). Format 1 kept no final states, so the longer runs run again from t = 0 (with
     // a warning), with their format-1 seeds: up to the old end their rows are the old runs'.
@@ -764,4 +772,123 @@ fn format1_campaigns_upgrade_and_continue() {
         );
         assert!(rows_of(new_id, 4000.0).len() > rows_of(old, 4000.0).len());
     }
+}
+
+/// The committed fixture `tests/fixtures/format2.tar.gz` (made by granular 66a0e87, the version
+/// before checksums; see tests/fixtures/README.md): a complete, compacted campaign and the same
+/// campaign interrupted (2 runs committed, 1 checkpointed, 1 pending). The new binary refuses
+/// both with the command that upgrades them and changes nothing; `granular upgrade` records the
+/// size and SHA-256 of every committed file (the compacted index becomes one group) and a
+/// sidecar for every rebuilt table; `verify` (the full scrub) passes; the interrupted one
+/// resumes from its old checkpoint to the complete one's rows; the upgraded campaign grows
+/// (longer runs continue from the final states kept by format 2) and compacts.
+#[test]
+fn format2_campaigns_upgrade_to_checksums_and_continue() {
+    let _g = heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let tar = util::repo_root().join("tests/fixtures/format2.tar.gz");
+    let ok = Command::new("tar")
+        .args(["xzf", s(&tar), "-C", s(dir.path())])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let (complete, interrupted) = (dir.path().join("complete"), dir.path().join("interrupted"));
+    let m = dir.path().join("m.json");
+    for d in [&complete, &interrupted] {
+        let before = util::snapshot(d);
+        for cmd in [
+            vec!["resume", s(d), "--quiet"],
+            vec!["verify", s(d)],
+            vec!["run", s(&m), "--out", s(d), "--quiet"],
+        ] {
+            fs::write(&log, "").unwrap();
+            assert_eq!(
+                run_granular(&cmd, &log, LIMIT),
+                Some(3),
+                "{}",
+                log_text(&log)
+            );
+            assert!(
+                log_text(&log).contains(&format!("granular upgrade {}", d.display())),
+                "{}",
+                log_text(&log)
+            );
+        }
+        assert!(
+            util::snapshot(d) == before,
+            "a refused command changed {}",
+            d.display()
+        );
+        assert_eq!(
+            run_granular(&["upgrade", s(d)], &log, LIMIT),
+            Some(0),
+            "{}",
+            log_text(&log)
+        );
+        let upgrade_log = fs::read_to_string(d.join("upgrade.log")).unwrap();
+        assert!(
+            upgrade_log.contains("format 2 -> 3") && upgrade_log.contains("SHA-256"),
+            "{upgrade_log}"
+        );
+        let info: Value =
+            serde_json::from_slice(&fs::read(d.join("campaign.json")).unwrap()).unwrap();
+        assert_eq!(info["format_version"], json!(3));
+        let (code, out) = run_capture(&["verify", s(d)], &log);
+        assert_eq!(code, Some(0), "{out}\n{}", log_text(&log));
+        assert!(out.contains("SHA-256 checked"), "{out}");
+        let again = util::snapshot(d);
+        assert_eq!(run_granular(&["upgrade", s(d)], &log, LIMIT), Some(0));
+        assert!(util::snapshot(d) == again, "a second upgrade changed files");
+    }
+    // The compacted index of format 2 became one group with every compacted file.
+    let index: Value =
+        serde_json::from_slice(&fs::read(complete.join("ledger/index.json")).unwrap()).unwrap();
+    assert_eq!(index["format_version"], json!(2));
+    assert_eq!(index["groups"].as_array().unwrap().len(), 1, "{index}");
+    assert_eq!(
+        index["groups"][0]["files"].as_array().unwrap().len(),
+        2,
+        "{index}"
+    );
+    fs::write(&log, "").unwrap();
+    let code = run_granular(&["resume", s(&interrupted), "--quiet"], &log, LIMIT);
+    assert_eq!(code, Some(0), "{}", log_text(&log));
+    assert!(
+        !log_text(&log).contains("restarting from t = 0"),
+        "the old checkpoint was not resumed:\n{}",
+        log_text(&log)
+    );
+    assert_same_rows(
+        &complete,
+        &interrupted,
+        "the resumed upgraded campaign vs the complete one",
+    );
+    // Growth: a third replica and a longer t_end; format 2 kept final states, so the longer
+    // runs continue them (no rerun warning).
+    let mut grown: Value = serde_json::from_slice(&fs::read(&m).unwrap()).unwrap();
+    grown["replicas"] = json!(3);
+    grown["params"]["t_end"] = json!(3500.0);
+    grown["params"]["output_times"]["list"] = json!([1.0, 10.0, 100.0, 3000.0]);
+    let mg = dir.path().join("grown.json");
+    util::write_json(&mg, &grown);
+    fs::write(&log, "").unwrap();
+    run_ok(&mg, &complete, &log);
+    assert!(
+        !log_text(&log).contains("cannot continue run"),
+        "{}",
+        log_text(&log)
+    );
+    let direct = dir.path().join("direct");
+    run_ok(&mg, &direct, &log);
+    assert_same_current(&complete, &direct, "upgraded and grown vs direct");
+    for cmd in [vec!["compact", s(&complete)], vec!["verify", s(&complete)]] {
+        let (code, out) = run_capture(&cmd, &log);
+        assert_eq!(code, Some(0), "{cmd:?}: {out}\n{}", log_text(&log));
+    }
+    assert_same_current(
+        &complete,
+        &direct,
+        "upgraded, grown and compacted vs direct",
+    );
 }

@@ -138,7 +138,7 @@ fn every_model_runs_a_campaign_whose_tables_the_generic_reader_reads() {
             rows.insert(t, n);
         }
         assert_eq!(rows["runs"], 2, "{}: {rows:?}", kind.as_str());
-        let v = verify::verify(&c).expect("verify");
+        let v = verify::verify(&c, granular::campaign::integrity::Depth::Full).expect("verify");
         assert!(v.problems.is_empty(), "{}: {:?}", kind.as_str(), v.problems);
     }
 }
