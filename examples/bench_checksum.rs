@@ -15,7 +15,9 @@ fn main() {
         .and_then(|a| a.parse().ok())
         .unwrap_or(512);
     let dir = tempfile::tempdir().expect("temp dir");
-    let chunk: Vec<u8> = (0..1 << 20).map(|i: u32| (i.wrapping_mul(2654435761) >> 13) as u8).collect();
+    let chunk: Vec<u8> = (0..1 << 20)
+        .map(|i: u32| (i.wrapping_mul(2654435761) >> 13) as u8)
+        .collect();
     let write = |path: &std::path::Path, hash: bool| {
         let t = Instant::now();
         let f = std::fs::File::create(path).expect("create");
@@ -48,6 +50,13 @@ fn main() {
     let gb = bytes as f64 / 1e9;
     println!("{mib} MiB, best of 3 writes (fsynced):");
     println!("  plain write        {plain:.3} s ({:.2} GB/s)", gb / plain);
-    println!("  write + SHA-256    {hashed:.3} s ({:.2} GB/s), +{:.1} %", gb / hashed, (hashed / plain - 1.0) * 100.0);
-    println!("  verify (read + SHA-256, file in page cache) {verify:.3} s ({:.2} GB/s)", gb / verify);
+    println!(
+        "  write + SHA-256    {hashed:.3} s ({:.2} GB/s), +{:.1} %",
+        gb / hashed,
+        (hashed / plain - 1.0) * 100.0
+    );
+    println!(
+        "  verify (read + SHA-256, file in page cache) {verify:.3} s ({:.2} GB/s)",
+        gb / verify
+    );
 }

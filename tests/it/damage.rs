@@ -1,5 +1,5 @@
 //! Damage to a campaign directory never passes silently (issue 14): each drill damages a copy
-//! of a finished campaign (bytes flipped in a part, a part, a table, a commit record, the
+//! of a finished campaign, of the same campaign compacted, and of a half-finished one (bytes flipped in a part, a part, a table, a commit record, the
 //! ledger deleted; a corrupt record or index; a foreign or orphan file), then asserts the
 //! promised outcome: `verify` (the full scrub) names the damage (exit 3); `status` (the quick
 //! check, sizes only) exits 3 where sizes show it; `compact` refuses it (exit 3) and changes
@@ -162,7 +162,15 @@ fn drills() -> Vec<Drill> {
             name: "one commit record deleted",
             quick_sees: true,
             reruns: false,
-            damage: |d| fs::remove_file(d.join("ledger/s1of1/commit-00000002.json")).unwrap(),
+            damage: |d| {
+                let dir = fs::read_dir(d.join("ledger"))
+                    .unwrap()
+                    .next()
+                    .unwrap()
+                    .unwrap()
+                    .path();
+                fs::remove_file(dir.join("commit-00000002.json")).unwrap()
+            },
         },
         Drill {
             name: "a commit record corrupted",
@@ -177,11 +185,17 @@ fn drills() -> Vec<Drill> {
             quick_sees: true,
             reruns: false,
             damage: |d| {
-                let text = fs::read_to_string(d.join("ledger/s1of1/commit-00000001.json")).unwrap();
+                let dir = fs::read_dir(d.join("ledger"))
+                    .unwrap()
+                    .next()
+                    .unwrap()
+                    .unwrap()
+                    .path();
+                let text = fs::read_to_string(dir.join("commit-00000001.json")).unwrap();
                 let mut v: Value = serde_json::from_str(&text).unwrap();
-                v["shard"] = json!("s1of2");
-                fs::create_dir_all(d.join("ledger/s1of2")).unwrap();
-                write_json(&d.join("ledger/s1of2/commit-00000001.json"), &v);
+                v["shard"] = json!("s9of9");
+                fs::create_dir_all(d.join("ledger/s9of9")).unwrap();
+                write_json(&d.join("ledger/s9of9/commit-00000001.json"), &v);
             },
         },
         Drill {
@@ -245,11 +259,42 @@ fn damage_is_named_refused_or_healed_to_identical_tables() {
     assert_eq!(code, Some(0), "{out}{}", log_text(&log));
     util::assert_tables_identical(&want, &read_tables(&compacted), "compacted");
 
+    // Half-finished: shard 1 of 2 done (runs 0 and 2), committed one by one.
+    let half = dir.path().join("half");
+    assert_eq!(
+        run_granular(
+            &[
+                "run",
+                s(&m),
+                "--out",
+                s(&half),
+                "--shard",
+                "1/2",
+                "--flush-every",
+                "0",
+                "--quiet"
+            ],
+            &log,
+            LIMIT
+        ),
+        Some(0),
+        "{}",
+        log_text(&log)
+    );
+
     let mut table = Vec::new();
     for (k, d) in drills().into_iter().enumerate() {
-        for (from, layout) in [(&base, "commits"), (&compacted, "compacted")] {
-            // Drills that name commit records apply to the campaign that has them.
-            if layout == "compacted" && d.name.contains("commit record") {
+        for (from, layout) in [
+            (&base, "commits"),
+            (&compacted, "compacted"),
+            (&half, "half"),
+        ] {
+            // Drills that name commit records apply to the campaigns that have them; a
+            // half-finished campaign has no summary yet and two commits.
+            let summary = d.name.contains("summary");
+            if (layout == "compacted" && d.name.contains("commit record"))
+                || (layout == "half" && (summary || d.name.contains("commit record corrupted")))
+            {
                 continue;
             }
             let c = dir.path().join(format!("d{k}-{layout}"));
@@ -304,7 +349,9 @@ fn damage_is_named_refused_or_healed_to_identical_tables() {
             let reran = text
                 .match_indices("pending=")
                 .any(|(i, m)| !text[i + m.len()..].starts_with('0'));
-            assert_eq!(reran, d.reruns, "{what}: runs run again: {reran}\n{text}");
+            if layout != "half" {
+                assert_eq!(reran, d.reruns, "{what}: runs run again: {reran}\n{text}");
+            }
             let (v, vout) = run_capture(&["verify", s(&c)], &log);
             assert_eq!(
                 v,
