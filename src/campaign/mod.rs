@@ -137,11 +137,13 @@ impl Campaign {
         out: &Path,
         apply: bool,
     ) -> Result<(Campaign, Growth), CampaignError> {
-        let (manifest, fresh) = plan::load(manifest_path)?;
+        // One (bounded) reading of the file: what is validated is what is recorded.
+        let text = crate::manifest::validate::read(manifest_path)?;
+        let (manifest, fresh) = plan::parse(&text, &manifest_path.display().to_string())?;
+        let text = text.into_bytes();
         if let Some(mem) = resources::Memory::of_this_machine() {
             resources::check(&fresh, mem).map_err(CampaignError::TooLarge)?;
         }
-        let text = std::fs::read(manifest_path).map_err(|e| io_err(manifest_path, e))?;
         if out.join("campaign.json").exists() {
             let existing = Self::open(out)?;
             return existing.accept(manifest, &text, apply);

@@ -48,6 +48,34 @@ pub fn check_velocity_range(range: [f64; 2], at: String, errors: &mut ParamError
     }
 }
 
+/// `value` deserialised as `T`; an error names the JSON pointer of the offending value (below
+/// `path`), e.g. `/seed` for `"seed": 42.0`, which the schema takes for an integer.
+pub fn from_value_at<T: DeserializeOwned>(value: Value, path: &str) -> Result<T, (String, String)> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let mut at = path.to_string();
+        for seg in e.path().iter() {
+            use serde_path_to_error::Segment;
+            match seg {
+                Segment::Seq { index } => at.push_str(&format!("/{index}")),
+                Segment::Map { key } | Segment::Enum { variant: key } => {
+                    at.push('/');
+                    at.push_str(&key.replace('~', "~0").replace('/', "~1"));
+                }
+                Segment::Unknown => {}
+            }
+        }
+        let mut message = e.inner().to_string();
+        // serde_json appends " at line L column C", meaningless for a value.
+        if let Some(i) = message.find(" at line ") {
+            message.truncate(i);
+        }
+        if message.starts_with("invalid type: floating point") {
+            message.push_str(" (an integer is written without a decimal point or exponent)");
+        }
+        (at, message)
+    })
+}
+
 /// The params of model `M` among `points`.
 fn typed<'p, M: Registered>(points: &[&'p ModelParams]) -> Vec<&'p M::Params> {
     points.iter().filter_map(|p| M::params(p)).collect()
@@ -319,13 +347,13 @@ macro_rules! models {
             ) -> Option<ModelParams> {
                 match self {
                     $(ModelKind::$variant => {
-                        match serde_json::from_value::<<$model as Model>::Params>(value.clone()) {
+                        match from_value_at::<<$model as Model>::Params>(value.clone(), path) {
                             Ok(p) => {
                                 <$model as Model>::check(&p, path, errors);
                                 Some(ModelParams::$variant(p))
                             }
                             Err(e) => {
-                                errors.push((path.to_string(), e.to_string()));
+                                errors.push(e);
                                 None
                             }
                         }
