@@ -219,6 +219,43 @@ fn run_with_bad_manifest_exits_2_and_creates_nothing() {
     }
 }
 
+/// What a run of the parameters would fail on (the engine's limits) and what no machine could
+/// hold or finish is refused by `validate` (exit 2) and by `run` before it writes anything.
+/// Before: `validate` accepted all but the float count, and `run` failed (exit 1, a campaign
+/// directory left behind), ran out of memory or hung.
+#[test]
+fn validate_and_run_refuse_what_a_run_could_not_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    for name in [
+        "bounds_particles_power_law",
+        "bounds_particles_list",
+        "bounds_species",
+        "bounds_rfm_packing_uniform",
+        "bounds_rfm_packing_square",
+        "bounds_t_end_collision_times",
+        "bounds_output_times",
+        "bounds_runs",
+        "bounds_runs_seeds",
+        "bounds_sweep_points",
+        "integer_written_as_float",
+        "integer_written_as_float_in_params",
+    ] {
+        let manifest = repo_root().join(format!("tests/manifests/bad/{name}.json"));
+        let m = manifest.to_str().unwrap();
+        let code = util::run_granular(&["validate", m], &log, Duration::from_secs(60));
+        assert_eq!(code, Some(2), "validate {name}: log:\n{}", util::log_text(&log));
+        let out = dir.path().join(format!("out-{name}"));
+        let code = util::run_granular(
+            &["run", m, "--out", out.to_str().unwrap(), "--quiet"],
+            &log,
+            Duration::from_secs(60),
+        );
+        assert_eq!(code, Some(2), "run {name}: log:\n{}", util::log_text(&log));
+        assert!(!out.exists(), "run {name} created {}", out.display());
+    }
+}
+
 /// A manifest file is read up to 16 MiB (+1 byte): a larger file, or one without end, is
 /// refused at once with exit 2 (before: `validate /dev/zero` read without end).
 #[test]
