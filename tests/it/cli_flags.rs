@@ -419,3 +419,50 @@ fn analyze_flags(d: &Path) {
         ok(d, &args);
     }
 }
+
+/// `--out` (or `DIR`) naming a regular file, a dangling symbolic link or a path through a
+/// file is "not a campaign directory": exit 3 with that message from every command, nothing
+/// created, the file untouched (before: `run`/`theory`/`plan`/`submit` gave exit 4 or 0).
+#[test]
+fn out_naming_a_file_or_a_dangling_link_exits_3() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    fs::copy(
+        repo_root().join("tests/manifests/good/power_law_sweep.json"),
+        d.join("m.json"),
+    )
+    .unwrap();
+    fs::write(d.join("file"), b"not a campaign").unwrap();
+    std::os::unix::fs::symlink(d.join("nowhere"), d.join("dangling")).unwrap();
+    for out in ["file", "dangling", "file/sub"] {
+        let with_manifest: [&[&str]; 4] = [
+            &["run", "m.json", "--out", out, "--quiet"],
+            &["plan", "m.json", "--out", out],
+            &["theory", "m.json", "--out", out],
+            &[
+                "submit", "m.json", "--out", out, "--slurm", "--tasks", "1",
+                "--per-task-runs", "1", "--time", "1", "--dry-run",
+            ],
+        ];
+        let with_dir: [&[&str]; 8] = [
+            &["resume", out, "--quiet"],
+            &["status", out],
+            &["verify", out],
+            &["compact", out],
+            &["plot", out],
+            &["upgrade", out],
+            &["analyze", out],
+            &["submit", "--missing", out, "--time", "1", "--dry-run"],
+        ];
+        for args in with_manifest.iter().chain(with_dir.iter()) {
+            let before = snapshot(d);
+            let o = granular(d, args);
+            let err = String::from_utf8_lossy(&o.stderr);
+            let what = format!("granular {args:?}: exit {:?}, stderr:\n{err}", o.status);
+            assert_eq!(o.status.code(), Some(3), "{what}");
+            assert!(err.contains("not a") && err.contains("campaign directory"), "{what}");
+            assert!(snapshot(d) == before, "the directory changed: {what}");
+        }
+    }
+    assert!(!d.join("nowhere").exists());
+}
