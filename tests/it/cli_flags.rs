@@ -466,3 +466,63 @@ fn out_naming_a_file_or_a_dangling_link_exits_3() {
     }
     assert!(!d.join("nowhere").exists());
 }
+
+/// Ctrl-C / SIGTERM before any simulation has started (here: in the kinetic-theory step of a
+/// 200-species mixture, which takes many seconds) stops `theory` and `run` at once with exit
+/// 130; before, `run` had installed its checkpoint-and-stop handler, which the theory step
+/// never looks at.
+#[test]
+fn a_signal_before_any_run_started_exits_130() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write_json(
+        &d.join("m.json"),
+        &serde_json::json!({
+            "name": "slow-theory",
+            "model": "dsmc",
+            "seed": 1,
+            "params": {
+                "method": "low_rank",
+                "species": {"power_law": {"n1": 0.1, "N1": 4000000, "theta": 3}},
+                "restitution": {"constant": 0.5},
+                "t_end": 100.0,
+                "output_times": {"log": {"from": 0.01, "to": 100, "per_decade": 10}},
+                "observables": ["msd"]
+            }
+        }),
+    );
+    for (args, signal) in [
+        (["theory", "m.json", "--out", "t", ""], libc::SIGTERM),
+        (["run", "m.json", "--out", "r", "--quiet"], libc::SIGTERM),
+        (["run", "m.json", "--out", "r2", "--quiet"], libc::SIGINT),
+    ] {
+        let args: Vec<&str> = args.into_iter().filter(|a| !a.is_empty()).collect();
+        let mut child = Command::new(bin())
+            .args(&args)
+            .current_dir(d)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(1500));
+        // SAFETY: a signal to the child process spawned above.
+        assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, signal) }, 0);
+        let start = std::time::Instant::now();
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            if start.elapsed() > std::time::Duration::from_secs(60) {
+                let _ = child.kill();
+                panic!("granular {args:?} still running 60 s after the signal");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        };
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+        assert_eq!(status.code(), Some(130), "granular {args:?}:\n{err}");
+        assert!(err.contains("interrupted before any simulation started"), "{err}");
+    }
+}
