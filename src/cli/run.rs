@@ -3,6 +3,7 @@
 //! used by `slurm-task`.
 
 use std::path::PathBuf;
+
 use super::flags::{Execution, Runtime};
 use super::report_error;
 use super::reporter::CliReporter;

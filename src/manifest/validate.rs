@@ -128,9 +128,8 @@ pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
         return Err(fail(errors));
     }
     // The schema takes 42.0 for an integer (JSON Schema does); serde does not: say where.
-    crate::models::from_value_at(value, "").map_err(|(path, message)| {
-        fail(vec![ManifestError { path, message }])
-    })
+    crate::models::from_value_at(value, "")
+        .map_err(|(path, message)| fail(vec![ManifestError { path, message }]))
 }
 
 /// Validate a model's params object (after sweep substitution) against its schema; paths are

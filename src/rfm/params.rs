@@ -345,8 +345,8 @@ impl RfmConfig {
             } else {
                 "box_length"
             };
-            let phi = self.n_particles as f64 * std::f64::consts::PI * self.radius.powi(2)
-                / (l * l);
+            let phi =
+                self.n_particles as f64 * std::f64::consts::PI * self.radius.powi(2) / (l * l);
             if let Some(sites) = self.lattice_sites() {
                 if sites < self.n_particles {
                     e.push(format!(

@@ -440,8 +440,18 @@ fn out_naming_a_file_or_a_dangling_link_exits_3() {
             &["plan", "m.json", "--out", out],
             &["theory", "m.json", "--out", out],
             &[
-                "submit", "m.json", "--out", out, "--slurm", "--tasks", "1",
-                "--per-task-runs", "1", "--time", "1", "--dry-run",
+                "submit",
+                "m.json",
+                "--out",
+                out,
+                "--slurm",
+                "--tasks",
+                "1",
+                "--per-task-runs",
+                "1",
+                "--time",
+                "1",
+                "--dry-run",
             ],
         ];
         let with_dir: [&[&str]; 8] = [
@@ -460,7 +470,10 @@ fn out_naming_a_file_or_a_dangling_link_exits_3() {
             let err = String::from_utf8_lossy(&o.stderr);
             let what = format!("granular {args:?}: exit {:?}, stderr:\n{err}", o.status);
             assert_eq!(o.status.code(), Some(3), "{what}");
-            assert!(err.contains("not a") && err.contains("campaign directory"), "{what}");
+            assert!(
+                err.contains("not a") && err.contains("campaign directory"),
+                "{what}"
+            );
             assert!(snapshot(d) == before, "the directory changed: {what}");
         }
     }
@@ -523,6 +536,9 @@ fn a_signal_before_any_run_started_exits_130() {
         let mut err = String::new();
         std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
         assert_eq!(status.code(), Some(130), "granular {args:?}:\n{err}");
-        assert!(err.contains("interrupted before any simulation started"), "{err}");
+        assert!(
+            err.contains("interrupted before any simulation started"),
+            "{err}"
+        );
     }
 }

@@ -244,7 +244,12 @@ fn validate_and_run_refuse_what_a_run_could_not_do() {
         let manifest = repo_root().join(format!("tests/manifests/bad/{name}.json"));
         let m = manifest.to_str().unwrap();
         let code = util::run_granular(&["validate", m], &log, Duration::from_secs(60));
-        assert_eq!(code, Some(2), "validate {name}: log:\n{}", util::log_text(&log));
+        assert_eq!(
+            code,
+            Some(2),
+            "validate {name}: log:\n{}",
+            util::log_text(&log)
+        );
         let out = dir.path().join(format!("out-{name}"));
         let code = util::run_granular(
             &["run", m, "--out", out.to_str().unwrap(), "--quiet"],
@@ -273,7 +278,12 @@ fn oversized_and_endless_manifest_files_are_refused() {
     }
     for f in &files {
         let (code, _) = util::run_capture(&["validate", f], &log);
-        assert_eq!(code, Some(2), "validate {f}: log:\n{}", util::log_text(&log));
+        assert_eq!(
+            code,
+            Some(2),
+            "validate {f}: log:\n{}",
+            util::log_text(&log)
+        );
         let text = util::log_text(&log);
         assert!(text.contains("larger than 16 MiB"), "{f}:\n{text}");
     }
