@@ -120,6 +120,35 @@ pub struct Campaign {
     pub history: Vec<history::Accepted>,
 }
 
+/// `--out` must be a directory or not exist: a regular file, a dangling symbolic link or a
+/// path through a file is "not a campaign directory" (refused, exit 3), not an I/O failure.
+fn refuse_non_directory(out: &Path) -> Result<(), CampaignError> {
+    let refuse = |what: String| {
+        Err(CampaignError::Refused(format!(
+            "{} {what}: not a campaign directory; refusing to write there (use another --out)",
+            out.display()
+        )))
+    };
+    match std::fs::symlink_metadata(out) {
+        Ok(link) => match std::fs::metadata(out) {
+            Ok(m) if m.is_dir() => Ok(()),
+            Ok(_) => refuse("exists and is not a directory".into()),
+            Err(_) if link.file_type().is_symlink() => refuse(format!(
+                "is a symbolic link to {}, which does not exist",
+                std::fs::read_link(out)
+                    .map(|t| t.display().to_string())
+                    .unwrap_or_else(|_| "?".into())
+            )),
+            Err(e) => refuse(format!("cannot be read ({e})")),
+        },
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) if e.raw_os_error() == Some(libc::ENOTDIR) => {
+            refuse("lies below a file that is not a directory".into())
+        }
+        Err(_) => Ok(()),
+    }
+}
+
 pub(crate) fn io_err(p: &Path, e: impl std::fmt::Display) -> CampaignError {
     CampaignError::Io(format!("{}: {e}", p.display()))
 }
@@ -140,11 +169,14 @@ impl Campaign {
         out: &Path,
         apply: bool,
     ) -> Result<(Campaign, Growth), CampaignError> {
-        let (manifest, fresh) = plan::load(manifest_path)?;
+        // One (bounded) reading of the file: what is validated is what is recorded.
+        let text = crate::manifest::validate::read(manifest_path)?;
+        let (manifest, fresh) = plan::parse(&text, &manifest_path.display().to_string())?;
+        let text = text.into_bytes();
         if let Some(mem) = resources::Memory::of_this_machine() {
             resources::check(&fresh, mem).map_err(CampaignError::TooLarge)?;
         }
-        let text = std::fs::read(manifest_path).map_err(|e| io_err(manifest_path, e))?;
+        refuse_non_directory(out)?;
         if out.join("campaign.json").exists() {
             let existing = Self::open(out)?;
             return existing.accept(manifest, &text, apply);

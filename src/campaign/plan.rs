@@ -394,14 +394,21 @@ pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
 
     let keys: Vec<String> = m.sweep.keys().cloned().collect();
     errors.extend(sweep_key_errors(&base, &m.sweep));
-    let mut lists: Vec<Vec<Value>> = Vec::new();
-    for key in &keys {
+    let lists: Vec<Vec<Value>> = keys
+        .iter()
+        .map(|k| m.sweep[k].as_array().cloned().unwrap_or_default())
+        .collect();
+    // The size of the campaign, from the list lengths: nothing is expanded beyond the limits,
+    // and the values of a sweep too large are not checked one by one.
+    let size = size_errors(m, &lists);
+    let too_large = !size.is_empty();
+    errors.extend(size);
+    for (key, list) in keys.iter().zip(&lists) {
         let kp = format!("/sweep/{}", pointer_escape(key));
         let parts: Vec<&str> = key.split('.').collect();
         let ok = path_exists(&base, &parts);
-        let list = m.sweep[key].as_array().cloned().unwrap_or_default();
         // Each value alone must make valid params; report at the sweep value.
-        if ok && base_typed.is_some() {
+        if ok && base_typed.is_some() && !too_large {
             for (i, v) in list.iter().enumerate() {
                 let mut p = base.clone();
                 set_path(&mut p, &parts, v.clone());
@@ -429,7 +436,6 @@ pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
                 }
             }
         }
-        lists.push(list);
     }
     if !errors.is_empty() || base_typed.is_none() {
         return Err(errors);
@@ -437,19 +443,6 @@ pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
 
     // Cartesian product, first key outermost.
     let n_points: usize = lists.iter().map(|l| l.len()).product();
-    let per_point = match m.runs_per_point() {
-        RunsPerPoint::Replicas(r) => r as u64,
-        RunsPerPoint::Seeds(s) => s.len() as u64,
-    };
-    if n_points as u64 * per_point > u32::MAX as u64 {
-        return Err(vec![(
-            "/sweep".into(),
-            format!(
-                "{} runs is more than this version supports",
-                n_points as u64 * per_point
-            ),
-        )]);
-    }
     let mut points = Vec::with_capacity(n_points);
     let mut swept = Vec::with_capacity(n_points);
     for point_id in 0..n_points {
@@ -497,6 +490,53 @@ pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
         points,
         values: swept,
     })
+}
+
+/// Most sweep points a manifest may ask for (the thesis's largest sweep has 154).
+pub const MAX_POINTS: u64 = 100_000;
+
+/// Most runs a manifest may ask for (points x replicas or seeds); `scripts/bench-scale.sh`
+/// makes 10^5.
+pub const MAX_RUNS: u64 = 10_000_000;
+
+/// The points (the product of the sweep lists' lengths) and runs (times the replicas or seeds)
+/// against [`MAX_POINTS`] and [`MAX_RUNS`], in saturating arithmetic.
+fn size_errors(m: &Manifest, lists: &[Vec<Value>]) -> Vec<(String, String)> {
+    let mut errors = Vec::new();
+    let points = lists
+        .iter()
+        .fold(1u64, |a, l| a.saturating_mul(l.len() as u64));
+    let (per_point, per_at, per_what) = match m.runs_per_point() {
+        RunsPerPoint::Replicas(r) => (r as u64, "/replicas", "replicas"),
+        RunsPerPoint::Seeds(s) => (s.len() as u64, "/seeds", "seeds"),
+    };
+    let product = || {
+        lists
+            .iter()
+            .map(|l| l.len().to_string())
+            .collect::<Vec<_>>()
+            .join(" x ")
+    };
+    if points > MAX_POINTS {
+        errors.push((
+            "/sweep".into(),
+            format!(
+                "{points} points ({} values), more than the limit of {MAX_POINTS} points per manifest",
+                product()
+            ),
+        ));
+    }
+    let runs = points.saturating_mul(per_point);
+    if runs > MAX_RUNS {
+        errors.push((
+            per_at.into(),
+            format!(
+                "{runs} runs ({points} point{} x {per_point} {per_what}), more than the limit of {MAX_RUNS} runs per manifest",
+                if points == 1 { "" } else { "s" }
+            ),
+        ));
+    }
+    errors
 }
 
 /// `replicas` and `seeds` exclude each other; given seeds are distinct.

@@ -14,7 +14,7 @@
 //! runs of another point (`continues`): the same point with a longer horizon, whose finished
 //! runs carry over (`CarryOver::Continue`) from their final states.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -158,30 +158,48 @@ impl Registry {
         let mut refused = Vec::new();
         let mut asked_ids = BTreeSet::new();
         let before: Vec<RegPoint> = self.points.clone();
+        // Indices, so that a manifest of many points registers in O(n log n): the points by
+        // their canonical params, those registered before by their run identity.
+        let mut index: HashMap<String, u32> = self
+            .points
+            .iter()
+            .map(|p| (canonical(&p.params), p.id))
+            .collect();
+        let mut by_identity: HashMap<String, Vec<usize>> = HashMap::new();
+        for (i, p) in before.iter().enumerate() {
+            by_identity
+                .entry(run_identity(asked.model, &p.params))
+                .or_default()
+                .push(i);
+        }
         for params in asked.points {
             let value = params.to_value();
-            let id = match self.find(&value) {
-                Some(id) => id,
+            let key = canonical(&value);
+            let (id, is_new) = match index.get(&key) {
+                Some(&id) => (id, false),
                 None => {
                     let id = self.points.len() as u32;
                     self.points.push(RegPoint {
                         id,
                         params: value.clone(),
                     });
+                    index.insert(key, id);
                     growth.new_points.push(id);
-                    id
+                    (id, true)
                 }
             };
             asked_ids.insert(id);
             // A longer run of a point registered before: its runs continue (or rerun) those.
-            let is_new = growth.new_points.contains(&id);
+            let mut shorter = None;
             if is_new {
-                refused.extend(shorter_than_before(&before, asked.model, params));
+                let same: Vec<RegPoint> = by_identity
+                    .get(&run_identity(asked.model, &value))
+                    .map(|ids| ids.iter().map(|&i| before[i].clone()).collect())
+                    .unwrap_or_default();
+                refused.extend(shorter_than_before(&same, asked.model, params));
+                shorter = self.shorter_point(&same, asked.model, params, &mut growth);
             }
-            let shorter = is_new
-                .then(|| self.shorter_point(&before, asked.model, params, &mut growth))
-                .flatten();
-            self.grow_point(id, asked.runs, shorter, seed_of, &mut growth);
+            self.grow_point(id, is_new, asked.runs, shorter, seed_of, &mut growth);
         }
         if !refused.is_empty() {
             return Err(refused);
@@ -243,6 +261,7 @@ impl Registry {
     fn grow_point(
         &mut self,
         id: u32,
+        is_new: bool,
         runs: &RunsPerPoint,
         continues: Option<u32>,
         seed_of: &dyn Fn(&RunBlock, u32) -> u64,
@@ -256,7 +275,12 @@ impl Registry {
                 })
                 .collect()
         };
-        let have = replicas_of(id);
+        // A point registered now has no runs yet (no need to look through every block).
+        let have = if is_new {
+            BTreeMap::new()
+        } else {
+            replicas_of(id)
+        };
         let old = continues.map(replicas_of).unwrap_or_default();
         // The old run's seed source, for a replica the shorter point has.
         let inherited = |replica: u32| -> Option<SeedSource> {

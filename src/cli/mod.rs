@@ -4,8 +4,8 @@
 //! One file per command (as in ripgrep and cargo-nextest), each owning its clap `Args` and a
 //! `run(args) -> i32` that returns the exit code; `flags` holds the flags several commands
 //! share and the parsers that validate every numeric flag at parse time; `reporter` the
-//! progress bar. This file holds the parser, the dispatch, the tracing set-up and the
-//! mapping of library errors to exit codes.
+//! progress bar; `signals` the Ctrl-C/SIGTERM handler. This file holds the parser, the
+//! dispatch, the tracing set-up and the mapping of library errors to exit codes.
 
 mod analyze;
 mod compact;
@@ -15,6 +15,7 @@ mod plot;
 mod reporter;
 mod run;
 mod schema;
+mod signals;
 mod slurm_task;
 mod status;
 mod submit;
@@ -103,6 +104,7 @@ pub fn main() -> i32 {
         }
     };
     init_tracing(cli.log_format);
+    signals::install();
     match cli.command {
         Command::Validate(a) => validate::run(a),
         Command::Run(a) => run::run(a),

@@ -74,6 +74,8 @@ impl Reporter for CliReporter {
                 run_id,
                 resumed_from,
             } => {
+                // From now on Ctrl-C / SIGTERM checkpoints and stops.
+                super::signals::runs_started();
                 tracing::debug!(run_id, ?resumed_from, "run started");
                 self.running.insert(*run_id, 0.0);
             }

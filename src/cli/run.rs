@@ -1,10 +1,8 @@
 //! `granular run MANIFEST --out DIR` and `granular resume DIR`: execute (this shard of) a
-//! campaign with the progress bar, the Ctrl-C/SIGTERM handler and the final summary; also
+//! campaign with the progress bar and the final summary (Ctrl-C/SIGTERM: `signals`); also
 //! used by `slurm-task`.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU8, Ordering};
-use std::sync::Arc;
 
 use super::flags::{Execution, Runtime};
 use super::report_error;
@@ -74,7 +72,7 @@ pub(super) fn options(exec: &Execution, default_threads: usize, shard: Shard) ->
         threads: exec.threads(default_threads),
         checkpoint_every: exec.checkpoint_every(),
         shard,
-        interrupt: Arc::new(AtomicU8::new(0)),
+        interrupt: super::signals::interrupt_flag(),
         flush_every: exec.flush_every(),
         keep_final_states: !exec.no_final_states,
     }
@@ -82,7 +80,6 @@ pub(super) fn options(exec: &Execution, default_threads: usize, shard: Shard) ->
 
 /// Run the shard `opts.shard` of `c` to its end or an interruption; the exit code.
 pub(super) fn execute(c: &Campaign, opts: RunOptions, quiet: bool) -> i32 {
-    handle_interrupts(opts.interrupt.clone());
     tracing::info!(campaign = %c.manifest.name, dir = %c.root.display(), shard = %opts.shard, "starting");
     let mut reporter = CliReporter::new(quiet);
     let result = campaign::dispatch::run(c, &opts, &mut reporter);
@@ -91,18 +88,6 @@ pub(super) fn execute(c: &Campaign, opts: RunOptions, quiet: bool) -> i32 {
         Ok(o) => summarise(c, &o),
         Err(e) => report_error(e),
     }
-}
-
-/// Ctrl-C / SIGTERM: the first sets `flag` (checkpoint and stop), the second exits at once.
-fn handle_interrupts(flag: Arc<AtomicU8>) {
-    let _ = ctrlc::set_handler(move || {
-        let n = flag.fetch_add(1, Ordering::SeqCst) + 1;
-        if n >= 2 {
-            eprintln!("\ninterrupted twice: exiting now (work since the last checkpoints is lost)");
-            std::process::exit(exit_codes::INTERRUPTED);
-        }
-        eprintln!("\ninterrupt: checkpointing running simulations and stopping (press Ctrl-C again to exit at once)");
-    });
 }
 
 fn summarise(c: &Campaign, o: &Outcome) -> i32 {

@@ -100,8 +100,9 @@ pub fn sweep_key_errors(params: &Value, sweep: &Map<String, Value>) -> Vec<(Stri
             errors.push((kp.clone(), "expected a non-empty list of values".into()));
         }
         let canon: Vec<String> = list.iter().map(canonical).collect();
+        let mut seen = std::collections::HashSet::with_capacity(canon.len());
         for i in 0..canon.len() {
-            if canon[..i].contains(&canon[i]) {
+            if !seen.insert(&canon[i]) {
                 errors.push((
                     format!("{kp}/{i}"),
                     format!(

@@ -60,16 +60,40 @@ impl ManifestErrors {
     }
 }
 
-/// The text of a manifest file (an unreadable file is a manifest error at `/`).
+/// The largest manifest file read (16 MiB): a manifest is a few kilobytes, a sweep of the
+/// largest size allowed (`campaign::plan::MAX_POINTS`) a few megabytes at most.
+pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
+
+/// The text of a manifest file (an unreadable file, one larger than [`MAX_MANIFEST_BYTES`] or
+/// one that is not UTF-8 is a manifest error at `/`). At most `MAX_MANIFEST_BYTES + 1` bytes
+/// are read, so `/dev/zero` or a huge file is refused at once.
 pub fn read(path: &Path) -> Result<String, ManifestErrors> {
-    std::fs::read_to_string(path).map_err(|e| {
+    use std::io::Read;
+    let fail = |message: String| {
         ManifestErrors::new(
             &path.display().to_string(),
             vec![ManifestError {
                 path: String::new(),
-                message: format!("cannot read the file: {e}"),
+                message,
             }],
         )
+    };
+    let file = std::fs::File::open(path).map_err(|e| fail(format!("cannot read the file: {e}")))?;
+    let mut bytes = Vec::new();
+    file.take(MAX_MANIFEST_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| fail(format!("cannot read the file: {e}")))?;
+    if bytes.len() as u64 > MAX_MANIFEST_BYTES {
+        return Err(fail(format!(
+            "the file is larger than {} MiB, the limit of a manifest",
+            MAX_MANIFEST_BYTES >> 20
+        )));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        fail(format!(
+            "not UTF-8 text (invalid byte at offset {})",
+            e.utf8_error().valid_up_to()
+        ))
     })
 }
 
@@ -77,6 +101,8 @@ pub fn read(path: &Path) -> Result<String, ManifestErrors> {
 /// are reported together); `file` names the text in errors.
 pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
     let fail = |errors: Vec<ManifestError>| ManifestErrors::new(file, errors);
+    // A UTF-8 byte-order mark (some Windows editors write one) is not JSON: skip it.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let value: Value = serde_json::from_str(text).map_err(|e| {
         fail(vec![ManifestError {
             path: String::new(),
@@ -101,12 +127,9 @@ pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
         }
         return Err(fail(errors));
     }
-    serde_json::from_value(value).map_err(|e| {
-        fail(vec![ManifestError {
-            path: String::new(),
-            message: e.to_string(),
-        }])
-    })
+    // The schema takes 42.0 for an integer (JSON Schema does); serde does not: say where.
+    crate::models::from_value_at(value, "")
+        .map_err(|(path, message)| fail(vec![ManifestError { path, message }]))
 }
 
 /// Validate a model's params object (after sweep substitution) against its schema; paths are

@@ -48,6 +48,51 @@ pub fn check_velocity_range(range: [f64; 2], at: String, errors: &mut ParamError
     }
 }
 
+/// The most memory one run may need, as its model estimates it from its parameters (1 TiB):
+/// a manifest asking for more is invalid on any machine (a typo, most likely). `run` also
+/// refuses a run that does not fit in this machine's memory (`campaign::resources`).
+pub const MAX_RUN_MEMORY: u64 = 1 << 40;
+
+/// `value` deserialised as `T`; an error names the JSON pointer of the offending value (below
+/// `path`), e.g. `/seed` for `"seed": 42.0`, which the schema takes for an integer.
+pub fn from_value_at<T: DeserializeOwned>(value: Value, path: &str) -> Result<T, (String, String)> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let mut at = path.to_string();
+        for seg in e.path().iter() {
+            use serde_path_to_error::Segment;
+            match seg {
+                Segment::Seq { index } => at.push_str(&format!("/{index}")),
+                Segment::Map { key } | Segment::Enum { variant: key } => {
+                    at.push('/');
+                    at.push_str(&key.replace('~', "~0").replace('/', "~1"));
+                }
+                Segment::Unknown => {}
+            }
+        }
+        let mut message = e.inner().to_string();
+        // serde_json appends " at line L column C", meaningless for a value.
+        if let Some(i) = message.find(" at line ") {
+            message.truncate(i);
+        }
+        if message.starts_with("invalid type: floating point") {
+            message.push_str(" (an integer is written without a decimal point or exponent)");
+        }
+        (at, message)
+    })
+}
+
+/// Bytes in words: `1.5 GB` (powers of 1000, as the memory messages of `resources`).
+pub fn bytes_text(b: u64) -> String {
+    let b = b as f64;
+    if b >= 1e12 {
+        format!("{:.1} TB", b / 1e12)
+    } else if b >= 1e9 {
+        format!("{:.1} GB", b / 1e9)
+    } else {
+        format!("{:.1} MB", b / 1e6)
+    }
+}
+
 /// The params of model `M` among `points`.
 fn typed<'p, M: Registered>(points: &[&'p ModelParams]) -> Vec<&'p M::Params> {
     points.iter().filter_map(|p| M::params(p)).collect()
@@ -319,13 +364,24 @@ macro_rules! models {
             ) -> Option<ModelParams> {
                 match self {
                     $(ModelKind::$variant => {
-                        match serde_json::from_value::<<$model as Model>::Params>(value.clone()) {
+                        match from_value_at::<<$model as Model>::Params>(value.clone(), path) {
                             Ok(p) => {
+                                let before = errors.len();
                                 <$model as Model>::check(&p, path, errors);
+                                // The estimate is meaningful (and cheap) only for checked params.
+                                if errors.len() == before {
+                                    let memory = <$model as Model>::memory(&p);
+                                    if memory > MAX_RUN_MEMORY {
+                                        errors.push((path.to_string(), format!(
+                                            "a run needs about {} of memory (estimated from its parameters), more than the limit of {} TiB per run",
+                                            bytes_text(memory), MAX_RUN_MEMORY >> 40
+                                        )));
+                                    }
+                                }
                                 Some(ModelParams::$variant(p))
                             }
                             Err(e) => {
-                                errors.push((path.to_string(), e.to_string()));
+                                errors.push(e);
                                 None
                             }
                         }

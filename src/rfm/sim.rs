@@ -633,15 +633,14 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, Stri
             let hex = cfg.initial_layout == InitialLayout::Hexagonal;
             let per_row = (l / sp).floor() as usize;
             let pitch = if hex { sp * 3f64.sqrt() / 2.0 } else { sp };
-            let rows = (l / pitch).floor() as usize;
-            // Hex rows alternate offsets; an odd row count would put two offset rows face to
-            // face across the boundary, so use an even count there.
-            let rows = if hex { rows & !1 } else { rows };
-            if per_row * rows < n {
+            // The sites (`RfmConfig::validate` refuses a bed too small): hex rows alternate
+            // offsets, in an even number of rows.
+            let sites = cfg.lattice_sites().unwrap_or(0);
+            let rows = sites.checked_div(per_row).unwrap_or(0);
+            if sites < n {
                 return Err(format!(
-                    "initial_layout: {n} particles do not fit a {:?} bed ({} sites)",
+                    "initial_layout: {n} particles do not fit a {:?} bed ({sites} sites)",
                     cfg.initial_layout,
-                    per_row * rows
                 ));
             }
             let mut count = 0;

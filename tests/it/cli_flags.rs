@@ -419,3 +419,126 @@ fn analyze_flags(d: &Path) {
         ok(d, &args);
     }
 }
+
+/// `--out` (or `DIR`) naming a regular file, a dangling symbolic link or a path through a
+/// file is "not a campaign directory": exit 3 with that message from every command, nothing
+/// created, the file untouched (before: `run`/`theory`/`plan`/`submit` gave exit 4 or 0).
+#[test]
+fn out_naming_a_file_or_a_dangling_link_exits_3() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    fs::copy(
+        repo_root().join("tests/manifests/good/power_law_sweep.json"),
+        d.join("m.json"),
+    )
+    .unwrap();
+    fs::write(d.join("file"), b"not a campaign").unwrap();
+    std::os::unix::fs::symlink(d.join("nowhere"), d.join("dangling")).unwrap();
+    for out in ["file", "dangling", "file/sub"] {
+        let with_manifest: [&[&str]; 4] = [
+            &["run", "m.json", "--out", out, "--quiet"],
+            &["plan", "m.json", "--out", out],
+            &["theory", "m.json", "--out", out],
+            &[
+                "submit",
+                "m.json",
+                "--out",
+                out,
+                "--slurm",
+                "--tasks",
+                "1",
+                "--per-task-runs",
+                "1",
+                "--time",
+                "1",
+                "--dry-run",
+            ],
+        ];
+        let with_dir: [&[&str]; 8] = [
+            &["resume", out, "--quiet"],
+            &["status", out],
+            &["verify", out],
+            &["compact", out],
+            &["plot", out],
+            &["upgrade", out],
+            &["analyze", out],
+            &["submit", "--missing", out, "--time", "1", "--dry-run"],
+        ];
+        for args in with_manifest.iter().chain(with_dir.iter()) {
+            let before = snapshot(d);
+            let o = granular(d, args);
+            let err = String::from_utf8_lossy(&o.stderr);
+            let what = format!("granular {args:?}: exit {:?}, stderr:\n{err}", o.status);
+            assert_eq!(o.status.code(), Some(3), "{what}");
+            assert!(
+                err.contains("not a") && err.contains("campaign directory"),
+                "{what}"
+            );
+            assert!(snapshot(d) == before, "the directory changed: {what}");
+        }
+    }
+    assert!(!d.join("nowhere").exists());
+}
+
+/// Ctrl-C / SIGTERM before any simulation has started (here: in the kinetic-theory step of a
+/// 200-species mixture, which takes many seconds) stops `theory` and `run` at once with exit
+/// 130; before, `run` had installed its checkpoint-and-stop handler, which the theory step
+/// never looks at.
+#[test]
+fn a_signal_before_any_run_started_exits_130() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write_json(
+        &d.join("m.json"),
+        &serde_json::json!({
+            "name": "slow-theory",
+            "model": "dsmc",
+            "seed": 1,
+            "params": {
+                "method": "low_rank",
+                "species": {"power_law": {"n1": 0.1, "N1": 4000000, "theta": 3}},
+                "restitution": {"constant": 0.5},
+                "t_end": 100.0,
+                "output_times": {"log": {"from": 0.01, "to": 100, "per_decade": 10}},
+                "observables": ["msd"]
+            }
+        }),
+    );
+    for (args, signal) in [
+        (["theory", "m.json", "--out", "t", ""], libc::SIGTERM),
+        (["run", "m.json", "--out", "r", "--quiet"], libc::SIGTERM),
+        (["run", "m.json", "--out", "r2", "--quiet"], libc::SIGINT),
+    ] {
+        let args: Vec<&str> = args.into_iter().filter(|a| !a.is_empty()).collect();
+        let mut child = Command::new(bin())
+            .args(&args)
+            .current_dir(d)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(1500));
+        // SAFETY: a signal to the child process spawned above.
+        assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, signal) }, 0);
+        let start = std::time::Instant::now();
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            if start.elapsed() > std::time::Duration::from_secs(60) {
+                let _ = child.kill();
+                panic!("granular {args:?} still running 60 s after the signal");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        };
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+        assert_eq!(status.code(), Some(130), "granular {args:?}:\n{err}");
+        assert!(
+            err.contains("interrupted before any simulation started"),
+            "{err}"
+        );
+    }
+}

@@ -1,6 +1,7 @@
 //! Ctrl-C (SIGINT): once = every running simulation is checkpointed and the process stops with
 //! exit code 130; `resume` then finishes the campaign with tables bit-identical to an
-//! uninterrupted run. Twice = exit at once.
+//! uninterrupted run. Twice = exit at once. (Before any simulation has started, once = exit
+//! at once: `cli_flags::a_signal_before_any_run_started_exits_130`.)
 
 use std::fs;
 use std::time::{Duration, Instant};
@@ -154,9 +155,20 @@ fn ctrl_c_twice_exits_at_once() {
         ],
         &log,
     )
+    .env("GRANULAR_LOG", "debug")
     .spawn()
     .unwrap();
-    std::thread::sleep(Duration::from_millis(700));
+    // Once a run has started (before that, one signal exits at once: see
+    // `cli_flags::a_signal_before_any_run_started_exits_130`).
+    let t0 = Instant::now();
+    while !log_text(&log).contains("run started") {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "runs never started:\n{}",
+            log_text(&log)
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
     sigint(child.id());
     std::thread::sleep(Duration::from_millis(5));
     sigint(child.id());

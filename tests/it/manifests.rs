@@ -218,3 +218,89 @@ fn run_with_bad_manifest_exits_2_and_creates_nothing() {
         );
     }
 }
+
+/// What a run of the parameters would fail on (the engine's limits) and what no machine could
+/// hold or finish is refused by `validate` (exit 2) and by `run` before it writes anything.
+/// Before: `validate` accepted all but the float count, and `run` failed (exit 1, a campaign
+/// directory left behind), ran out of memory or hung.
+#[test]
+fn validate_and_run_refuse_what_a_run_could_not_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    for name in [
+        "bounds_particles_power_law",
+        "bounds_particles_list",
+        "bounds_species",
+        "bounds_rfm_packing_uniform",
+        "bounds_rfm_packing_square",
+        "bounds_t_end_collision_times",
+        "bounds_output_times",
+        "bounds_runs",
+        "bounds_runs_seeds",
+        "bounds_sweep_points",
+        "integer_written_as_float",
+        "integer_written_as_float_in_params",
+    ] {
+        let manifest = repo_root().join(format!("tests/manifests/bad/{name}.json"));
+        let m = manifest.to_str().unwrap();
+        let code = util::run_granular(&["validate", m], &log, Duration::from_secs(60));
+        assert_eq!(
+            code,
+            Some(2),
+            "validate {name}: log:\n{}",
+            util::log_text(&log)
+        );
+        let out = dir.path().join(format!("out-{name}"));
+        let code = util::run_granular(
+            &["run", m, "--out", out.to_str().unwrap(), "--quiet"],
+            &log,
+            Duration::from_secs(60),
+        );
+        assert_eq!(code, Some(2), "run {name}: log:\n{}", util::log_text(&log));
+        assert!(!out.exists(), "run {name} created {}", out.display());
+    }
+}
+
+/// A manifest file is read up to 16 MiB (+1 byte): a larger file, or one without end, is
+/// refused at once with exit 2 (before: `validate /dev/zero` read without end).
+#[test]
+fn oversized_and_endless_manifest_files_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let big = dir.path().join("big.json");
+    let mut text = String::from("{\"name\": \"x\", \"description\": \"");
+    text.push_str(&"a".repeat(16 << 20));
+    text.push_str("\"}");
+    fs::write(&big, text).unwrap();
+    let mut files = vec![big.to_str().unwrap().to_string()];
+    if Path::new("/dev/zero").exists() {
+        files.push("/dev/zero".into());
+    }
+    for f in &files {
+        let (code, _) = util::run_capture(&["validate", f], &log);
+        assert_eq!(
+            code,
+            Some(2),
+            "validate {f}: log:\n{}",
+            util::log_text(&log)
+        );
+        let text = util::log_text(&log);
+        assert!(text.contains("larger than 16 MiB"), "{f}:\n{text}");
+    }
+}
+
+/// A UTF-8 byte-order mark before the JSON (some editors write one) is skipped (before:
+/// "expected value at line 1 column 1").
+#[test]
+fn a_byte_order_mark_is_accepted() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let good = fs::read(repo_root().join("tests/manifests/good/power_law_sweep.json")).unwrap();
+    let bom = dir.path().join("bom.json");
+    fs::write(&bom, [b"\xef\xbb\xbf".as_slice(), &good].concat()).unwrap();
+    let (code, out) = util::run_capture(&["validate", bom.to_str().unwrap()], &log);
+    assert_eq!(code, Some(0), "log:\n{}", util::log_text(&log));
+    assert!(out.contains("4 points x 2 replicas = 8 runs"), "{out}");
+    let (m, _) = load_manifest(&bom).expect("the library accepts it too");
+    assert_eq!(m.name, "good-power-law-sweep");
+}

@@ -325,7 +325,43 @@ impl TamsdSpec {
     }
 }
 
+/// Most output times a run may report (t = 0 and t_end included): the paper's figures use
+/// tens, a log grid of 1000 per decade over 100 decades is 10^5.
+pub const MAX_OUTPUT_TIMES: u64 = 100_000;
+
+/// Most species a run may have (the engine's limit: a power law with a small theta gives
+/// many).
+pub const MAX_SPECIES: usize = 1_000_000;
+
+/// Largest `t_end` in collision times, t_end n sigma_max^2 sqrt(T_max / m_min) (the
+/// collision rate of the fastest, largest pair, up to a factor ~7): by then a gas that cools
+/// at all has cooled by a factor ~1e-60 (the paper's longest runs are ~1e9 collision times);
+/// far beyond, its temperature leaves the range of a double and the theory cannot follow it.
+pub const MAX_COLLISION_TIMES: f64 = 1e30;
+
 impl OutputTimes {
+    /// An upper bound on the number of times [`OutputTimes::resolve`] gives (0, t_end, the log
+    /// grid, the list), computed without listing them (saturating).
+    pub fn count_bound(&self) -> u64 {
+        let mut n: u64 = 2;
+        if let Some(log) = &self.log {
+            let span = (log.to.log10() - log.from.log10()) * log.per_decade as f64 + 1e-9;
+            if span >= 0.0 {
+                n = n.saturating_add(if span.is_finite() && span < 1e18 {
+                    span.floor() as u64 + 1
+                } else {
+                    u64::MAX
+                });
+            } else {
+                n = n.saturating_add(1);
+            }
+        }
+        if let Some(list) = &self.list {
+            n = n.saturating_add(list.len() as u64);
+        }
+        n
+    }
+
     /// The sorted, de-duplicated output times, with 0 and `t_end` included.
     pub fn resolve(&self, t_end: f64) -> Vec<f64> {
         let mut times = vec![0.0, t_end];
@@ -371,7 +407,7 @@ impl DsmcParams {
                         initial_temperature: s.temperature.unwrap_or(base_t),
                     })
                     .collect();
-                let n: u64 = species.iter().map(|s| s.count).sum();
+                let n: u64 = species.iter().fold(0u64, |a, s| a.saturating_add(s.count));
                 let volume = match (p.volume, p.number_density) {
                     (Some(v), _) => v,
                     (None, Some(d)) => n as f64 / d,
@@ -382,7 +418,7 @@ impl DsmcParams {
                 (species, volume)
             }
         };
-        let n: u64 = species.iter().map(|s| s.count).sum();
+        let n: u64 = species.iter().fold(0u64, |a, s| a.saturating_add(s.count));
         if n > MAX_PARTICLES {
             return Err(format!(
                 "{n} particles is more than the supported {MAX_PARTICLES}"
@@ -470,7 +506,7 @@ impl DsmcParams {
         };
         let m = counts.len() as u64;
         let rows = m
-            .saturating_mul(self.output_times.resolve(self.t_end).len() as u64)
+            .saturating_mul(self.output_times.count_bound())
             .saturating_mul(80);
         n.saturating_mul(per_particle)
             .saturating_add(tracks)
@@ -497,6 +533,45 @@ impl DsmcParams {
                 .map(|s| s.iter().map(|x| x.count).collect()),
             SpeciesSpec::List(list) => Some(list.iter().map(|s| s.count).collect()),
         }
+    }
+
+    /// n sigma_max^2 sqrt(T_max / m_min) at t = 0 for species counts `counts`: an order of
+    /// magnitude of the fastest collision rate (the HCS start counts at its mean temperature).
+    /// None where it is not a positive finite number.
+    fn collision_rate(&self, counts: &[u64]) -> Option<f64> {
+        let n: f64 = counts.iter().map(|&c| c as f64).sum();
+        let base_t = match self.initial_temperature {
+            InitialTemperature::Value(t) => t,
+            InitialTemperature::Hcs { mean } => mean,
+        };
+        let (volume, sigma_max, t_max, m_min) = match &self.species {
+            SpeciesSpec::PowerLaw(pl) => (
+                pl.n1_count as f64 / pl.n1,
+                (counts.len() as f64).cbrt(),
+                base_t,
+                1.0,
+            ),
+            SpeciesSpec::List(list) => {
+                let volume = match (self.volume, self.number_density) {
+                    (Some(v), _) => v,
+                    (None, Some(d)) => n / d,
+                    (None, None) => return None,
+                };
+                let fold = |f: fn(&SpeciesEntry) -> f64, g: fn(f64, f64) -> f64, z: f64| {
+                    list.iter().map(f).fold(z, g)
+                };
+                (
+                    volume,
+                    fold(|s| s.diameter, f64::max, 0.0),
+                    list.iter()
+                        .map(|s| s.temperature.unwrap_or(base_t))
+                        .fold(0.0, f64::max),
+                    fold(|s| s.mass, f64::min, f64::INFINITY),
+                )
+            }
+        };
+        let rate = n / volume * sigma_max * sigma_max * (t_max / m_min).sqrt();
+        (rate.is_finite() && rate > 0.0).then_some(rate)
     }
 
     /// Checks that the schema cannot express; `path` is the JSON pointer of this object.
@@ -539,7 +614,7 @@ impl DsmcParams {
                     ),
                     _ => {}
                 }
-                let total: u64 = list.iter().map(|s| s.count).sum();
+                let total: u64 = list.iter().fold(0u64, |a, s| a.saturating_add(s.count));
                 if !list.is_empty() && total < 2 {
                     err(
                         "/species/list",
@@ -548,10 +623,57 @@ impl DsmcParams {
                 }
             }
         }
+        // The engine's own limits (`DsmcParams::system`), so that `validate` refuses what a
+        // run would fail on.
+        let counts = self.species_counts();
+        let (species_at, particles_at) = match &self.species {
+            SpeciesSpec::PowerLaw(_) => ("/species/power_law/theta", "/species/power_law/N1"),
+            SpeciesSpec::List(_) => ("/species/list", "/species/list"),
+        };
+        match &counts {
+            None => err(
+                species_at,
+                format!(
+                    "the power law gives more than {MAX_SPECIES} species (N_k = round(N1 k^-theta) >= 1), the limit of a run: raise theta or lower N1"
+                ),
+            ),
+            Some(c) => {
+                let n = c.iter().fold(0u64, |a, x| a.saturating_add(*x));
+                if n > MAX_PARTICLES {
+                    err(
+                        particles_at,
+                        format!(
+                            "{n} particles in total, more than the limit of {MAX_PARTICLES} (2^32 - 2) per run"
+                        ),
+                    );
+                }
+            }
+        }
         if !self.t_end.is_finite() {
             err(
                 "/t_end",
                 format!("expected a finite time > 0, got {}", self.t_end),
+            );
+        } else if let Some(rate) = counts.as_deref().and_then(|c| self.collision_rate(c)) {
+            let times = self.t_end * rate;
+            if times > MAX_COLLISION_TIMES {
+                err(
+                    "/t_end",
+                    format!(
+                        "{:e} is {times:.2e} collision times (t_end n sigma_max^2 sqrt(T_max/m_min)), more than the limit of {MAX_COLLISION_TIMES:e}: the gas would cool beyond what the theory (and a double) can follow",
+                        self.t_end
+                    ),
+                );
+            }
+        }
+        let n_times = self.output_times.count_bound();
+        if n_times > MAX_OUTPUT_TIMES {
+            err(
+                "/output_times",
+                format!(
+                    "gives {} output times per run, more than the limit of {MAX_OUTPUT_TIMES}: fewer per_decade, a later `from` or a shorter list",
+                    if n_times == u64::MAX { "about infinitely many".to_string() } else { n_times.to_string() }
+                ),
             );
         }
         if let Some(log) = &self.output_times.log {
@@ -615,8 +737,10 @@ impl DsmcParams {
                     );
                 }
             }
-            if let Some(counts) = self.species_counts() {
-                let tracers: u64 = counts.iter().map(|&n| n.min(tm.tracers)).sum();
+            if let Some(counts) = &counts {
+                let tracers: u64 = counts
+                    .iter()
+                    .fold(0u64, |a, &n| a.saturating_add(n.min(tm.tracers)));
                 let doubles = tracers as f64 * 3.0 * (tm.grid as f64 + 1.0);
                 if doubles > TAMSD_MAX_DOUBLES {
                     err(
