@@ -43,6 +43,9 @@ pub fn run(a: Args) -> i32 {
         Ok(c) => c,
         Err(e) => return report_error(e),
     };
+    if let Err(code) = super::tables_checked(&c, crate::campaign::integrity::Depth::Full) {
+        return code;
+    }
     let out = a.out.unwrap_or_else(|| a.dir.join("analysis"));
     let opts = Options {
         n_min: a.n_min,

@@ -138,6 +138,32 @@ fn init_tracing(format: LogFormat) {
     };
 }
 
+/// The tables checked against the ledger before a command reads them (`integrity::check`);
+/// damage is printed and refused (exit 3) with the command that heals it.
+pub(crate) fn tables_checked(
+    c: &crate::campaign::Campaign,
+    depth: crate::campaign::integrity::Depth,
+) -> Result<(), i32> {
+    let found = match crate::campaign::integrity::check(c, depth) {
+        Ok(f) => f,
+        Err(e) => return Err(fail(exit_codes::DIRECTORY_REFUSED, e)),
+    };
+    if found.clean() {
+        return Ok(());
+    }
+    for p in found.problems() {
+        eprintln!("error: damage: {p}");
+    }
+    Err(fail(
+        exit_codes::DIRECTORY_REFUSED,
+        format!(
+            "{}: the tables do not match the ledger; `granular resume {}` heals it (runs whose rows are damaged run again)",
+            c.root.display(),
+            c.root.display()
+        ),
+    ))
+}
+
 /// Print a campaign error and return its exit code.
 fn report_error(e: CampaignError) -> i32 {
     match e {

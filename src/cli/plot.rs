@@ -19,6 +19,9 @@ pub fn run(a: Args) -> i32 {
         Ok(c) => c,
         Err(e) => return report_error(e),
     };
+    if let Err(code) = super::tables_checked(&c, crate::campaign::integrity::Depth::Quick) {
+        return code;
+    }
     let out = a.out.unwrap_or_else(|| a.dir.join("figures"));
     let figs = match c.figures() {
         Ok(Some(figs)) => figs,
