@@ -250,11 +250,18 @@ fn analyze_end_to_end() {
         .len();
     assert_eq!(cas.1 .3 as usize, shells);
 
-    // A missing table: refused (exit 3), not a panic.
+    // A missing table: refused (exit 3), not a panic; its committed parts are named missing
+    // by the integrity check that analyze makes first (`granular resume` runs them again).
     std::fs::remove_dir_all(b.join("tables").join("rfm_structure_factor")).unwrap();
     let (code, _) = run_capture(&["analyze", b_s], &log);
     assert_eq!(code, Some(3), "{}", log_text(&log));
-    assert!(log_text(&log).contains("rfm_structure_factor is missing"));
+    assert!(
+        log_text(&log).contains("tables/rfm_structure_factor/")
+            && log_text(&log).contains(": missing")
+            && log_text(&log).contains("granular resume"),
+        "{}",
+        log_text(&log)
+    );
 }
 
 fn write_cascade_table(campaign: &Path) {
@@ -301,12 +308,22 @@ fn write_cascade_table(campaign: &Path) {
     std::fs::create_dir_all(&dir).unwrap();
     // Written for this campaign (analyze reads only parts stamped with the campaign's
     // identity).
+    // With its checksum sidecar, as the campaign writes a table written whole (`analyze`
+    // checks the tables against the ledger and sidecars first).
     let c = granular::campaign::Campaign::open(campaign).unwrap();
-    granular::store::parquet_io::write_file(
+    let w = granular::store::parquet_io::write_file(
         &dir.join("summary.parquet"),
         &batch,
         "cascade_structure_factor",
         c.stamp(),
+    )
+    .unwrap();
+    granular::store::checksum::write_sidecar(
+        campaign,
+        "cascade_structure_factor",
+        "summary.parquet",
+        w.bytes,
+        &w.sha256,
     )
     .unwrap();
 }
