@@ -308,6 +308,17 @@ fn section_failures(h: &mut String, c: &Campaign, notes: &mut Vec<String>) {
             return;
         }
     };
+    write_failures(h, &fails, &|p| {
+        if (p as usize) < c.plan.points.len() {
+            c.plan.label(p)
+        } else {
+            String::new()
+        }
+    });
+}
+
+/// The table of failed runs (`label`: a point's swept values).
+fn write_failures(h: &mut String, fails: &[Failure], label: &dyn Fn(u32) -> String) {
     if fails.is_empty() {
         h.push_str("<p>None.</p>\n");
         return;
@@ -315,18 +326,13 @@ fn section_failures(h: &mut String, c: &Campaign, notes: &mut Vec<String>) {
     h.push_str(
         "<table>\n<tr><th>run</th><th>point</th><th>parameters</th><th>seed</th><th>t_failed</th><th>reason</th></tr>\n",
     );
-    for f in &fails {
-        let label = if (f.point_id as usize) < c.plan.points.len() {
-            c.plan.label(f.point_id)
-        } else {
-            String::new()
-        };
+    for f in fails {
         let _ = writeln!(
             h,
             "<tr><td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td></tr>",
             f.run_id,
             f.point_id,
-            escape(&label),
+            escape(&label(f.point_id)),
             f.seed,
             f.t_failed.map(|t| format!("{t}")).unwrap_or_default(),
             escape(f.reason.as_deref().unwrap_or(""))
@@ -433,6 +439,26 @@ mod tests {
             escape("<script>alert('x') & \"y\"</script>"),
             "&lt;script&gt;alert(&#39;x&#39;) &amp; &quot;y&quot;&lt;/script&gt;"
         );
+    }
+
+    #[test]
+    fn failed_runs_listed_escaped() {
+        let mut h = String::new();
+        write_failures(&mut h, &[], &|_| String::new());
+        assert!(h.contains("None."));
+        let mut h = String::new();
+        let f = Failure {
+            run_id: 17,
+            point_id: 3,
+            seed: 123456789,
+            reason: Some("kinetic energy increased <script>".into()),
+            t_failed: Some(2.5),
+        };
+        write_failures(&mut h, &[f], &|p| format!("eps=<{p}>"));
+        for want in ["17", "123456789", "2.5", "eps=&lt;3&gt;", "increased &lt;script&gt;"] {
+            assert!(h.contains(want), "{want} missing: {h}");
+        }
+        assert!(!h.contains("<script>"));
     }
 
     #[test]
