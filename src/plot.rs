@@ -346,7 +346,10 @@ fn register_font() {
 pub fn svg_string(fig: &Figure) -> Result<String, String> {
     register_font();
     let mut out = String::new();
-    draw(SVGBackend::with_string(&mut out, SIZE).into_drawing_area(), fig)?;
+    draw(
+        SVGBackend::with_string(&mut out, SIZE).into_drawing_area(),
+        fig,
+    )?;
     Ok(out)
 }
 
@@ -409,7 +412,9 @@ mod tests {
         let series = (0..12)
             .map(|k| Series {
                 label: format!("k={k} <b>"),
-                points: (1..5).map(|i| (i as f64, (i * (k + 1)) as f64, 0.1)).collect(),
+                points: (1..5)
+                    .map(|i| (i as f64, (i * (k + 1)) as f64, 0.1))
+                    .collect(),
                 line: k % 2 == 1,
             })
             .collect();

@@ -79,7 +79,8 @@ pub fn failures(c: &Campaign) -> Result<Vec<Failure>, String> {
                     run_id: run.value(i),
                     point_id: point.value(i),
                     seed: seed.value(i),
-                    reason: (!arrow_array::Array::is_null(reason, i)).then(|| reason.value(i).to_string()),
+                    reason: (!arrow_array::Array::is_null(reason, i))
+                        .then(|| reason.value(i).to_string()),
                     t_failed: opt(t, i),
                 });
             }
@@ -416,7 +417,15 @@ fn section_manifest(h: &mut String, info: &CampaignInfo) {
         return;
     }
     h.push_str("<table>\n<tr><th>#</th><th>file</th><th>accepted</th><th>runs added</th></tr>\n");
-    for (k, Accepted { file, accepted, runs_added }) in info.history.iter().enumerate() {
+    for (
+        k,
+        Accepted {
+            file,
+            accepted,
+            runs_added,
+        },
+    ) in info.history.iter().enumerate()
+    {
         let _ = writeln!(
             h,
             "<tr><td class=\"n\">{}</td><td>{}</td><td>{}</td><td class=\"n\">{}</td></tr>",
@@ -455,7 +464,13 @@ mod tests {
             t_failed: Some(2.5),
         };
         write_failures(&mut h, &[f], &|p| format!("eps=<{p}>"));
-        for want in ["17", "123456789", "2.5", "eps=&lt;3&gt;", "increased &lt;script&gt;"] {
+        for want in [
+            "17",
+            "123456789",
+            "2.5",
+            "eps=&lt;3&gt;",
+            "increased &lt;script&gt;",
+        ] {
             assert!(h.contains(want), "{want} missing: {h}");
         }
         assert!(!h.contains("<script>"));
@@ -463,7 +478,10 @@ mod tests {
 
     #[test]
     fn svg_prolog_removed() {
-        assert_eq!(inline_svg("<?xml version=\"1.0\"?>\n<svg a>x</svg>\n"), "<svg a>x</svg>");
+        assert_eq!(
+            inline_svg("<?xml version=\"1.0\"?>\n<svg a>x</svg>\n"),
+            "<svg a>x</svg>"
+        );
         assert_eq!(inline_svg("<svg>x</svg>"), "<svg>x</svg>");
     }
 }

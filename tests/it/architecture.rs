@@ -392,7 +392,9 @@ fn forbidden(from: &str, to: &str) -> Option<&'static str> {
     if f == "report"
         && (sim(t) || matches!(t, "theory" | "cli" | "analysis") || model_home(to).is_some())
     {
-        return Some("the report reads the campaign and draws with plot: no model home or simulator");
+        return Some(
+            "the report reads the campaign and draws with plot: no model home or simulator",
+        );
     }
     if f == "plot" && t != "plot" {
         return Some("the renderer imports nothing of the crate");

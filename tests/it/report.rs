@@ -110,7 +110,11 @@ fn report_of_a_finished_campaign() {
         })
         .count();
     assert!(svg_files >= 2, "{svg_files} figures");
-    assert_eq!(html.matches("<svg").count(), svg_files, "one <svg> per figure");
+    assert_eq!(
+        html.matches("<svg").count(),
+        svg_files,
+        "one <svg> per figure"
+    );
     assert_eq!(html.matches("</svg>").count(), svg_files);
     assert_eq!(html.matches("<figure").count(), svg_files);
     assert!(out.contains(&format!("{svg_files} figures")), "{out}");
