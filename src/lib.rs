@@ -27,6 +27,7 @@ pub mod memory;
 pub mod models;
 pub mod physics;
 pub mod plot;
+pub mod report;
 pub mod rfm;
 pub mod rng;
 pub mod store;

@@ -29,7 +29,7 @@ pub struct Figure {
     pub series: Vec<Series>,
     pub log_x: bool,
     pub log_y: bool,
-    /// Legend in the lower right (growing curves) rather than the upper right.
+    /// Legend rows from the bottom of the legend column (growing curves) rather than the top.
     pub legend_low: bool,
     /// Series from this index on are reference lines (theory, guides) with their own colours
     /// rather than fits drawn in the colour of the data before them.
@@ -100,16 +100,52 @@ fn tick(v: f64) -> String {
     }
 }
 
-const COLORS: [RGBColor; 8] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(148, 103, 189),
-    RGBColor(255, 127, 14),
-    RGBColor(23, 190, 207),
-    RGBColor(140, 86, 75),
-    RGBColor(127, 127, 127),
+/// The colour map of every figure: 24 well-separated colours (Glasbey-like, dark enough on
+/// white), so that species 1 and 10 (or any two of the first 24 series) never share a colour;
+/// series beyond 24 cycle.
+pub const PALETTE: [(u8, u8, u8); 24] = [
+    (31, 119, 180),  // blue
+    (214, 39, 40),   // red
+    (44, 160, 44),   // green
+    (255, 127, 14),  // orange
+    (148, 103, 189), // purple
+    (140, 86, 75),   // brown
+    (227, 119, 194), // pink
+    (23, 190, 207),  // cyan
+    (188, 189, 34),  // olive
+    (0, 0, 0),       // black
+    (0, 0, 128),     // navy
+    (128, 0, 0),     // maroon
+    (0, 128, 128),   // teal
+    (255, 90, 90),   // salmon
+    (128, 128, 0),   // dark olive
+    (240, 50, 230),  // magenta
+    (70, 240, 240),  // light cyan
+    (170, 60, 0),    // rust
+    (145, 30, 180),  // violet
+    (0, 200, 120),   // jade
+    (160, 160, 160), // grey
+    (0, 90, 50),     // dark green
+    (255, 200, 0),   // gold
+    (90, 60, 160),   // indigo
 ];
+
+/// Colour `i` of the colour map (cycling past its end).
+pub fn colour(i: usize) -> (u8, u8, u8) {
+    PALETTE[i % PALETTE.len()]
+}
+
+fn rgb(i: usize) -> RGBColor {
+    let (r, g, b) = colour(i);
+    RGBColor(r, g, b)
+}
+
+/// Width of the legend column to the right of the plot area (the legend never covers data).
+const LEGEND_WIDTH: u32 = 210;
+/// Height of one legend row.
+const LEGEND_ROW: i32 = 18;
+/// Longest legend label drawn, in characters (longer ones end with `...`).
+const LEGEND_CHARS: usize = 28;
 
 fn tr(v: f64, log: bool) -> Option<f64> {
     if log {
@@ -178,7 +214,9 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         (a - w, b + w)
     };
     let ((x0, x1), (y0, y1)) = (pad(x0, x1), pad(y0, y1));
-    let mut chart = ChartBuilder::on(&root)
+    let (width, _) = root.dim_in_pixel();
+    let (plot_area, legend_area) = root.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
+    let mut chart = ChartBuilder::on(&plot_area)
         .caption(&fig.title, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(45)
@@ -201,6 +239,8 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         .draw()
         .map_err(e)?;
     let mut colour_index = 0usize;
+    // (label, colour, drawn as a line) of each series drawn, for the legend.
+    let mut legend: Vec<(&str, RGBColor, bool)> = Vec::new();
     for (j, (s, data)) in fig.series.iter().zip(&series).enumerate() {
         if data.is_empty() {
             continue;
@@ -211,18 +251,14 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         if !follows_data && j > 0 {
             colour_index += 1;
         }
-        let colour = COLORS[colour_index % COLORS.len()];
+        let colour = rgb(colour_index);
         if s.line {
             chart
                 .draw_series(LineSeries::new(
                     data.iter().map(|q| (q.0, q.1)),
                     colour.stroke_width(2),
                 ))
-                .map_err(e)?
-                .label(&s.label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
+                .map_err(e)?;
         } else {
             chart
                 .draw_series(
@@ -236,25 +272,85 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
                     data.iter()
                         .map(|q| Circle::new((q.0, q.1), 2, colour.filled())),
                 )
-                .map_err(e)?
-                .label(&s.label)
-                .legend(move |(x, y)| Circle::new((x + 9, y), 3, colour.filled()));
+                .map_err(e)?;
+        }
+        if !s.label.is_empty() {
+            legend.push((&s.label, colour, s.line));
         }
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 12))
-        .position(if fig.legend_low {
-            SeriesLabelPosition::LowerRight
-        } else {
-            SeriesLabelPosition::UpperRight
-        })
-        .draw()
-        .map_err(e)?;
+    draw_legend(&legend_area, &legend, fig.legend_low).map_err(e)?;
     root.present().map_err(e)?;
     Ok(())
+}
+
+/// The legend in its own column beside the plot area: one row per series (a line or a
+/// marker in the series' colour, then its label), from the top, or from the bottom for
+/// `low` (growing curves); rows that do not fit are counted in a last "+N more" row.
+fn draw_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    entries: &[(&str, RGBColor, bool)],
+    low: bool,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    if entries.is_empty() {
+        return Ok(());
+    }
+    let (_, h) = area.dim_in_pixel();
+    let (top, bottom) = (40, h as i32 - 50);
+    let fits = ((bottom - top) / LEGEND_ROW).max(1) as usize;
+    let (shown, more) = if entries.len() > fits {
+        (fits - 1, entries.len() - (fits - 1))
+    } else {
+        (entries.len(), 0)
+    };
+    let rows = shown + usize::from(more > 0);
+    let first = if low {
+        bottom - rows as i32 * LEGEND_ROW
+    } else {
+        top
+    };
+    let font = ("sans-serif", 12).into_font().color(&BLACK);
+    for (i, (label, colour, line)) in entries[..shown].iter().enumerate() {
+        let y = first + i as i32 * LEGEND_ROW + LEGEND_ROW / 2;
+        if *line {
+            area.draw(&PathElement::new(
+                vec![(6, y), (26, y)],
+                colour.stroke_width(2),
+            ))?;
+        } else {
+            area.draw(&Circle::new((16, y), 3, colour.filled()))?;
+        }
+        let text: String = if label.chars().count() > LEGEND_CHARS {
+            let t: String = label.chars().take(LEGEND_CHARS - 3).collect();
+            format!("{t}...")
+        } else {
+            label.to_string()
+        };
+        area.draw(&Text::new(text, (32, y - 7), font.clone()))?;
+    }
+    if more > 0 {
+        let y = first + shown as i32 * LEGEND_ROW + LEGEND_ROW / 2;
+        area.draw(&Text::new(format!("+{more} more"), (32, y - 7), font))?;
+    }
+    Ok(())
+}
+
+/// The size of every figure, in pixels.
+const SIZE: (u32, u32) = (900, 650);
+
+fn register_font() {
+    let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+}
+
+/// `fig` as an SVG document in memory (`<svg ...>...</svg>`, text as `<text>` elements, no
+/// external references): what `render` writes to `name.svg`.
+pub fn svg_string(fig: &Figure) -> Result<String, String> {
+    register_font();
+    let mut out = String::new();
+    draw(
+        SVGBackend::with_string(&mut out, SIZE).into_drawing_area(),
+        fig,
+    )?;
+    Ok(out)
 }
 
 /// Write `name.png` and `name.svg` of every figure into `dir`. Returns the files written and
@@ -264,13 +360,13 @@ pub fn render(
     dir: &Path,
 ) -> Result<(Vec<PathBuf>, Vec<String>), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+    register_font();
     let (mut out, mut failed) = (Vec::new(), Vec::new());
     for (name, p) in figs {
         let png = dir.join(format!("{name}.png"));
         let svg = dir.join(format!("{name}.svg"));
-        let r = draw(BitMapBackend::new(&png, (900, 650)).into_drawing_area(), p)
-            .and_then(|_| draw(SVGBackend::new(&svg, (900, 650)).into_drawing_area(), p));
+        let r = draw(BitMapBackend::new(&png, SIZE).into_drawing_area(), p)
+            .and_then(|_| draw(SVGBackend::new(&svg, SIZE).into_drawing_area(), p));
         match r {
             Ok(()) => {
                 out.push(png);
@@ -280,4 +376,53 @@ pub fn render(
         }
     }
     Ok((out, failed))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// At least 20 colours, pairwise well apart (so that T_1 and T_10 differ), none near
+    /// the white background.
+    #[test]
+    fn colour_map_has_20_distinct_colours() {
+        assert!(PALETTE.len() >= 20);
+        let d = |a: (u8, u8, u8), b: (u8, u8, u8)| {
+            let f = |x: u8, y: u8| (x as f64 - y as f64).powi(2);
+            (f(a.0, b.0) + f(a.1, b.1) + f(a.2, b.2)).sqrt()
+        };
+        for i in 0..PALETTE.len() {
+            assert!(d(colour(i), (255, 255, 255)) > 80.0, "colour {i} too pale");
+            for j in 0..i {
+                assert!(
+                    d(colour(i), colour(j)) > 60.0,
+                    "colours {j} and {i} too close: {:?} {:?}",
+                    colour(j),
+                    colour(i)
+                );
+            }
+        }
+        assert_ne!(colour(0), colour(9), "series 1 and 10 share a colour");
+        assert_eq!(colour(PALETTE.len()), colour(0));
+    }
+
+    /// A figure renders to one self-contained SVG document, its legend labels escaped.
+    #[test]
+    fn figure_renders_to_an_svg_string() {
+        let series = (0..12)
+            .map(|k| Series {
+                label: format!("k={k} <b>"),
+                points: (1..5)
+                    .map(|i| (i as f64, (i * (k + 1)) as f64, 0.1))
+                    .collect(),
+                line: k % 2 == 1,
+            })
+            .collect();
+        let svg = svg_string(&loglog(Figure::new("T_k(t)".into(), "t", "T", series))).unwrap();
+        assert!(svg.trim_start().starts_with("<svg"), "{}", &svg[..80]);
+        assert!(svg.trim_end().ends_with("</svg>"));
+        assert!(svg.contains("k=11 &lt;b&gt;"));
+        assert!(!svg.contains("<b>"));
+        assert!(!svg.contains("href"));
+    }
 }

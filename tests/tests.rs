@@ -24,6 +24,8 @@
 //!   `compact`, healed by `resume` to identical tables; stale locks of reused pids; compaction
 //!   killed at any moment.
 //! - `slurm`: `granular submit --slurm` with stand-in sbatch/squeue/scontrol.
+//! - `report`: `granular report` on a finished and a half-finished campaign: one HTML file,
+//!   an inline SVG per figure, progress per point, no network references, escaped strings.
 //! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
 //!   kill + resume bit-identity of their tables.
 //!
@@ -42,6 +44,7 @@ mod it {
     pub mod manifests;
     pub mod models;
     pub mod physics;
+    pub mod report;
     pub mod resume;
     pub mod rfm;
     pub mod schema;

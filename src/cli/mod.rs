@@ -12,6 +12,7 @@ mod compact;
 mod flags;
 mod plan;
 mod plot;
+mod report;
 mod reporter;
 mod run;
 mod schema;
@@ -82,6 +83,10 @@ enum Command {
     Verify(verify::Args),
     /// Draw the standard figures (PNG and SVG) of a campaign's summary tables.
     Plot(plot::Args),
+    /// Write one self-contained HTML page of a campaign (progress per point, failed runs,
+    /// the standard figures as inline SVG, the manifest and its history); works on an
+    /// unfinished campaign.
+    Report(report::Args),
     /// Upgrade a campaign directory written by an earlier granular, in place (logged).
     Upgrade(upgrade::Args),
     /// Fit the thesis's observables of an rfm campaign (xi_m, zeta_m, D_f, alpha, (5.32),
@@ -119,6 +124,7 @@ pub fn main() -> i32 {
         Command::Compact(a) => compact::run(a),
         Command::Verify(a) => verify::run(a),
         Command::Plot(a) => plot::run(a),
+        Command::Report(a) => report::run(a),
         Command::Analyze(a) => analyze::run(a),
     }
 }

@@ -13,7 +13,9 @@
 //! - a model's home (`models::<model>`) imports no other model's home, no campaign, manifest,
 //!   command line or analysis;
 //! - `manifest` imports no campaign, store, simulator or model home (only the list of models);
-//! - `plot` (the renderer) imports nothing of the crate.
+//! - `plot` (the renderer) imports nothing of the crate;
+//! - `report` (the HTML page) imports the campaign, store and plot, no model home, simulator,
+//!   theory, command line or analysis.
 //!
 //! Test code (`#[cfg(test)]` modules, `tests.rs` files) is not part of the architecture and is
 //! skipped; doc comments and comments are skipped. A path is resolved to the longest module
@@ -338,6 +340,7 @@ const NOT_SIMULATORS: &[&str] = &[
     "models",
     "store",
     "plot",
+    "report",
     "analysis",
     "theory",
     "math",
@@ -385,6 +388,13 @@ fn forbidden(from: &str, to: &str) -> Option<&'static str> {
     if f == "manifest" && (sim(t) || matches!(t, "campaign" | "store") || model_home(to).is_some())
     {
         return Some("the manifest imports only the list of models");
+    }
+    if f == "report"
+        && (sim(t) || matches!(t, "theory" | "cli" | "analysis") || model_home(to).is_some())
+    {
+        return Some(
+            "the report reads the campaign and draws with plot: no model home or simulator",
+        );
     }
     if f == "plot" && t != "plot" {
         return Some("the renderer imports nothing of the crate");

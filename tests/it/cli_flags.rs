@@ -454,7 +454,7 @@ fn out_naming_a_file_or_a_dangling_link_exits_3() {
                 "--dry-run",
             ],
         ];
-        let with_dir: [&[&str]; 8] = [
+        let with_dir: [&[&str]; 9] = [
             &["resume", out, "--quiet"],
             &["status", out],
             &["verify", out],
@@ -462,6 +462,7 @@ fn out_naming_a_file_or_a_dangling_link_exits_3() {
             &["plot", out],
             &["upgrade", out],
             &["analyze", out],
+            &["report", out],
             &["submit", "--missing", out, "--time", "1", "--dry-run"],
         ];
         for args in with_manifest.iter().chain(with_dir.iter()) {

@@ -1,0 +1,173 @@
+//! `granular report`: one self-contained HTML file of a campaign: its name, per-point
+//! progress, one inline SVG per standard figure (as many as `granular plot` draws), nothing
+//! fetched from the network, manifest strings escaped; a half-finished campaign (one shard
+//! of two) is reported with its pending runs and without figures; a directory that is not a
+//! campaign is refused (exit 3).
+
+use std::path::Path;
+use std::time::Duration;
+
+use serde_json::{json, Value};
+
+use super::util::{heavy, log_text, run_capture, run_granular, write_json};
+
+const LIMIT: Duration = Duration::from_secs(300);
+
+/// 2 points x 2 replicas of a small power-law DSMC campaign (well under a second), its
+/// description carrying markup that must come out escaped.
+fn manifest() -> Value {
+    json!({
+        "name": "report-test",
+        "description": "<script>alert('x')</script> & more",
+        "model": "dsmc",
+        "seed": 7,
+        "replicas": 2,
+        "params": {
+            "method": "low_rank",
+            "species": {"power_law": {"n1": 0.1, "N1": 2000, "theta": 3}},
+            "restitution": {"constant": 0.7},
+            "t_end": 10.0,
+            "output_times": {"list": [0.5, 1.0, 5.0, 10.0]},
+            "observables": ["temperature", "msd"]
+        },
+        "sweep": {"restitution.constant": [0.7, 0.9]}
+    })
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Sources or links to the network, scripts, stylesheets or imports.
+fn external_references(html: &str) -> Vec<String> {
+    let lower = html.to_ascii_lowercase();
+    let mut found = Vec::new();
+    for bad in [
+        "src=\"http",
+        "src='http",
+        "href=\"http",
+        "href='http",
+        "src=\"//",
+        "href=\"//",
+        "<script",
+        "<link",
+        "<iframe",
+        "@import",
+        "url(",
+    ] {
+        if lower.contains(bad) {
+            found.push(bad.to_string());
+        }
+    }
+    found
+}
+
+fn run_report(dir: &Path, out: Option<&Path>, log: &Path) -> (Option<i32>, String) {
+    let mut args = vec!["report", s(dir)];
+    if let Some(o) = out {
+        args.extend(["--out", s(o)]);
+    }
+    run_capture(&args, log)
+}
+
+#[test]
+fn report_of_a_finished_campaign() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let (m, c, log) = (
+        tmp.path().join("m.json"),
+        tmp.path().join("c"),
+        tmp.path().join("log"),
+    );
+    write_json(&m, &manifest());
+    let code = run_granular(&["run", s(&m), "--out", s(&c), "--quiet"], &log, LIMIT);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+
+    let (code, out) = run_report(&c, None, &log);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    let file = c.join("report.html");
+    assert!(out.contains("report.html"), "{out}");
+    let html = std::fs::read_to_string(&file).expect("report.html written");
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert!(html.trim_end().ends_with("</html>"));
+    assert!(html.contains("report-test"));
+
+    // One inline SVG per figure, as many as `granular plot` draws.
+    let code = run_granular(
+        &["plot", s(&c), "--out", s(&tmp.path().join("figs"))],
+        &log,
+        LIMIT,
+    );
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    let svg_files = std::fs::read_dir(tmp.path().join("figs"))
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "svg")
+        })
+        .count();
+    assert!(svg_files >= 2, "{svg_files} figures");
+    assert_eq!(
+        html.matches("<svg").count(),
+        svg_files,
+        "one <svg> per figure"
+    );
+    assert_eq!(html.matches("</svg>").count(), svg_files);
+    assert_eq!(html.matches("<figure").count(), svg_files);
+    assert!(out.contains(&format!("{svg_files} figures")), "{out}");
+
+    // Per-point progress: both points, all done.
+    assert!(html.contains("constant=0.7"), "point label missing");
+    assert!(html.contains("constant=0.9"), "point label missing");
+    assert!(html.contains("4: 4 done, 0 failed, 0 running, 0 pending"));
+    assert!(html.contains("Failed runs"));
+
+    // Self-contained, escaped.
+    assert_eq!(external_references(&html), Vec::<String>::new());
+    assert!(!html.contains("alert('x')"), "description not escaped");
+    assert!(html.contains("&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt; &amp; more"));
+
+    // --out elsewhere; the same page but for its time stamp.
+    let other = tmp.path().join("r.html");
+    let (code, _) = run_report(&c, Some(&other), &log);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    assert!(std::fs::read_to_string(&other).unwrap().contains("<svg"));
+
+    // Not a campaign directory: refused (3); an --out that cannot be written: I/O (4).
+    let (code, _) = run_report(tmp.path(), None, &log);
+    assert_eq!(code, Some(3), "log:\n{}", log_text(&log));
+    let (code, _) = run_report(&c, Some(&tmp.path().join("no/such/dir/r.html")), &log);
+    assert_eq!(code, Some(4), "log:\n{}", log_text(&log));
+}
+
+#[test]
+fn report_of_a_half_finished_campaign() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let (m, c, log) = (
+        tmp.path().join("m.json"),
+        tmp.path().join("c"),
+        tmp.path().join("log"),
+    );
+    write_json(&m, &manifest());
+    let code = run_granular(
+        &["run", s(&m), "--out", s(&c), "--shard", "1/2", "--quiet"],
+        &log,
+        LIMIT,
+    );
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    let (code, _) = run_report(&c, None, &log);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    let html = std::fs::read_to_string(c.join("report.html")).expect("report.html written");
+    // Shard 1 of 2 ran the even run ids: 2 done, 2 pending; no summaries yet, so no figures.
+    assert!(
+        html.contains("4: 2 done, 0 failed, 0 running, 2 pending"),
+        "progress missing"
+    );
+    assert!(html.contains("No figures yet"));
+    assert_eq!(html.matches("<svg").count(), 0);
+    assert_eq!(external_references(&html), Vec::<String>::new());
+}
