@@ -24,6 +24,8 @@
 //!   `compact`, healed by `resume` to identical tables; stale locks of reused pids; compaction
 //!   killed at any moment.
 //! - `slurm`: `granular submit --slurm` with stand-in sbatch/squeue/scontrol.
+//! - `sweep_columns`: every summary table of DSMC, RFM and cascade campaigns carries its
+//!   point's sweep columns after `point_id`, as in `points`.
 //! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
 //!   kill + resume bit-identity of their tables.
 //!
@@ -46,5 +48,6 @@ mod it {
     pub mod rfm;
     pub mod schema;
     pub mod slurm;
+    pub mod sweep_columns;
     pub mod util;
 }
