@@ -2,6 +2,7 @@
 """Compare the tables of two granular campaign directories row for row with DuckDB.
 
 Usage: python scripts/compare_tables.py DIR_A DIR_B [--current] [--ignore table.column ...]
+       [--rtol X] [--allow-extra-columns]
 
 Every table (tables/<t>/*.parquet) must exist in both and hold the same multiset of rows
 (EXCEPT ALL in both directions, so order, file layout and compaction do not matter; doubled
@@ -15,6 +16,10 @@ and prints each float column's largest relative difference: for a change that re
 `in_manifest`), with rows keyed by their point's params and their run's replica instead of
 `point_id` and `run_id` (which depend on the order in which a campaign grew), and without
 `runs.continued_from`: a grown campaign against one started from its final manifest.
+
+A table whose columns differ between A and B (by name) fails, naming the columns present on
+one side only; with --allow-extra-columns those columns are left out and the shared ones
+compared (e.g. summaries written before and after they gained the sweep columns).
 """
 
 from __future__ import annotations
@@ -87,6 +92,7 @@ def main() -> int:
     ap.add_argument("--ignore", nargs="*", default=[])
     ap.add_argument("--current", action="store_true")
     ap.add_argument("--rtol", type=float, default=None)
+    ap.add_argument("--allow-extra-columns", action="store_true")
     args = ap.parse_args()
     ignore = {"runs.wall_seconds", *args.ignore}
     if args.current:
@@ -101,6 +107,17 @@ def main() -> int:
     for t in ta:
         src = lambda d, t=t: f"read_parquet('{d}/tables/{t}/*.parquet')"
         cols = [r[0] for r in con.execute(f"DESCRIBE SELECT * FROM {src(args.a)}").fetchall()]
+        cols_b = [r[0] for r in con.execute(f"DESCRIBE SELECT * FROM {src(args.b)}").fetchall()]
+        only_a = [c for c in cols if c not in cols_b]
+        only_b = [c for c in cols_b if c not in cols]
+        if only_a or only_b:
+            what = f"columns only in A: {only_a}, only in B: {only_b}"
+            if not args.allow_extra_columns:
+                print(f"  FAIL  {t}: {what}")
+                bad += 1
+                continue
+            print(f"  note  {t}: {what} (left out, --allow-extra-columns)")
+            cols = [c for c in cols if c in cols_b]
         keep = [c for c in cols if f"{t}.{c}" not in ignore]
         if args.current:
             qa, qb = (current(d, t, keep, src) for d in (args.a, args.b))

@@ -26,6 +26,8 @@
 //! - `slurm`: `granular submit --slurm` with stand-in sbatch/squeue/scontrol.
 //! - `report`: `granular report` on a finished and a half-finished campaign: one HTML file,
 //!   an inline SVG per figure, progress per point, no network references, escaped strings.
+//! - `sweep_columns`: every summary table of DSMC, RFM and cascade campaigns carries its
+//!   point's sweep columns after `point_id`, as in `points`.
 //! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
 //!   kill + resume bit-identity of their tables.
 //!
@@ -49,5 +51,6 @@ mod it {
     pub mod rfm;
     pub mod schema;
     pub mod slurm;
+    pub mod sweep_columns;
     pub mod util;
 }

@@ -389,6 +389,7 @@ impl Campaign {
             replicas: self.plan.max_runs_per_point(),
             done,
             data,
+            sweep: tables::sweep_batch(&self.plan),
         }
     }
 

@@ -1,6 +1,7 @@
 //! The campaign's own tables, whatever the model: `runs` (one row per finished run) and
 //! `points` (one row per registered point, with the swept parameters of the latest manifest as
-//! typed columns and whether it still asks for the point).
+//! typed columns and whether it still asks for the point); and those sweep columns by point
+//! (`sweep_batch`), which every summary table carries too.
 
 use std::sync::Arc;
 
@@ -165,14 +166,13 @@ pub fn runs_batch(rows: &[RunRow]) -> RecordBatch {
     })
 }
 
-/// The `points` table: every registered point with its swept values (the latest manifest's
-/// keys), full params, and whether the latest manifest asks for it.
-pub fn points_batch(plan: &Plan) -> RecordBatch {
+/// `point_id` and the typed sweep columns of every registered point (the latest manifest's
+/// keys): the head of the `points` table, and the columns every summary table carries after
+/// its `point_id` (`CampaignView::write_summary`).
+pub fn sweep_batch(plan: &Plan) -> RecordBatch {
     let cols = sweep_columns(plan);
     let mut fields = vec![Field::new("point_id", DataType::UInt32, false)];
     fields.extend(sweep_fields(&cols));
-    fields.push(Field::new("params", DataType::Utf8, false));
-    fields.push(Field::new("in_manifest", DataType::Boolean, false));
     let mut arrays: Vec<ArrayRef> = vec![Arc::new(
         plan.points
             .iter()
@@ -181,6 +181,23 @@ pub fn points_batch(plan: &Plan) -> RecordBatch {
     )];
     let values: Vec<&[Value]> = plan.points.iter().map(|p| p.values.as_slice()).collect();
     arrays.extend(sweep_arrays(&cols, &values));
+    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays)
+        .expect("sweep batch matches its schema")
+}
+
+/// The `points` table: every registered point with its swept values (the latest manifest's
+/// keys, [`sweep_batch`]), full params, and whether the latest manifest asks for it.
+pub fn points_batch(plan: &Plan) -> RecordBatch {
+    let head = sweep_batch(plan);
+    let mut fields: Vec<Field> = head
+        .schema()
+        .fields()
+        .iter()
+        .map(|f| f.as_ref().clone())
+        .collect();
+    fields.push(Field::new("params", DataType::Utf8, false));
+    fields.push(Field::new("in_manifest", DataType::Boolean, false));
+    let mut arrays: Vec<ArrayRef> = head.columns().to_vec();
     arrays.push(Arc::new(
         plan.points
             .iter()

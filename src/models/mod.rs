@@ -253,6 +253,20 @@ pub struct CampaignView<'a, P> {
     /// The runs finished with status done, and their replica numbers.
     pub done: &'a BTreeMap<u64, u32>,
     pub data: &'a Dataset,
+    /// The swept parameters of every point: `point_id` and the `points` table's sweep
+    /// columns (same names and types), one row per point; see [`CampaignView::write_summary`].
+    pub sweep: RecordBatch,
+}
+
+impl<P> CampaignView<'_, P> {
+    /// Write a replica summary whole (`tables/<table>/summary.parquet`): `batch`, whose rows
+    /// each name their point in a `point_id` column, with the point's sweep columns right
+    /// after `point_id` (so a summary is read without a join with `points`). Every summary
+    /// goes through here; the model names no sweep key.
+    pub fn write_summary(&self, table: &str, batch: &RecordBatch) -> Result<(), StoreError> {
+        let batch = crate::store::cols::join_after_key(batch, table, "point_id", &self.sweep)?;
+        self.data.write_whole(table, "summary.parquet", &batch)
+    }
 }
 
 /// One sweep point of a [`CampaignView`].
@@ -281,6 +295,7 @@ impl<'a> CampaignView<'a, ModelParams> {
             replicas: self.replicas,
             done: self.done,
             data: self.data,
+            sweep: self.sweep.clone(),
         }
     }
 }

@@ -205,3 +205,86 @@ pub fn opt<T: arrow_array::ArrowPrimitiveType>(
 ) -> Option<T::Native> {
     (!a.is_null(i)).then(|| a.value(i))
 }
+
+/// `batch` with the columns of `lookup` joined onto its rows by the `UInt32` column `key` (a
+/// many-to-one join: `lookup` holds one row per key), placed right after `key`, in `lookup`'s
+/// order. A row whose key `lookup` lacks gets nulls there (the joined fields are nullable). A
+/// column of `lookup` whose name `batch` already has is left out: the batch's own column
+/// stays. `table` names the batch in errors.
+pub fn join_after_key(
+    batch: &RecordBatch,
+    table: &str,
+    key: &str,
+    lookup: &RecordBatch,
+) -> Result<RecordBatch, StoreError> {
+    let keys = get_u32(batch, table, key)?;
+    let lookup_keys = get_u32(lookup, "lookup", key)?;
+    let row_of: std::collections::HashMap<u32, u32> = lookup_keys
+        .iter()
+        .enumerate()
+        .filter_map(|(i, k)| k.map(|k| (k, i as u32)))
+        .collect();
+    let rows: UInt32Array = keys
+        .iter()
+        .map(|k| k.and_then(|k| row_of.get(&k).copied()))
+        .collect();
+    let schema = batch.schema();
+    let at = schema.index_of(key).expect("get_u32 found it") + 1;
+    let mut fields: Vec<Field> = schema.fields()[..at]
+        .iter()
+        .map(|f| f.as_ref().clone())
+        .collect();
+    let mut arrays: Vec<ArrayRef> = batch.columns()[..at].to_vec();
+    let lookup_schema = lookup.schema();
+    for (f, a) in lookup_schema.fields().iter().zip(lookup.columns()) {
+        if f.name() == key || schema.column_with_name(f.name()).is_some() {
+            continue;
+        }
+        let joined = arrow_select::take::take(a.as_ref(), &rows, None)
+            .map_err(|e| StoreError::Arrow(e.to_string()))?;
+        fields.push(f.as_ref().clone().with_nullable(true));
+        arrays.push(joined);
+    }
+    fields.extend(schema.fields()[at..].iter().map(|f| f.as_ref().clone()));
+    arrays.extend(batch.columns()[at..].iter().cloned());
+    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays)
+        .map_err(|e| StoreError::Arrow(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn join_after_key_places_lookup_columns_after_the_key() {
+        let rows = [(2u32, 0.5), (0, 1.5), (2, 2.5), (7, 3.5)];
+        let batch = table(&rows, |c| {
+            vec![c.u32("point_id", |r| r.0), c.f64("x", |r| r.1)]
+        });
+        let points = [(0u32, "a", 10.0), (2, "b", 20.0)];
+        let lookup = table(&points, |c| {
+            vec![
+                c.u32("point_id", |r| r.0),
+                c.str("method", |r| r.1),
+                c.f64("x", |r| r.2),
+            ]
+        });
+        let out = join_after_key(&batch, "t", "point_id", &lookup).unwrap();
+        let names: Vec<&str> = out
+            .schema_ref()
+            .fields()
+            .iter()
+            .map(|f| f.name().as_str())
+            .collect();
+        // `x` of the batch stays; the lookup's `x` is left out.
+        assert_eq!(names, ["point_id", "method", "x"]);
+        let m = get_str(&out, "t", "method").unwrap();
+        let got: Vec<Option<&str>> = m.iter().collect();
+        assert_eq!(got, [Some("b"), Some("a"), Some("b"), None]);
+        assert_eq!(
+            get_f64(&out, "t", "x").unwrap().values(),
+            &[0.5, 1.5, 2.5, 3.5]
+        );
+        assert!(join_after_key(&lookup, "t", "run_id", &lookup).is_err());
+    }
+}

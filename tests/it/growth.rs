@@ -707,6 +707,17 @@ fn format1_campaigns_upgrade_and_continue() {
         "the old checkpoint was not resumed:\n{}",
         log_text(&log)
     );
+    // The complete campaign's summaries are the old version's, without the sweep columns
+    // (the resumed one wrote its own): `resume` on a complete campaign rewrites them, with
+    // the sweep columns, and nothing else.
+    fs::write(&log, "").unwrap();
+    let code = run_granular(&["resume", s(&complete), "--quiet"], &log, LIMIT);
+    assert_eq!(code, Some(0), "{}", log_text(&log));
+    assert_eq!(
+        read_table(&complete, "dsmc_species_summary").columns[1].0,
+        "method",
+        "the rewritten summary has the sweep column"
+    );
     assert_same_rows(
         &complete,
         &interrupted,
@@ -858,6 +869,17 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
         !log_text(&log).contains("restarting from t = 0"),
         "the old checkpoint was not resumed:\n{}",
         log_text(&log)
+    );
+    // The complete campaign's summaries are the old version's, without the sweep columns
+    // (the resumed one wrote its own): `resume` on a complete campaign rewrites them, with
+    // the sweep columns, and nothing else.
+    fs::write(&log, "").unwrap();
+    let code = run_granular(&["resume", s(&complete), "--quiet"], &log, LIMIT);
+    assert_eq!(code, Some(0), "{}", log_text(&log));
+    assert_eq!(
+        read_table(&complete, "dsmc_species_summary").columns[1].0,
+        "method",
+        "the rewritten summary has the sweep column"
     );
     assert_same_rows(
         &complete,

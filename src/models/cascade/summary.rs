@@ -81,6 +81,5 @@ pub fn write(c: &CampaignView<'_, CascadeParams>) -> Result<(), StoreError> {
             col.opt_f64("s_sem", |r| r.6),
         ]
     });
-    c.data
-        .write_whole(CASCADE_STRUCTURE_FACTOR_SUMMARY, "summary.parquet", &batch)
+    c.write_summary(CASCADE_STRUCTURE_FACTOR_SUMMARY, &batch)
 }

@@ -124,11 +124,7 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
         }
         p0 = p1;
     }
-    c.data.write_whole(
-        DSMC_SPECIES_SUMMARY,
-        "summary.parquet",
-        &species_summary(&out),
-    )
+    c.write_summary(DSMC_SPECIES_SUMMARY, &species_summary(&out))
 }
 
 type TamsdKey = (u32, u32, u64); // point, species, lag bits
@@ -189,8 +185,7 @@ fn write_tamsd_summary(c: View) -> Result<(), StoreError> {
         }
         p0 = p1;
     }
-    c.data
-        .write_whole(DSMC_TAMSD_SUMMARY, "summary.parquet", &tamsd_summary(&rows))
+    c.write_summary(DSMC_TAMSD_SUMMARY, &tamsd_summary(&rows))
 }
 
 /// Theory (27) by (point, species, lag bits), if the table exists.

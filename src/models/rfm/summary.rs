@@ -83,7 +83,7 @@ fn stats(mut v: Vec<(u64, Vec<f64>)>) -> (u32, Vec<(f64, Option<f64>)>) {
 }
 
 fn write_summary(c: View, name: &str, batch: RecordBatch) -> Result<(), StoreError> {
-    c.data.write_whole(name, "summary.parquet", &batch)
+    c.write_summary(name, &batch)
 }
 
 /// (point, t) -> temperature mean and sem over replicas.
