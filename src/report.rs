@@ -196,24 +196,10 @@ fn section_campaign(h: &mut String, c: &Campaign, info: &CampaignInfo, st: &Camp
     };
     row(h, "live shards", &live);
     for sub in &st.slurm {
-        let queue = match &sub.queue {
-            Some(q) if q.is_empty() => "nothing queued".to_string(),
-            Some(q) => q
-                .iter()
-                .map(|(k, n)| format!("{k}: {n}"))
-                .collect::<Vec<_>>()
-                .join(", "),
-            None => "squeue not available".to_string(),
-        };
         row(
             h,
             &format!("slurm submission {}", sub.number),
-            &escape(&format!(
-                "array {} job {}, compaction job {} ({queue})",
-                sub.array,
-                sub.array_job.as_deref().unwrap_or("-"),
-                sub.compact_job.as_deref().unwrap_or("-")
-            )),
+            &escape(&sub.describe()),
         );
     }
     h.push_str("</table>\n");

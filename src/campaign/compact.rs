@@ -106,7 +106,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
     for u in &units {
         for f in &u.files {
             let path = c.root.join(&f.path);
-            let table = table_of(&f.path);
+            let table = integrity::table_and_name(&f.path).0.to_string();
             parts.insert(f.path.clone(), read_part(c, &table, &path)?);
         }
     }
@@ -119,7 +119,12 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
         .map(|u| {
             u.files
                 .iter()
-                .map(|f| (table_of(&f.path), parts[&f.path].schema.clone()))
+                .map(|f| {
+                    (
+                        integrity::table_and_name(&f.path).0.to_string(),
+                        parts[&f.path].schema.clone(),
+                    )
+                })
                 .collect()
         })
         .collect();
@@ -148,7 +153,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
         let mut tables_of_bin: Vec<String> = Vec::new();
         for &u in g {
             for f in &units[u].files {
-                let t = table_of(&f.path);
+                let t = integrity::table_and_name(&f.path).0.to_string();
                 if !tables_of_bin.contains(&t) {
                     tables_of_bin.push(t);
                 }
@@ -182,7 +187,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
                 for f in units[u]
                     .files
                     .iter()
-                    .filter(|f| table_of(&f.path) == *table)
+                    .filter(|f| integrity::table_and_name(&f.path).0.to_string() == *table)
                 {
                     let path = c.root.join(&f.path);
                     batches.extend(
@@ -193,7 +198,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
                     merged_away
                         .entry(table.clone())
                         .or_default()
-                        .push(file_name(&f.path));
+                        .push(integrity::table_and_name(&f.path).1.to_string());
                 }
             }
             let name = format!("part-{shard}-{seq:08}.parquet");
@@ -299,15 +304,6 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
 
 fn gens_dir(tables: &Path) -> PathBuf {
     tables.join(layout::GEN_DIR)
-}
-
-/// `tables/<t>/<name>` -> `<t>`.
-fn table_of(rel: &str) -> String {
-    rel.split('/').nth(1).unwrap_or_default().to_string()
-}
-
-fn file_name(rel: &str) -> String {
-    rel.rsplit('/').next().unwrap_or_default().to_string()
 }
 
 fn read_part(c: &Campaign, table: &str, path: &Path) -> Result<Part, CampaignError> {

@@ -249,6 +249,12 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
     Ok(out)
 }
 
+/// `tables/<t>/<name>` (a path relative to the campaign directory) -> (`<t>`, `<name>`).
+pub fn table_and_name(rel: &str) -> (&str, &str) {
+    let mut parts = rel.splitn(3, '/').skip(1);
+    (parts.next().unwrap_or(""), parts.next().unwrap_or(""))
+}
+
 /// Committed parts are named `part-*.parquet` (and, before checksums, `compact-*.parquet`);
 /// every other file of a table is written whole and rebuilt.
 pub fn is_part_name(name: &str) -> bool {
@@ -444,8 +450,7 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
         }
     }
     for (rel, why) in &derived {
-        let mut parts = rel.split('/').skip(1);
-        let (t, n) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""));
+        let (t, n) = table_and_name(rel);
         let side = checksum::sidecar_path(root, t, n);
         if q.set_aside(rel)? {
             let _ = fs::remove_file(&side);
@@ -486,7 +491,7 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
 fn part_commit(c: &Campaign, rel: &str) -> Result<PartCommit, String> {
     let path = c.root.join(rel);
     let (info, _) = parquet_io::inspect(&path).map_err(|e| e.to_string())?;
-    let table = rel.split('/').nth(1).unwrap_or_default();
+    let table = table_and_name(rel).0;
     parquet_io::check_part(&path, &info, table, Some(&c.identity)).map_err(|e| e.to_string())?;
     let Some(json) = info.commit else {
         return Err(format!(
@@ -498,7 +503,7 @@ fn part_commit(c: &Campaign, rel: &str) -> Result<PartCommit, String> {
 
 /// Every row of a part, decoded (a damaged page is an error), and its runs if it is `runs`.
 fn read_whole(c: &Campaign, rel: &str) -> Result<Vec<CommittedRun>, String> {
-    let table = rel.split('/').nth(1).unwrap_or_default();
+    let table = table_and_name(rel).0;
     let batches = c
         .data()
         .read_file(&c.root.join(rel), table)
@@ -575,18 +580,17 @@ fn adopt_or_set_aside(
             for t in &pc.tables {
                 let rel = files
                     .iter()
-                    .find(|f| f.split('/').nth(1) == Some(t.as_str()))
+                    .find(|f| table_and_name(f).0 == t.as_str())
                     .ok_or_else(|| format!("its {t} part is missing"))?;
                 let r = read_whole(c, rel)?;
                 if t == tables::RUNS {
                     runs = r;
                 }
             }
-            if let Some(f) = files.iter().find(|f| {
-                !pc.tables
-                    .iter()
-                    .any(|t| f.split('/').nth(1) == Some(t.as_str()))
-            }) {
+            if let Some(f) = files
+                .iter()
+                .find(|f| !pc.tables.iter().any(|t| table_and_name(f).0 == t.as_str()))
+            {
                 return Err(format!("{f} is of a table its commit does not list"));
             }
             if runs.is_empty() {
@@ -603,7 +607,7 @@ fn adopt_or_set_aside(
                 for t in &pc.tables {
                     let rel = files
                         .iter()
-                        .find(|f| f.split('/').nth(1) == Some(t.as_str()))
+                        .find(|f| table_and_name(f).0 == t.as_str())
                         .expect("checked");
                     let path = c.root.join(rel);
                     let (bytes, sha256) = checksum::sum_file(&path)

@@ -227,8 +227,22 @@ pub fn write_index(root: &Path, ix: &LedgerIndex) -> Result<(), String> {
         .map_err(|e| format!("{}: {e}", p.display()))
 }
 
+/// The shard directories of `ledger/`, sorted (none if there is no ledger).
+pub fn shard_dirs(root: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = fs::read_dir(root.join("ledger")) else {
+        return Vec::new();
+    };
+    let mut tags: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.is_dir())
+        .collect();
+    tags.sort();
+    tags
+}
+
 /// Commit record files of a shard directory with their sequence numbers, sorted.
-fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
+pub fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
     let mut files: Vec<(u64, PathBuf)> = fs::read_dir(dir)
         .map_err(|e| format!("{}: {e}", dir.display()))?
         .filter_map(|e| e.ok())
@@ -315,17 +329,7 @@ fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, String> {
     if let Some(ix) = &out.index {
         out.commits.extend(ix.groups.iter().map(Group::as_commit));
     }
-    let dir = root.join("ledger");
-    let Ok(entries) = fs::read_dir(&dir) else {
-        return Ok(Some(out));
-    };
-    let mut tags: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .filter(|p| p.is_dir())
-        .collect();
-    tags.sort();
-    for tag in tags {
+    for tag in shard_dirs(root) {
         let name = tag
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())

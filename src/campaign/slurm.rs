@@ -394,6 +394,27 @@ pub struct SubmissionStatus {
     pub queue: Option<std::collections::BTreeMap<String, u64>>,
 }
 
+impl SubmissionStatus {
+    /// "array A job J, compaction job C (STATE: n, ...)", as `status` and `report` show it.
+    pub fn describe(&self) -> String {
+        let queue = match &self.queue {
+            Some(q) if q.is_empty() => "nothing queued".to_string(),
+            Some(q) => q
+                .iter()
+                .map(|(k, n)| format!("{k}: {n}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            None => "squeue not available".to_string(),
+        };
+        format!(
+            "array {} job {}, compaction job {} ({queue})",
+            self.array,
+            self.array_job.as_deref().unwrap_or("-"),
+            self.compact_job.as_deref().unwrap_or("-")
+        )
+    }
+}
+
 /// The submissions of a campaign with their jobs' current SLURM states.
 pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, String> {
     let Some(rec) = read_record(root)? else {

@@ -169,27 +169,9 @@ impl AnyFile {
 /// Every commit record of the ledger (format 1 or 2), with its path.
 fn old_records(root: &Path) -> Result<Vec<(PathBuf, AnyCommit)>, CampaignError> {
     let mut out = Vec::new();
-    let Ok(tags) = fs::read_dir(root.join("ledger")) else {
-        return Ok(out);
-    };
-    let mut tags: Vec<PathBuf> = tags
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .filter(|p| p.is_dir())
-        .collect();
-    tags.sort();
-    for t in tags {
-        let mut files: Vec<PathBuf> = fs::read_dir(&t)
-            .map_err(|e| io_err(&t, e))?
-            .filter_map(|e| e.ok())
-            .map(|e| e.path())
-            .filter(|p| {
-                let n = p.file_name().unwrap().to_string_lossy();
-                n.starts_with("commit-") && n.ends_with(".json")
-            })
-            .collect();
-        files.sort();
-        for f in files {
+    for t in ledger::shard_dirs(root) {
+        let files = ledger::commit_files(&t).map_err(CampaignError::Io)?;
+        for (_, f) in files {
             let text = fs::read(&f).map_err(|e| io_err(&f, e))?;
             let c: AnyCommit = serde_json::from_slice(&text).map_err(|e| {
                 CampaignError::Refused(format!(

@@ -71,23 +71,7 @@ fn write_text(out: &mut impl Write, s: &CampaignStatus) -> std::io::Result<()> {
         writeln!(out, "  live shard {l}")?;
     }
     for sub in &s.slurm {
-        let queue = match &sub.queue {
-            Some(q) if q.is_empty() => "nothing queued".to_string(),
-            Some(q) => q
-                .iter()
-                .map(|(k, n)| format!("{k}: {n}"))
-                .collect::<Vec<_>>()
-                .join(", "),
-            None => "squeue not available".to_string(),
-        };
-        writeln!(
-            out,
-            "  slurm submission {}: array {} job {}, compaction job {} ({queue})",
-            sub.number,
-            sub.array,
-            sub.array_job.as_deref().unwrap_or("-"),
-            sub.compact_job.as_deref().unwrap_or("-")
-        )?;
+        writeln!(out, "  slurm submission {}: {}", sub.number, sub.describe())?;
     }
     for p in &s.points {
         write!(

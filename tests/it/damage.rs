@@ -44,6 +44,27 @@ fn manifest() -> Value {
     })
 }
 
+/// `granular run m --out out EXTRA --flush-every 0` (every run its own commit), which must
+/// succeed.
+fn run_committing_each(m: &Path, out: &Path, extra: &[&str], log: &Path) {
+    let mut args = vec![
+        "run",
+        s(m),
+        "--out",
+        s(out),
+        "--flush-every",
+        "0",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    assert_eq!(
+        run_granular(&args, log, LIMIT),
+        Some(0),
+        "{}",
+        log_text(log)
+    );
+}
+
 fn copy_dir(from: &Path, to: &Path) {
     let ok = Command::new("cp")
         .args(["-a", s(from), s(to)])
@@ -234,24 +255,7 @@ fn damage_is_named_refused_or_healed_to_identical_tables() {
     let m = dir.path().join("m.json");
     write_json(&m, &manifest());
     let base = dir.path().join("base");
-    assert_eq!(
-        run_granular(
-            &[
-                "run",
-                s(&m),
-                "--out",
-                s(&base),
-                "--flush-every",
-                "0",
-                "--quiet"
-            ],
-            &log,
-            LIMIT
-        ),
-        Some(0),
-        "{}",
-        log_text(&log)
-    );
+    run_committing_each(&m, &base, &[], &log);
     let want: Tables = read_tables(&base);
     let compacted = dir.path().join("compacted");
     copy_dir(&base, &compacted);
@@ -261,26 +265,7 @@ fn damage_is_named_refused_or_healed_to_identical_tables() {
 
     // Half-finished: shard 1 of 2 done (runs 0 and 2), committed one by one.
     let half = dir.path().join("half");
-    assert_eq!(
-        run_granular(
-            &[
-                "run",
-                s(&m),
-                "--out",
-                s(&half),
-                "--shard",
-                "1/2",
-                "--flush-every",
-                "0",
-                "--quiet"
-            ],
-            &log,
-            LIMIT
-        ),
-        Some(0),
-        "{}",
-        log_text(&log)
-    );
+    run_committing_each(&m, &half, &["--shard", "1/2"], &log);
 
     let mut table = Vec::new();
     for (k, d) in drills().into_iter().enumerate() {
@@ -443,24 +428,7 @@ fn a_compaction_killed_at_any_moment_is_finished_by_the_next_command() {
     man["replicas"] = json!(6);
     write_json(&m, &man);
     let base = dir.path().join("base");
-    assert_eq!(
-        run_granular(
-            &[
-                "run",
-                s(&m),
-                "--out",
-                s(&base),
-                "--flush-every",
-                "0",
-                "--quiet"
-            ],
-            &log,
-            LIMIT
-        ),
-        Some(0),
-        "{}",
-        log_text(&log)
-    );
+    run_committing_each(&m, &base, &[], &log);
     let want = read_tables(&base);
     // How long a compaction takes here.
     let probe = dir.path().join("probe");

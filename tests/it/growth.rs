@@ -639,6 +639,94 @@ fn assert_same_rows(a: &Path, b: &Path, what: &str) {
     }
 }
 
+/// Unpack the committed fixture `tests/fixtures/<name>` into `dir`: its `complete/` and
+/// `interrupted/` campaigns and their manifest `m.json`.
+fn unpack_fixture(name: &str, dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    let tar = util::repo_root().join("tests/fixtures").join(name);
+    let ok = Command::new("tar")
+        .args(["xzf", s(&tar), "-C", s(dir)])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    (
+        dir.join("complete"),
+        dir.join("interrupted"),
+        dir.join("m.json"),
+    )
+}
+
+/// Each of `refused` exits 3 naming `granular upgrade d` and changes nothing; then `granular
+/// upgrade d` succeeds, its log holds every one of `logged`, `campaign.json` is of format 3,
+/// and a second upgrade changes nothing.
+fn refused_then_upgraded(d: &Path, refused: &[Vec<&str>], logged: &[&str], log: &Path) {
+    let before = util::snapshot(d);
+    for cmd in refused {
+        fs::write(log, "").unwrap();
+        assert_eq!(run_granular(cmd, log, LIMIT), Some(3), "{}", log_text(log));
+        assert!(
+            log_text(log).contains(&format!("granular upgrade {}", d.display())),
+            "{}",
+            log_text(log)
+        );
+    }
+    assert!(
+        util::snapshot(d) == before,
+        "a refused command changed {}",
+        d.display()
+    );
+    assert_eq!(
+        run_granular(&["upgrade", s(d)], log, LIMIT),
+        Some(0),
+        "{}",
+        log_text(log)
+    );
+    let upgrade_log = fs::read_to_string(d.join("upgrade.log")).unwrap();
+    assert!(
+        logged.iter().all(|l| upgrade_log.contains(l)),
+        "{upgrade_log}"
+    );
+    let info: Value = serde_json::from_slice(&fs::read(d.join("campaign.json")).unwrap()).unwrap();
+    assert_eq!(info["format_version"], json!(3));
+    let again = util::snapshot(d);
+    assert_eq!(run_granular(&["upgrade", s(d)], log, LIMIT), Some(0));
+    assert!(util::snapshot(d) == again, "a second upgrade changed files");
+}
+
+/// The interrupted fixture campaign resumed from its old checkpoint; the complete one resumed
+/// too (it rewrites the old version's summaries, now with the sweep columns, and nothing
+/// else); then both hold the same rows.
+fn resume_fixtures(complete: &Path, interrupted: &Path, log: &Path, what: &str) {
+    fs::write(log, "").unwrap();
+    let code = run_granular(&["resume", s(interrupted), "--quiet"], log, LIMIT);
+    assert_eq!(code, Some(0), "{}", log_text(log));
+    assert!(
+        !log_text(log).contains("restarting from t = 0"),
+        "the old checkpoint was not resumed:\n{}",
+        log_text(log)
+    );
+    fs::write(log, "").unwrap();
+    let code = run_granular(&["resume", s(complete), "--quiet"], log, LIMIT);
+    assert_eq!(code, Some(0), "{}", log_text(log));
+    assert_eq!(
+        read_table(complete, "dsmc_species_summary").columns[1].0,
+        "method",
+        "the rewritten summary has the sweep column"
+    );
+    assert_same_rows(complete, interrupted, what);
+}
+
+/// The fixtures' manifest grown by a third replica and t_end 3000 -> 3500 (the old end kept
+/// as an output), written to `dir/grown.json`.
+fn grown_fixture_manifest(m: &Path, dir: &Path) -> PathBuf {
+    let mut grown: Value = serde_json::from_slice(&fs::read(m).unwrap()).unwrap();
+    grown["replicas"] = json!(3);
+    grown["params"]["t_end"] = json!(3500.0);
+    grown["params"]["output_times"]["list"] = json!([1.0, 10.0, 100.0, 3000.0]);
+    let mg = dir.join("grown.json");
+    util::write_json(&mg, &grown);
+    mg
+}
+
 /// The committed fixture `tests/fixtures/format1.tar.gz` (made by granular b2aa8d6, the
 /// version before this format; see tests/fixtures/README.md): a complete campaign and the same
 /// campaign interrupted (2 runs done, 1 checkpointed, 1 pending). The new binary refuses them
@@ -650,88 +738,25 @@ fn format1_campaigns_upgrade_and_continue() {
     let _g = heavy();
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("log");
-    let tar = util::repo_root().join("tests/fixtures/format1.tar.gz");
-    let ok = Command::new("tar")
-        .args(["xzf", s(&tar), "-C", s(dir.path())])
-        .status()
-        .unwrap();
-    assert!(ok.success());
-    let (complete, interrupted) = (dir.path().join("complete"), dir.path().join("interrupted"));
-    let m = dir.path().join("m.json");
+    let (complete, interrupted, m) = unpack_fixture("format1.tar.gz", dir.path());
     for d in [&complete, &interrupted] {
-        let before = util::snapshot(d);
-        for cmd in [
+        let refused = [
             vec!["resume", s(d), "--quiet"],
             vec!["run", s(&m), "--out", s(d), "--quiet"],
-        ] {
-            fs::write(&log, "").unwrap();
-            assert_eq!(
-                run_granular(&cmd, &log, LIMIT),
-                Some(3),
-                "{}",
-                log_text(&log)
-            );
-            assert!(
-                log_text(&log).contains(&format!("granular upgrade {}", d.display())),
-                "{}",
-                log_text(&log)
-            );
-        }
-        assert!(
-            util::snapshot(d) == before,
-            "a refused command changed {}",
-            d.display()
-        );
-        assert_eq!(
-            run_granular(&["upgrade", s(d)], &log, LIMIT),
-            Some(0),
-            "{}",
-            log_text(&log)
-        );
-        let upgrade_log = fs::read_to_string(d.join("upgrade.log")).unwrap();
-        assert!(upgrade_log.contains("format 1 -> 2"), "{upgrade_log}");
-        let info: Value =
-            serde_json::from_slice(&fs::read(d.join("campaign.json")).unwrap()).unwrap();
+        ];
         // Format 1 is upgraded through 2 to today's 3 (checksums).
-        assert_eq!(info["format_version"], json!(3));
-        // Upgrading again does nothing.
-        let again = util::snapshot(d);
-        assert_eq!(run_granular(&["upgrade", s(d)], &log, LIMIT), Some(0));
-        assert!(util::snapshot(d) == again);
+        refused_then_upgraded(d, &refused, &["format 1 -> 2"], &log);
     }
-    fs::write(&log, "").unwrap();
-    let code = run_granular(&["resume", s(&interrupted), "--quiet"], &log, LIMIT);
-    assert_eq!(code, Some(0), "{}", log_text(&log));
-    assert!(
-        !log_text(&log).contains("restarting from t = 0"),
-        "the old checkpoint was not resumed:\n{}",
-        log_text(&log)
-    );
-    // The complete campaign's summaries are the old version's, without the sweep columns
-    // (the resumed one wrote its own): `resume` on a complete campaign rewrites them, with
-    // the sweep columns, and nothing else.
-    fs::write(&log, "").unwrap();
-    let code = run_granular(&["resume", s(&complete), "--quiet"], &log, LIMIT);
-    assert_eq!(code, Some(0), "{}", log_text(&log));
-    assert_eq!(
-        read_table(&complete, "dsmc_species_summary").columns[1].0,
-        "method",
-        "the rewritten summary has the sweep column"
-    );
-    assert_same_rows(
+    resume_fixtures(
         &complete,
         &interrupted,
+        &log,
         "the resumed campaign vs the complete one",
     );
     // Growth of the upgraded campaign: a third replica and a longer t_end (the old end kept as
     // an output). Format 1 kept no final states, so the longer runs run again from t = 0 (with
     // a warning), with their format-1 seeds: up to the old end their rows are the old runs'.
-    let mut grown: Value = serde_json::from_slice(&fs::read(&m).unwrap()).unwrap();
-    grown["replicas"] = json!(3);
-    grown["params"]["t_end"] = json!(3500.0);
-    grown["params"]["output_times"]["list"] = json!([1.0, 10.0, 100.0, 3000.0]);
-    let mg = dir.path().join("grown.json");
-    util::write_json(&mg, &grown);
+    let mg = grown_fixture_manifest(&m, dir.path());
     fs::write(&log, "").unwrap();
     run_ok(&mg, &complete, &log);
     assert!(
@@ -798,59 +823,17 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
     let _g = heavy();
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("log");
-    let tar = util::repo_root().join("tests/fixtures/format2.tar.gz");
-    let ok = Command::new("tar")
-        .args(["xzf", s(&tar), "-C", s(dir.path())])
-        .status()
-        .unwrap();
-    assert!(ok.success());
-    let (complete, interrupted) = (dir.path().join("complete"), dir.path().join("interrupted"));
-    let m = dir.path().join("m.json");
+    let (complete, interrupted, m) = unpack_fixture("format2.tar.gz", dir.path());
     for d in [&complete, &interrupted] {
-        let before = util::snapshot(d);
-        for cmd in [
+        let refused = [
             vec!["resume", s(d), "--quiet"],
             vec!["verify", s(d)],
             vec!["run", s(&m), "--out", s(d), "--quiet"],
-        ] {
-            fs::write(&log, "").unwrap();
-            assert_eq!(
-                run_granular(&cmd, &log, LIMIT),
-                Some(3),
-                "{}",
-                log_text(&log)
-            );
-            assert!(
-                log_text(&log).contains(&format!("granular upgrade {}", d.display())),
-                "{}",
-                log_text(&log)
-            );
-        }
-        assert!(
-            util::snapshot(d) == before,
-            "a refused command changed {}",
-            d.display()
-        );
-        assert_eq!(
-            run_granular(&["upgrade", s(d)], &log, LIMIT),
-            Some(0),
-            "{}",
-            log_text(&log)
-        );
-        let upgrade_log = fs::read_to_string(d.join("upgrade.log")).unwrap();
-        assert!(
-            upgrade_log.contains("format 2 -> 3") && upgrade_log.contains("SHA-256"),
-            "{upgrade_log}"
-        );
-        let info: Value =
-            serde_json::from_slice(&fs::read(d.join("campaign.json")).unwrap()).unwrap();
-        assert_eq!(info["format_version"], json!(3));
+        ];
+        refused_then_upgraded(d, &refused, &["format 2 -> 3", "SHA-256"], &log);
         let (code, out) = run_capture(&["verify", s(d)], &log);
         assert_eq!(code, Some(0), "{out}\n{}", log_text(&log));
         assert!(out.contains("SHA-256 checked"), "{out}");
-        let again = util::snapshot(d);
-        assert_eq!(run_granular(&["upgrade", s(d)], &log, LIMIT), Some(0));
-        assert!(util::snapshot(d) == again, "a second upgrade changed files");
     }
     // The compacted index of format 2 became one group with every compacted file.
     let index: Value =
@@ -862,38 +845,15 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
         2,
         "{index}"
     );
-    fs::write(&log, "").unwrap();
-    let code = run_granular(&["resume", s(&interrupted), "--quiet"], &log, LIMIT);
-    assert_eq!(code, Some(0), "{}", log_text(&log));
-    assert!(
-        !log_text(&log).contains("restarting from t = 0"),
-        "the old checkpoint was not resumed:\n{}",
-        log_text(&log)
-    );
-    // The complete campaign's summaries are the old version's, without the sweep columns
-    // (the resumed one wrote its own): `resume` on a complete campaign rewrites them, with
-    // the sweep columns, and nothing else.
-    fs::write(&log, "").unwrap();
-    let code = run_granular(&["resume", s(&complete), "--quiet"], &log, LIMIT);
-    assert_eq!(code, Some(0), "{}", log_text(&log));
-    assert_eq!(
-        read_table(&complete, "dsmc_species_summary").columns[1].0,
-        "method",
-        "the rewritten summary has the sweep column"
-    );
-    assert_same_rows(
+    resume_fixtures(
         &complete,
         &interrupted,
+        &log,
         "the resumed upgraded campaign vs the complete one",
     );
     // Growth: a third replica and a longer t_end; format 2 kept final states, so the longer
     // runs continue them (no rerun warning).
-    let mut grown: Value = serde_json::from_slice(&fs::read(&m).unwrap()).unwrap();
-    grown["replicas"] = json!(3);
-    grown["params"]["t_end"] = json!(3500.0);
-    grown["params"]["output_times"]["list"] = json!([1.0, 10.0, 100.0, 3000.0]);
-    let mg = dir.path().join("grown.json");
-    util::write_json(&mg, &grown);
+    let mg = grown_fixture_manifest(&m, dir.path());
     fs::write(&log, "").unwrap();
     run_ok(&mg, &complete, &log);
     assert!(
