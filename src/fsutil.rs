@@ -42,8 +42,14 @@ pub fn host_tag() -> String {
         .collect()
 }
 
-/// fsync a directory so that a rename inside it is durable.
+/// fsync a directory so that a rename inside it is durable. The empty path (the parent of a
+/// bare file name such as `report.html`) is the current directory.
 pub fn sync_dir(dir: &Path) -> std::io::Result<()> {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
     File::open(dir)?.sync_all()
 }
 

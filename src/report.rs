@@ -344,7 +344,30 @@ fn section_figures(
     notes: &mut Vec<String>,
 ) -> usize {
     h.push_str("<h2 id=\"figures\">Figures</h2>\n");
-    let figs = match c.figures() {
+    // Until every run the latest manifest asks for has finished, the campaign's summary
+    // tables are missing (or of fewer runs): the figures are of the runs finished so far,
+    // their summaries computed for this page only.
+    let unfinished = st.current.done + st.current.failed < st.current_runs;
+    let figs = if unfinished && st.counts.done > 0 {
+        let finished = crate::campaign::ledger::read_ledger(&c.root)
+            .map(|l| crate::campaign::ledger::finished_runs(&l.commits));
+        match finished {
+            Ok(f) => {
+                let _ = writeln!(
+                    h,
+                    "<p class=\"note\" id=\"figures-so-far\">Figures of the {} runs finished so far \
+                     (of {}): their summaries are computed for this page; the campaign's summary \
+                     tables are written when every run has finished.</p>",
+                    st.counts.done, st.runs
+                );
+                c.figures_so_far(&f).map_err(|e| e.to_string())
+            }
+            Err(e) => Err(e),
+        }
+    } else {
+        c.figures().map_err(|e| e.to_string())
+    };
+    let figs = match figs {
         Ok(Some(f)) => f,
         Ok(None) => {
             let _ = writeln!(
@@ -362,7 +385,6 @@ fn section_figures(
         }
     };
     if figs.is_empty() {
-        let unfinished = st.current.done + st.current.failed < st.current_runs;
         h.push_str(if unfinished {
             "<p>No figures yet: the summary tables are written when every run of the latest manifest has finished.</p>\n"
         } else {

@@ -437,6 +437,40 @@ impl Campaign {
         self.plan.model.figures(&self.view(&data, &none))
     }
 
+    /// The model's figures of the runs finished so far (`finished`, from the ledger): the
+    /// model's summaries are computed into a scratch directory under the system's temporary
+    /// directory (removed afterwards) and the figures drawn from them, so nothing is written
+    /// into the campaign. What the report shows of a campaign not finished yet.
+    pub fn figures_so_far(
+        &self,
+        finished: &BTreeMap<u64, RunStatus>,
+    ) -> Result<Option<Vec<(String, crate::plot::Figure)>>, crate::store::parquet_io::StoreError>
+    {
+        struct Scratch(PathBuf);
+        impl Drop for Scratch {
+            fn drop(&mut self) {
+                let _ = std::fs::remove_dir_all(&self.0);
+            }
+        }
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0);
+        let scratch = Scratch(
+            std::env::temp_dir().join(format!("granular-summaries-{}-{nanos}", std::process::id())),
+        );
+        let done: BTreeMap<u64, u32> = finished
+            .iter()
+            .filter(|(_, s)| **s == RunStatus::Done)
+            .map(|(r, _)| (*r, self.plan.replica_of(*r)))
+            .collect();
+        let data = self.data().overlay(&scratch.0);
+        let view = self.view(&data, &done);
+        self.plan.model.write_summaries(&view)?;
+        let none = BTreeMap::new();
+        self.plan.model.figures(&self.view(&data, &none))
+    }
+
     pub fn checkpoint_dir(&self) -> PathBuf {
         self.root.join("checkpoints")
     }

@@ -18,6 +18,8 @@ pub struct Dataset {
     root: PathBuf,
     identity: String,
     manifest: String,
+    /// Where tables written whole go instead of `root` (see [`Dataset::overlay`]).
+    scratch: Option<PathBuf>,
 }
 
 impl Dataset {
@@ -28,7 +30,25 @@ impl Dataset {
             root: root.to_path_buf(),
             identity: identity.to_string(),
             manifest: manifest.to_string(),
+            scratch: None,
         }
+    }
+
+    /// The same tables, but every table written whole goes to `scratch/tables` and is read
+    /// back from there; the other tables are read from the campaign. What a report of an
+    /// unfinished campaign uses to compute summaries of the runs finished so far without
+    /// writing into the campaign directory.
+    pub fn overlay(&self, scratch: &Path) -> Self {
+        Dataset {
+            scratch: Some(scratch.to_path_buf()),
+            ..self.clone()
+        }
+    }
+
+    /// The directory tables are written to: the scratch directory of an overlay, else the
+    /// campaign's.
+    fn write_root(&self) -> &Path {
+        self.scratch.as_deref().unwrap_or(&self.root)
     }
 
     pub fn root(&self) -> &Path {
@@ -44,16 +64,24 @@ impl Dataset {
         }
     }
 
-    /// `root/tables/<table>` (through the table's generation link).
+    /// `root/tables/<table>` (through the table's generation link); for an overlay, the
+    /// scratch directory's when the table was written there.
     pub fn dir(&self, table: &str) -> PathBuf {
+        if let Some(s) = &self.scratch {
+            let d = s.join("tables").join(table);
+            if std::fs::symlink_metadata(&d).is_ok() {
+                return d;
+            }
+        }
         self.root.join("tables").join(table)
     }
 
-    /// Create the table's directory if it does not exist.
+    /// Create the table's directory (where it is written) if it does not exist.
     pub fn ensure(&self, table: &str) -> Result<(), StoreError> {
-        layout::ensure_table_dir(&self.root, table)
+        let root = self.write_root();
+        layout::ensure_table_dir(root, table)
             .map(|_| ())
-            .map_err(|e| StoreError::io(&self.dir(table), e))
+            .map_err(|e| StoreError::io(&root.join("tables").join(table), e))
     }
 
     /// The table's visible Parquet files, sorted (hidden and pending files excluded; a
@@ -108,11 +136,12 @@ impl Dataset {
         name: &str,
         batch: &RecordBatch,
     ) -> Result<(), StoreError> {
-        let path = self.dir(table).join(name);
         self.ensure(table)?;
+        let path = self.write_root().join("tables").join(table).join(name);
         let tmp = fsutil::temp_path(&path);
         let w = parquet_io::write_file(&tmp, batch, table, self.stamp())?;
-        if let Err(e) = checksum::write_sidecar(&self.root, table, name, w.bytes, &w.sha256) {
+        if let Err(e) = checksum::write_sidecar(self.write_root(), table, name, w.bytes, &w.sha256)
+        {
             let _ = std::fs::remove_file(&tmp);
             return Err(StoreError::io(&path, e));
         }

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
-use super::util::{heavy, log_text, run_capture, run_granular, write_json};
+use super::util::{heavy, log_text, run_capture, run_granular, snapshot, write_json};
 
 const LIMIT: Duration = Duration::from_secs(300);
 
@@ -136,6 +136,17 @@ fn report_of_a_finished_campaign() {
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
     assert!(std::fs::read_to_string(&other).unwrap().contains("<svg"));
 
+    // A bare file name: written in the working directory (its parent is the empty path).
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_granular"))
+        .args(["report", s(&c), "--out", "bare.html"])
+        .current_dir(tmp.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    assert!(std::fs::read_to_string(tmp.path().join("bare.html"))
+        .unwrap()
+        .contains("<svg"));
+
     // Not a campaign directory: refused (3); an --out that cannot be written: I/O (4).
     let (code, _) = run_report(tmp.path(), None, &log);
     assert_eq!(code, Some(3), "log:\n{}", log_text(&log));
@@ -159,15 +170,31 @@ fn report_of_a_half_finished_campaign() {
         LIMIT,
     );
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
-    let (code, _) = run_report(&c, None, &log);
+    // Reported from outside: the campaign directory is not touched (the summaries of the
+    // runs finished so far are computed in a scratch directory).
+    let before = snapshot(&c);
+    let page = tmp.path().join("half.html");
+    let (code, _) = run_report(&c, Some(&page), &log);
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
-    let html = std::fs::read_to_string(c.join("report.html")).expect("report.html written");
-    // Shard 1 of 2 ran the even run ids: 2 done, 2 pending; no summaries yet, so no figures.
+    assert_eq!(snapshot(&c), before, "report wrote into the campaign");
+    let html = std::fs::read_to_string(&page).expect("report written");
+    // Shard 1 of 2 ran the even run ids: 2 done, 2 pending; no summary tables yet, so the
+    // figures are of the 2 runs finished so far (one per point).
     assert!(
         html.contains("4: 2 done, 0 failed, 0 running, 2 pending"),
         "progress missing"
     );
-    assert!(html.contains("No figures yet"));
-    assert_eq!(html.matches("<svg").count(), 0);
+    assert!(html.contains("Figures of the 2 runs finished so far (of 4)"));
+    let half_figures = html.matches("<svg").count();
+    assert!(half_figures >= 2, "{half_figures} figures");
     assert_eq!(external_references(&html), Vec::<String>::new());
+
+    // Finished: the figures come from the campaign's summary tables, as many as before.
+    let code = run_granular(&["resume", s(&c), "--quiet"], &log, LIMIT);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    let (code, _) = run_report(&c, Some(&page), &log);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(!html.contains("finished so far"));
+    assert_eq!(html.matches("<svg").count(), half_figures);
 }
