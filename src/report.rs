@@ -8,6 +8,7 @@
 //! the SVG text is escaped by the renderer. This module builds the text; the command line
 //! writes it.
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use crate::campaign::history::{self, Accepted};
@@ -53,10 +54,21 @@ pub fn escape(s: &str) -> String {
     out
 }
 
-/// The failed runs of the `runs` table, by run id.
-pub fn failures(c: &Campaign) -> Result<Vec<Failure>, String> {
+/// What the report takes from the `runs` table: the failed runs, and per point the wall time
+/// of its finished runs.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunsRead {
+    /// The failed runs, by run id.
+    pub failures: Vec<Failure>,
+    /// point -> (sum of `wall_seconds` of its done runs, their number).
+    pub wall: BTreeMap<u32, (f64, u64)>,
+}
+
+/// Read the `runs` table (each run counted once, as the ledger's first commit has it).
+pub fn read_runs(c: &Campaign) -> Result<RunsRead, String> {
     let data = c.data();
-    let mut out = Vec::new();
+    let mut out = RunsRead::default();
+    let mut seen = std::collections::BTreeSet::new();
     for f in data.files(RUNS).map_err(|e| e.to_string())? {
         let name = f.display().to_string();
         for b in data.read_file(&f, RUNS).map_err(|e| e.to_string())? {
@@ -68,27 +80,86 @@ pub fn failures(c: &Campaign) -> Result<Vec<Failure>, String> {
                     get_str(&b, &name, "status")?,
                     get_str(&b, &name, "reason")?,
                     get_f64(&b, &name, "t_failed")?,
+                    get_f64(&b, &name, "wall_seconds")?,
                 ))
             })();
-            let (run, point, seed, st, reason, t) = cols.map_err(|e| e.to_string())?;
+            let (run, point, seed, st, reason, t, wall) = cols.map_err(|e| e.to_string())?;
             for i in 0..b.num_rows() {
-                if st.value(i) != "failed" {
+                if !seen.insert(run.value(i)) {
                     continue;
                 }
-                out.push(Failure {
-                    run_id: run.value(i),
-                    point_id: point.value(i),
-                    seed: seed.value(i),
-                    reason: (!arrow_array::Array::is_null(reason, i))
-                        .then(|| reason.value(i).to_string()),
-                    t_failed: opt(t, i),
-                });
+                match st.value(i) {
+                    "failed" => out.failures.push(Failure {
+                        run_id: run.value(i),
+                        point_id: point.value(i),
+                        seed: seed.value(i),
+                        reason: (!arrow_array::Array::is_null(reason, i))
+                            .then(|| reason.value(i).to_string()),
+                        t_failed: opt(t, i),
+                    }),
+                    "done" => {
+                        let e = out.wall.entry(point.value(i)).or_default();
+                        e.0 += wall.value(i);
+                        e.1 += 1;
+                    }
+                    _ => {}
+                }
             }
         }
     }
-    out.sort_by_key(|f| f.run_id);
-    out.dedup_by_key(|f| f.run_id);
+    out.failures.sort_by_key(|f| f.run_id);
     Ok(out)
+}
+
+/// A duration for people: `3 ms`, `0.8 s`, `42 s`, `3 min 20 s`, `5 h 12 min`, `2 d 4 h`.
+pub fn duration_text(secs: f64) -> String {
+    if !secs.is_finite() || secs < 0.0 {
+        return "?".into();
+    }
+    let s = secs.round() as u64;
+    if secs < 0.1 {
+        format!("{:.0} ms", secs * 1e3)
+    } else if secs < 10.0 {
+        format!("{secs:.1} s")
+    } else if s < 60 {
+        format!("{s} s")
+    } else if s < 3600 {
+        format!("{} min {} s", s / 60, s % 60)
+    } else if s < 86_400 {
+        format!("{} h {} min", s / 3600, (s % 3600) / 60)
+    } else {
+        format!("{} d {} h", s / 86_400, (s % 86_400) / 3600)
+    }
+}
+
+/// The estimated time left of the unfinished runs of the points (pending and running, each
+/// at its point's mean wall time of finished runs, or the campaign's mean where the point has
+/// none): (per point, total CPU seconds), `None` where nothing has finished to estimate from.
+pub fn time_left(
+    points: &[status::PointStatus],
+    wall: &BTreeMap<u32, (f64, u64)>,
+) -> (BTreeMap<u32, f64>, Option<f64>) {
+    let (sum, n) = wall
+        .values()
+        .fold((0.0, 0u64), |(s, k), (ws, wn)| (s + ws, k + wn));
+    let overall = (n > 0).then(|| sum / n as f64);
+    let mut per = BTreeMap::new();
+    let mut total = 0.0;
+    for p in points {
+        let left = p.counts.pending + p.counts.running;
+        if left == 0 {
+            continue;
+        }
+        let mean = match wall.get(&p.point_id) {
+            Some((s, k)) if *k > 0 => Some(s / *k as f64),
+            _ => overall,
+        };
+        if let Some(m) = mean {
+            per.insert(p.point_id, m * left as f64);
+            total += m * left as f64;
+        }
+    }
+    (per, overall.map(|_| total))
 }
 
 const CSS: &str = "body{font-family:sans-serif;margin:2em auto;max-width:1000px;color:#222;line-height:1.4}
@@ -119,9 +190,14 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
          <title>granular report: {name}</title>\n<style>\n{CSS}</style>\n</head>\n<body>\n\
          <h1>Campaign {name}</h1>\n"
     );
+    let runs = read_runs(c);
+    if let Err(e) = &runs {
+        notes.push(format!("the runs table could not be read: {e}"));
+    }
     section_campaign(&mut h, c, &info, &st);
-    section_progress(&mut h, &st);
-    section_failures(&mut h, c, &mut notes);
+    section_progress(&mut h, &st, runs.as_ref().ok());
+    section_shards(&mut h, c, &st, &mut notes);
+    section_failures(&mut h, c, &runs);
     let figures = section_figures(&mut h, c, &st, &mut notes);
     section_manifest(&mut h, &info);
     if !notes.is_empty() {
@@ -185,23 +261,6 @@ fn section_campaign(h: &mut String, c: &Campaign, info: &CampaignInfo, st: &Camp
             &counts_text(st.current_runs, &st.current),
         );
     }
-    let live = if st.live_shards.is_empty() {
-        "none".to_string()
-    } else {
-        st.live_shards
-            .iter()
-            .map(|l| escape(l))
-            .collect::<Vec<_>>()
-            .join("<br>")
-    };
-    row(h, "live shards", &live);
-    for sub in &st.slurm {
-        row(
-            h,
-            &format!("slurm submission {}", sub.number),
-            &escape(&sub.describe()),
-        );
-    }
     h.push_str("</table>\n");
     if !st.damage.is_empty() {
         h.push_str(
@@ -251,24 +310,74 @@ fn bar(k: &Counts) -> String {
     s
 }
 
-fn section_progress(h: &mut String, st: &CampaignStatus) {
+/// Rows of the per-point progress table at most (a larger campaign's points beyond are
+/// counted in the campaign line and `granular status --json`).
+pub const MAX_POINT_ROWS: usize = 2000;
+
+fn section_progress(h: &mut String, st: &CampaignStatus, runs: Option<&RunsRead>) {
     h.push_str("<h2 id=\"progress\">Progress</h2>\n");
-    let _ = writeln!(h, "<p>{}</p>", counts_text(st.runs, &st.counts));
+    let _ = writeln!(
+        h,
+        "<p id=\"progress-counts\">{}</p>",
+        counts_text(st.runs, &st.counts)
+    );
+    let empty = BTreeMap::new();
+    let wall = runs.map(|r| &r.wall).unwrap_or(&empty);
+    let (left, total_left) = time_left(&st.points, wall);
+    let spent: f64 = wall.values().map(|(s, _)| s).sum();
+    let mut times = format!(
+        "The finished runs took {} of run time (wall time of each run, summed).",
+        duration_text(spent)
+    );
+    match total_left {
+        Some(t) if t > 0.0 => {
+            let _ = write!(
+                times,
+                " Estimated time left: {} of CPU time for the {} unfinished runs (each at its \
+                 point's mean wall time of finished runs)",
+                duration_text(t),
+                st.counts.pending + st.counts.running
+            );
+            if st.counts.running > 0 {
+                let _ = write!(
+                    times,
+                    ", about {} of wall time at the {} runs running now",
+                    duration_text(t / st.counts.running as f64),
+                    st.counts.running
+                );
+            }
+            times.push('.');
+        }
+        Some(_) => {}
+        None => times.push_str(" No time left can be estimated before a run has finished."),
+    }
+    let _ = writeln!(h, "<p id=\"progress-times\">{}</p>", escape(&times));
     h.push_str(
         "<p class=\"key\"><span class=\"done\"></span>done<span class=\"failed\"></span>failed\
          <span class=\"running\"></span>running<span class=\"pending\"></span>pending\
          <span class=\"dropped\"></span>dropped (no longer asked for)</p>\n",
     );
     h.push_str(
-        "<table>\n<tr><th>point</th><th>parameters</th><th></th><th>done</th><th>failed</th>\
-         <th>running</th><th>pending</th><th>dropped</th><th>checkpointed</th><th>in latest manifest</th></tr>\n",
+        "<table id=\"progress-table\">\n<tr><th>point</th><th>parameters</th><th></th><th>done</th><th>failed</th>\
+         <th>running</th><th>pending</th><th>dropped</th><th>checkpointed</th><th>wall time</th>\
+         <th>time left (est.)</th><th>in latest manifest</th></tr>\n",
     );
-    for p in &st.points {
+    for p in st.points.iter().take(MAX_POINT_ROWS) {
         let k = &p.counts;
+        let spent = wall
+            .get(&p.point_id)
+            .map(|(s, _)| duration_text(*s))
+            .unwrap_or_default();
+        let left = left
+            .get(&p.point_id)
+            .map(|t| duration_text(*t))
+            .unwrap_or_default();
         let _ = writeln!(
             h,
-            "<tr><td class=\"n\">{}</td><td>{}</td><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
-             <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td></tr>",
+            "<tr data-point=\"{}\"><td class=\"n\">{}</td><td>{}</td><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+             <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+             <td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td></tr>",
+            p.point_id,
             p.point_id,
             escape(&p.point),
             bar(k),
@@ -278,24 +387,117 @@ fn section_progress(h: &mut String, st: &CampaignStatus) {
             k.pending,
             k.dropped,
             k.checkpointed,
+            spent,
+            left,
             if p.in_manifest { "yes" } else { "no" }
         );
     }
     h.push_str("</table>\n");
+    if st.points.len() > MAX_POINT_ROWS {
+        let _ = writeln!(
+            h,
+            "<p class=\"note\">The first {MAX_POINT_ROWS} of {} points; every point's counts: \
+             <code>granular status --json</code>.</p>",
+            st.points.len()
+        );
+    }
 }
 
-fn section_failures(h: &mut String, c: &Campaign, notes: &mut Vec<String>) {
-    h.push_str("<h2 id=\"failures\">Failed runs</h2>\n");
-    let fails = match failures(c) {
-        Ok(f) => f,
+/// Where the campaign ran: its shards (from the ledger's commits: commits, runs committed;
+/// live shards from their locks) and SLURM submissions.
+fn section_shards(h: &mut String, c: &Campaign, st: &CampaignStatus, notes: &mut Vec<String>) {
+    h.push_str("<h2 id=\"shards\">Where it ran</h2>\n");
+    let ledger = match crate::campaign::ledger::read_ledger(&c.root) {
+        Ok(l) => l,
         Err(e) => {
-            let n = format!("the runs table could not be read: {e}");
+            let n = format!("the ledger could not be read: {e}");
             let _ = writeln!(h, "<p class=\"note\">{}</p>", escape(&n));
             notes.push(n);
             return;
         }
     };
-    write_failures(h, &fails, &|p| {
+    // shard -> (commits, done, failed)
+    let mut shards: BTreeMap<String, (u64, u64, u64)> = BTreeMap::new();
+    for cm in &ledger.commits {
+        let e = shards.entry(cm.shard.clone()).or_default();
+        e.0 += 1;
+        for r in &cm.runs {
+            if r.status == crate::campaign::ledger::RunStatus::Done {
+                e.1 += 1;
+            } else {
+                e.2 += 1;
+            }
+        }
+    }
+    if shards.is_empty() && st.live_shards.is_empty() {
+        h.push_str("<p>No run committed yet.</p>\n");
+    } else {
+        h.push_str(
+            "<table id=\"shards-table\">\n<tr><th>shard</th><th>commits</th><th>runs done</th><th>runs failed</th><th>now</th></tr>\n",
+        );
+        for (tag, (commits, done, failed)) in &shards {
+            let live: Vec<&String> = st
+                .live_shards
+                .iter()
+                .filter(|l| l.split(' ').next() == Some(tag.as_str()))
+                .collect();
+            let now = if live.is_empty() {
+                "stopped".to_string()
+            } else {
+                live.iter()
+                    .map(|l| format!("running: {}", escape(l)))
+                    .collect::<Vec<_>>()
+                    .join("<br>")
+            };
+            let _ = writeln!(
+                h,
+                "<tr><td>{}</td><td class=\"n\">{commits}</td><td class=\"n\">{done}</td><td class=\"n\">{failed}</td><td>{now}</td></tr>",
+                escape(tag)
+            );
+        }
+        for l in &st.live_shards {
+            let tag = l.split(' ').next().unwrap_or("");
+            if !shards.contains_key(tag) {
+                let _ = writeln!(
+                    h,
+                    "<tr><td>{}</td><td class=\"n\">0</td><td class=\"n\">0</td><td class=\"n\">0</td><td>running: {}</td></tr>",
+                    escape(tag),
+                    escape(l)
+                );
+            }
+        }
+        h.push_str("</table>\n");
+    }
+    if st.slurm.is_empty() {
+        h.push_str("<p>No SLURM submission (<code>granular submit --slurm</code>).</p>\n");
+    } else {
+        h.push_str("<table id=\"slurm-table\">\n<tr><th>SLURM submission</th><th>jobs</th></tr>\n");
+        for sub in &st.slurm {
+            let _ = writeln!(
+                h,
+                "<tr><td class=\"n\">{}</td><td>{}</td></tr>",
+                sub.number,
+                escape(&sub.describe())
+            );
+        }
+        h.push_str("</table>\n");
+    }
+}
+
+fn section_failures(h: &mut String, c: &Campaign, runs: &Result<RunsRead, String>) {
+    h.push_str("<h2 id=\"failures\">Failed runs</h2>\n");
+    let fails = match runs {
+        Ok(r) => &r.failures,
+        Err(e) => {
+            let _ = writeln!(
+                h,
+                "<p class=\"note\">the runs table could not be read: {}</p>",
+                escape(e)
+            );
+            return;
+        }
+    };
+    write_failures(h, fails, &|p| {
         if (p as usize) < c.plan.points.len() {
             c.plan.label(p)
         } else {
@@ -482,6 +684,42 @@ mod tests {
             assert!(h.contains(want), "{want} missing: {h}");
         }
         assert!(!h.contains("<script>"));
+    }
+
+    #[test]
+    fn durations_read_as_people_write_them() {
+        assert_eq!(duration_text(0.0031), "3 ms");
+        assert_eq!(duration_text(0.84), "0.8 s");
+        assert_eq!(duration_text(42.4), "42 s");
+        assert_eq!(duration_text(200.0), "3 min 20 s");
+        assert_eq!(duration_text(5.0 * 3600.0 + 12.0 * 60.0), "5 h 12 min");
+        assert_eq!(duration_text(2.0 * 86_400.0 + 4.0 * 3600.0), "2 d 4 h");
+        assert_eq!(duration_text(f64::NAN), "?");
+    }
+
+    #[test]
+    fn time_left_from_each_points_mean() {
+        let point = |id: u32, pending: u64, running: u64| status::PointStatus {
+            point_id: id,
+            point: String::new(),
+            in_manifest: true,
+            counts: Counts {
+                pending,
+                running,
+                ..Counts::default()
+            },
+        };
+        // Point 0: 2 done in 10 s (5 s each), 3 left -> 15 s; point 1: none done, 1 left ->
+        // the campaign's mean, (10 + 20) / 4 = 7.5 s; point 2: 2 done in 20 s, nothing left.
+        let wall = BTreeMap::from([(0, (10.0, 2)), (2, (20.0, 2))]);
+        let pts = [point(0, 2, 1), point(1, 1, 0), point(2, 0, 0)];
+        let (per, total) = time_left(&pts, &wall);
+        assert_eq!(per, BTreeMap::from([(0, 15.0), (1, 7.5)]));
+        assert_eq!(total, Some(22.5));
+        // Nothing finished: no estimate.
+        let (per, total) = time_left(&pts, &BTreeMap::new());
+        assert!(per.is_empty());
+        assert_eq!(total, None);
     }
 
     #[test]

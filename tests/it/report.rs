@@ -185,6 +185,16 @@ fn report_of_a_half_finished_campaign() {
         "progress missing"
     );
     assert!(html.contains("Figures of the 2 runs finished so far (of 4)"));
+    // Where it ran: shard 1 of 2, one commit of its 2 runs, stopped; a time estimate for the
+    // 2 pending runs from the finished runs' wall times.
+    assert!(
+        html.contains("<tr><td>s1of2</td><td class=\"n\">1</td><td class=\"n\">2</td><td class=\"n\">0</td><td>stopped</td></tr>"),
+        "shards table missing"
+    );
+    assert!(
+        html.contains("for the 2 unfinished runs"),
+        "no time estimate"
+    );
     let half_figures = html.matches("<svg").count();
     assert!(half_figures >= 2, "{half_figures} figures");
     assert_eq!(external_references(&html), Vec::<String>::new());
