@@ -174,6 +174,8 @@ pre{background:#f6f6f6;border:1px solid #ddd;padding:.6em;overflow:auto;max-heig
 .note{color:#8a4b00}.damage{color:#b00}
 figure{margin:1em 0}figure svg{max-width:100%;height:auto;border:1px solid #eee}
 figcaption{font-size:90%;color:#555}
+.headline{font-size:110%;background:#f3f6fa;border:1px solid #d0d8e4;padding:.4em .7em}
+nav{margin:.5em 0 1em}nav a{color:#1f5fa8}
 ";
 
 /// The report of `c`.
@@ -194,12 +196,14 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
     if let Err(e) = &runs {
         notes.push(format!("the runs table could not be read: {e}"));
     }
+    let head_at = h.len();
     section_campaign(&mut h, c, &info, &st);
     section_progress(&mut h, &st, runs.as_ref().ok());
     section_shards(&mut h, c, &st, &mut notes);
     section_failures(&mut h, c, &runs);
     let figures = section_figures(&mut h, c, &st, &mut notes);
     section_manifest(&mut h, &info);
+    h.insert_str(head_at, &headline(c, &st, figures, !notes.is_empty()));
     if !notes.is_empty() {
         h.push_str("<h2 id=\"notes\">Notes</h2>\n<ul>\n");
         for n in &notes {
@@ -218,6 +222,45 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
         figures,
         notes,
     })
+}
+
+/// What a reader sees first: the state of the campaign in one line, and the sections.
+fn headline(c: &Campaign, st: &CampaignStatus, figures: usize, notes: bool) -> String {
+    let k = &st.current;
+    let state = if !st.damage.is_empty() {
+        "<span class=\"damage\">damaged: granular resume heals it</span>"
+    } else if k.done + k.failed >= st.current_runs {
+        "complete"
+    } else if k.running > 0 || !st.live_shards.is_empty() {
+        "running"
+    } else {
+        "stopped, unfinished"
+    };
+    let mut s = format!(
+        "<p class=\"headline\" id=\"headline\">{} · {} point{} · <b>{} of {} runs done</b> · {} failed · \
+         {} running · {} pending · {state}</p>\n",
+        escape(c.plan.model.as_str()),
+        st.points.iter().filter(|p| p.in_manifest).count(),
+        if st.points.iter().filter(|p| p.in_manifest).count() == 1 { "" } else { "s" },
+        k.done,
+        st.current_runs,
+        k.failed,
+        k.running,
+        k.pending,
+    );
+    s.push_str(
+        "<nav><a href=\"#campaign\">Campaign</a> · <a href=\"#progress\">Progress</a> · \
+         <a href=\"#shards\">Where it ran</a> · <a href=\"#failures\">Failed runs</a> · ",
+    );
+    let _ = write!(
+        s,
+        "<a href=\"#figures\">Figures ({figures})</a> · <a href=\"#manifest\">Manifest</a>"
+    );
+    if notes {
+        s.push_str(" · <a href=\"#notes\">Notes</a>");
+    }
+    s.push_str("</nav>\n");
+    s
 }
 
 fn row(h: &mut String, key: &str, value: &str) {

@@ -124,6 +124,14 @@ fn report_of_a_finished_campaign() {
     assert!(html.contains("constant=0.9"), "point label missing");
     assert!(html.contains("4: 4 done, 0 failed, 0 running, 0 pending"));
     assert!(html.contains("Failed runs"));
+    // The headline: the state first, and the sections.
+    assert!(
+        html.contains(
+            "dsmc · 2 points · <b>4 of 4 runs done</b> · 0 failed · 0 running · 0 pending · complete"
+        ),
+        "headline missing"
+    );
+    assert!(html.contains(&format!("<a href=\"#figures\">Figures ({svg_files})</a>")));
 
     // Self-contained, escaped.
     assert_eq!(external_references(&html), Vec::<String>::new());
@@ -185,6 +193,9 @@ fn report_of_a_half_finished_campaign() {
         "progress missing"
     );
     assert!(html.contains("Figures of the 2 runs finished so far (of 4)"));
+    assert!(html.contains(
+        "<b>2 of 4 runs done</b> · 0 failed · 0 running · 2 pending · stopped, unfinished"
+    ));
     // Where it ran: shard 1 of 2, one commit of its 2 runs, stopped; a time estimate for the
     // 2 pending runs from the finished runs' wall times.
     assert!(
