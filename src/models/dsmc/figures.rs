@@ -193,6 +193,7 @@ fn time_figures(
             log_y: true,
             legend_low: false,
             references_from: None,
+            heatmap: None,
         },
     ));
     if !msd.is_empty() {
@@ -207,6 +208,7 @@ fn time_figures(
                 log_y: true,
                 legend_low: true,
                 references_from: None,
+                heatmap: None,
             },
         ));
     }
@@ -245,6 +247,7 @@ fn vs_k_figures(
             log_y: true,
             legend_low: true,
             references_from: None,
+            heatmap: None,
         },
     ));
     if let Some(r1) = at_last(&1).and_then(|r| r.3) {
@@ -267,6 +270,7 @@ fn vs_k_figures(
                 log_y: true,
                 legend_low: false,
                 references_from: None,
+                heatmap: None,
             },
         ));
     }
