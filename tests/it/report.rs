@@ -229,7 +229,8 @@ fn report_maps_deviations_and_plots_across_the_sweep() {
         html.contains("\ninitial_temperature=2\n"),
         "series of the other key"
     );
-    assert!(html.contains("\ninitial_temperature=1 theory\n"));
+    assert!(html.contains("\ninitial_temperature=1\n"));
+    assert!(html.contains("\ntheory\n"));
     assert!(html.contains("\nrestitution_constant=0.9\n"));
 
     let figs = tmp.path().join("figs");
