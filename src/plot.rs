@@ -530,7 +530,7 @@ fn draw_heatmap<DB: DrawingBackend>(
     ))?;
     // The colour bar: the scale from +limit (top) to -limit, ticks at the ends, halves and 0.
     let bx = x0 + nc * cw + 20;
-    let bh = (nr * ch).clamp(120, 360);
+    let bh = (nr * ch).clamp(180, 360); // room for the rotated scale label
     let steps = 48;
     for k in 0..steps {
         let v = h.limit * (1.0 - 2.0 * (k as f64 + 0.5) / steps as f64);
