@@ -1,8 +1,10 @@
 //! The one figure renderer (PNG and SVG, plotters, the embedded DejaVu Sans font): figures of
 //! series of (x, y, error) points, drawn as markers with error bars or as lines, on any
 //! combination of linear and logarithmic axes (a log axis is drawn as log10 of the data on a
-//! linear chart, its ticks labelled with the original values). What a figure shows is the
-//! business of its model (`models::<model>::figures`) or of the analysis.
+//! linear chart, its ticks labelled with the original values); or a heatmap: a grid of values
+//! (rows x columns, labelled) as coloured cells on a diverging scale clamped at +-`limit`, with
+//! a colour bar. What a figure shows is the business of its model (`models::<model>::figures`)
+//! or of the analysis.
 
 use std::path::{Path, PathBuf};
 
@@ -34,6 +36,26 @@ pub struct Figure {
     /// Series from this index on are reference lines (theory, guides) with their own colours
     /// rather than fits drawn in the colour of the data before them.
     pub references_from: Option<usize>,
+    /// Drawn as this heatmap (`series` and the axis types unused): `x_label` describes the
+    /// columns, `y_label` the rows.
+    pub heatmap: Option<Heatmap>,
+}
+
+/// A grid of values drawn as coloured cells: blue (negative) - white (0) - red (positive),
+/// clamped at +-`limit`; missing values grey. Row labels on the left (top row first), column
+/// labels below (thinned when they would overlap), a colour bar on the right, and the values
+/// written in the cells when the grid is small enough to read them. The figure grows taller
+/// with the rows (at least `HEAT_MIN_ROW` pixels each) and wider with the columns.
+#[derive(Clone, Debug, Default)]
+pub struct Heatmap {
+    pub rows: Vec<String>,
+    pub cols: Vec<String>,
+    /// `values[row][col]`.
+    pub values: Vec<Vec<Option<f64>>>,
+    /// The colour scale runs over [-limit, limit]; values beyond take the end colours.
+    pub limit: f64,
+    /// What the colour bar measures.
+    pub scale_label: String,
 }
 
 impl Figure {
@@ -48,6 +70,24 @@ impl Figure {
             log_y: false,
             legend_low: false,
             references_from: None,
+            heatmap: None,
+        }
+    }
+
+    /// A heatmap figure: `x_label` describes the columns, `y_label` the rows.
+    pub fn heatmap(title: String, x_label: &str, y_label: &str, heatmap: Heatmap) -> Self {
+        Figure {
+            heatmap: Some(heatmap),
+            ..Figure::new(title, x_label, y_label, Vec::new())
+        }
+    }
+
+    /// The figure's size in pixels: `SIZE`, or for a heatmap as tall and wide as its grid
+    /// needs.
+    pub fn size(&self) -> (u32, u32) {
+        match &self.heatmap {
+            Some(h) => heat_layout(&self.title, h).size,
+            None => SIZE,
         }
     }
 }
@@ -171,6 +211,9 @@ fn log_tick(v: f64) -> String {
 }
 
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), String> {
+    if let Some(h) = &fig.heatmap {
+        return draw_heatmap(root, fig, h).map_err(|x| x.to_string());
+    }
     let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
     let p = fig;
     root.fill(&WHITE).map_err(e)?;
@@ -202,8 +245,14 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
     for q in &all {
         x0 = x0.min(q.0);
         x1 = x1.max(q.0);
-        y0 = y0.min(q.1);
-        y1 = y1.max(q.1);
+        // Error bars inside the plot (on a log axis at most a decade beyond their point).
+        let (lo, hi) = if p.log_y {
+            (q.2.max(q.1 - 1.0), q.3.min(q.1 + 1.0))
+        } else {
+            (q.2, q.3)
+        };
+        y0 = y0.min(q.1).min(lo);
+        y1 = y1.max(q.1).max(hi);
     }
     let pad = |a: f64, b: f64| {
         let w = if b > a {
@@ -283,6 +332,245 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
     Ok(())
 }
 
+/// The diverging colour of `v` on a scale clamped at +-`limit`: white at 0, blue (33, 102,
+/// 172) at -limit and below, red (178, 24, 43) at +limit and above (ColorBrewer RdBu ends).
+pub fn diverging(v: f64, limit: f64) -> (u8, u8, u8) {
+    let s = if limit > 0.0 && v.is_finite() {
+        (v / limit).clamp(-1.0, 1.0)
+    } else if v.is_nan() {
+        0.0
+    } else {
+        v.signum()
+    };
+    let end = if s < 0.0 {
+        (33, 102, 172)
+    } else {
+        (178, 24, 43)
+    };
+    let a = s.abs();
+    let mix = |w: u8| (255.0 + (w as f64 - 255.0) * a).round() as u8;
+    (mix(end.0), mix(end.1), mix(end.2))
+}
+
+/// Colour of a missing value.
+const HEAT_MISSING: RGBColor = RGBColor(215, 215, 215);
+/// Smallest and largest cell height, in pixels.
+const HEAT_MIN_ROW: u32 = 10;
+const HEAT_MAX_ROW: u32 = 40;
+/// Smallest cell width, in pixels (a wider grid makes a wider figure).
+const HEAT_MIN_COL: u32 = 14;
+/// Longest row label drawn, in characters (longer ones end with `...`).
+const HEAT_ROW_CHARS: usize = 64;
+/// Values are written in the cells only for grids of at most this many cells whose cells are
+/// large enough to hold them.
+const HEAT_MAX_CELL_LABELS: usize = 600;
+/// Pixels above the grid (title), below it (column labels and their description), and to
+/// its right (colour bar, its ticks and label).
+const HEAT_TOP: u32 = 50;
+const HEAT_BOTTOM: u32 = 70;
+const HEAT_RIGHT: u32 = 130;
+
+/// Where a heatmap's parts go.
+struct HeatLayout {
+    size: (u32, u32),
+    /// Left edge of the grid (after the row description and labels).
+    left: u32,
+    cell: (u32, u32),
+}
+
+/// An upper bound of the width of `chars` characters at the 12- and 13-pixel fonts (DejaVu
+/// Sans: about 6 pixels a character).
+fn text_px(chars: usize) -> u32 {
+    (chars as u32) * 7
+}
+
+fn heat_layout(title: &str, h: &Heatmap) -> HeatLayout {
+    let (rows, cols) = (h.rows.len().max(1) as u32, h.cols.len().max(1) as u32);
+    let label = h
+        .rows
+        .iter()
+        .map(|r| r.chars().count().min(HEAT_ROW_CHARS))
+        .max()
+        .unwrap_or(0);
+    let left = 40 + text_px(label);
+    let avail = SIZE.0.saturating_sub(left + HEAT_RIGHT);
+    let cw = (avail / cols).max(HEAT_MIN_COL).min(160);
+    let ch =
+        (SIZE.1.saturating_sub(HEAT_TOP + HEAT_BOTTOM) / rows).clamp(HEAT_MIN_ROW, HEAT_MAX_ROW);
+    // Wide enough for the title (18-pixel font).
+    let title_px = (title.chars().count() as u32 * 10 + 40).min(SIZE.0);
+    let width = (left + cw * cols + HEAT_RIGHT)
+        .max(title_px)
+        .max(SIZE.0 / 2);
+    let height = (HEAT_TOP + ch * rows + HEAT_BOTTOM).max(300);
+    HeatLayout {
+        size: (width, height),
+        left,
+        cell: (cw, ch),
+    }
+}
+
+fn shorten(s: &str, max: usize) -> String {
+    if s.chars().count() > max {
+        let t: String = s.chars().take(max.saturating_sub(3)).collect();
+        format!("{t}...")
+    } else {
+        s.to_string()
+    }
+}
+
+/// A value as written in a cell: signed, one decimal (no decimals from 100 on).
+fn cell_text(v: f64) -> String {
+    if v.abs() >= 99.95 {
+        format!("{v:+.0}")
+    } else {
+        format!("{v:+.1}")
+    }
+}
+
+fn draw_heatmap<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    fig: &Figure,
+    h: &Heatmap,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    use plotters::style::text_anchor::{HPos, Pos, VPos};
+    let lay = heat_layout(&fig.title, h);
+    let (w, _) = lay.size;
+    let (cw, ch) = (lay.cell.0 as i32, lay.cell.1 as i32);
+    let (x0, y0) = (lay.left as i32, HEAT_TOP as i32);
+    let (nr, nc) = (h.rows.len() as i32, h.cols.len() as i32);
+    root.fill(&WHITE)?;
+    let at = |hp, vp| Pos::new(hp, vp);
+    root.draw(&Text::new(
+        fig.title.clone(),
+        (w as i32 / 2, 12),
+        ("sans-serif", 18)
+            .into_font()
+            .color(&BLACK)
+            .pos(at(HPos::Center, VPos::Top)),
+    ))?;
+    // The cells, and their values when they fit.
+    let cells = (nr * nc) as usize;
+    let write_values = cells <= HEAT_MAX_CELL_LABELS && cw >= 34 && ch >= 14;
+    let value_font = ("sans-serif", 11).into_font();
+    for (i, row) in h.values.iter().enumerate().take(nr as usize) {
+        for (j, v) in row.iter().enumerate().take(nc as usize) {
+            let (cx, cy) = (x0 + j as i32 * cw, y0 + i as i32 * ch);
+            let colour = match v {
+                Some(v) => {
+                    let (r, g, b) = diverging(*v, h.limit);
+                    RGBColor(r, g, b)
+                }
+                None => HEAT_MISSING,
+            };
+            root.draw(&Rectangle::new(
+                [(cx, cy), (cx + cw - 1, cy + ch - 1)],
+                colour.filled(),
+            ))?;
+            if let (true, Some(v)) = (write_values, v) {
+                let dark = h.limit > 0.0 && v.abs() / h.limit > 0.6;
+                root.draw(&Text::new(
+                    cell_text(*v),
+                    (cx + cw / 2, cy + ch / 2),
+                    value_font
+                        .clone()
+                        .color(if dark { &WHITE } else { &BLACK })
+                        .pos(at(HPos::Center, VPos::Center)),
+                ))?;
+            }
+        }
+    }
+    // Row labels (smaller in small rows), right-aligned against the grid.
+    let row_font = ("sans-serif", (ch - 1).clamp(8, 13) as u32).into_font();
+    for (i, label) in h.rows.iter().enumerate() {
+        root.draw(&Text::new(
+            shorten(label, HEAT_ROW_CHARS),
+            (x0 - 6, y0 + i as i32 * ch + ch / 2),
+            row_font
+                .clone()
+                .color(&BLACK)
+                .pos(at(HPos::Right, VPos::Center)),
+        ))?;
+    }
+    // Column labels below the grid, every `step`-th one when they would overlap.
+    let col_font = ("sans-serif", 12).into_font();
+    let widest = h
+        .cols
+        .iter()
+        .map(|c| text_px(c.chars().count()) as i32 + 6)
+        .max()
+        .unwrap_or(1);
+    let step = ((widest + cw - 1) / cw).max(1) as usize;
+    let y1 = y0 + nr * ch;
+    for (j, label) in h.cols.iter().enumerate() {
+        if j % step != 0 {
+            continue;
+        }
+        root.draw(&Text::new(
+            label.clone(),
+            (x0 + j as i32 * cw + cw / 2, y1 + 6),
+            col_font
+                .clone()
+                .color(&BLACK)
+                .pos(at(HPos::Center, VPos::Top)),
+        ))?;
+    }
+    let desc = ("sans-serif", 16).into_font().color(&BLACK);
+    root.draw(&Text::new(
+        fig.x_label.clone(),
+        (x0 + nc * cw / 2, y1 + 32),
+        desc.clone().pos(at(HPos::Center, VPos::Top)),
+    ))?;
+    root.draw(&Text::new(
+        fig.y_label.clone(),
+        (14, y0 + nr * ch / 2),
+        desc.clone()
+            .transform(FontTransform::Rotate270)
+            .pos(at(HPos::Center, VPos::Center)),
+    ))?;
+    // The colour bar: the scale from +limit (top) to -limit, ticks at the ends, halves and 0.
+    let bx = x0 + nc * cw + 20;
+    let bh = (nr * ch).clamp(180, 360); // room for the rotated scale label
+    let steps = 48;
+    for k in 0..steps {
+        let v = h.limit * (1.0 - 2.0 * (k as f64 + 0.5) / steps as f64);
+        let (r, g, b) = diverging(v, h.limit);
+        let (ya, yb) = (y0 + k * bh / steps, y0 + (k + 1) * bh / steps);
+        root.draw(&Rectangle::new(
+            [(bx, ya), (bx + 16, yb)],
+            RGBColor(r, g, b).filled(),
+        ))?;
+    }
+    root.draw(&Rectangle::new([(bx, y0), (bx + 16, y0 + bh)], BLACK))?;
+    let tick_font = ("sans-serif", 12).into_font().color(&BLACK);
+    for (f, prefix) in [
+        (1.0, ">= "),
+        (0.5, ""),
+        (0.0, ""),
+        (-0.5, ""),
+        (-1.0, "<= "),
+    ] {
+        let y = y0 + ((1.0 - f) / 2.0 * bh as f64).round() as i32;
+        root.draw(&PathElement::new(vec![(bx + 16, y), (bx + 20, y)], BLACK))?;
+        root.draw(&Text::new(
+            format!("{prefix}{}", tick(f * h.limit)),
+            (bx + 23, y),
+            tick_font.clone().pos(at(HPos::Left, VPos::Center)),
+        ))?;
+    }
+    root.draw(&Text::new(
+        h.scale_label.clone(),
+        (bx + 80, y0 + bh / 2),
+        ("sans-serif", 13)
+            .into_font()
+            .color(&BLACK)
+            .transform(FontTransform::Rotate270)
+            .pos(at(HPos::Center, VPos::Center)),
+    ))?;
+    root.present()?;
+    Ok(())
+}
+
 /// The legend in its own column beside the plot area: one row per series (a line or a
 /// marker in the series' colour, then its label), from the top, or from the bottom for
 /// `low` (growing curves); rows that do not fit are counted in a last "+N more" row.
@@ -334,7 +622,7 @@ fn draw_legend<DB: DrawingBackend>(
     Ok(())
 }
 
-/// The size of every figure, in pixels.
+/// The size of every figure but a heatmap, in pixels.
 const SIZE: (u32, u32) = (900, 650);
 
 fn register_font() {
@@ -347,7 +635,7 @@ pub fn svg_string(fig: &Figure) -> Result<String, String> {
     register_font();
     let mut out = String::new();
     draw(
-        SVGBackend::with_string(&mut out, SIZE).into_drawing_area(),
+        SVGBackend::with_string(&mut out, fig.size()).into_drawing_area(),
         fig,
     )?;
     Ok(out)
@@ -365,8 +653,9 @@ pub fn render(
     for (name, p) in figs {
         let png = dir.join(format!("{name}.png"));
         let svg = dir.join(format!("{name}.svg"));
-        let r = draw(BitMapBackend::new(&png, SIZE).into_drawing_area(), p)
-            .and_then(|_| draw(SVGBackend::new(&svg, SIZE).into_drawing_area(), p));
+        let size = p.size();
+        let r = draw(BitMapBackend::new(&png, size).into_drawing_area(), p)
+            .and_then(|_| draw(SVGBackend::new(&svg, size).into_drawing_area(), p));
         match r {
             Ok(()) => {
                 out.push(png);
@@ -424,5 +713,91 @@ mod tests {
         assert!(svg.contains("k=11 &lt;b&gt;"));
         assert!(!svg.contains("<b>"));
         assert!(!svg.contains("href"));
+    }
+
+    fn grid(rows: usize, cols: usize) -> Figure {
+        Figure::heatmap(
+            "deviation".into(),
+            "species",
+            "point",
+            Heatmap {
+                rows: (0..rows).map(|i| format!("row <{i}>")).collect(),
+                cols: (0..cols).map(|j| format!("c{j}")).collect(),
+                values: (0..rows)
+                    .map(|i| {
+                        (0..cols)
+                            .map(|j| (j != 1 || i != 0).then(|| (i * cols + j) as f64 - 2.2))
+                            .collect()
+                    })
+                    .collect(),
+                limit: 5.0,
+                scale_label: "sigma".into(),
+            },
+        )
+    }
+
+    /// The diverging scale: white at 0, the end colours at and beyond +-limit, symmetric.
+    #[test]
+    fn diverging_scale_clamps_at_the_limit() {
+        assert_eq!(diverging(0.0, 5.0), (255, 255, 255));
+        assert_eq!(diverging(5.0, 5.0), (178, 24, 43));
+        assert_eq!(diverging(50.0, 5.0), (178, 24, 43));
+        assert_eq!(diverging(f64::INFINITY, 5.0), (178, 24, 43));
+        assert_eq!(diverging(-5.0, 5.0), (33, 102, 172));
+        assert_eq!(diverging(-1e9, 5.0), (33, 102, 172));
+        let (half, less) = (diverging(2.5, 5.0), diverging(1.0, 5.0));
+        assert!(half.1 < less.1 && less.1 < 255, "{half:?} {less:?}");
+        assert_ne!(diverging(4.9, 5.0), diverging(5.0, 5.0));
+    }
+
+    /// A heatmap's SVG: one rect per cell (a 2 x 3 grid draws 5 more than a 1 x 1 one), the
+    /// values written in the cells (a missing one not), labels escaped, both backends.
+    #[test]
+    fn heatmap_renders_cells_labels_and_colour_bar() {
+        let small = svg_string(&grid(1, 1)).unwrap();
+        let svg = svg_string(&grid(2, 3)).unwrap();
+        assert_eq!(
+            svg.matches("<rect").count(),
+            small.matches("<rect").count() + 5
+        );
+        for v in ["-2.2", "+2.8", "+0.8"] {
+            assert!(svg.contains(&format!(">\n{v}\n")), "{v} missing");
+        }
+        assert!(!svg.contains("-1.2"), "the missing cell has a value");
+        assert!(svg.contains("row &lt;1&gt;"));
+        assert!(svg.contains(">= 5") || svg.contains("&gt;= 5"));
+        assert!(svg.contains("<= -5") || svg.contains("&lt;= -5"));
+        // At a limit of 1, the cells 1.8 and 2.8 take the red end, -2.2 the blue one.
+        let mut clamped = grid(2, 3);
+        clamped.heatmap.as_mut().unwrap().limit = 1.0;
+        let svg = svg_string(&clamped).unwrap().to_ascii_uppercase();
+        assert_eq!(svg.matches("FILL=\"#B2182B\"").count(), 2);
+        assert_eq!(svg.matches("FILL=\"#2166AC\"").count(), 1);
+        let dir = tempfile::tempdir().unwrap();
+        let (files, failed) = render(&[("map".into(), grid(3, 4))], dir.path()).unwrap();
+        assert!(failed.is_empty(), "{failed:?}");
+        assert_eq!(files.len(), 2);
+    }
+
+    /// Many rows: a tall figure (rows at least HEAT_MIN_ROW pixels), no values written in
+    /// the cells, drawn in bounded time.
+    #[test]
+    fn large_heatmap_is_tall_and_unlabelled() {
+        let fig = grid(300, 12);
+        let (w, h) = fig.size();
+        assert!(h >= 300 * HEAT_MIN_ROW, "{h}");
+        assert!(w >= SIZE.0 / 2);
+        let t = std::time::Instant::now();
+        let svg = svg_string(&fig).unwrap();
+        assert!(t.elapsed().as_secs_f64() < 10.0);
+        assert!(svg.contains("row &lt;299&gt;"));
+        assert!(
+            !svg.contains("+3597"),
+            "cell values written in a large grid"
+        );
+        assert_eq!(
+            grid(2, 3).size().1,
+            300.max(HEAT_TOP + 2 * HEAT_MAX_ROW + HEAT_BOTTOM)
+        );
     }
 }

@@ -219,3 +219,77 @@ fn report_of_a_half_finished_campaign() {
     assert!(!html.contains("finished so far"));
     assert_eq!(html.matches("<svg").count(), half_figures);
 }
+
+/// A DSMC sweep of two numeric keys (2 x 2 points, 2 replicas, well under a second): the
+/// report opens its figures with the deviation maps (points x species, at the last output
+/// time) and the figures across each sweep key (one series per value of the other key, the
+/// theory as a line), under the ids `granular plot` uses as file names (PNG and SVG).
+#[test]
+fn report_maps_deviations_and_plots_across_the_sweep() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let (m, c, log) = (
+        tmp.path().join("m.json"),
+        tmp.path().join("c"),
+        tmp.path().join("log"),
+    );
+    let mut manifest = manifest();
+    manifest["params"]["initial_temperature"] = json!(1.0);
+    manifest["sweep"] = json!({
+        "restitution.constant": [0.7, 0.9],
+        "initial_temperature": [1.0, 2.0]
+    });
+    write_json(&m, &manifest);
+    let code = run_granular(&["run", s(&m), "--out", s(&c), "--quiet"], &log, LIMIT);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    let (code, _) = run_report(&c, None, &log);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    let html = std::fs::read_to_string(c.join("report.html")).expect("report.html written");
+
+    let ids = [
+        "deviation-temperature",
+        "deviation-msd",
+        "sweep-restitution_constant-temperature-k1",
+        "sweep-restitution_constant-msd-k1",
+        "sweep-initial_temperature-temperature-k1",
+        "sweep-initial_temperature-msd-k1",
+    ];
+    for id in ids {
+        assert!(
+            html.contains(&format!("<figure id=\"fig-{id}\">")),
+            "figure {id} missing"
+        );
+    }
+    // Before the per-point figures; the map's rows are the points, its caption says when.
+    let first_point = html
+        .find("fig-point-0000-temperature")
+        .expect("point figures");
+    assert!(html.find("fig-deviation-temperature").unwrap() < first_point);
+    assert!(html.contains("at the last output time, in sems"));
+    for p in 0..4 {
+        assert!(
+            html.contains(&format!("\n{p}: ")),
+            "map row of point {p} missing"
+        );
+    }
+    // Series named by the other key's values (sweep columns), each with its theory line.
+    assert!(
+        html.contains("\ninitial_temperature=2\n"),
+        "series of the other key"
+    );
+    assert!(html.contains("\ninitial_temperature=1\n"));
+    assert!(html.contains("\ntheory\n"));
+    assert!(html.contains("\nrestitution_constant=0.9\n"));
+
+    let figs = tmp.path().join("figs");
+    let code = run_granular(&["plot", s(&c), "--out", s(&figs)], &log, LIMIT);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    for id in ids {
+        for ext in ["png", "svg"] {
+            assert!(
+                figs.join(format!("{id}.{ext}")).is_file(),
+                "{id}.{ext} missing"
+            );
+        }
+    }
+}

@@ -1,7 +1,9 @@
 //! The standard figures of a DSMC campaign, from its summary and theory tables: per point,
 //! T_k(t) and <R_k^2(t)> on log-log axes (ensemble mean with standard-error bars, theory lines
 //! where a `dsmc_theory` table exists), and for polydisperse points T_k and <R_k^2>/<R_1^2>
-//! against k at the last time (the paper's Figs 4 and 6).
+//! against k at the last time (the paper's Figs 4 and 6); before them the campaign-wide
+//! figures of [`super::overview`] (deviation maps, figures across the sweep). Figure names are
+//! file names and HTML ids: made safe and unique here.
 
 use std::collections::BTreeMap;
 
@@ -102,7 +104,7 @@ fn shown_species(all: &[u32]) -> Vec<u32> {
 pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
     let summary = read_summary(c)?;
     let theory = read_theory(c);
-    let mut figs = Vec::new();
+    let mut figs = super::overview::figures(c)?;
     for (&point, species) in &summary {
         let desc = c
             .points
@@ -121,6 +123,11 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         if species.len() > 3 {
             figs.extend(vs_k_figures(point, species, &title));
         }
+    }
+    let mut names: Vec<String> = figs.iter().map(|f| f.0.clone()).collect();
+    super::overview::safe_unique_names(&mut names);
+    for (f, n) in figs.iter_mut().zip(names) {
+        f.0 = n;
     }
     Ok(figs)
 }
@@ -193,6 +200,7 @@ fn time_figures(
             log_y: true,
             legend_low: false,
             references_from: None,
+            heatmap: None,
         },
     ));
     if !msd.is_empty() {
@@ -207,6 +215,7 @@ fn time_figures(
                 log_y: true,
                 legend_low: true,
                 references_from: None,
+                heatmap: None,
             },
         ));
     }
@@ -245,6 +254,7 @@ fn vs_k_figures(
             log_y: true,
             legend_low: true,
             references_from: None,
+            heatmap: None,
         },
     ));
     if let Some(r1) = at_last(&1).and_then(|r| r.3) {
@@ -267,6 +277,7 @@ fn vs_k_figures(
                 log_y: true,
                 legend_low: false,
                 references_from: None,
+                heatmap: None,
             },
         ));
     }

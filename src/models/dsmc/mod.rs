@@ -5,9 +5,12 @@
 //! - [`tables`]: `dsmc_species`, `dsmc_tamsd` and the theory tables in Arrow form;
 //! - [`summary`]: `dsmc_species_summary` and `dsmc_tamsd_summary` over replicas;
 //! - [`theory`]: the theory tables of a campaign (predictions of every point in parallel);
-//! - [`figures`]: T_k(t), MSD_k(t), T_k and MSD ratios against k.
+//! - [`figures`]: T_k(t), MSD_k(t), T_k and MSD ratios against k, after the campaign-wide
+//!   figures of [`overview`]: deviation maps (points x species, in sems) and T_k, MSD_k at
+//!   t_end against each numeric sweep key.
 
 pub mod figures;
+pub mod overview;
 pub mod params;
 pub mod summary;
 pub mod tables;
