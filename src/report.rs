@@ -119,11 +119,19 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
          <title>granular report: {name}</title>\n<style>\n{CSS}</style>\n</head>\n<body>\n\
          <h1>Campaign {name}</h1>\n"
     );
+    // Each section in a `<section id="sec-...">`, so that a live page (`granular serve`) can
+    // swap it for a newer one.
+    h.push_str("<section id=\"sec-campaign\">\n");
     section_campaign(&mut h, c, &info, &st);
+    h.push_str("</section>\n<section id=\"sec-progress\">\n");
     section_progress(&mut h, &st);
+    h.push_str("</section>\n<section id=\"sec-failures\">\n");
     section_failures(&mut h, c, &mut notes);
+    h.push_str("</section>\n<section id=\"sec-figures\">\n");
     let figures = section_figures(&mut h, c, &st, &mut notes);
+    h.push_str("</section>\n<section id=\"sec-manifest\">\n");
     section_manifest(&mut h, &info);
+    h.push_str("</section>\n");
     if !notes.is_empty() {
         h.push_str("<h2 id=\"notes\">Notes</h2>\n<ul>\n");
         for n in &notes {
@@ -177,12 +185,16 @@ fn section_campaign(h: &mut String, c: &Campaign, info: &CampaignInfo, st: &Camp
             st.points.iter().filter(|p| p.in_manifest).count()
         ),
     );
-    row(h, "runs", &counts_text(st.runs, &st.counts));
+    let _ = writeln!(
+        h,
+        "<tr><th>runs</th><td id=\"campaign-runs\">{}</td></tr>",
+        counts_text(st.runs, &st.counts)
+    );
     if st.manifests > 1 || st.current_runs != st.runs {
-        row(
+        let _ = writeln!(
             h,
-            "runs of the latest manifest",
-            &counts_text(st.current_runs, &st.current),
+            "<tr><th>runs of the latest manifest</th><td id=\"campaign-current\">{}</td></tr>",
+            counts_text(st.current_runs, &st.current)
         );
     }
     let live = if st.live_shards.is_empty() {
@@ -253,22 +265,27 @@ fn bar(k: &Counts) -> String {
 
 fn section_progress(h: &mut String, st: &CampaignStatus) {
     h.push_str("<h2 id=\"progress\">Progress</h2>\n");
-    let _ = writeln!(h, "<p>{}</p>", counts_text(st.runs, &st.counts));
+    let _ = writeln!(
+        h,
+        "<p id=\"progress-counts\">{}</p>",
+        counts_text(st.runs, &st.counts)
+    );
     h.push_str(
         "<p class=\"key\"><span class=\"done\"></span>done<span class=\"failed\"></span>failed\
          <span class=\"running\"></span>running<span class=\"pending\"></span>pending\
          <span class=\"dropped\"></span>dropped (no longer asked for)</p>\n",
     );
     h.push_str(
-        "<table>\n<tr><th>point</th><th>parameters</th><th></th><th>done</th><th>failed</th>\
+        "<table id=\"progress-table\">\n<tr><th>point</th><th>parameters</th><th></th><th>done</th><th>failed</th>\
          <th>running</th><th>pending</th><th>dropped</th><th>checkpointed</th><th>in latest manifest</th></tr>\n",
     );
     for p in &st.points {
         let k = &p.counts;
         let _ = writeln!(
             h,
-            "<tr><td class=\"n\">{}</td><td>{}</td><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+            "<tr data-point=\"{}\"><td class=\"n\">{}</td><td>{}</td><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
              <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td></tr>",
+            p.point_id,
             p.point_id,
             escape(&p.point),
             bar(k),
