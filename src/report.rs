@@ -3,7 +3,8 @@
 //! point (`campaign::status`), the failed runs with their reasons (the `runs` table), and the
 //! model's standard figures as inline SVG (`Campaign::figures`, drawn by `plot::svg_string`).
 //!
-//! Inline CSS, no script, no external reference: the page opens offline after a copy. Every
+//! Inline CSS, no script, no external reference: the page opens offline after a copy
+//! (`granular serve` adds its live script to the page it serves, not to this one). Every
 //! string read from the campaign (manifest, names, labels, reasons) is HTML-escaped here;
 //! the SVG text is escaped by the renderer. This module builds the text; the command line
 //! writes it.
