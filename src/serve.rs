@@ -374,8 +374,9 @@ const LIVE: &str = r##"<style>
 <script>
 (function () {
   "use strict";
-  var EVERY = 2000, SECTIONS = ["sec-campaign", "sec-progress", "sec-failures", "sec-figures", "sec-manifest"];
+  var EVERY = 2000, RELOAD_EVERY = 10000, SECTIONS = ["sec-campaign", "sec-progress", "sec-failures", "sec-figures", "sec-manifest"];
   var live = document.getElementById("live"), shown = null, downSince = null, busy = false;
+  var dirty = false, reloaded = 0;
   function time(d) { return d.toLocaleTimeString(); }
   function counts(n, k) {
     var s = n + ": " + k.done + " done, " + k.failed + " failed, " + k.running + " running, " +
@@ -418,6 +419,7 @@ const LIVE: &str = r##"<style>
     });
   }
   function reloadSections() {
+    reloaded = Date.now();
     return fetch("/", {cache: "no-store"}).then(function (r) {
       if (!r.ok) { throw new Error("HTTP " + r.status); }
       return r.text();
@@ -427,7 +429,7 @@ const LIVE: &str = r##"<style>
         var a = document.getElementById(id), b = doc.getElementById(id);
         if (a && b && a.innerHTML !== b.innerHTML) { a.innerHTML = b.innerHTML; }
       });
-    });
+    }).catch(function () { dirty = true; });
   }
   function poll() {
     if (busy) { return; }
@@ -436,9 +438,12 @@ const LIVE: &str = r##"<style>
       if (!r.ok) { return r.text().then(function (t) { throw new Error(t || ("HTTP " + r.status)); }); }
       return r.json();
     }).then(function (s) {
-      var key = pageKey(s), wait = null;
-      if (shown !== null && key !== shown) { wait = reloadSections(); }
+      // The page again when it changed: at once when every run has finished (the figures),
+      // else at most every RELOAD_EVERY (a campaign committing every run at once).
+      var key = pageKey(s), wait = null, over = s.current.done + s.current.failed >= s.current_runs;
+      if (shown !== null && key !== shown) { dirty = true; }
       shown = key;
+      if (dirty && (over || Date.now() - reloaded >= RELOAD_EVERY)) { dirty = false; wait = reloadSections(); }
       return Promise.resolve(wait).then(function () {
         update(s);
         downSince = null;
