@@ -69,10 +69,13 @@ struct Cached<T> {
     value: T,
 }
 
-/// A cached text (or the error that computing it gave), and the lock of its computation.
+/// A computed text, or the error that computing it gave.
+type Text = Result<Arc<String>, String>;
+
+/// A cached text, and the lock of its computation.
 #[derive(Default)]
 struct Slot {
-    value: Mutex<Option<Cached<Result<Arc<String>, String>>>>,
+    value: Mutex<Option<Cached<Text>>>,
     compute: Mutex<()>,
 }
 
@@ -175,8 +178,8 @@ impl Served {
         slot: &Slot,
         stale_ok: bool,
         make: impl FnOnce(&Campaign) -> Result<(String, bool), String>,
-    ) -> Result<Arc<String>, String> {
-        let lock = |m: &Mutex<Option<Cached<Result<Arc<String>, String>>>>| {
+    ) -> Text {
+        let lock = |m: &Mutex<Option<Cached<Text>>>| {
             let g = m.lock().unwrap_or_else(|e| e.into_inner());
             g.as_ref()
                 .map(|c| (c.fingerprint, c.at.elapsed(), c.max_age, c.value.clone()))
