@@ -13,6 +13,8 @@
 //! - [`theory`]: kinetic theory (pure functions, usable without simulating), on [`math`].
 //! - [`store`]: Parquet tables, datasets, atomic files, checkpoints; knows no physics.
 //! - [`analysis`]: the thesis's fits of finished campaigns; [`plot`]: the figure renderer.
+//! - [`report`]: one HTML page of a campaign; [`serve`]: that page live over HTTP, with the
+//!   status JSON and the table files (read-only).
 
 pub mod analysis;
 pub mod aux_models;
@@ -30,6 +32,7 @@ pub mod plot;
 pub mod report;
 pub mod rfm;
 pub mod rng;
+pub mod serve;
 pub mod store;
 pub mod theory;
 

@@ -3,7 +3,8 @@
 //! point (`campaign::status`), the failed runs with their reasons (the `runs` table), and the
 //! model's standard figures as inline SVG (`Campaign::figures`, drawn by `plot::svg_string`).
 //!
-//! Inline CSS, no script, no external reference: the page opens offline after a copy. Every
+//! Inline CSS, no script, no external reference: the page opens offline after a copy
+//! (`granular serve` adds its live script to the page it serves, not to this one). Every
 //! string read from the campaign (manifest, names, labels, reasons) is HTML-escaped here;
 //! the SVG text is escaped by the renderer. This module builds the text; the command line
 //! writes it.
@@ -197,13 +198,28 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
         notes.push(format!("the runs table could not be read: {e}"));
     }
     let head_at = h.len();
+    // Each section in a `<section id="sec-...">`, so that a live page (`granular serve`) can
+    // swap it for a newer one.
+    h.push_str("<section id=\"sec-campaign\">\n");
     section_campaign(&mut h, c, &info, &st);
+    h.push_str("</section>\n<section id=\"sec-progress\">\n");
     section_progress(&mut h, &st, runs.as_ref().ok());
+    h.push_str("</section>\n<section id=\"sec-shards\">\n");
     section_shards(&mut h, c, &st, &mut notes);
+    h.push_str("</section>\n<section id=\"sec-failures\">\n");
     section_failures(&mut h, c, &runs);
+    h.push_str("</section>\n<section id=\"sec-figures\">\n");
     let figures = section_figures(&mut h, c, &st, &mut notes);
+    h.push_str("</section>\n<section id=\"sec-manifest\">\n");
     section_manifest(&mut h, &info);
-    h.insert_str(head_at, &headline(c, &st, figures, !notes.is_empty()));
+    h.push_str("</section>\n");
+    h.insert_str(
+        head_at,
+        &format!(
+            "<section id=\"sec-headline\">\n{}</section>\n",
+            headline(c, &st, figures, !notes.is_empty())
+        ),
+    );
     if !notes.is_empty() {
         h.push_str("<h2 id=\"notes\">Notes</h2>\n<ul>\n");
         for n in &notes {
@@ -296,12 +312,16 @@ fn section_campaign(h: &mut String, c: &Campaign, info: &CampaignInfo, st: &Camp
             st.points.iter().filter(|p| p.in_manifest).count()
         ),
     );
-    row(h, "runs", &counts_text(st.runs, &st.counts));
+    let _ = writeln!(
+        h,
+        "<tr><th>runs</th><td id=\"campaign-runs\">{}</td></tr>",
+        counts_text(st.runs, &st.counts)
+    );
     if st.manifests > 1 || st.current_runs != st.runs {
-        row(
+        let _ = writeln!(
             h,
-            "runs of the latest manifest",
-            &counts_text(st.current_runs, &st.current),
+            "<tr><th>runs of the latest manifest</th><td id=\"campaign-current\">{}</td></tr>",
+            counts_text(st.current_runs, &st.current)
         );
     }
     h.push_str("</table>\n");

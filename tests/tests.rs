@@ -26,6 +26,9 @@
 //! - `slurm`: `granular submit --slurm` with stand-in sbatch/squeue/scontrol.
 //! - `report`: `granular report` on a finished and a half-finished campaign: one HTML file,
 //!   an inline SVG per figure, progress per point, no network references, escaped strings.
+//! - `serve`: `granular serve` read-only: the live dashboard, `/api/status` = `status --json`,
+//!   table downloads byte for byte, 405 for every other method, traversal and symlinks out
+//!   refused, a running campaign followed.
 //! - `sweep_columns`: every summary table of DSMC, RFM and cascade campaigns carries its
 //!   point's sweep columns after `point_id`, as in `points`.
 //! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
@@ -50,6 +53,7 @@ mod it {
     pub mod resume;
     pub mod rfm;
     pub mod schema;
+    pub mod serve;
     pub mod slurm;
     pub mod sweep_columns;
     pub mod util;

@@ -81,6 +81,58 @@ pub fn remove_heartbeat(root: &Path, tag: &str) {
     let _ = std::fs::remove_file(root.join("locks").join(format!("{tag}.running.json")));
 }
 
+/// The JSON of a status, as `granular status --json` prints it and `granular serve` answers
+/// `/api/status`.
+pub fn to_json(s: &CampaignStatus) -> String {
+    serde_json::to_string_pretty(s).expect("status serialises")
+}
+
+/// A cheap fingerprint of what [`status`] reads, for callers that cache it (`granular
+/// serve`): the modification times and sizes of `campaign.json`, of the ledger, lock,
+/// checkpoint, table, generation, sidecar and SLURM directories and of their entries (a
+/// commit, heartbeat, checkpoint, part or generation is a rename into one of them), and the
+/// live lock holders (a process that died leaves its lock file unchanged). A table file
+/// changed in place without a rename is not seen: the cache's age limit covers it.
+pub fn fingerprint(root: &Path) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    let stat = |p: &Path, h: &mut std::collections::hash_map::DefaultHasher| {
+        match std::fs::symlink_metadata(p) {
+            Ok(m) => (m.modified().ok(), m.len(), m.is_dir()).hash(h),
+            Err(_) => 0u8.hash(h),
+        }
+    };
+    stat(&root.join("campaign.json"), &mut h);
+    for (dir, entries) in [
+        ("ledger", true),
+        ("locks", true),
+        ("checkpoints", false),
+        ("tables", true),
+        ("tables/.gen", true),
+        ("sums", true),
+        ("slurm", true),
+    ] {
+        let d = root.join(dir);
+        dir.hash(&mut h);
+        stat(&d, &mut h);
+        if !entries {
+            continue;
+        }
+        let mut names: Vec<_> = std::fs::read_dir(&d)
+            .map(|it| it.filter_map(|e| e.ok()).map(|e| e.path()).collect())
+            .unwrap_or_default();
+        names.sort();
+        for p in names {
+            p.hash(&mut h);
+            stat(&p, &mut h);
+        }
+    }
+    for l in ledger::live_locks(root) {
+        serde_json::to_string(&l).unwrap_or_default().hash(&mut h);
+    }
+    h.finish()
+}
+
 pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
     let check = integrity::check(c, integrity::Depth::Quick)?;
     let commits = ledger::read_ledger(&c.root)?.commits;

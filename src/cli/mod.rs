@@ -16,6 +16,7 @@ mod report;
 mod reporter;
 mod run;
 mod schema;
+mod serve;
 mod signals;
 mod slurm_task;
 mod status;
@@ -87,6 +88,10 @@ enum Command {
     /// the standard figures as inline SVG, the manifest and its history); works on an
     /// unfinished campaign.
     Report(report::Args),
+    /// A live dashboard of a campaign over HTTP, read-only: the report page updating while
+    /// runs finish (on any shard or SLURM task), /api/status (the JSON of `status --json`),
+    /// the table files for download. Binds 127.0.0.1:8080 unless --addr says otherwise.
+    Serve(serve::Args),
     /// Upgrade a campaign directory written by an earlier granular, in place (logged).
     Upgrade(upgrade::Args),
     /// Fit the thesis's observables of an rfm campaign (xi_m, zeta_m, D_f, alpha, (5.32),
@@ -125,6 +130,7 @@ pub fn main() -> i32 {
         Command::Verify(a) => verify::run(a),
         Command::Plot(a) => plot::run(a),
         Command::Report(a) => report::run(a),
+        Command::Serve(a) => serve::run(a),
         Command::Analyze(a) => analyze::run(a),
     }
 }
@@ -197,6 +203,22 @@ mod tests {
     fn the_command_line_is_consistent() {
         use clap::CommandFactory;
         Cli::command().debug_assert();
+    }
+
+    /// `granular serve DIR` listens on loopback unless told otherwise.
+    #[test]
+    fn serve_binds_loopback_by_default() {
+        let cli = Cli::try_parse_from(["granular", "serve", "/c"]).expect("parses");
+        let Command::Serve(a) = cli.command else {
+            panic!("not serve")
+        };
+        assert!(a.addr.ip().is_loopback(), "{}", a.addr);
+        let cli = Cli::try_parse_from(["granular", "serve", "/c", "--addr", "0.0.0.0:0"]);
+        assert!(cli.is_ok());
+        let err = Cli::try_parse_from(["granular", "serve", "/c", "--addr", "nowhere"])
+            .err()
+            .expect("refused");
+        assert!(err.to_string().contains("--addr"), "{err}");
     }
 
     /// The invocation written into array scripts by `campaign::slurm` (earlier submissions

@@ -1,6 +1,6 @@
 //! Ctrl-C / SIGTERM, for every command. Until a simulation has started (loading and
 //! validating the manifest, planning, the theory step, and every command but the running of
-//! runs) the first signal exits at once with 130: every file is written atomically (to a
+//! runs, `serve` included) the first signal exits at once with 130: every file is written atomically (to a
 //! temporary name, then renamed), so nothing is left half-written, and there is nothing to
 //! checkpoint. Once `run`/`resume`/`slurm-task` has started a simulation, the first signal sets
 //! the interrupt flag that the workers and the dispatcher watch (checkpoint and stop, exit

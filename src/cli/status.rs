@@ -29,7 +29,7 @@ pub fn run(a: Args) -> i32 {
     // Write errors (a closed pipe, `| head`) are not worth a panic.
     let mut out = std::io::stdout().lock();
     let _ = if a.json {
-        writeln!(out, "{}", serde_json::to_string_pretty(&s).expect("status"))
+        writeln!(out, "{}", campaign::status::to_json(&s))
     } else {
         write_text(&mut out, &s)
     };

@@ -15,7 +15,9 @@
 //! - `manifest` imports no campaign, store, simulator or model home (only the list of models);
 //! - `plot` (the renderer) imports nothing of the crate;
 //! - `report` (the HTML page) imports the campaign, store and plot, no model home, simulator,
-//!   theory, command line or analysis.
+//!   theory, command line or analysis;
+//! - `serve` (the HTTP dashboard) imports the report, the campaign and the basic utilities:
+//!   no model home, simulator, theory, command line or analysis.
 //!
 //! Test code (`#[cfg(test)]` modules, `tests.rs` files) is not part of the architecture and is
 //! skipped; doc comments and comments are skipped. A path is resolved to the longest module
@@ -341,6 +343,7 @@ const NOT_SIMULATORS: &[&str] = &[
     "store",
     "plot",
     "report",
+    "serve",
     "analysis",
     "theory",
     "math",
@@ -395,6 +398,13 @@ fn forbidden(from: &str, to: &str) -> Option<&'static str> {
         return Some(
             "the report reads the campaign and draws with plot: no model home or simulator",
         );
+    }
+    if f == "serve"
+        && (sim(t)
+            || matches!(t, "theory" | "cli" | "analysis" | "models")
+            || model_home(to).is_some())
+    {
+        return Some("the server shows the report and the campaign's files: no model or simulator");
     }
     if f == "plot" && t != "plot" {
         return Some("the renderer imports nothing of the crate");

@@ -454,8 +454,9 @@ fn out_naming_a_file_or_a_dangling_link_exits_3() {
                 "--dry-run",
             ],
         ];
-        let with_dir: [&[&str]; 9] = [
+        let with_dir: [&[&str]; 10] = [
             &["resume", out, "--quiet"],
+            &["serve", out, "--addr", "127.0.0.1:0"],
             &["status", out],
             &["verify", out],
             &["compact", out],

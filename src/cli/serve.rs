@@ -1,0 +1,101 @@
+//! `granular serve DIR [--addr 127.0.0.1:8080]`: a read-only live dashboard of a campaign over
+//! HTTP (`crate::serve`): the report page kept current, `/api/status` (the JSON of `status
+//! --json`), the table files. Loopback unless told otherwise; Ctrl-C/SIGTERM exits at once
+//! with 130 (`signals`: it writes nothing, so there is nothing to finish).
+
+use std::net::{Ipv4Addr, SocketAddr};
+use std::path::PathBuf;
+
+use super::{fail, report_error};
+use crate::campaign::Campaign;
+use crate::exit_codes;
+use crate::serve;
+
+#[derive(clap::Args)]
+pub struct Args {
+    dir: PathBuf,
+    /// Address to listen on, IP:PORT (`localhost:PORT` too; port 0: any free port). The
+    /// default is loopback only: from another machine use `ssh -L 8080:localhost:8080 HOST`.
+    #[arg(long, default_value = serve::DEFAULT_ADDR, value_parser = parse_addr)]
+    pub(super) addr: SocketAddr,
+}
+
+/// `--addr`: a socket address, or `localhost:PORT`.
+fn parse_addr(s: &str) -> Result<SocketAddr, String> {
+    if let Some(port) = s.strip_prefix("localhost:") {
+        let port: u16 = port
+            .parse()
+            .map_err(|_| format!("{port:?} is not a port (0 to 65535)"))?;
+        return Ok(SocketAddr::from((Ipv4Addr::LOCALHOST, port)));
+    }
+    s.parse()
+        .map_err(|_| format!("{s:?} is not an address: IP:PORT, e.g. 127.0.0.1:8080 or [::1]:8080"))
+}
+
+pub fn run(a: Args) -> i32 {
+    let c = match Campaign::open(&a.dir) {
+        Ok(c) => c,
+        Err(e) => return report_error(e),
+    };
+    let server = match serve::bind(c, a.addr) {
+        Ok(s) => s,
+        Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => {
+            return fail(
+                exit_codes::DIRECTORY_REFUSED,
+                format!(
+                    "{} is in use (another server?); choose another with --addr, e.g. --addr 127.0.0.1:0 for any free port",
+                    a.addr
+                ),
+            )
+        }
+        Err(e) => return fail(exit_codes::IO_ERROR, format!("--addr {}: {e}", a.addr)),
+    };
+    let addr = match server.local_addr() {
+        Ok(x) => x,
+        Err(e) => return fail(exit_codes::IO_ERROR, e),
+    };
+    if !addr.ip().is_loopback() {
+        eprintln!(
+            "warning: {addr} is not a loopback address: whoever reaches it can read this campaign (read-only, no authentication)"
+        );
+    }
+    {
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "serving {} at http://{addr}/", a.dir.display());
+        let _ = out.flush();
+    }
+    match server.run() {
+        Ok(()) => exit_codes::OK,
+        Err(e) => fail(exit_codes::IO_ERROR, e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_address_is_loopback() {
+        let a: SocketAddr = serve::DEFAULT_ADDR.parse().unwrap();
+        assert!(a.ip().is_loopback());
+        assert_eq!(a.port(), 8080);
+        assert_eq!(
+            parse_addr("localhost:0").unwrap(),
+            "127.0.0.1:0".parse().unwrap()
+        );
+        assert_eq!(
+            parse_addr("[::1]:9000").unwrap(),
+            "[::1]:9000".parse().unwrap()
+        );
+        for bad in [
+            "8080",
+            "localhost",
+            "localhost:x",
+            "1.2.3.4:99999",
+            "example.org:80",
+        ] {
+            assert!(parse_addr(bad).is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,837 @@
+//! `granular serve`: a read-only live dashboard of a campaign over HTTP/1.1 (axum on a
+//! current-thread tokio runtime).
+//!
+//! - `/`: the report page (`report::build`) with a small inline script that polls
+//!   `/api/status` every 2 s, updates the progress counts and bars in place, and swaps in the
+//!   page's sections anew (figures, failures, campaign) when runs finish, the shards change or
+//!   the campaign grows; a "live" line shows the time of the last answer, or that the server
+//!   is unreachable.
+//! - `/api/status`: the JSON of `granular status --json` (`campaign::status::to_json`).
+//! - `/report.html`: the report as a download (no script).
+//! - `/tables/`, `/api/tables`: the table files (HTML, JSON); `/tables/<table>/<file>`: one
+//!   file, streamed.
+//!
+//! Read-only: only GET and HEAD are answered (anything else 405), no lock is taken, nothing
+//! is healed or written; the campaign is read from disk again whenever the status
+//! fingerprint (`campaign::status::fingerprint`: the ledger, locks and heartbeats, checkpoints,
+//! tables, live lock holders) changes, or after `MAX_AGE`, so a campaign run by other
+//! processes (shards, SLURM tasks) is followed. Computations run on blocking threads; one at
+//! a time per cached item.
+//!
+//! A table file is served only if its request path, percent-decoded segment by segment, has
+//! at least two segments, none empty, hidden (`.`, `..`, `.gen`, pending parts), or holding
+//! `/`, `\` or NUL, and if the file it opens, symlinks resolved, is a regular file inside the
+//! campaign's `tables/` directory (checked on the canonical path before opening, and on the
+//! opened descriptor after).
+
+use std::io;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use axum::body::{Body, Bytes};
+use axum::extract::State;
+use axum::http::{header, HeaderMap, HeaderValue, Method, StatusCode, Uri};
+use axum::response::Response;
+
+use crate::campaign::{status, Campaign};
+use crate::report;
+
+/// The default address: loopback only.
+pub const DEFAULT_ADDR: &str = "127.0.0.1:8080";
+
+/// How long a cached status or page is used while the fingerprint stays the same (the
+/// fingerprint does not see a table file changed in place, nor a SLURM job's queue state).
+const MAX_AGE: Duration = Duration::from_secs(30);
+/// The same while SLURM submissions are recorded (their queue states come from `squeue`).
+const MAX_AGE_SLURM: Duration = Duration::from_secs(10);
+/// While `/api/status` was asked for within `WATCHED`, a refresher thread checks the
+/// fingerprint every `REFRESH` and computes the status anew when it changed; meanwhile
+/// requests are answered from the previous status (so at once, however large the campaign)
+/// unless it is older than `STALE_LIMIT`.
+const REFRESH: Duration = Duration::from_millis(250);
+const WATCHED: Duration = Duration::from_secs(10);
+const STALE_LIMIT: Duration = Duration::from_secs(10);
+
+/// A bound server: `local_addr` is known before `run` serves.
+pub struct Server {
+    rt: tokio::runtime::Runtime,
+    listener: std::net::TcpListener,
+    state: Arc<Served>,
+}
+
+/// What one computed item is cached with.
+struct Cached<T> {
+    fingerprint: u64,
+    at: Instant,
+    max_age: Duration,
+    value: T,
+}
+
+/// A computed text, or the error that computing it gave.
+type Text = Result<Arc<String>, String>;
+
+/// A cached text, and the lock of its computation.
+#[derive(Default)]
+struct Slot {
+    value: Mutex<Option<Cached<Text>>>,
+    compute: Mutex<()>,
+}
+
+struct Served {
+    root: PathBuf,
+    /// Whether the server listens on loopback only (then requests must name a local host:
+    /// a DNS-rebinding page cannot read the campaign).
+    loopback: bool,
+    /// The campaign, opened again when `campaign.json` changes (a grown manifest).
+    campaign: Mutex<(Option<std::time::SystemTime>, u64, Arc<Campaign>)>,
+    status: Slot,
+    page: Slot,
+    /// When `/api/status` was last asked for.
+    watched: Mutex<Option<Instant>>,
+}
+
+/// Bind `addr` for the campaign `c` (already opened by the caller, so that its refusals are
+/// the other commands').
+pub fn bind(c: Campaign, addr: SocketAddr) -> io::Result<Server> {
+    let listener = std::net::TcpListener::bind(addr)?;
+    listener.set_nonblocking(true)?;
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let root = c.root.clone();
+    let stamp = campaign_stamp(&root);
+    Ok(Server {
+        rt,
+        listener,
+        state: Arc::new(Served {
+            root,
+            loopback: addr.ip().is_loopback(),
+            campaign: Mutex::new((stamp.0, stamp.1, Arc::new(c))),
+            status: Slot::default(),
+            page: Slot::default(),
+            // Watched from the start: the refresher computes the first status at once.
+            watched: Mutex::new(Some(Instant::now())),
+        }),
+    })
+}
+
+impl Server {
+    /// The address bound (the actual port when 0 was asked for).
+    pub fn local_addr(&self) -> io::Result<SocketAddr> {
+        self.listener.local_addr()
+    }
+
+    /// Serve until the process ends (Ctrl-C/SIGTERM: the command line's handler exits).
+    pub fn run(self) -> io::Result<()> {
+        let Server {
+            rt,
+            listener,
+            state,
+        } = self;
+        let s = state.clone();
+        std::thread::Builder::new()
+            .name("status-refresher".into())
+            .spawn(move || loop {
+                let watched = s
+                    .watched
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .is_some_and(|t| t.elapsed() < WATCHED);
+                if watched {
+                    let _ = s.status_json(false);
+                }
+                std::thread::sleep(REFRESH);
+            })?;
+        rt.block_on(async move {
+            let listener = tokio::net::TcpListener::from_std(listener)?;
+            let app = axum::Router::new().fallback(dispatch).with_state(state);
+            axum::serve(listener, app).await
+        })
+    }
+}
+
+fn campaign_stamp(root: &Path) -> (Option<std::time::SystemTime>, u64) {
+    match std::fs::metadata(root.join("campaign.json")) {
+        Ok(m) => (m.modified().ok(), m.len()),
+        Err(_) => (None, 0),
+    }
+}
+
+impl Served {
+    /// The campaign as `campaign.json` now describes it.
+    fn campaign(&self) -> Result<Arc<Campaign>, String> {
+        let stamp = campaign_stamp(&self.root);
+        let mut g = self.campaign.lock().unwrap_or_else(|e| e.into_inner());
+        if (g.0, g.1) != stamp {
+            let c = Campaign::open(&self.root).map_err(|e| e.to_string())?;
+            *g = (stamp.0, stamp.1, Arc::new(c));
+        }
+        Ok(g.2.clone())
+    }
+
+    /// A cached item, computed again when the fingerprint changed or it is too old; with
+    /// `stale_ok`, the previous value while it is younger than `STALE_LIMIT`.
+    fn cached(
+        &self,
+        slot: &Slot,
+        stale_ok: bool,
+        make: impl FnOnce(&Campaign) -> Result<(String, bool), String>,
+    ) -> Text {
+        let lock = |m: &Mutex<Option<Cached<Text>>>| {
+            let g = m.lock().unwrap_or_else(|e| e.into_inner());
+            g.as_ref()
+                .map(|c| (c.fingerprint, c.at.elapsed(), c.max_age, c.value.clone()))
+        };
+        let fp = status::fingerprint(&self.root);
+        if let Some((f, age, max_age, v)) = lock(&slot.value) {
+            if (f == fp && age < max_age) || (stale_ok && age < STALE_LIMIT) {
+                return v;
+            }
+        }
+        let _computing = slot.compute.lock().unwrap_or_else(|e| e.into_inner());
+        // Computed while this thread waited?
+        if let Some((f, age, max_age, v)) = lock(&slot.value) {
+            if f == fp && age < max_age {
+                return v;
+            }
+        }
+        let (value, slurm) = match self.campaign().and_then(|c| make(&c)) {
+            Ok((v, slurm)) => (Ok(Arc::new(v)), slurm),
+            Err(e) => (Err(e), false),
+        };
+        *slot.value.lock().unwrap_or_else(|e| e.into_inner()) = Some(Cached {
+            fingerprint: fp,
+            at: Instant::now(),
+            max_age: if slurm { MAX_AGE_SLURM } else { MAX_AGE },
+            value: value.clone(),
+        });
+        value
+    }
+
+    /// The status JSON; `stale_ok` for requests (the refresher keeps it current).
+    fn status_json(&self, stale_ok: bool) -> Result<Arc<String>, String> {
+        self.cached(&self.status, stale_ok, |c| {
+            let s = status::status(c)?;
+            Ok((status::to_json(&s), !s.slurm.is_empty()))
+        })
+    }
+
+    /// The report page (without the live script), always current.
+    fn page(&self) -> Result<Arc<String>, String> {
+        self.cached(&self.page, false, |c| {
+            let r = report::build(c)?;
+            let slurm = r.html.contains("slurm submission");
+            Ok((r.html, slurm))
+        })
+    }
+}
+
+/// Run `f` on a blocking thread (the runtime keeps answering).
+async fn blocking<T: Send + 'static>(
+    s: &Arc<Served>,
+    f: impl FnOnce(&Served) -> T + Send + 'static,
+) -> Result<T, String> {
+    let s = s.clone();
+    tokio::task::spawn_blocking(move || f(&s))
+        .await
+        .map_err(|e| format!("internal error: {e}"))
+}
+
+/// Every request: the method, the host, then the path, decided here.
+async fn dispatch(
+    State(s): State<Arc<Served>>,
+    method: Method,
+    uri: Uri,
+    headers: HeaderMap,
+) -> Response {
+    if method != Method::GET && method != Method::HEAD {
+        let mut r = text(
+            StatusCode::METHOD_NOT_ALLOWED,
+            "granular serve is read-only: GET and HEAD only\n",
+        );
+        r.headers_mut()
+            .insert(header::ALLOW, HeaderValue::from_static("GET, HEAD"));
+        return r;
+    }
+    if s.loopback && !local_host(headers.get(header::HOST)) {
+        return text(
+            StatusCode::FORBIDDEN,
+            "the Host header must name this machine (localhost or an IP address)\n",
+        );
+    }
+    let head = method == Method::HEAD;
+    let path = uri.path();
+    let mut r = match path {
+        "/" | "/index.html" => match blocking(&s, |s| s.page()).await.and_then(|r| r) {
+            Ok(page) => html(dashboard(&page)),
+            Err(e) => unavailable(&e),
+        },
+        "/api/status" => match blocking(&s, |s| {
+            *s.watched.lock().unwrap_or_else(|e| e.into_inner()) = Some(Instant::now());
+            s.status_json(true)
+        })
+        .await
+        .and_then(|r| r)
+        {
+            Ok(j) => json(j.as_str().to_owned()),
+            Err(e) => unavailable(&e),
+        },
+        "/report.html" => match blocking(&s, |s| s.page()).await.and_then(|r| r) {
+            Ok(page) => {
+                let mut r = html(page.as_str().to_owned());
+                r.headers_mut().insert(
+                    header::CONTENT_DISPOSITION,
+                    HeaderValue::from_static("attachment; filename=\"report.html\""),
+                );
+                r
+            }
+            Err(e) => unavailable(&e),
+        },
+        "/tables" => {
+            let mut r = text(StatusCode::MOVED_PERMANENTLY, "/tables/\n");
+            r.headers_mut()
+                .insert(header::LOCATION, HeaderValue::from_static("/tables/"));
+            r
+        }
+        "/tables/" => match blocking(&s, |s| list_tables(&s.root)).await {
+            Ok(files) => html(tables_page(&files)),
+            Err(e) => unavailable(&e),
+        },
+        "/api/tables" => match blocking(&s, |s| list_tables(&s.root)).await {
+            Ok(files) => json(tables_json(&files)),
+            Err(e) => unavailable(&e),
+        },
+        p => match p.strip_prefix("/tables/") {
+            Some(rest) => table_file(&s, rest.to_owned(), head).await,
+            None => text(StatusCode::NOT_FOUND, "not found\n"),
+        },
+    };
+    let h = r.headers_mut();
+    h.insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
+    );
+    h.entry(header::CACHE_CONTROL)
+        .or_insert(HeaderValue::from_static("no-store"));
+    r
+}
+
+/// Whether a Host header names this machine: `localhost` or an IP literal, any port.
+fn local_host(h: Option<&HeaderValue>) -> bool {
+    let Some(h) = h.and_then(|h| h.to_str().ok()) else {
+        // HTTP/1.0 without Host: no browser sends that.
+        return true;
+    };
+    let host = if let Some(v6) = h.strip_prefix('[') {
+        return v6
+            .split(']')
+            .next()
+            .is_some_and(|a| a.parse::<std::net::Ipv6Addr>().is_ok());
+    } else {
+        h.rsplit_once(':').map_or(h, |(a, _)| a)
+    };
+    host.eq_ignore_ascii_case("localhost") || host.parse::<std::net::Ipv4Addr>().is_ok()
+}
+
+fn response(code: StatusCode, ctype: &'static str, body: impl Into<Body>) -> Response {
+    let mut r = Response::new(body.into());
+    *r.status_mut() = code;
+    r.headers_mut()
+        .insert(header::CONTENT_TYPE, HeaderValue::from_static(ctype));
+    r
+}
+
+fn text(code: StatusCode, body: impl Into<String>) -> Response {
+    response(code, "text/plain; charset=utf-8", body.into())
+}
+
+fn html(body: String) -> Response {
+    let mut r = response(StatusCode::OK, "text/html; charset=utf-8", body);
+    // The page may run its own inline script and fetch from this server, nothing else.
+    r.headers_mut().insert(
+        header::CONTENT_SECURITY_POLICY,
+        HeaderValue::from_static(
+            "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; \
+             img-src data:; connect-src 'self'; base-uri 'none'; form-action 'none'",
+        ),
+    );
+    r
+}
+
+fn json(body: String) -> Response {
+    response(StatusCode::OK, "application/json", body)
+}
+
+fn unavailable(e: &str) -> Response {
+    text(StatusCode::SERVICE_UNAVAILABLE, format!("error: {e}\n"))
+}
+
+/// The live part of the dashboard: a status line, and the script that keeps the page current.
+const LIVE: &str = r##"<style>
+#live{position:fixed;top:.5em;right:.5em;padding:.2em .6em;border-radius:4px;font-size:85%;background:#eee;border:1px solid #ccc}
+#live.ok{background:#e6f4e6;border-color:#2ca02c}#live.down{background:#fde8e8;border-color:#d62728;color:#900}
+</style>
+<div id="live" class="wait" role="status">live: connecting…</div>
+<script>
+(function () {
+  "use strict";
+  var EVERY = 2000, RELOAD_EVERY = 10000, SECTIONS = ["sec-headline", "sec-campaign", "sec-progress", "sec-shards", "sec-failures", "sec-figures", "sec-manifest"];
+  var live = document.getElementById("live"), shown = null, downSince = null, busy = false;
+  var dirty = false, reloaded = 0;
+  function time(d) { return d.toLocaleTimeString(); }
+  function counts(n, k) {
+    var s = n + ": " + k.done + " done, " + k.failed + " failed, " + k.running + " running, " +
+      k.pending + " pending (" + k.checkpointed + " with checkpoints)";
+    if (k.dropped > 0) { s += ", " + k.dropped + " dropped"; }
+    return s;
+  }
+  function bar(k) {
+    var n = k.done + k.failed + k.running + k.pending + k.dropped, d = document.createElement("div");
+    if (n === 0) { return null; }
+    d.className = "bar";
+    ["done", "failed", "running", "pending", "dropped"].forEach(function (c) {
+      if (k[c] > 0) {
+        var s = document.createElement("span");
+        s.className = c; s.style.width = (100 * k[c] / n).toFixed(2) + "%"; s.title = k[c] + " " + c;
+        d.appendChild(s);
+      }
+    });
+    return d;
+  }
+  function setText(id, t) { var e = document.getElementById(id); if (e) { e.textContent = t; } }
+  // What, when it changes, asks for the whole page again (new figures, failures, shards).
+  function pageKey(s) {
+    return JSON.stringify([s.runs, s.done, s.failed, s.current_runs, s.manifests, s.points.length,
+      s.live_shards, s.damage || [], s.slurm || []]);
+  }
+  function update(s) {
+    setText("progress-counts", counts(s.runs, s));
+    setText("campaign-runs", counts(s.runs, s));
+    setText("campaign-current", counts(s.current_runs, s.current));
+    s.points.forEach(function (p) {
+      var row = document.querySelector('tr[data-point="' + p.point_id + '"]');
+      if (!row || row.cells.length < 9) { return; }
+      var b = bar(p), cell = row.cells[2];
+      while (cell.firstChild) { cell.removeChild(cell.firstChild); }
+      if (b) { cell.appendChild(b); }
+      ["done", "failed", "running", "pending", "dropped", "checkpointed"].forEach(function (c, i) {
+        row.cells[3 + i].textContent = p[c];
+      });
+    });
+  }
+  function reloadSections() {
+    reloaded = Date.now();
+    return fetch("/", {cache: "no-store"}).then(function (r) {
+      if (!r.ok) { throw new Error("HTTP " + r.status); }
+      return r.text();
+    }).then(function (t) {
+      var doc = new DOMParser().parseFromString(t, "text/html");
+      SECTIONS.forEach(function (id) {
+        var a = document.getElementById(id), b = doc.getElementById(id);
+        if (a && b && a.innerHTML !== b.innerHTML) { a.innerHTML = b.innerHTML; }
+      });
+    }).catch(function () { dirty = true; });
+  }
+  function poll() {
+    if (busy) { return; }
+    busy = true;
+    fetch("/api/status", {cache: "no-store"}).then(function (r) {
+      if (!r.ok) { return r.text().then(function (t) { throw new Error(t || ("HTTP " + r.status)); }); }
+      return r.json();
+    }).then(function (s) {
+      // The page again when it changed: at once when every run has finished (the figures),
+      // else at most every RELOAD_EVERY (a campaign committing every run at once).
+      var key = pageKey(s), wait = null, over = s.current.done + s.current.failed >= s.current_runs;
+      if (shown !== null && key !== shown) { dirty = true; }
+      shown = key;
+      if (dirty && (over || Date.now() - reloaded >= RELOAD_EVERY)) { dirty = false; wait = reloadSections(); }
+      return Promise.resolve(wait).then(function () {
+        update(s);
+        downSince = null;
+        live.className = "ok";
+        live.textContent = "live: " + s.done + " of " + s.runs + " runs done, " + s.running +
+          " running; updated " + time(new Date());
+      });
+    }).catch(function (e) {
+      if (downSince === null) { downSince = new Date(); }
+      live.className = "down";
+      live.textContent = "server unreachable since " + time(downSince) + " (retrying): " + e.message;
+    }).then(function () { busy = false; });
+  }
+  poll();
+  setInterval(poll, EVERY);
+})();
+</script>
+"##;
+
+/// The report page with the live part before `</body>`.
+fn dashboard(page: &str) -> String {
+    match page.rfind("</body>") {
+        Some(i) => format!("{}{LIVE}{}", &page[..i], &page[i..]),
+        None => format!("{page}{LIVE}"),
+    }
+}
+
+/// One table file that may be served.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TableFile {
+    pub table: String,
+    pub file: String,
+    pub bytes: u64,
+}
+
+/// Why a table path is refused.
+#[derive(Debug, PartialEq)]
+pub enum Refused {
+    /// A malformed or forbidden path (400).
+    BadPath(&'static str),
+    /// No such servable file (404): missing, not a regular file, or outside `tables/`.
+    NotFound,
+}
+
+/// Percent-decode one path segment; `None` for a malformed escape.
+fn percent_decode(s: &str) -> Option<Vec<u8>> {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let hex = std::str::from_utf8(b.get(i + 1..i + 3)?).ok()?;
+            out.push(u8::from_str_radix(hex, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    Some(out)
+}
+
+/// The decoded segments of a raw request path under `/tables/` (`table/file`).
+pub fn table_segments(raw: &str) -> Result<Vec<String>, Refused> {
+    if raw.contains('\\') || raw.contains('\0') {
+        return Err(Refused::BadPath("backslash or NUL in the path"));
+    }
+    let mut out = Vec::new();
+    for seg in raw.split('/') {
+        let bytes = percent_decode(seg).ok_or(Refused::BadPath("malformed percent-encoding"))?;
+        let seg = String::from_utf8(bytes).map_err(|_| Refused::BadPath("not UTF-8"))?;
+        if seg.is_empty() {
+            return Err(Refused::BadPath("an empty path segment"));
+        }
+        if seg.starts_with('.') {
+            return Err(Refused::BadPath("a hidden, `.` or `..` path segment"));
+        }
+        if seg.contains(['/', '\\', '\0']) || seg.chars().any(char::is_control) {
+            return Err(Refused::BadPath(
+                "an encoded separator or control character",
+            ));
+        }
+        out.push(seg);
+    }
+    if out.len() < 2 {
+        return Err(Refused::BadPath("expected /tables/<table>/<file>"));
+    }
+    Ok(out)
+}
+
+/// Open the regular file `root/tables/<segments>`, refusing anything whose real path (symlinks
+/// resolved) is not inside the real `root/tables`.
+pub fn open_table_file(root: &Path, segments: &[String]) -> Result<(std::fs::File, u64), Refused> {
+    let tables = root.join("tables");
+    let real_tables = tables.canonicalize().map_err(|_| Refused::NotFound)?;
+    let mut p = tables;
+    for s in segments {
+        p.push(s);
+    }
+    let real = p.canonicalize().map_err(|_| Refused::NotFound)?;
+    if !real.starts_with(&real_tables) || real == real_tables {
+        return Err(Refused::NotFound);
+    }
+    let mut o = std::fs::OpenOptions::new();
+    o.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        o.custom_flags(libc::O_NOFOLLOW);
+    }
+    let f = o.open(&real).map_err(|_| Refused::NotFound)?;
+    let m = f.metadata().map_err(|_| Refused::NotFound)?;
+    if !m.is_file() {
+        return Err(Refused::NotFound);
+    }
+    // What was opened, if a directory on the way was swapped for a link since.
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let opened = std::fs::read_link(format!("/proc/self/fd/{}", f.as_raw_fd()))
+            .map_err(|_| Refused::NotFound)?;
+        if !opened.starts_with(&real_tables) {
+            return Err(Refused::NotFound);
+        }
+    }
+    Ok((f, m.len()))
+}
+
+/// Every servable table file: `tables/<table>/<file>`, hidden names skipped, each checked as
+/// a download would be.
+pub fn list_tables(root: &Path) -> Vec<TableFile> {
+    let names = |d: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .map(|it| {
+                it.filter_map(|e| e.ok())
+                    .filter_map(|e| e.file_name().into_string().ok())
+                    .filter(|n| !n.starts_with('.'))
+                    .collect()
+            })
+            .unwrap_or_default();
+        v.sort();
+        v
+    };
+    let tables = root.join("tables");
+    let mut out = Vec::new();
+    for t in names(&tables) {
+        for f in names(&tables.join(&t)) {
+            let segs = [t.clone(), f.clone()];
+            if let Ok((_, bytes)) = open_table_file(root, &segs) {
+                out.push(TableFile {
+                    table: t.clone(),
+                    file: f,
+                    bytes,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// A path segment percent-encoded for a link.
+fn encode(s: &str) -> String {
+    let mut out = String::new();
+    for b in s.bytes() {
+        if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
+            out.push(b as char);
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+fn tables_page(files: &[TableFile]) -> String {
+    use std::fmt::Write as _;
+    let mut h = String::from(
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>tables</title>\n\
+         <style>body{font-family:sans-serif;margin:2em auto;max-width:1000px}\
+         td,th{padding:.1em .6em;text-align:left}td.n{text-align:right}</style>\n</head>\n<body>\n\
+         <p><a href=\"/\">dashboard</a> · <a href=\"/api/tables\">JSON</a></p>\n<h1>Tables</h1>\n",
+    );
+    if files.is_empty() {
+        h.push_str("<p>No table files yet.</p>\n");
+    } else {
+        h.push_str("<table>\n<tr><th>table</th><th>file</th><th>bytes</th></tr>\n");
+        for f in files {
+            let _ = writeln!(
+                h,
+                "<tr><td>{t}</td><td><a href=\"/tables/{}/{}\">{f}</a></td><td class=\"n\">{}</td></tr>",
+                encode(&f.table),
+                encode(&f.file),
+                f.bytes,
+                t = report::escape(&f.table),
+                f = report::escape(&f.file),
+            );
+        }
+        h.push_str("</table>\n");
+    }
+    h.push_str("</body>\n</html>\n");
+    h
+}
+
+fn tables_json(files: &[TableFile]) -> String {
+    let v: Vec<serde_json::Value> = files
+        .iter()
+        .map(|f| serde_json::json!({"table": f.table, "file": f.file, "bytes": f.bytes}))
+        .collect();
+    serde_json::to_string_pretty(&v).expect("json")
+}
+
+fn content_type(file: &str) -> &'static str {
+    match file.rsplit_once('.').map(|(_, e)| e) {
+        Some("parquet") => "application/vnd.apache.parquet",
+        Some("json") => "application/json",
+        _ => "application/octet-stream",
+    }
+}
+
+/// A table file, streamed in 64 KiB chunks (HEAD: its headers only).
+async fn table_file(s: &Arc<Served>, raw: String, head: bool) -> Response {
+    let segments = match table_segments(&raw) {
+        Ok(v) => v,
+        Err(Refused::BadPath(why)) => return text(StatusCode::BAD_REQUEST, format!("{why}\n")),
+        Err(Refused::NotFound) => return text(StatusCode::NOT_FOUND, "not found\n"),
+    };
+    let name = segments.last().cloned().unwrap_or_default();
+    let opened = blocking(s, move |s| open_table_file(&s.root, &segments)).await;
+    let (file, len) = match opened {
+        Ok(Ok(x)) => x,
+        Ok(Err(Refused::BadPath(why))) => return text(StatusCode::BAD_REQUEST, format!("{why}\n")),
+        Ok(Err(Refused::NotFound)) => return text(StatusCode::NOT_FOUND, "not found\n"),
+        Err(e) => return unavailable(&e),
+    };
+    let body = if head {
+        Body::empty()
+    } else {
+        // Each chunk read on a blocking thread (as tokio::fs does).
+        let stream = futures_util::stream::unfold(Some(file), |f| async move {
+            let mut f = f?;
+            let read = tokio::task::spawn_blocking(move || {
+                use std::io::Read;
+                let mut buf = vec![0u8; 64 * 1024];
+                let n = f.read(&mut buf);
+                (f, buf, n)
+            })
+            .await;
+            match read {
+                Ok((_, _, Ok(0))) => None,
+                Ok((f, mut buf, Ok(n))) => {
+                    buf.truncate(n);
+                    Some((Ok(Bytes::from(buf)), Some(f)))
+                }
+                Ok((_, _, Err(e))) => Some((Err::<Bytes, io::Error>(e), None)),
+                Err(e) => Some((Err(io::Error::other(e)), None)),
+            }
+        });
+        Body::from_stream(stream)
+    };
+    let mut r = response(StatusCode::OK, content_type(&name), body);
+    let h = r.headers_mut();
+    h.insert(header::CONTENT_LENGTH, HeaderValue::from(len));
+    // The name is a checked segment; quotes and non-ASCII are left out of the header.
+    let safe: String = name
+        .chars()
+        .filter(|c| c.is_ascii_graphic() && *c != '"' && *c != '\\')
+        .collect();
+    if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{safe}\"")) {
+        h.insert(header::CONTENT_DISPOSITION, v);
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn traversal_segments_refused() {
+        for raw in [
+            "../campaign.json",
+            "%2e%2e/campaign.json",
+            "%2E%2E/campaign.json",
+            "runs/%2e%2e%2f%2e%2e%2fcampaign.json",
+            "..%2fcampaign.json",
+            "runs/..",
+            "runs/.",
+            "runs//x",
+            "/etc/passwd",
+            "runs/..\\..\\campaign.json",
+            "runs%5c..%5ccampaign.json",
+            "runs/x%00",
+            "runs/x\0",
+            "runs/%zz",
+            "runs/%2",
+            ".gen/runs.1/part.parquet",
+            "runs/.part-s1of1-1.parquet.pending",
+            "runs",
+            "",
+            "runs/%ff",
+        ] {
+            assert!(
+                matches!(table_segments(raw), Err(Refused::BadPath(_))),
+                "{raw:?} accepted"
+            );
+        }
+        assert_eq!(
+            table_segments("runs/part-s1of1-000001.parquet").unwrap(),
+            vec!["runs", "part-s1of1-000001.parquet"]
+        );
+        assert_eq!(
+            table_segments("dsmc%5Fspecies/a%20b.parquet").unwrap(),
+            vec!["dsmc_species", "a b.parquet"]
+        );
+    }
+
+    #[test]
+    fn symlinks_out_of_tables_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path().join("c");
+        let gen = root.join("tables/.gen/runs.1");
+        std::fs::create_dir_all(&gen).unwrap();
+        std::os::unix::fs::symlink(".gen/runs.1", root.join("tables/runs")).unwrap();
+        std::fs::write(gen.join("part.parquet"), b"PAR1").unwrap();
+        std::fs::write(root.join("campaign.json"), b"{}").unwrap();
+        std::fs::create_dir_all(tmp.path().join("outside")).unwrap();
+        std::fs::write(tmp.path().join("outside/secret"), b"secret").unwrap();
+        std::os::unix::fs::symlink("../../../campaign.json", gen.join("up.parquet")).unwrap();
+        std::os::unix::fs::symlink(tmp.path().join("outside"), root.join("tables/out")).unwrap();
+        std::os::unix::fs::symlink(tmp.path().join("outside/secret"), gen.join("s")).unwrap();
+        std::fs::create_dir_all(gen.join("sub")).unwrap();
+        let segs = |a: &str, b: &str| vec![a.to_string(), b.to_string()];
+        let (_, n) = open_table_file(&root, &segs("runs", "part.parquet")).unwrap();
+        assert_eq!(n, 4);
+        for (a, b) in [
+            ("runs", "up.parquet"),
+            ("out", "secret"),
+            ("runs", "s"),
+            ("runs", "sub"),
+            ("runs", "missing"),
+        ] {
+            assert_eq!(
+                open_table_file(&root, &segs(a, b)).unwrap_err(),
+                Refused::NotFound,
+                "{a}/{b}"
+            );
+        }
+        let listed = list_tables(&root);
+        assert_eq!(
+            listed,
+            vec![TableFile {
+                table: "runs".into(),
+                file: "part.parquet".into(),
+                bytes: 4
+            }]
+        );
+    }
+
+    #[test]
+    fn host_header_must_be_local() {
+        let h = |s: &'static str| Some(HeaderValue::from_static(s));
+        for ok in [
+            "localhost:8080",
+            "LOCALHOST",
+            "127.0.0.1:9000",
+            "[::1]:8080",
+            "[::1]",
+            "10.0.0.7:80",
+        ] {
+            assert!(local_host(h(ok).as_ref()), "{ok}");
+        }
+        for bad in [
+            "evil.example:8080",
+            "evil.example",
+            "localhost.evil:80",
+            "[x]:1",
+        ] {
+            assert!(!local_host(h(bad).as_ref()), "{bad}");
+        }
+        assert!(local_host(None));
+    }
+
+    #[test]
+    fn live_part_goes_before_the_end_of_the_body() {
+        let page = dashboard("<html><body><p>x</p></body>\n</html>\n");
+        assert!(page.contains("<p>x</p><style>"));
+        assert!(page.trim_end().ends_with("</script>\n</body>\n</html>"));
+    }
+}

@@ -1,0 +1,512 @@
+//! `granular serve`: the dashboard (figures, progress table, live script), `/api/status` equal
+//! to `status --json`, table files downloaded byte for byte, every method but GET/HEAD refused
+//! (405) and nothing in the directory changed, traversal (`..`, `%2e%2e`, encoded slashes and
+//! backslashes, absolute paths, symlinks to a file or a directory outside) refused without the
+//! target's content; refusals of `status` (not a campaign), a bad `--addr` (2), an address in
+//! use (3); and a campaign run by another process followed while it runs.
+//!
+//! Requests are raw HTTP/1.1 over `TcpStream` (no client library: the paths go out exactly as
+//! written, undecoded).
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::{json, Value};
+
+use super::util::{
+    bin, granular, heavy, log_text, run_capture, run_granular, snapshot, write_json,
+};
+
+const LIMIT: Duration = Duration::from_secs(300);
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A running `granular serve`, killed on drop.
+struct Server {
+    child: Child,
+    addr: String,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Start `granular serve DIR --addr 127.0.0.1:0` and read the address it prints.
+fn serve(dir: &Path, log: &Path) -> Server {
+    let f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log)
+        .unwrap();
+    let mut child = Command::new(bin())
+        .args(["serve", s(dir), "--addr", "127.0.0.1:0"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(f)
+        .spawn()
+        .expect("spawn granular serve");
+    let out = child.stdout.take().unwrap();
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        let _ = BufReader::new(out).read_line(&mut line);
+        let _ = tx.send(line);
+    });
+    let line = match rx.recv_timeout(Duration::from_secs(60)) {
+        Ok(l) => l,
+        Err(_) => {
+            let _ = child.kill();
+            panic!("serve printed no address; log:\n{}", log_text(log));
+        }
+    };
+    let mut server = Server {
+        child,
+        addr: String::new(),
+    };
+    let addr = line
+        .trim()
+        .strip_prefix(&format!("serving {} at http://", s(dir)))
+        .and_then(|r| r.strip_suffix('/'))
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}; log:\n{}", log_text(log)));
+    assert!(addr.starts_with("127.0.0.1:"), "{addr}");
+    assert_ne!(addr, "127.0.0.1:0", "the actual port is printed");
+    server.addr = addr.to_string();
+    server
+}
+
+/// One response.
+struct Resp {
+    code: u16,
+    head: String,
+    body: Vec<u8>,
+}
+
+impl Resp {
+    fn text(&self) -> String {
+        String::from_utf8_lossy(&self.body).into_owned()
+    }
+    fn header(&self, name: &str) -> Option<String> {
+        self.head.lines().find_map(|l| {
+            let (k, v) = l.split_once(':')?;
+            k.eq_ignore_ascii_case(name).then(|| v.trim().to_string())
+        })
+    }
+}
+
+/// Send `METHOD target HTTP/1.1` as written (the target is not normalised or encoded).
+fn request(addr: &str, method: &str, target: &str) -> Resp {
+    let mut st = TcpStream::connect(addr).expect("connect");
+    st.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    let body = if matches!(method, "POST" | "PUT" | "PATCH") {
+        "x=1"
+    } else {
+        ""
+    };
+    write!(
+        st,
+        "{method} {target} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    )
+    .unwrap();
+    let mut raw = Vec::new();
+    st.read_to_end(&mut raw).expect("read response");
+    let split = raw
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .unwrap_or_else(|| panic!("no header end: {:?}", String::from_utf8_lossy(&raw)));
+    let head = String::from_utf8_lossy(&raw[..split]).into_owned();
+    let mut body = raw[split + 4..].to_vec();
+    let code: u16 = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    let r = Resp {
+        code,
+        head,
+        body: Vec::new(),
+    };
+    if r.header("transfer-encoding")
+        .is_some_and(|t| t.contains("chunked"))
+    {
+        body = dechunk(&body);
+    }
+    Resp { body, ..r }
+}
+
+fn dechunk(mut b: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    loop {
+        let eol = b.windows(2).position(|w| w == b"\r\n").expect("chunk size");
+        let n = usize::from_str_radix(
+            std::str::from_utf8(&b[..eol])
+                .unwrap()
+                .split(';')
+                .next()
+                .unwrap()
+                .trim(),
+            16,
+        )
+        .unwrap();
+        if n == 0 {
+            return out;
+        }
+        out.extend_from_slice(&b[eol + 2..eol + 2 + n]);
+        b = &b[eol + 2 + n + 2..];
+    }
+}
+
+fn get(addr: &str, target: &str) -> Resp {
+    request(addr, "GET", target)
+}
+
+/// 2 points x 2 replicas of a small DSMC campaign (well under a second).
+fn manifest() -> Value {
+    json!({
+        "name": "serve-test",
+        "model": "dsmc",
+        "seed": 7,
+        "replicas": 2,
+        "params": {
+            "method": "low_rank",
+            "species": {"power_law": {"n1": 0.1, "N1": 2000, "theta": 3}},
+            "restitution": {"constant": 0.7},
+            "t_end": 10.0,
+            "output_times": {"list": [0.5, 1.0, 5.0, 10.0]},
+            "observables": ["temperature", "msd"]
+        },
+        "sweep": {"restitution.constant": [0.7, 0.9]}
+    })
+}
+
+#[test]
+fn serve_a_finished_campaign_read_only() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let (m, c, log) = (
+        tmp.path().join("m.json"),
+        tmp.path().join("c"),
+        tmp.path().join("log"),
+    );
+    write_json(&m, &manifest());
+    let code = run_granular(&["run", s(&m), "--out", s(&c), "--quiet"], &log, LIMIT);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    // Traps: links inside tables/ to a file and a directory outside the campaign.
+    let outside = tmp.path().join("outside");
+    std::fs::create_dir(&outside).unwrap();
+    std::fs::write(outside.join("secret.parquet"), "TOP-SECRET-CONTENT").unwrap();
+    std::os::unix::fs::symlink("/etc/passwd", c.join("tables/runs/passwd.parquet")).unwrap();
+    std::os::unix::fs::symlink(&outside, c.join("tables/outside")).unwrap();
+    std::os::unix::fs::symlink(
+        outside.join("secret.parquet"),
+        c.join("tables/runs/secret.parquet"),
+    )
+    .unwrap();
+    let (_, status_json) = run_capture(&["status", s(&c), "--json"], &log);
+    let want_status: Value = serde_json::from_str(&status_json).expect("status --json");
+    let before = snapshot(&c);
+
+    let srv = serve(&c, &log);
+    let a = srv.addr.as_str();
+
+    // The dashboard: the report's figures and progress table, and the live script.
+    let r = get(a, "/");
+    assert_eq!(r.code, 200, "{}", r.head);
+    let page = r.text();
+    assert!(page.starts_with("<!DOCTYPE html>"));
+    assert!(page.contains("serve-test"));
+    assert!(page.contains("id=\"progress-table\""));
+    assert!(page.contains("data-point=\"0\"") && page.contains("data-point=\"1\""));
+    assert!(page.contains("constant=0.7") && page.contains("constant=0.9"));
+    assert!(page.contains("4: 4 done, 0 failed, 0 running, 0 pending"));
+    let figures = page.matches("<figure").count();
+    assert!(figures >= 2, "{figures} figures");
+    assert_eq!(page.matches("<svg").count(), figures);
+    assert!(page.contains("id=\"live\"") && page.contains("/api/status"));
+    assert!(!page.to_ascii_lowercase().contains("src=\"http"));
+    assert!(!page.to_ascii_lowercase().contains("<link"));
+
+    // /api/status is status --json.
+    let r = get(a, "/api/status");
+    assert_eq!(r.code, 200);
+    assert!(r
+        .header("content-type")
+        .unwrap()
+        .contains("application/json"));
+    let got: Value = serde_json::from_slice(&r.body).expect("JSON");
+    assert_eq!(got, want_status);
+    let r = request(a, "HEAD", "/api/status");
+    assert_eq!(r.code, 200);
+    assert!(r.body.is_empty());
+
+    // The report as a download, without the script.
+    let r = get(a, "/report.html");
+    assert_eq!(r.code, 200);
+    assert!(r
+        .header("content-disposition")
+        .is_some_and(|d| d.contains("attachment")));
+    assert!(!r.text().contains("<script"));
+    assert_eq!(r.text().matches("<figure").count(), figures);
+
+    // Table files: listed, downloaded byte for byte; the traps neither listed nor served.
+    let r = get(a, "/api/tables");
+    assert_eq!(r.code, 200);
+    let files: Vec<Value> = serde_json::from_slice(&r.body).unwrap();
+    let names: Vec<String> = files
+        .iter()
+        .map(|f| {
+            format!(
+                "{}/{}",
+                f["table"].as_str().unwrap(),
+                f["file"].as_str().unwrap()
+            )
+        })
+        .collect();
+    assert!(names.iter().any(|n| n.starts_with("runs/")), "{names:?}");
+    assert!(names.iter().any(|n| n.starts_with("points/")), "{names:?}");
+    for n in &names {
+        assert!(
+            !n.contains("passwd") && !n.contains("secret") && !n.starts_with("outside"),
+            "{n} listed"
+        );
+    }
+    let listing = get(a, "/tables/").text();
+    for n in &names {
+        let real = c.join("tables").join(n);
+        let r = get(a, &format!("/tables/{n}"));
+        assert_eq!(r.code, 200, "{n}: {}", r.head);
+        assert_eq!(r.body, std::fs::read(&real).unwrap(), "{n} differs");
+        assert_eq!(
+            r.header("content-length").unwrap(),
+            r.body.len().to_string()
+        );
+        if n.ends_with(".parquet") {
+            assert_eq!(
+                r.header("content-type").unwrap(),
+                "application/vnd.apache.parquet"
+            );
+        }
+        assert!(
+            listing.contains(&format!("/tables/{n}\"")),
+            "{n} not linked"
+        );
+        let h = request(a, "HEAD", &format!("/tables/{n}"));
+        assert_eq!(h.code, 200);
+        assert!(h.body.is_empty());
+    }
+
+    // Traversal: refused, never the target's content.
+    let campaign_json = std::fs::read_to_string(c.join("campaign.json")).unwrap();
+    for target in [
+        "/tables/../campaign.json",
+        "/tables/runs/../../campaign.json",
+        "/tables/%2e%2e/campaign.json",
+        "/tables/%2E%2E/campaign.json",
+        "/tables/x/%2e%2e%2f%2e%2e%2fcampaign.json",
+        "/tables/runs/%2e%2e%2f%2e%2e%2fcampaign.json",
+        "/tables/..%2fcampaign.json",
+        "/tables/..%2Fcampaign.json",
+        "/tables/runs%2f..%2f..%2fcampaign.json",
+        "/tables/runs/..%5c..%5ccampaign.json",
+        "/tables/runs\\..\\..\\campaign.json",
+        "/tables//etc/passwd",
+        "/tables/%2fetc%2fpasswd",
+        "/tables/runs/%2fetc%2fpasswd",
+        "/tables/runs/passwd.parquet",
+        "/tables/runs/secret.parquet",
+        "/tables/outside/secret.parquet",
+        "/tables/runs/campaign.json%00.parquet",
+        "/tables/.gen",
+        "/tables/runs/.",
+        "/../campaign.json",
+        "/campaign.json",
+        "/%2e%2e/campaign.json",
+    ] {
+        let r = get(a, target);
+        assert!(
+            matches!(r.code, 400 | 403 | 404),
+            "{target}: {} {}",
+            r.code,
+            r.text()
+        );
+        let body = r.text();
+        for leaked in ["root:", "TOP-SECRET", "registry", "format_version"] {
+            assert!(!body.contains(leaked), "{target} leaked {leaked}: {body}");
+        }
+        assert!(!campaign_json.is_empty() && !body.contains(&campaign_json[..20]));
+    }
+
+    // Read-only: every other method 405, wherever it points.
+    let part = &names[0];
+    for method in ["POST", "PUT", "DELETE", "PATCH", "OPTIONS"] {
+        for target in [
+            "/".to_string(),
+            "/api/status".to_string(),
+            format!("/tables/{part}"),
+            "/tables/runs/new.parquet".to_string(),
+            "/nowhere".to_string(),
+        ] {
+            let r = request(a, method, &target);
+            assert_eq!(r.code, 405, "{method} {target}");
+            assert_eq!(r.header("allow").as_deref(), Some("GET, HEAD"));
+        }
+    }
+    // A page of another site (DNS rebinding) is refused on loopback.
+    let mut st = TcpStream::connect(a).unwrap();
+    st.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    write!(
+        st,
+        "GET /api/status HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut raw = String::new();
+    st.read_to_string(&mut raw).unwrap();
+    assert!(raw.starts_with("HTTP/1.1 403"), "{raw}");
+
+    // The address is in use: refused (3), naming it.
+    let (code, _) = run_capture(&["serve", s(&c), "--addr", a], &log);
+    assert_eq!(code, Some(3), "log:\n{}", log_text(&log));
+    assert!(log_text(&log).contains("is in use"));
+
+    drop(srv);
+    assert!(
+        before == snapshot(&c),
+        "serving changed the campaign directory"
+    );
+}
+
+#[test]
+fn serve_refuses_what_status_refuses() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (log1, log2) = (tmp.path().join("log1"), tmp.path().join("log2"));
+    // Not a campaign: the same refusal as status (3, the same message).
+    let (code, _) = run_capture(&["status", s(tmp.path())], &log1);
+    let (code2, out) = run_capture(&["serve", s(tmp.path()), "--addr", "127.0.0.1:0"], &log2);
+    assert_eq!(code, Some(3));
+    assert_eq!(code2, code);
+    assert!(out.is_empty(), "{out}");
+    assert_eq!(log_text(&log1), log_text(&log2));
+    // A bad --addr: a usage error (2) naming the flag.
+    for bad in ["nowhere", "127.0.0.1", "127.0.0.1:99999"] {
+        let (code, _) = run_capture(&["serve", s(tmp.path()), "--addr", bad], &log2);
+        assert_eq!(code, Some(2), "{bad}");
+        let text = log_text(&log2);
+        assert!(text.contains("--addr"), "{text}");
+    }
+}
+
+/// A campaign run by another process: `/api/status` shows a run running, then more runs done,
+/// while `granular run` goes on.
+#[test]
+fn serve_follows_a_running_campaign() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let (m, c, log, run_log) = (
+        tmp.path().join("m.json"),
+        tmp.path().join("c"),
+        tmp.path().join("log"),
+        tmp.path().join("run.log"),
+    );
+    // 3 runs of a few seconds each, one at a time, each committed when it finishes.
+    write_json(
+        &m,
+        &json!({
+            "name": "serve-live",
+            "model": "dsmc",
+            "seed": 3,
+            "replicas": 3,
+            "params": {
+                "method": "low_rank",
+                "species": {"power_law": {"n1": 0.1, "N1": 800000, "theta": 3}},
+                "restitution": {"constant": 0.8},
+                "t_end": 100.0,
+                "output_times": {"list": [1.0, 100.0]},
+                "observables": ["temperature"]
+            }
+        }),
+    );
+    struct Killed(Child);
+    impl Drop for Killed {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let mut run = Killed(
+        granular(
+            &[
+                "run",
+                s(&m),
+                "--out",
+                s(&c),
+                "--threads",
+                "1",
+                "--flush-every",
+                "0",
+                "--quiet",
+            ],
+            &run_log,
+        )
+        .spawn()
+        .expect("spawn run"),
+    );
+    let t0 = Instant::now();
+    while !c.join("campaign.json").exists() {
+        assert!(
+            t0.elapsed() < LIMIT,
+            "no campaign.json; log:\n{}",
+            log_text(&run_log)
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let srv = serve(&c, &log);
+    let (mut saw_running, mut first_done, mut last_done) = (false, None, 0);
+    let mut finished = false;
+    while t0.elapsed() < LIMIT {
+        let r = get(&srv.addr, "/api/status");
+        if r.code == 200 {
+            let st: Value = serde_json::from_slice(&r.body).expect("JSON");
+            let (done, running) = (
+                st["done"].as_u64().unwrap(),
+                st["running"].as_u64().unwrap(),
+            );
+            if running > 0 {
+                saw_running = true;
+                assert!(
+                    !st["live_shards"].as_array().unwrap().is_empty(),
+                    "running without a live shard: {st}"
+                );
+            }
+            first_done.get_or_insert(done);
+            last_done = done;
+            if done == 3 {
+                break;
+            }
+        }
+        if !finished {
+            if let Some(status) = run.0.try_wait().unwrap() {
+                assert!(status.success(), "run failed; log:\n{}", log_text(&run_log));
+                finished = true;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert!(
+        saw_running,
+        "no running run seen; log:\n{}",
+        log_text(&run_log)
+    );
+    assert_eq!(last_done, 3, "log:\n{}", log_text(&run_log));
+    assert!(
+        first_done.unwrap() < 3,
+        "the campaign had finished before the first answer"
+    );
+    // The dashboard of the finished campaign.
+    let page = get(&srv.addr, "/").text();
+    assert!(page.contains("3: 3 done, 0 failed, 0 running, 0 pending"));
+}
