@@ -1,12 +1,16 @@
 //! `granular report`: one self-contained HTML page of a campaign, finished or not: the
 //! campaign (name, model, code version, the latest manifest, its history), the progress per
 //! point (`campaign::status`), the failed runs with their reasons (the `runs` table), and the
-//! model's standard figures as inline SVG (`Campaign::figures`, drawn by `plot::svg_string`).
+//! model's standard figures as inline SVG (`Campaign::figures`, drawn by `plot::svg_string`),
+//! and what `granular analyze` left in the campaign directory ([`analysis`]: its tables and
+//! figures, read as files).
 //!
 //! Inline CSS, no script, no external reference: the page opens offline after a copy. Every
 //! string read from the campaign (manifest, names, labels, reasons) is HTML-escaped here;
 //! the SVG text is escaped by the renderer. This module builds the text; the command line
 //! writes it.
+
+mod analysis;
 
 use std::fmt::Write as _;
 
@@ -20,8 +24,10 @@ use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
 /// A built report.
 pub struct Report {
     pub html: String,
-    /// Figures embedded.
+    /// Figures embedded (the model's standard figures).
     pub figures: usize,
+    /// Figures of `granular analyze` embedded (from `DIR/analysis/figures`).
+    pub analysis_figures: usize,
     /// What could not be shown (a figure that could not be drawn, an unreadable table), also
     /// noted in the page.
     pub notes: Vec<String>,
@@ -123,6 +129,7 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
     section_progress(&mut h, &st);
     section_failures(&mut h, c, &mut notes);
     let figures = section_figures(&mut h, c, &st, &mut notes);
+    let analysis_figures = analysis::section(&mut h, c, &mut notes);
     section_manifest(&mut h, &info);
     if !notes.is_empty() {
         h.push_str("<h2 id=\"notes\">Notes</h2>\n<ul>\n");
@@ -140,6 +147,7 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
     Ok(Report {
         html: h,
         figures,
+        analysis_figures,
         notes,
     })
 }
@@ -349,7 +357,7 @@ fn section_figures(
         Ok(None) => {
             let _ = writeln!(
                 h,
-                "<p>Model {} has no standard figures (an rfm campaign: <code>granular analyze</code>).</p>",
+                "<p>Model {} has no standard figures.</p>",
                 escape(c.plan.model.as_str())
             );
             return 0;

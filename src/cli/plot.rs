@@ -29,7 +29,7 @@ pub fn run(a: Args) -> i32 {
             return fail(
                 exit_codes::INVALID_INPUT,
                 format!(
-                    "`granular plot` draws no figures of model {} (see `granular analyze`)",
+                    "`granular plot` draws no figures of model {}",
                     c.plan.model.as_str()
                 ),
             )
