@@ -44,9 +44,16 @@ pub(crate) fn read_summary(batches: &[RecordBatch]) -> Result<Sk, StoreError> {
     }
     for v in out.values_mut() {
         v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // Shells where S vanishes to rounding (the symmetrised process at some k) would
+        // stretch the log axis over 30 decades: left out.
+        let max = v.iter().map(|r| r.1).fold(0.0, f64::max);
+        v.retain(|r| r.1 > ROUNDING * max);
     }
     Ok(out)
 }
+
+/// S(k) below this fraction of the series' largest value is rounding, not data.
+const ROUNDING: f64 = 1e-15;
 
 /// A fit averaged over the replicas: (D_f, A, k_lo, k_hi).
 pub(crate) type Fit = (f64, f64, f64, f64);
@@ -141,7 +148,7 @@ pub fn figures(c: &CampaignView<'_, CascadeParams>) -> Result<Vec<(String, Figur
                 let fit = fits.get(&(*p, s.clone()));
                 let mut label = label(c, *p);
                 if let Some(f) = fit {
-                    label = format!("D_f {:.2}: {label}", f.0);
+                    label = format!("D_f={:.2}, {label}", f.0);
                 }
                 PointCurve {
                     point: *p,
@@ -260,6 +267,7 @@ mod tests {
             (0, "field", 2.0, 5.0, Some(0.5)),
             (0, "field", 1.0, 9.0, None),
             (0, "placement", 1.0, 0.8, Some(0.1)),
+            (0, "placement", 3.0, 1e-20, Some(1e-21)),
         ];
         let b = table(&rows, |c| {
             vec![
@@ -275,6 +283,10 @@ mod tests {
             s[&(0, "field".to_string())],
             vec![(1.0, 9.0, 0.0), (2.0, 5.0, 0.5)]
         );
-        assert_eq!(s[&(0, "placement".to_string())], vec![(1.0, 0.8, 0.1)]);
+        assert_eq!(
+            s[&(0, "placement".to_string())],
+            vec![(1.0, 0.8, 0.1)],
+            "a rounding-level S left out"
+        );
     }
 }

@@ -3,7 +3,7 @@
 //!
 //! - `velocity-distribution`: the time-weighted P(v) (Q(v, l) for a fixed free path) of the
 //!   velocity components, with the measured tail exponent (and the predicted one, (5.29))
-//!   from `spm_summary` in the legend;
+//!   from `spm_summary` in the legend (`α=measured/predicted`);
 //! - `velocity-distribution-walk`: the same with every walk weighted equally ((5.10) as
 //!   written, spec 6.5).
 //!
@@ -106,13 +106,13 @@ fn read_alphas(
 /// A point's legend label from its parameters.
 fn label(p: &SpmParams) -> String {
     match &p.free_path {
-        FreePathSpec::Fixed { length } => format!("fixed l={length} m"),
+        FreePathSpec::Fixed { length } => format!("l={length} m"),
         FreePathSpec::Fitted {
             c,
             fractal_dimension,
             ..
-        } => format!("(4.25) C={c} D_f={fractal_dimension}"),
-        FreePathSpec::Table { edges, .. } => format!("table, {} bins", edges.len() - 1),
+        } => format!("C={c} D_f={fractal_dimension}"),
+        FreePathSpec::Table { edges, .. } => format!("table of {} bins", edges.len() - 1),
     }
 }
 
@@ -129,8 +129,8 @@ pub fn figures(c: &CampaignView<'_, SpmParams>) -> Result<Vec<(String, Figure)>,
             .unwrap_or_else(|| c.point_label(p));
         if let Some((Some(m), pred)) = alphas.get(&p) {
             l = match pred {
-                Some(pr) => format!("a={m:.2} ({pr:.2}): {l}"),
-                None => format!("a={m:.2}: {l}"),
+                Some(pr) => format!("\u{3b1}={m:.2}/{pr:.2} {l}"),
+                None => format!("\u{3b1}={m:.2} {l}"),
             };
         }
         l
@@ -140,7 +140,7 @@ pub fn figures(c: &CampaignView<'_, SpmParams>) -> Result<Vec<(String, Figure)>,
         (
             false,
             "velocity-distribution",
-            "P(v), time-weighted (legend: tail alpha, predicted)",
+            "P(v), time-weighted (legend: tail alpha measured/predicted)",
         ),
         (
             true,
