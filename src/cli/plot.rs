@@ -1,4 +1,5 @@
-//! `granular plot DIR [--out FIGDIR]`: the standard figures of a campaign's summary tables.
+//! `granular plot DIR [--out FIGDIR]`: the standard figures of a campaign (its model's
+//! `figures`: from the summary tables, or the run tables of the models without summaries).
 
 use std::path::PathBuf;
 

@@ -166,8 +166,9 @@ pub trait Model {
     fn write_summaries(_c: &CampaignView<'_, Self::Params>) -> Result<(), StoreError> {
         Ok(())
     }
-    /// The standard figures (name, figure) from the summary tables; `None` if the model has
-    /// none.
+    /// The standard figures (name, figure) from the summary tables (or the run tables of a
+    /// model without summaries), typically built with [`overlay_figures`]; `None` if the
+    /// model has none.
     fn figures(
         _c: &CampaignView<'_, Self::Params>,
     ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
@@ -302,6 +303,42 @@ pub fn overlay_groups<T>(items: Vec<T>) -> Vec<Vec<T>> {
         out[i * n / len.max(1)].push(x);
     }
     out
+}
+
+/// Most (x, y, error) rows of a log-x series drawn as they are: S(k) of a large system has
+/// thousands of shells, which [`log_binned`] averages for display.
+pub const MAX_LOG_ROWS: usize = 400;
+
+/// `rows` (sorted by x > 0) averaged in bins of `per_decade` per decade of x when there are
+/// more than [`MAX_LOG_ROWS`]: per bin the geometric mean of x, the mean of y and
+/// sqrt(sum err^2)/n (the rows' errors as independent); fewer rows are returned as they are.
+pub fn log_binned(rows: &[(f64, f64, f64)], per_decade: f64) -> Vec<(f64, f64, f64)> {
+    if rows.len() <= MAX_LOG_ROWS {
+        return rows.to_vec();
+    }
+    let mut out = Vec::new();
+    let mut bin: Vec<(f64, f64, f64)> = Vec::new();
+    let key = |x: f64| (x.log10() * per_decade).floor() as i64;
+    for &r in rows.iter().filter(|r| r.0 > 0.0) {
+        if bin.last().is_some_and(|b| key(b.0) != key(r.0)) {
+            out.push(average(&bin));
+            bin.clear();
+        }
+        bin.push(r);
+    }
+    if !bin.is_empty() {
+        out.push(average(&bin));
+    }
+    out
+}
+
+fn average(bin: &[(f64, f64, f64)]) -> (f64, f64, f64) {
+    let n = bin.len() as f64;
+    (
+        (bin.iter().map(|r| r.0.ln()).sum::<f64>() / n).exp(),
+        bin.iter().map(|r| r.1).sum::<f64>() / n,
+        bin.iter().map(|r| r.2 * r.2).sum::<f64>().sqrt() / n,
+    )
 }
 
 /// One observable drawn as overlay figures, one series per point.

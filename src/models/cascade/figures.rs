@@ -2,7 +2,8 @@
 //! [`crate::models::OVERLAY_MAX`] per figure:
 //!
 //! - `structure-factor` (log-log): S(k) (6.5) of the weight field, replica mean and error
-//!   (`cascade_structure_factor_summary`), with the fitted A k^-D_f over its fit window as a
+//!   (`cascade_structure_factor_summary`; beyond `models::MAX_LOG_ROWS` shells averaged in 50
+//!   bins per decade of k for display), with the fitted A k^-D_f over its fit window as a
 //!   line in the point's colour (`cascade_fit`, D_f and ln A averaged over the replicas; D_f in
 //!   the legend);
 //! - `placement-structure-factor`: the same for the placed discs (source `placement`);
@@ -15,10 +16,13 @@ use arrow_array::RecordBatch;
 
 use super::params::CascadeParams;
 use super::tables::{CASCADE_FIT, CASCADE_PLACEMENT, CASCADE_STRUCTURE_FACTOR_SUMMARY};
-use crate::models::{overlay_figures, CampaignView, Overlay, PointCurve};
+use crate::models::{log_binned, overlay_figures, CampaignView, Overlay, PointCurve};
 use crate::plot::{Figure, Series};
 use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
 use crate::store::parquet_io::StoreError;
+
+/// Display bins per decade of k of a point with more than `models::MAX_LOG_ROWS` shells.
+const SHELLS_PER_DECADE: f64 = 50.0;
 
 /// Most points whose placed discs are drawn.
 pub const MAX_PLACEMENTS: usize = 4;
@@ -150,13 +154,14 @@ pub fn figures(c: &CampaignView<'_, CascadeParams>) -> Result<Vec<(String, Figur
                 if let Some(f) = fit {
                     label = format!("D_f={:.2}, {label}", f.0);
                 }
+                let shown = log_binned(rows, SHELLS_PER_DECADE);
                 PointCurve {
                     point: *p,
                     label,
-                    data: rows.clone(),
                     line: fit
-                        .map(|f| (String::new(), fit_line(rows, f)))
+                        .map(|f| (String::new(), fit_line(&shown, f)))
                         .filter(|l| !l.1.is_empty()),
+                    data: shown,
                 }
             })
             .collect();

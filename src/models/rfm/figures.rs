@@ -11,7 +11,8 @@
 //!   `neighbour-distance-distribution` G_1(R) (log-log) likewise, without a line. The
 //!   histogram summaries pool the replicas' counts, so their error bars are the thesis's
 //!   counting errors sqrt(X_j)/(N_s dv) (A.4)-(A.6), not a replica spread;
-//! - `structure-factor`: S(k) (log-log), reference S = 1 (uncorrelated positions, and the
+//! - `structure-factor`: S(k) (log-log; beyond `models::MAX_LOG_ROWS` shells averaged in 50
+//!   bins per decade of k for display), reference S = 1 (uncorrelated positions, and the
 //!   large-k limit);
 //! - `radial-distribution`: g(R), reference g = 1 (uniform gas).
 //!
@@ -24,7 +25,7 @@ use arrow_array::RecordBatch;
 
 use super::params::RfmParams;
 use super::tables::*;
-use crate::models::{overlay_figures, CampaignView, Overlay, PointCurve};
+use crate::models::{log_binned, overlay_figures, CampaignView, Overlay, PointCurve};
 use crate::plot::{Figure, Series};
 use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
 use crate::store::parquet_io::StoreError;
@@ -33,6 +34,9 @@ type View<'a, 'b> = &'a CampaignView<'b, RfmParams>;
 
 /// (x, y, error) rows per point, sorted by x.
 pub(crate) type PerPoint = BTreeMap<u32, Vec<(f64, f64, f64)>>;
+
+/// Display bins per decade of k of a point with more than `models::MAX_LOG_ROWS` shells.
+const SHELLS_PER_DECADE: f64 = 50.0;
 
 /// Most times of a temperature series shown (evenly thinned beyond).
 const MAX_TIMES: usize = 300;
@@ -374,6 +378,10 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
     ));
 
     let sk = structure_factor(&c.data.read(RFM_STRUCTURE_FACTOR_SUMMARY)?)?;
+    let sk_shown: PerPoint = sk
+        .iter()
+        .map(|(&p, v)| (p, log_binned(v, SHELLS_PER_DECADE)))
+        .collect();
     figs.extend(overlay_figures(
         name,
         &overlay(
@@ -383,7 +391,7 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
             "S(k)",
             (true, true),
         ),
-        curves(c, &sk, NO_LINE),
+        curves(c, &sk_shown, NO_LINE),
         &|x0, x1| level("S = 1", 1.0, x0, x1),
     ));
 
@@ -437,6 +445,27 @@ mod tests {
             vec![c.u32("point_id", |r| r.0), c.f64("t", |r| r.1)]
         });
         assert!(timeseries(&[bad]).is_err());
+    }
+
+    #[test]
+    fn many_shells_averaged_in_log_bins() {
+        use crate::models::{log_binned, MAX_LOG_ROWS};
+        let few: Vec<(f64, f64, f64)> = (1..=10).map(|i| (i as f64, 1.0, 0.1)).collect();
+        assert_eq!(log_binned(&few, 10.0), few);
+        // 1000 rows on k = 1..1000, 10 bins per decade: [1, 10^0.1) holds k = 1 alone,
+        // [10^0.1, 10^0.2) and [10^0.2, 10^0.3) hold nothing (no bin drawn), [10^2.9, 10^3)
+        // holds 795..999 (205 rows), [10^3, 10^3.1) k = 1000: 28 bins.
+        let many: Vec<(f64, f64, f64)> = (1..=1000).map(|i| (i as f64, 2.0, 0.5)).collect();
+        assert!(many.len() > MAX_LOG_ROWS);
+        let b = log_binned(&many, 10.0);
+        assert_eq!(b.len(), 28);
+        assert_eq!(b[0], (1.0, 2.0, 0.5));
+        assert!((b[27].0 - 1000.0).abs() < 1e-9 && (b[27].1, b[27].2) == (2.0, 0.5));
+        let tail = b[26];
+        assert_eq!(tail.1, 2.0);
+        assert!((tail.2 - 0.5 / 205f64.sqrt()).abs() < 1e-12, "{tail:?}");
+        assert!(tail.0 > 795.0 && tail.0 < 999.0);
+        assert!(b.windows(2).all(|w| w[0].0 < w[1].0));
     }
 
     #[test]
