@@ -354,13 +354,17 @@ pub struct Overlay<'a> {
     pub legend_low: bool,
 }
 
+/// (x, y, error) rows of a figure's series.
+pub type Rows = Vec<(f64, f64, f64)>;
+
 /// One point's curve of an [`Overlay`]: its (x, y, error) data, drawn as markers with error
 /// bars, and an optional line drawn after it in its colour (exact result, theory, fit).
 pub struct PointCurve {
     pub point: u32,
     pub label: String,
-    pub data: Vec<(f64, f64, f64)>,
-    pub line: Option<(String, Vec<(f64, f64, f64)>)>,
+    pub data: Rows,
+    /// (legend label, rows) of the line.
+    pub line: Option<(String, Rows)>,
 }
 
 /// The figures of an overlay: the curves split by [`overlay_groups`], each figure followed by

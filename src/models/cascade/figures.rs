@@ -16,7 +16,7 @@ use arrow_array::RecordBatch;
 
 use super::params::CascadeParams;
 use super::tables::{CASCADE_FIT, CASCADE_PLACEMENT, CASCADE_STRUCTURE_FACTOR_SUMMARY};
-use crate::models::{log_binned, overlay_figures, CampaignView, Overlay, PointCurve};
+use crate::models::{log_binned, overlay_figures, CampaignView, Overlay, PointCurve, Rows};
 use crate::plot::{Figure, Series};
 use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
 use crate::store::parquet_io::StoreError;
@@ -188,7 +188,7 @@ pub fn figures(c: &CampaignView<'_, CascadeParams>) -> Result<Vec<(String, Figur
 fn placements(c: &CampaignView<'_, CascadeParams>) -> Result<Vec<(String, Figure)>, StoreError> {
     let t = CASCADE_PLACEMENT;
     // point -> (first run, its discs)
-    let mut first: BTreeMap<u32, (u64, Vec<(f64, f64, f64)>)> = BTreeMap::new();
+    let mut first: BTreeMap<u32, (u64, Rows)> = BTreeMap::new();
     for b in c.data.read(t)? {
         let (r, p) = (get_u64(&b, t, "run_id")?, get_u32(&b, t, "point_id")?);
         let (x, y) = (get_f64(&b, t, "x")?, get_f64(&b, t, "y")?);

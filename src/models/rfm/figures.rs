@@ -25,7 +25,7 @@ use arrow_array::RecordBatch;
 
 use super::params::RfmParams;
 use super::tables::*;
-use crate::models::{log_binned, overlay_figures, CampaignView, Overlay, PointCurve};
+use crate::models::{log_binned, overlay_figures, CampaignView, Overlay, PointCurve, Rows};
 use crate::plot::{Figure, Series};
 use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
 use crate::store::parquet_io::StoreError;
@@ -98,12 +98,12 @@ pub(crate) fn moments(batches: &[RecordBatch]) -> Result<PerPoint, StoreError> {
 /// E|z|^m / sigma^m of a Gaussian: 2^(m/2) Gamma((m+1)/2) / sqrt(pi).
 pub(crate) fn gaussian_abs_moment(m: u32) -> f64 {
     // Gamma((m+1)/2) by the recurrence from Gamma(1/2) = sqrt(pi) or Gamma(1) = 1.
-    let mut g = if m % 2 == 0 {
+    let mut g = if m.is_multiple_of(2) {
         std::f64::consts::PI.sqrt()
     } else {
         1.0
     };
-    let mut a = if m % 2 == 0 { 0.5 } else { 1.0 };
+    let mut a = if m.is_multiple_of(2) { 0.5 } else { 1.0 };
     while a + 1e-9 < (m as f64 + 1.0) / 2.0 {
         g *= a;
         a += 1.0;
@@ -233,7 +233,7 @@ pub(crate) fn radial(batches: &[RecordBatch]) -> Result<PerPoint, StoreError> {
 
 /// A horizontal reference line at `y` over [x0, x1].
 fn level(label: &str, y: f64, x0: f64, x1: f64) -> Vec<Series> {
-    if !(x0 <= x1) {
+    if x0.is_nan() || x1.is_nan() || x0 > x1 {
         return Vec::new();
     }
     vec![Series {
@@ -243,11 +243,7 @@ fn level(label: &str, y: f64, x0: f64, x1: f64) -> Vec<Series> {
     }]
 }
 
-fn curves(
-    c: View,
-    data: &PerPoint,
-    line: &dyn Fn(u32, &[(f64, f64, f64)]) -> Option<(String, Vec<(f64, f64, f64)>)>,
-) -> Vec<PointCurve> {
+fn curves(c: View, data: &PerPoint, line: &LineOf) -> Vec<PointCurve> {
     data.iter()
         .map(|(&p, rows)| PointCurve {
             point: p,
@@ -258,8 +254,10 @@ fn curves(
         .collect()
 }
 
-const NO_LINE: &dyn Fn(u32, &[(f64, f64, f64)]) -> Option<(String, Vec<(f64, f64, f64)>)> =
-    &|_, _| None;
+/// A point's line (label, rows) from its data.
+type LineOf<'a> = dyn Fn(u32, &[(f64, f64, f64)]) -> Option<(String, Rows)> + 'a;
+
+const NO_LINE: &LineOf<'static> = &|_, _| None;
 const NO_REFS: &dyn Fn(f64, f64) -> Vec<Series> = &|_, _| Vec::new();
 
 /// The standard figures of a campaign (data only; `plot` draws them).

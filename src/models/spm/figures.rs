@@ -81,10 +81,11 @@ pub(crate) fn combine(runs: &BTreeMap<u64, Vec<Bin>>, walk: bool) -> Vec<(f64, f
     out
 }
 
+/// (alpha measured, alpha predicted).
+type Alphas = (Option<f64>, Option<f64>);
+
 /// (point) -> (alpha measured, alpha predicted) of the first run of `spm_summary`.
-fn read_alphas(
-    batches: &[RecordBatch],
-) -> Result<BTreeMap<u32, (Option<f64>, Option<f64>)>, StoreError> {
+fn read_alphas(batches: &[RecordBatch]) -> Result<BTreeMap<u32, Alphas>, StoreError> {
     let t = SPM_SUMMARY;
     let mut first: BTreeMap<u32, (u64, Option<f64>, Option<f64>)> = BTreeMap::new();
     for b in batches {
