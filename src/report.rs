@@ -1,13 +1,17 @@
 //! `granular report`: one self-contained HTML page of a campaign, finished or not: the
 //! campaign (name, model, code version, the latest manifest, its history), the progress per
 //! point (`campaign::status`), the failed runs with their reasons (the `runs` table), and the
-//! model's standard figures as inline SVG (`Campaign::figures`, drawn by `plot::svg_string`).
+//! model's standard figures as inline SVG (`Campaign::figures`, drawn by `plot::svg_string`),
+//! and what `granular analyze` left in the campaign directory ([`analysis`]: its tables and
+//! figures, read as files).
 //!
 //! Inline CSS, no script, no external reference: the page opens offline after a copy
 //! (`granular serve` adds its live script to the page it serves, not to this one). Every
 //! string read from the campaign (manifest, names, labels, reasons) is HTML-escaped here;
 //! the SVG text is escaped by the renderer. This module builds the text; the command line
 //! writes it.
+
+mod analysis;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -22,8 +26,10 @@ use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
 /// A built report.
 pub struct Report {
     pub html: String,
-    /// Figures embedded.
+    /// Figures embedded (the model's standard figures).
     pub figures: usize,
+    /// Figures of `granular analyze` embedded (from `DIR/analysis/figures`).
+    pub analysis_figures: usize,
     /// What could not be shown (a figure that could not be drawn, an unreadable table), also
     /// noted in the page.
     pub notes: Vec<String>,
@@ -210,6 +216,8 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
     section_failures(&mut h, c, &runs);
     h.push_str("</section>\n<section id=\"sec-figures\">\n");
     let figures = section_figures(&mut h, c, &st, &mut notes);
+    h.push_str("</section>\n<section id=\"sec-analysis\">\n");
+    let analysis_figures = analysis::section(&mut h, c, &mut notes);
     h.push_str("</section>\n<section id=\"sec-manifest\">\n");
     section_manifest(&mut h, &info);
     h.push_str("</section>\n");
@@ -236,6 +244,7 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
     Ok(Report {
         html: h,
         figures,
+        analysis_figures,
         notes,
     })
 }
@@ -268,10 +277,11 @@ fn headline(c: &Campaign, st: &CampaignStatus, figures: usize, notes: bool) -> S
         "<nav><a href=\"#campaign\">Campaign</a> · <a href=\"#progress\">Progress</a> · \
          <a href=\"#shards\">Where it ran</a> · <a href=\"#failures\">Failed runs</a> · ",
     );
-    let _ = write!(
-        s,
-        "<a href=\"#figures\">Figures ({figures})</a> · <a href=\"#manifest\">Manifest</a>"
-    );
+    let _ = write!(s, "<a href=\"#figures\">Figures ({figures})</a> · ");
+    if c.analysis_dir().is_dir() {
+        s.push_str("<a href=\"#analysis\">Analysis</a> · ");
+    }
+    s.push_str("<a href=\"#manifest\">Manifest</a>");
     if notes {
         s.push_str(" · <a href=\"#notes\">Notes</a>");
     }
@@ -637,7 +647,7 @@ fn section_figures(
         Ok(None) => {
             let _ = writeln!(
                 h,
-                "<p>Model {} has no standard figures (an rfm campaign: <code>granular analyze</code>).</p>",
+                "<p>Model {} has no standard figures.</p>",
                 escape(c.plan.model.as_str())
             );
             return 0;

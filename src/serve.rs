@@ -377,7 +377,7 @@ const LIVE: &str = r##"<style>
 <script>
 (function () {
   "use strict";
-  var EVERY = 2000, RELOAD_EVERY = 10000, SECTIONS = ["sec-headline", "sec-campaign", "sec-progress", "sec-shards", "sec-failures", "sec-figures", "sec-manifest"];
+  var EVERY = 2000, RELOAD_EVERY = 10000, SECTIONS = ["sec-headline", "sec-campaign", "sec-progress", "sec-shards", "sec-failures", "sec-figures", "sec-analysis", "sec-manifest"];
   var live = document.getElementById("live"), shown = null, downSince = null, busy = false;
   var dirty = false, reloaded = 0;
   function time(d) { return d.toLocaleTimeString(); }

@@ -31,6 +31,9 @@
 //!   refused, a running campaign followed.
 //! - `sweep_columns`: every summary table of DSMC, RFM and cascade campaigns carries its
 //!   point's sweep columns after `point_id`, as in `points`.
+//! - `figures`: the standard figures of tiny rfm, bisection, cascade and SPM campaigns, the
+//!   same in `plot` and `report`; analyze's outputs in the report; overlays split beyond 12
+//!   points.
 //! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
 //!   kill + resume bit-identity of their tables.
 //!
@@ -44,6 +47,7 @@ mod it {
     pub mod cli_flags;
     pub mod damage;
     pub mod drills;
+    pub mod figures;
     pub mod growth;
     pub mod interrupt;
     pub mod manifests;

@@ -106,6 +106,10 @@ impl CampaignInfo {
     }
 }
 
+/// The directory of a campaign where `granular analyze` writes by default (its tables
+/// `*.parquet` and `figures/`): [`Campaign::analysis_dir`].
+pub const ANALYSIS_DIR: &str = "analysis";
+
 /// An opened campaign directory.
 pub struct Campaign {
     pub root: PathBuf,
@@ -469,6 +473,12 @@ impl Campaign {
         self.plan.model.write_summaries(&view)?;
         let none = BTreeMap::new();
         self.plan.model.figures(&self.view(&data, &none))
+    }
+
+    /// `DIR/analysis`: where `granular analyze` writes its tables and `figures/` by default,
+    /// and where the report looks for them.
+    pub fn analysis_dir(&self) -> PathBuf {
+        self.root.join(ANALYSIS_DIR)
     }
 
     pub fn checkpoint_dir(&self) -> PathBuf {

@@ -46,7 +46,7 @@ pub fn run(a: Args) -> i32 {
     if let Err(code) = super::tables_checked(&c, crate::campaign::integrity::Depth::Full) {
         return code;
     }
-    let out = a.out.unwrap_or_else(|| a.dir.join("analysis"));
+    let out = a.out.unwrap_or_else(|| c.analysis_dir());
     let opts = Options {
         n_min: a.n_min,
         count_error_factor: a.count_error_factor,

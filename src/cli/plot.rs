@@ -1,4 +1,5 @@
-//! `granular plot DIR [--out FIGDIR]`: the standard figures of a campaign's summary tables.
+//! `granular plot DIR [--out FIGDIR]`: the standard figures of a campaign (its model's
+//! `figures`: from the summary tables, or the run tables of the models without summaries).
 
 use std::path::PathBuf;
 
@@ -29,7 +30,7 @@ pub fn run(a: Args) -> i32 {
             return fail(
                 exit_codes::INVALID_INPUT,
                 format!(
-                    "`granular plot` draws no figures of model {} (see `granular analyze`)",
+                    "`granular plot` draws no figures of model {}",
                     c.plan.model.as_str()
                 ),
             )

@@ -1,6 +1,6 @@
 //! `granular report DIR [--out FILE]`: one self-contained HTML page of a campaign (finished
-//! or not): progress per point, failed runs, the standard figures as inline SVG, the manifest
-//! and its history.
+//! or not): progress per point, failed runs, the standard figures as inline SVG, what
+//! `granular analyze` wrote (tables and figures), the manifest and its history.
 
 use std::path::PathBuf;
 
@@ -32,8 +32,13 @@ pub fn run(a: Args) -> i32 {
     if let Err(e) = crate::fsutil::write_atomic(&out, r.html.as_bytes()) {
         return fail(exit_codes::IO_ERROR, format!("{}: {e}", out.display()));
     }
+    let analysis = if r.analysis_figures > 0 {
+        format!(", {} analysis figures", r.analysis_figures)
+    } else {
+        String::new()
+    };
     println!(
-        "wrote {} ({} figures, {} bytes)",
+        "wrote {} ({} figures{analysis}, {} bytes)",
         out.display(),
         r.figures,
         r.html.len()

@@ -1,12 +1,15 @@
 //! The `bisection` model: multiplicative bisection of [0, 1] (spec `rfm.md` 3.1), its length
 //! histogram and moments beside the exact P_n and <a^m>^n.
 
+pub mod figures;
 pub mod params;
 pub mod tables;
 
 use crate::aux_models::bisection::BisectionRun;
-use crate::models::{Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
+use crate::plot::Figure;
+use crate::store::parquet_io::StoreError;
 pub use params::BisectionParams;
 use tables::*;
 
@@ -63,6 +66,12 @@ impl Model for Bisection {
 
     fn tables(_points: &[&BisectionParams]) -> Vec<&'static str> {
         vec![BISECTION_HISTOGRAM, BISECTION_MOMENTS]
+    }
+
+    fn figures(
+        c: &CampaignView<'_, BisectionParams>,
+    ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
+        figures::figures(c).map(Some)
     }
 }
 

@@ -1,6 +1,7 @@
 //! The `cascade` model: multiplicative cascades on a 2^n x 2^n grid (spec `rfm.md` 3.4, thesis
 //! ch. 6), S(k) by FFT, the D_f fit, and the particle placement of F 6.3.
 
+pub mod figures;
 pub mod params;
 pub mod summary;
 pub mod tables;
@@ -8,6 +9,7 @@ pub mod tables;
 use crate::aux_models::cascade::{CascadeOutput, CascadeRun};
 use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
+use crate::plot::Figure;
 use crate::store::parquet_io::StoreError;
 pub use params::CascadeParams;
 use tables::*;
@@ -92,6 +94,12 @@ impl Model for Cascade {
 
     fn write_summaries(c: &CampaignView<'_, CascadeParams>) -> Result<(), StoreError> {
         summary::write(c)
+    }
+
+    fn figures(
+        c: &CampaignView<'_, CascadeParams>,
+    ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
+        figures::figures(c).map(Some)
     }
 }
 

@@ -3,10 +3,12 @@
 //!
 //! - [`params`]: the manifest's `params` and their resolution into the run's configuration;
 //! - [`tables`]: the run-level tables in Arrow form;
-//! - [`summary`]: the replica summaries.
+//! - [`summary`]: the replica summaries;
+//! - [`figures`]: the standard figures from the summaries.
 //!
 //! The thesis's fits across points (`granular analyze`) are in `crate::analysis`.
 
+pub mod figures;
 pub mod params;
 pub mod summary;
 pub mod tables;
@@ -15,6 +17,7 @@ mod tests;
 
 use crate::models::{CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
+use crate::plot::Figure;
 use crate::rfm::observe::RfmRun;
 use crate::store::parquet_io::StoreError;
 pub use params::{RfmObservable, RfmParams};
@@ -131,6 +134,12 @@ impl Model for Rfm {
     fn write_summaries(c: &CampaignView<'_, RfmParams>) -> Result<(), StoreError> {
         let points: Vec<&RfmParams> = c.points.iter().map(|p| p.params).collect();
         summary::write(c, &Self::tables(&points))
+    }
+
+    fn figures(
+        c: &CampaignView<'_, RfmParams>,
+    ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
+        figures::figures(c).map(Some)
     }
 }
 

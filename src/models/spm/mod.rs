@@ -1,12 +1,15 @@
 //! The `spm` model: the single particle model (spec `rfm.md` 3.2): Q(v, l) at a fixed free
 //! path, or P(v) with free paths drawn from (4.25) or a table; the predicted tail exponent.
 
+pub mod figures;
 pub mod params;
 pub mod tables;
 
 use crate::aux_models::spm::SpmRun;
-use crate::models::{Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
+use crate::plot::Figure;
+use crate::store::parquet_io::StoreError;
 pub use params::SpmParams;
 use tables::*;
 
@@ -61,6 +64,12 @@ impl Model for Spm {
 
     fn tables(_points: &[&SpmParams]) -> Vec<&'static str> {
         vec![SPM_VELOCITY_HISTOGRAM, SPM_SUMMARY]
+    }
+
+    fn figures(
+        c: &CampaignView<'_, SpmParams>,
+    ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
+        figures::figures(c).map(Some)
     }
 }
 
