@@ -19,6 +19,7 @@ Prints what it saw; exits non-zero with the reason on any failure.
 """
 
 import base64
+import fcntl
 import json
 import os
 import re
@@ -124,14 +125,18 @@ class Cdp:
     def __init__(self, profile):
         to_chrome_r, self.to_chrome = os.pipe()
         self.from_chrome, from_chrome_w = os.pipe()
-        # Chromium reads fd 3 and writes fd 4.
+        # Chromium reads fd 3 and writes fd 4: in the child, both ends are first moved above
+        # 10 (so that neither overwrites the other), then onto 3 and 4, which pass_fds keeps
+        # open (the close_fds step runs after preexec_fn).
         def fds():
-            os.dup2(to_chrome_r, 3)
-            os.dup2(from_chrome_w, 4)
+            r = fcntl.fcntl(to_chrome_r, fcntl.F_DUPFD, 10)
+            w = fcntl.fcntl(from_chrome_w, fcntl.F_DUPFD, 10)
+            os.dup2(r, 3)
+            os.dup2(w, 4)
         self.proc = subprocess.Popen(
             [CHROMIUM, *FLAGS, "--remote-debugging-pipe", f"--user-data-dir={profile}",
              "--window-size=1280,2400", "about:blank"],
-            pass_fds=(to_chrome_r, from_chrome_w), preexec_fn=fds,
+            pass_fds=(3, 4), preexec_fn=fds,
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         os.close(to_chrome_r)
         os.close(from_chrome_w)
@@ -243,12 +248,16 @@ def serve_test(work):
             deadline = time.time() + 60
             svgs = 0
             while time.time() < deadline:
-                svgs = cdp.eval("document.querySelectorAll('#figures svg').length") or 0
+                svgs = cdp.eval("document.querySelectorAll('#sec-figures svg').length") or 0
                 if svgs >= 2:
                     break
                 time.sleep(0.5)
             if svgs < 2:
                 fail(f"the served page shows {svgs} figures once every run is done")
+            head = cdp.eval("(document.getElementById('headline')||{}).textContent")
+            if not head or "3 of 3 runs done" not in head or "complete" not in head:
+                fail(f"the headline did not follow the runs: {head!r}")
+            print(f"serve: headline: {head}")
             print(f"serve: {svgs} figures on the page once every run was done "
                   f"({len(seen)} states seen without a reload)")
             cdp.screenshot(f"{OUT}/serve-done.png")

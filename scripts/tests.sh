@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The tests: `cargo test --release`, then a tiny campaign run with the release binary whose
 # tables are read back with DuckDB, pyarrow and Polars (scripts/check_tables.py), grown and
-# compared with the campaign of its final manifest (scripts/compare_tables.py --current).
+# compared with the campaign of its final manifest (scripts/compare_tables.py --current), the
+# report and the live dashboard in headless Chromium (scripts/browser-test.sh, which installs
+# Debian's chromium when missing), and the SLURM test.
 # Needs scripts/setup.sh to have been run once (for .venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -66,6 +68,9 @@ echo "== compaction while readers read, then the tables again"
 "$bin" compact "$tmp/runs"
 "$bin" verify "$tmp/runs"
 .venv/bin/python scripts/check_tables.py "$tmp/runs"
+
+echo "== the report and the live dashboard in a real browser (headless Chromium)"
+bash scripts/browser-test.sh
 
 echo "== SLURM (a real one-node cluster)"
 bash scripts/slurm-test.sh

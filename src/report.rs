@@ -174,7 +174,7 @@ h1{margin-bottom:0}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-to
 table{border-collapse:collapse;margin:.5em 0;display:block;overflow-x:auto;max-width:100%}td,th{border:1px solid #ccc;padding:.2em .5em;text-align:left;vertical-align:top}
 td.n{text-align:right;font-variant-numeric:tabular-nums}
 pre{background:#f6f6f6;border:1px solid #ddd;padding:.6em;overflow:auto;max-height:40em}
-.bar{display:flex;width:200px;height:12px;border:1px solid #999;background:#eee}
+.bar{display:flex;width:120px;height:12px;border:1px solid #999;background:#eee}
 .bar span{display:block;height:100%}
 .done{background:#2ca02c}.failed{background:#d62728}.running{background:#ff7f0e}.pending{background:#c7c7c7}.dropped{background:#f2e6ff}
 .key span{display:inline-block;width:12px;height:12px;margin:0 .3em 0 1em;vertical-align:middle}
@@ -261,12 +261,15 @@ fn headline(c: &Campaign, st: &CampaignStatus, figures: usize, notes: bool) -> S
     } else {
         "stopped, unfinished"
     };
+    // The counts and the state in spans of their own: the live page (`serve`) updates them.
+    let points = st.points.iter().filter(|p| p.in_manifest).count();
     let mut s = format!(
-        "<p class=\"headline\" id=\"headline\">{} · {} point{} · <b>{} of {} runs done</b> · {} failed · \
-         {} running · {} pending · {state}</p>\n",
+        "<p class=\"headline\" id=\"headline\">{} · {points} point{} · <b><span id=\"hl-done\">{}</span> of \
+         <span id=\"hl-runs\">{}</span> runs done</b> · <span id=\"hl-failed\">{}</span> failed · \
+         <span id=\"hl-running\">{}</span> running · <span id=\"hl-pending\">{}</span> pending · \
+         <span id=\"hl-state\">{state}</span></p>\n",
         escape(c.plan.model.as_str()),
-        st.points.iter().filter(|p| p.in_manifest).count(),
-        if st.points.iter().filter(|p| p.in_manifest).count() == 1 { "" } else { "s" },
+        if points == 1 { "" } else { "s" },
         k.done,
         st.current_runs,
         k.failed,
@@ -397,11 +400,15 @@ fn section_progress(h: &mut String, st: &CampaignStatus, runs: Option<&RunsRead>
     let empty = BTreeMap::new();
     let wall = runs.map(|r| &r.wall).unwrap_or(&empty);
     let (left, total_left) = time_left(&st.points, wall);
-    let spent: f64 = wall.values().map(|(s, _)| s).sum();
-    let mut times = format!(
-        "The finished runs took {} of run time (wall time of each run, summed).",
-        duration_text(spent)
-    );
+    let spent: f64 = wall.values().fold(0.0, |a, (s, _)| a + s);
+    let mut times = if wall.is_empty() {
+        "No run has finished yet.".to_string()
+    } else {
+        format!(
+            "The finished runs took {} of run time (wall time of each run, summed).",
+            duration_text(spent)
+        )
+    };
     match total_left {
         Some(t) if t > 0.0 => {
             let _ = write!(
@@ -432,8 +439,9 @@ fn section_progress(h: &mut String, st: &CampaignStatus, runs: Option<&RunsRead>
     );
     h.push_str(
         "<table id=\"progress-table\">\n<tr><th>point</th><th>parameters</th><th></th><th>done</th><th>failed</th>\
-         <th>running</th><th>pending</th><th>dropped</th><th>checkpointed</th><th>wall time</th>\
-         <th>time left (est.)</th><th>in latest manifest</th></tr>\n",
+         <th>running</th><th>pending</th><th>dropped</th><th title=\"pending or running runs with a checkpoint\">ckpt</th>\
+         <th title=\"wall time of the finished runs, summed\">wall</th><th title=\"estimated: the unfinished runs at the point's mean wall time\">left</th>\
+         <th title=\"whether the latest manifest asks for the point\">asked</th></tr>\n",
     );
     for p in st.points.iter().take(MAX_POINT_ROWS) {
         let k = &p.counts;
@@ -476,6 +484,15 @@ fn section_progress(h: &mut String, st: &CampaignStatus, runs: Option<&RunsRead>
     }
 }
 
+/// The ledger's tag (`s1of2`) of a live shard as `status` lists it (`1/2 (pid 17 on host)`).
+fn shard_tag(live: &str) -> String {
+    let shard = live.split(' ').next().unwrap_or("");
+    match shard.split_once('/') {
+        Some((i, n)) => format!("s{i}of{n}"),
+        None => shard.to_string(),
+    }
+}
+
 /// Where the campaign ran: its shards (from the ledger's commits: commits, runs committed;
 /// live shards from their locks) and SLURM submissions.
 fn section_shards(h: &mut String, c: &Campaign, st: &CampaignStatus, notes: &mut Vec<String>) {
@@ -512,7 +529,7 @@ fn section_shards(h: &mut String, c: &Campaign, st: &CampaignStatus, notes: &mut
             let live: Vec<&String> = st
                 .live_shards
                 .iter()
-                .filter(|l| l.split(' ').next() == Some(tag.as_str()))
+                .filter(|l| shard_tag(l) == *tag)
                 .collect();
             let now = if live.is_empty() {
                 "stopped".to_string()
@@ -529,12 +546,12 @@ fn section_shards(h: &mut String, c: &Campaign, st: &CampaignStatus, notes: &mut
             );
         }
         for l in &st.live_shards {
-            let tag = l.split(' ').next().unwrap_or("");
-            if !shards.contains_key(tag) {
+            let tag = shard_tag(l);
+            if !shards.contains_key(&tag) {
                 let _ = writeln!(
                     h,
                     "<tr><td>{}</td><td class=\"n\">0</td><td class=\"n\">0</td><td class=\"n\">0</td><td>running: {}</td></tr>",
-                    escape(tag),
+                    escape(&tag),
                     escape(l)
                 );
             }
@@ -757,6 +774,12 @@ mod tests {
             assert!(h.contains(want), "{want} missing: {h}");
         }
         assert!(!h.contains("<script>"));
+    }
+
+    #[test]
+    fn live_shards_named_by_their_ledger_tag() {
+        assert_eq!(shard_tag("1/2 (pid 17 on host)"), "s1of2");
+        assert_eq!(shard_tag("12/100 (pid 1 on h)"), "s12of100");
     }
 
     #[test]

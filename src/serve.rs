@@ -407,6 +407,12 @@ const LIVE: &str = r##"<style>
       s.live_shards, s.damage || [], s.slurm || []]);
   }
   function update(s) {
+    var k = s.current, over = k.done + k.failed >= s.current_runs;
+    ["done", "failed", "running", "pending"].forEach(function (c) { setText("hl-" + c, k[c]); });
+    setText("hl-runs", s.current_runs);
+    if (!(s.damage && s.damage.length)) {
+      setText("hl-state", over ? "complete" : (k.running > 0 || s.live_shards.length > 0) ? "running" : "stopped, unfinished");
+    }
     setText("progress-counts", counts(s.runs, s));
     setText("campaign-runs", counts(s.runs, s));
     setText("campaign-current", counts(s.current_runs, s.current));
