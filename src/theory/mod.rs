@@ -74,6 +74,7 @@ pub mod diffusion;
 pub mod hcs;
 pub mod msd;
 pub mod restitution;
+pub mod sonine;
 pub mod species;
 pub mod tamsd;
 pub mod temperature;
