@@ -3,7 +3,7 @@
 //! theory share the pair scaling of the restitution (`system::theory_restitution`).
 
 use super::system::{theory_restitution, DsmcSystem};
-use crate::theory::{diffusion, msd, tamsd, temperature, Species};
+use crate::theory::{diffusion, msd, sonine, tamsd, temperature, Species};
 
 /// One row of `dsmc_theory`.
 #[derive(Clone, Debug, PartialEq)]
@@ -15,6 +15,12 @@ pub struct TheoryRow {
     pub msd: Option<f64>,
     /// Velocity correlation time tau_v,k(t) (10-11).
     pub tau_v: f64,
+    /// The species' a2 in the Sonine HCS (`theory::sonine`); None unless the restitution is
+    /// constant.
+    pub a2: Option<f64>,
+    /// T_k(t) with the a2-corrected cooling rates (first Sonine approximation, a2 slaved to
+    /// the instantaneous temperatures); None unless the restitution is constant.
+    pub temperature_sonine: Option<f64>,
 }
 
 /// One row of `dsmc_theory_tamsd`: the TAMSD (27) of a species at a lag, for t = t_end.
@@ -44,6 +50,9 @@ pub fn theory_species(sys: &DsmcSystem) -> Vec<Species> {
         .collect()
 }
 
+/// The most species for which the Sonine columns are computed (null beyond).
+pub const SONINE_MAX_SPECIES: usize = 4;
+
 /// Predict T_k(t), <R_k^2(t)> and tau_v,k(t) at the system's output times.
 pub fn predict(sys: &DsmcSystem) -> Prediction {
     let species = theory_species(sys);
@@ -51,6 +60,15 @@ pub fn predict(sys: &DsmcSystem) -> Prediction {
     let t0: Vec<f64> = sys.species.iter().map(|s| s.initial_temperature).collect();
     let times = &sys.output_times;
     let temps = temperature::evolve_temperatures(&species, &r, &t0, times);
+    // The Sonine theory costs O(M^3) collision-moment quadratures per ODE step: given for
+    // up to SONINE_MAX_SPECIES species only.
+    let small = species.len() <= SONINE_MAX_SPECIES;
+    let a2 = small
+        .then(|| sonine::hcs_temperatures_sonine(&species, &r, 1.0).map(|(_, a2)| a2))
+        .flatten();
+    let sonine_temps = small
+        .then(|| sonine::evolve_temperatures_sonine(&species, &r, &t0, times))
+        .flatten();
     let msds = if sys.msd {
         Some(msd::msd_numeric(&species, &r, &t0, times))
     } else {
@@ -66,6 +84,8 @@ pub fn predict(sys: &DsmcSystem) -> Prediction {
                 temperature: temps[j][k],
                 msd: msds.as_ref().map(|m| m[j][k]),
                 tau_v: tv[k],
+                a2: a2.as_ref().map(|a| a[k]),
+                temperature_sonine: sonine_temps.as_ref().map(|s| s[j][k]),
             });
         }
     }

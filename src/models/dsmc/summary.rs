@@ -120,6 +120,8 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                 ms,
                 t_th: th.map(|x| x.0),
                 m_th: th.and_then(|x| x.1),
+                ts_th: th.and_then(|x| x.2),
+                a2_th: th.and_then(|x| x.3),
             });
         }
         p0 = p1;
@@ -243,6 +245,10 @@ struct SummaryRow {
     ms: Option<f64>,
     t_th: Option<f64>,
     m_th: Option<f64>,
+    /// Sonine theory (None for velocity-dependent restitution, or a theory table written
+    /// before the Sonine columns existed).
+    ts_th: Option<f64>,
+    a2_th: Option<f64>,
 }
 
 impl SummaryRow {
@@ -251,6 +257,9 @@ impl SummaryRow {
     }
     fn msd_dev(&self) -> (Option<f64>, Option<f64>) {
         deviations(self.mm, self.ms, self.m_th)
+    }
+    fn temperature_sonine_dev(&self) -> (Option<f64>, Option<f64>) {
+        deviations(Some(self.tm), self.ts, self.ts_th)
     }
 }
 
@@ -271,6 +280,14 @@ fn species_summary(rows: &[SummaryRow]) -> RecordBatch {
             c.opt_f64("temperature_dev_rel", |r| r.temperature_dev().1),
             c.opt_f64("msd_dev_sigma", |r| r.msd_dev().0),
             c.opt_f64("msd_dev_rel", |r| r.msd_dev().1),
+            c.opt_f64("temperature_sonine", |r| r.ts_th),
+            c.opt_f64("temperature_sonine_dev_sigma", |r| {
+                r.temperature_sonine_dev().0
+            }),
+            c.opt_f64("temperature_sonine_dev_rel", |r| {
+                r.temperature_sonine_dev().1
+            }),
+            c.opt_f64("a2_theory", |r| r.a2_th),
         ]
     })
 }
@@ -290,8 +307,12 @@ fn deviations(
     }
 }
 
-/// Theory values (temperature, msd) by (point, t bits, species), if the table exists.
-fn read_theory(c: View) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreError> {
+/// Theory values by (point, t bits, species), if the table exists.
+type TheoryValues = (f64, Option<f64>, Option<f64>, Option<f64>);
+
+/// Theory values (temperature, msd, temperature_sonine, a2) by (point, t bits, species), if
+/// the table exists. The Sonine columns are None where a theory file predates them.
+fn read_theory(c: View) -> Result<BTreeMap<Key, TheoryValues>, StoreError> {
     let mut out = BTreeMap::new();
     for f in c.data.files(DSMC_THEORY)? {
         let name = f.display().to_string();
@@ -301,13 +322,32 @@ fn read_theory(c: View) -> Result<BTreeMap<Key, (f64, Option<f64>)>, StoreError>
             let s = get_u32(&b, &name, "species")?;
             let tt = get_f64(&b, &name, "temperature")?;
             let m = get_f64(&b, &name, "msd")?;
+            let ts = optional_f64(&b, &name, "temperature_sonine")?;
+            let a2 = optional_f64(&b, &name, "a2")?;
             for i in 0..b.num_rows() {
                 out.insert(
                     (p.value(i), t.value(i).to_bits(), s.value(i)),
-                    (tt.value(i), opt(m, i)),
+                    (
+                        tt.value(i),
+                        opt(m, i),
+                        ts.and_then(|a| opt(a, i)),
+                        a2.and_then(|a| opt(a, i)),
+                    ),
                 );
             }
         }
     }
     Ok(out)
+}
+
+/// A Float64 column that older files may lack: None when absent.
+fn optional_f64<'a>(
+    b: &'a RecordBatch,
+    name: &str,
+    column: &str,
+) -> Result<Option<&'a arrow_array::Float64Array>, StoreError> {
+    match b.column_by_name(column) {
+        None => Ok(None),
+        Some(_) => get_f64(b, name, column).map(Some),
+    }
 }

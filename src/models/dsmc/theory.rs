@@ -70,7 +70,7 @@ pub fn write(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {
                 let rows: Vec<(u32, TheoryRow)> = preds
                     .flat_map(|(p, pr)| pr.rows.iter().map(move |r| (*p, r.clone())))
                     .collect();
-                theory_batch(&rows)
+                same_columns(c, DSMC_THEORY, theory_batch(&rows))?
             }
             DSMC_THEORY_POINT => {
                 let points: Vec<(u32, f64, Vec<f64>)> = preds
@@ -118,4 +118,33 @@ fn covered_points(c: &CampaignView<'_, DsmcParams>) -> Result<BTreeSet<u32>, Sto
         out.extend(ids.iter().flatten());
     }
     Ok(out)
+}
+
+/// `batch` with only the columns of the table's existing files (the first one's), so that a
+/// campaign whose theory was written by an older version (without the Sonine columns) keeps
+/// one schema per table when it grows: its summaries then have nulls there.
+fn same_columns(
+    c: &CampaignView<'_, DsmcParams>,
+    table: &str,
+    batch: arrow_array::RecordBatch,
+) -> Result<arrow_array::RecordBatch, StoreError> {
+    let Some(first) = c.data.files(table)?.into_iter().next() else {
+        return Ok(batch);
+    };
+    let Some(old) = c.data.read_file(&first, table)?.into_iter().next() else {
+        return Ok(batch);
+    };
+    let keep: Vec<usize> = (0..batch.num_columns())
+        .filter(|&i| {
+            old.schema()
+                .column_with_name(batch.schema().field(i).name())
+                .is_some()
+        })
+        .collect();
+    if keep.len() == batch.num_columns() {
+        return Ok(batch);
+    }
+    batch
+        .project(&keep)
+        .map_err(|e| StoreError::Corrupt(table.into(), e.to_string()))
 }
