@@ -17,6 +17,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use crate::campaign::history::{self, Accepted};
+use crate::campaign::ledger::{finished_runs, Ledger, RunStatus};
 use crate::campaign::status::{self, CampaignStatus, Counts};
 use crate::campaign::tables::RUNS;
 use crate::campaign::{Campaign, CampaignInfo};
@@ -199,6 +200,9 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
          <title>granular report: {name}</title>\n<style>\n{CSS}</style>\n</head>\n<body>\n\
          <h1>Campaign {name}</h1>\n"
     );
+    // The commits, read once: where the campaign ran, and which runs the figures of an
+    // unfinished campaign are of.
+    let ledger = crate::campaign::ledger::read_ledger(&c.root);
     let runs = read_runs(c);
     if let Err(e) = &runs {
         notes.push(format!("the runs table could not be read: {e}"));
@@ -211,11 +215,11 @@ pub fn build(c: &Campaign) -> Result<Report, String> {
     h.push_str("</section>\n<section id=\"sec-progress\">\n");
     section_progress(&mut h, &st, runs.as_ref().ok());
     h.push_str("</section>\n<section id=\"sec-shards\">\n");
-    section_shards(&mut h, c, &st, &mut notes);
+    section_shards(&mut h, &ledger, &st, &mut notes);
     h.push_str("</section>\n<section id=\"sec-failures\">\n");
     section_failures(&mut h, c, &runs);
     h.push_str("</section>\n<section id=\"sec-figures\">\n");
-    let figures = section_figures(&mut h, c, &st, &mut notes);
+    let figures = section_figures(&mut h, c, &ledger, &st, &mut notes);
     h.push_str("</section>\n<section id=\"sec-analysis\">\n");
     let analysis_figures = analysis::section(&mut h, c, &mut notes);
     h.push_str("</section>\n<section id=\"sec-manifest\">\n");
@@ -495,9 +499,14 @@ fn shard_tag(live: &str) -> String {
 
 /// Where the campaign ran: its shards (from the ledger's commits: commits, runs committed;
 /// live shards from their locks) and SLURM submissions.
-fn section_shards(h: &mut String, c: &Campaign, st: &CampaignStatus, notes: &mut Vec<String>) {
+fn section_shards(
+    h: &mut String,
+    ledger: &Result<Ledger, String>,
+    st: &CampaignStatus,
+    notes: &mut Vec<String>,
+) {
     h.push_str("<h2 id=\"shards\">Where it ran</h2>\n");
-    let ledger = match crate::campaign::ledger::read_ledger(&c.root) {
+    let ledger = match ledger {
         Ok(l) => l,
         Err(e) => {
             let n = format!("the ledger could not be read: {e}");
@@ -512,7 +521,7 @@ fn section_shards(h: &mut String, c: &Campaign, st: &CampaignStatus, notes: &mut
         let e = shards.entry(cm.shard.clone()).or_default();
         e.0 += 1;
         for r in &cm.runs {
-            if r.status == crate::campaign::ledger::RunStatus::Done {
+            if r.status == RunStatus::Done {
                 e.1 += 1;
             } else {
                 e.2 += 1;
@@ -632,6 +641,7 @@ fn inline_svg(svg: &str) -> &str {
 fn section_figures(
     h: &mut String,
     c: &Campaign,
+    ledger: &Result<Ledger, String>,
     st: &CampaignStatus,
     notes: &mut Vec<String>,
 ) -> usize {
@@ -641,10 +651,8 @@ fn section_figures(
     // their summaries computed for this page only.
     let unfinished = st.current.done + st.current.failed < st.current_runs;
     let figs = if unfinished && st.counts.done > 0 {
-        let finished = crate::campaign::ledger::read_ledger(&c.root)
-            .map(|l| crate::campaign::ledger::finished_runs(&l.commits));
-        match finished {
-            Ok(f) => {
+        match ledger {
+            Ok(l) => {
                 let _ = writeln!(
                     h,
                     "<p class=\"note\" id=\"figures-so-far\">Figures of the {} runs finished so far \
@@ -652,9 +660,10 @@ fn section_figures(
                      tables are written when every run has finished.</p>",
                     st.counts.done, st.runs
                 );
-                c.figures_so_far(&f).map_err(|e| e.to_string())
+                c.figures_so_far(&finished_runs(&l.commits))
+                    .map_err(|e| e.to_string())
             }
-            Err(e) => Err(e),
+            Err(e) => Err(e.clone()),
         }
     } else {
         c.figures().map_err(|e| e.to_string())

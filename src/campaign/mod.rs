@@ -410,13 +410,18 @@ impl Campaign {
         &self,
         finished: &BTreeMap<u64, RunStatus>,
     ) -> Result<(), crate::store::parquet_io::StoreError> {
-        let done: BTreeMap<u64, u32> = finished
+        let done = self.done_replicas(finished);
+        let data = self.data();
+        self.plan.model.write_summaries(&self.view(&data, &done))
+    }
+
+    /// The runs finished with status done, with their replica numbers: what a summary is of.
+    fn done_replicas(&self, finished: &BTreeMap<u64, RunStatus>) -> BTreeMap<u64, u32> {
+        finished
             .iter()
             .filter(|(_, s)| **s == RunStatus::Done)
             .map(|(r, _)| (*r, self.plan.replica_of(*r)))
-            .collect();
-        let data = self.data();
-        self.plan.model.write_summaries(&self.view(&data, &done))
+            .collect()
     }
 
     /// The model's kinetic-theory tables (none for models without theory).
@@ -463,11 +468,7 @@ impl Campaign {
         let scratch = Scratch(
             std::env::temp_dir().join(format!("granular-summaries-{}-{nanos}", std::process::id())),
         );
-        let done: BTreeMap<u64, u32> = finished
-            .iter()
-            .filter(|(_, s)| **s == RunStatus::Done)
-            .map(|(r, _)| (*r, self.plan.replica_of(*r)))
-            .collect();
+        let done = self.done_replicas(finished);
         let data = self.data().overlay(&scratch.0);
         let view = self.view(&data, &done);
         self.plan.model.write_summaries(&view)?;
