@@ -1,14 +1,15 @@
 //! The DSMC observable `velocity_distribution` end to end: a tiny campaign whose sweep turns
 //! it on and off has `a2` in `dsmc_species` exactly where it is observed (null elsewhere),
 //! `a2_mean` in the summary, `dsmc_speed_histogram` at t_end only (the default) for the
-//! observing points, and its replica summary with the sweep columns.
+//! observing points, and its replica summary with the sweep columns; `granular report` has
+//! the a2 and speed-distribution figures of the observing points.
 
 use std::collections::BTreeSet;
 use std::time::Duration;
 
 use serde_json::json;
 
-use super::util::{heavy, log_text, read_all, run_granular, write_json, Cell};
+use super::util::{heavy, log_text, read_all, run_capture, run_granular, write_json, Cell};
 
 #[test]
 fn velocity_distribution_tables() {
@@ -128,4 +129,15 @@ fn velocity_distribution_tables() {
     assert_eq!(hs.rows.len(), 2 * 2 * 60);
     let n = hs.col("n_replicas");
     assert!(hs.rows.iter().all(|r| r[n] == Cell::U(2)));
+
+    // The report draws a2(t) and the speed distribution of the observing points only.
+    let (code, _) = run_capture(&["report", out.to_str().unwrap()], &log);
+    assert_eq!(code, Some(0), "{}", log_text(&log));
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    for p in 0..4u64 {
+        for what in ["a2", "speed-distribution"] {
+            let id = format!("<figure id=\"fig-point-{p:04}-{what}\"");
+            assert_eq!(html.contains(&id), observing.contains(&p), "{id}");
+        }
+    }
 }
