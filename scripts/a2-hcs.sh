@@ -8,8 +8,9 @@
 # the standard error over replicas (which accounts for the correlation between outputs).
 # Measured (N = 20000, 20 replicas, 13 s on 2 cores): the sem is 0.00015-0.0006, and the
 # measured a2 lies below the first Sonine approximation by 0.001 (alpha 0.9) to 0.016 (0.3),
-# i.e. 8-26 sem: the truncated (linear) Sonine theory is an approximation, and that gap is
-# of the size reported for DSMC in the literature (not checked against a table here):
+# i.e. 8-26 sem. The first Sonine approximation is itself approximate (higher Sonine terms,
+# nonlinear in a2), but these values have NOT been checked against a published DSMC table,
+# nor against Bird's method; the gap is an open question:
 #  alpha   measured      sem     theory  diff/sem
 #   0.30    0.10241  0.00061    0.11806    -25.83
 #   0.50    0.04761  0.00043    0.05246    -11.16
