@@ -41,7 +41,9 @@ pub struct SpeciesRow {
     /// <R_k^2(t)>, when displacements are recorded.
     pub msd: Option<f64>,
     /// The Sonine coefficient 3 <v^4>_k / (5 <v^2>_k^2) - 1, when the velocity distribution
-    /// is recorded.
+    /// is recorded. Not in the row's own layout: saved after the state (see
+    /// [`DsmcSim::state_bytes`]), so a state without the observable is a dsmc/5 one.
+    #[serde(skip)]
     pub a2: Option<f64>,
     /// Collisions that species-k particles took part in up to t (a k-k collision counts twice).
     pub collisions: u64,
@@ -97,11 +99,19 @@ pub struct Candidate {
 pub const PIPELINE_DEPTH: usize = 32;
 /// Layout version of [`DsmcState`] in checkpoints (5: the low-rank queue holds two batches
 /// and collisions are applied when accepted, so a dsmc/4 pipeline would resume differently;
-/// 6: the rows hold a2 and the state the speed histograms, so a dsmc/5 payload does not
-/// decode).
-pub const STATE_FORMAT: &str = "dsmc/6";
+/// with the observable `velocity_distribution` the payload goes on after the state with a
+/// [`VdistExtra`], which a state without it lacks, so dsmc/5 payloads still decode).
+pub const STATE_FORMAT: &str = "dsmc/5";
 /// Layout version of a finished run's [`FinalState`] (it embeds a [`STATE_FORMAT`] state).
-pub const FINAL_FORMAT: &str = "dsmc/6+final/1";
+pub const FINAL_FORMAT: &str = "dsmc/5+final/1";
+
+/// What the observable `velocity_distribution` adds to a checkpoint, after the [`DsmcState`]:
+/// the a2 of every recorded row and the histograms recorded so far.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct VdistExtra {
+    pub a2: Vec<Option<f64>>,
+    pub hist: Vec<HistRow>,
+}
 
 /// Where a finished run stopped: the first collision accepted past its last output, whose
 /// time ended the run. It is not applied: a longer run of the same trajectory applies it
@@ -180,6 +190,8 @@ pub struct DsmcState {
     pub gap_log: f64,
     pub rows: Vec<SpeciesRow>,
     /// Speed histograms recorded so far (observable `velocity_distribution`); empty otherwise.
+    /// Saved in the [`VdistExtra`] after the state.
+    #[serde(skip)]
     pub hist: Vec<HistRow>,
     pub last_energy: f64,
     pub done: bool,
@@ -422,13 +434,37 @@ impl DsmcSim {
             Method::LowRank => self.batch.to_vec(),
             Method::Bird => self.ring.to_vec(),
         };
-        postcard::to_stdvec(&self.st).expect("state serialises")
+        let mut bytes = postcard::to_stdvec(&self.st).expect("state serialises");
+        if self.sys.vdist.is_some() {
+            let extra = VdistExtra {
+                a2: self.st.rows.iter().map(|r| r.a2).collect(),
+                hist: self.st.hist.clone(),
+            };
+            bytes.extend(postcard::to_stdvec(&extra).expect("a2 and histograms serialise"));
+        }
+        bytes
     }
 
     /// Rebuild a simulation from a checkpoint payload.
     pub fn from_state_bytes(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
-        let st: DsmcState = postcard::from_bytes(bytes)
+        let (mut st, rest): (DsmcState, &[u8]) = postcard::take_from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
+        if sys.vdist.is_some() {
+            let extra: VdistExtra = postcard::from_bytes(rest).map_err(|e| {
+                format!("checkpoint has no velocity distribution (observable velocity_distribution): {e}")
+            })?;
+            if extra.a2.len() != st.rows.len() {
+                return Err("checkpoint's a2 values do not match its rows".into());
+            }
+            for (r, a) in st.rows.iter_mut().zip(extra.a2) {
+                r.a2 = a;
+            }
+            st.hist = extra.hist;
+        } else if !rest.is_empty() {
+            return Err(
+                "checkpoint does not match the run's observables (velocity_distribution)".into(),
+            );
+        }
         if st.vel.len() != sys.n_particles()
             || st.vmax.len() != sys.species.len()
             || st.species_collisions.len() != sys.species.len()

@@ -160,10 +160,21 @@ fn velocity_distribution_leaves_the_trajectory_alone() {
             bins: 40,
             c_max: 4.0,
         });
-        let mut a = DsmcSim::new(plain, 9);
-        let mut b = DsmcSim::new(with, 9);
+        let mut a = DsmcSim::new(plain.clone(), 9);
+        let mut b = DsmcSim::new(with.clone(), 9);
         run(&mut a, u64::MAX);
         run(&mut b, 1_000);
+        // Restored from a checkpoint taken after the first histogram: the same rows (a2
+        // included) and histograms; a plain run's payload is refused for it and vice versa.
+        let mut c = DsmcSim::new(with.clone(), 9);
+        while c.st.hist.is_empty() {
+            c.advance(500).unwrap();
+        }
+        let mut c = DsmcSim::from_state_bytes(with.clone(), &c.state_bytes()).unwrap();
+        run(&mut c, 700);
+        assert_eq!((&c.st.rows, &c.st.hist), (&b.st.rows, &b.st.hist));
+        assert!(DsmcSim::from_state_bytes(with.clone(), &a.state_bytes()).is_err());
+        assert!(DsmcSim::from_state_bytes(plain, &b.state_bytes()).is_err());
         assert_eq!(a.st.vel, b.st.vel, "{method:?}");
         assert_eq!(
             (a.st.trials, a.st.collisions),

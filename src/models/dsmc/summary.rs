@@ -78,7 +78,11 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                 let sp = get_u32(&b, &name, "species")?;
                 let temp = get_f64(&b, &name, "temperature")?;
                 let msd = get_f64(&b, &name, "msd")?;
-                let a2 = get_f64(&b, &name, "a2")?;
+                // Tables written before the observable existed have no `a2` column.
+                let a2 = match b.schema().index_of("a2") {
+                    Ok(_) => Some(get_f64(&b, &name, "a2")?),
+                    Err(_) => None,
+                };
                 for i in 0..b.num_rows() {
                     let p = point.value(i);
                     let replica = c.done.get(&run.value(i));
@@ -87,7 +91,12 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                     };
                     acc.entry((p, t.value(i).to_bits(), sp.value(i)))
                         .or_default()
-                        .push((replica, temp.value(i), opt(msd, i), opt(a2, i)));
+                        .push((
+                            replica,
+                            temp.value(i),
+                            opt(msd, i),
+                            a2.and_then(|a| opt(a, i)),
+                        ));
                 }
             }
         }
