@@ -36,6 +36,8 @@
 //!   points.
 //! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
 //!   kill + resume bit-identity of their tables.
+//! - `vdist`: the DSMC observable `velocity_distribution` swept on and off: `a2` where
+//!   observed (null elsewhere), the speed histograms and their summary with sweep columns.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
@@ -61,4 +63,5 @@ mod it {
     pub mod slurm;
     pub mod sweep_columns;
     pub mod util;
+    pub mod vdist;
 }

@@ -913,6 +913,7 @@ mod tests {
             output_times: vec![0.0, 40.0],
             msd: true,
             tamsd,
+            vdist: None,
             refresh_every: 0.3,
             rate_scale: std::f64::consts::PI / (4.0 * volume),
         };

@@ -17,6 +17,7 @@ pub mod collision;
 pub mod low_rank;
 pub mod predict;
 pub mod system;
+pub mod vdist;
 pub mod viscoelastic;
 
 use serde::{Deserialize, Serialize};
@@ -24,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use crate::physics::PhysicsError;
 use crate::rng::{RngPosition, RunRng};
 use alias::Alias;
-pub use system::{DsmcSystem, Method, RestitutionModel, SpeciesInfo};
+pub use system::{DsmcSystem, Method, RestitutionModel, SpeciesInfo, VdistPlan};
 
 /// One row of the `dsmc_species` table (without the run's ids).
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -39,6 +40,11 @@ pub struct SpeciesRow {
     pub temperature: f64,
     /// <R_k^2(t)>, when displacements are recorded.
     pub msd: Option<f64>,
+    /// The Sonine coefficient 3 <v^4>_k / (5 <v^2>_k^2) - 1, when the velocity distribution
+    /// is recorded. Not in the row's own layout: saved after the state (see
+    /// [`DsmcSim::state_bytes`]), so a state without the observable is a dsmc/5 one.
+    #[serde(skip)]
+    pub a2: Option<f64>,
     /// Collisions that species-k particles took part in up to t (a k-k collision counts twice).
     pub collisions: u64,
 }
@@ -56,6 +62,22 @@ pub struct TamsdRow {
     pub tamsd: f64,
     /// The measurement time t of (26): t_end.
     pub t_total: f64,
+}
+
+/// One row of the `dsmc_speed_histogram` table (without the run's ids): bin `bin` of the
+/// scaled speed c = |v| / sqrt(2 T_k / m_k) of species `species` at time `t`.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct HistRow {
+    pub t: f64,
+    /// Species index k, from 1.
+    pub species: u32,
+    /// Bin index, from 0; the bin is [c_lo, c_hi).
+    pub bin: u32,
+    pub c_lo: f64,
+    pub c_hi: f64,
+    pub count: u64,
+    /// count / (N_k (c_hi - c_lo)): integrates to the fraction of particles below c_max.
+    pub density: f64,
 }
 
 /// A pre-drawn trial candidate: species pair and particle indices (global).
@@ -76,10 +98,20 @@ pub struct Candidate {
 /// ring is refilled in batches of `PIPELINE_DEPTH / 2` whenever half of it is used.
 pub const PIPELINE_DEPTH: usize = 32;
 /// Layout version of [`DsmcState`] in checkpoints (5: the low-rank queue holds two batches
-/// and collisions are applied when accepted, so a dsmc/4 pipeline would resume differently).
+/// and collisions are applied when accepted, so a dsmc/4 pipeline would resume differently;
+/// with the observable `velocity_distribution` the payload goes on after the state with a
+/// [`VdistExtra`], which a state without it lacks, so dsmc/5 payloads still decode).
 pub const STATE_FORMAT: &str = "dsmc/5";
 /// Layout version of a finished run's [`FinalState`] (it embeds a [`STATE_FORMAT`] state).
 pub const FINAL_FORMAT: &str = "dsmc/5+final/1";
+
+/// What the observable `velocity_distribution` adds to a checkpoint, after the [`DsmcState`]:
+/// the a2 of every recorded row and the histograms recorded so far.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct VdistExtra {
+    pub a2: Vec<Option<f64>>,
+    pub hist: Vec<HistRow>,
+}
 
 /// Where a finished run stopped: the first collision accepted past its last output, whose
 /// time ended the run. It is not applied: a longer run of the same trajectory applies it
@@ -157,6 +189,10 @@ pub struct DsmcState {
     /// Logs of underflow-guarded parts of that product.
     pub gap_log: f64,
     pub rows: Vec<SpeciesRow>,
+    /// Speed histograms recorded so far (observable `velocity_distribution`); empty otherwise.
+    /// Saved in the [`VdistExtra`] after the state.
+    #[serde(skip)]
+    pub hist: Vec<HistRow>,
     pub last_energy: f64,
     pub done: bool,
 }
@@ -304,6 +340,7 @@ impl DsmcSim {
             gap_prod: 1.0,
             gap_log: 0.0,
             rows: Vec::new(),
+            hist: Vec::new(),
             last_energy: f64::INFINITY,
             done: false,
         };
@@ -397,13 +434,37 @@ impl DsmcSim {
             Method::LowRank => self.batch.to_vec(),
             Method::Bird => self.ring.to_vec(),
         };
-        postcard::to_stdvec(&self.st).expect("state serialises")
+        let mut bytes = postcard::to_stdvec(&self.st).expect("state serialises");
+        if self.sys.vdist.is_some() {
+            let extra = VdistExtra {
+                a2: self.st.rows.iter().map(|r| r.a2).collect(),
+                hist: self.st.hist.clone(),
+            };
+            bytes.extend(postcard::to_stdvec(&extra).expect("a2 and histograms serialise"));
+        }
+        bytes
     }
 
     /// Rebuild a simulation from a checkpoint payload.
     pub fn from_state_bytes(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
-        let st: DsmcState = postcard::from_bytes(bytes)
+        let (mut st, rest): (DsmcState, &[u8]) = postcard::take_from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
+        if sys.vdist.is_some() {
+            let extra: VdistExtra = postcard::from_bytes(rest).map_err(|e| {
+                format!("checkpoint has no velocity distribution (observable velocity_distribution): {e}")
+            })?;
+            if extra.a2.len() != st.rows.len() {
+                return Err("checkpoint's a2 values do not match its rows".into());
+            }
+            for (r, a) in st.rows.iter_mut().zip(extra.a2) {
+                r.a2 = a;
+            }
+            st.hist = extra.hist;
+        } else if !rest.is_empty() {
+            return Err(
+                "checkpoint does not match the run's observables (velocity_distribution)".into(),
+            );
+        }
         if st.vel.len() != sys.n_particles()
             || st.vmax.len() != sys.species.len()
             || st.species_collisions.len() != sys.species.len()
@@ -460,6 +521,18 @@ impl DsmcSim {
         };
         if !tracks_ok {
             return Err("checkpoint does not match the run's observables (tamsd)".into());
+        }
+        let vdist_ok = match &sys.vdist {
+            Some(plan) => st
+                .hist
+                .iter()
+                .all(|h| h.bin < plan.bins && plan.times.contains(&h.t)),
+            None => st.hist.is_empty() && st.rows.iter().all(|r| r.a2.is_none()),
+        };
+        if !vdist_ok {
+            return Err(
+                "checkpoint does not match the run's observables (velocity_distribution)".into(),
+            );
         }
         let rng = RunRng::restore(&st.rng);
         let mut st = st;
@@ -611,6 +684,11 @@ impl DsmcSim {
         rows
     }
 
+    /// Take the recorded speed histograms (observable `velocity_distribution`).
+    pub fn take_hist(&mut self) -> Vec<HistRow> {
+        std::mem::take(&mut self.st.hist)
+    }
+
     /// Take the recorded rows (the run's output so far).
     pub fn take_rows(&mut self) -> Vec<SpeciesRow> {
         std::mem::take(&mut self.st.rows)
@@ -723,8 +801,41 @@ impl DsmcSim {
         for (s, sp) in self.sys.species.iter().enumerate() {
             let range = self.off[s]..self.off[s + 1];
             let mut v2 = 0.0;
-            for v in &self.st.vel[range.clone()] {
-                v2 += v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            let mut a2 = None;
+            if let Some(plan) = &self.sys.vdist {
+                // The same sum of |v|^2 as below (so T_k is the same bits), with |v|^4.
+                let mut v4 = 0.0;
+                for v in &self.st.vel[range.clone()] {
+                    let w = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+                    v2 += w;
+                    v4 += w * w;
+                }
+                a2 = vdist::sonine_a2(sp.count, v2, v4);
+                let scale = (2.0 * v2 / (3.0 * sp.count as f64)).sqrt();
+                if plan.times.contains(&t) && scale > 0.0 && scale.is_finite() {
+                    let counts = vdist::speed_histogram(
+                        &self.st.vel[range.clone()],
+                        scale,
+                        plan.bins,
+                        plan.c_max,
+                    );
+                    let dc = plan.c_max / plan.bins as f64;
+                    for (b, &count) in counts.iter().enumerate() {
+                        self.st.hist.push(HistRow {
+                            t,
+                            species: s as u32 + 1,
+                            bin: b as u32,
+                            c_lo: b as f64 * dc,
+                            c_hi: (b + 1) as f64 * dc,
+                            count,
+                            density: count as f64 / (sp.count as f64 * dc),
+                        });
+                    }
+                }
+            } else {
+                for v in &self.st.vel[range.clone()] {
+                    v2 += v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+                }
             }
             let msd = if self.sys.msd {
                 let mut r2 = 0.0;
@@ -756,6 +867,7 @@ impl DsmcSim {
                 count: sp.count,
                 temperature,
                 msd,
+                a2,
                 collisions: self.st.species_collisions[s],
             });
         }

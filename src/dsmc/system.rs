@@ -43,6 +43,9 @@ pub struct DsmcSystem {
     pub msd: bool,
     /// The time-averaged MSD's tracers, grid and lags (observable `tamsd`).
     pub tamsd: Option<TamsdPlan>,
+    /// The velocity distribution: a2 at every output, speed histograms at some (observable
+    /// `velocity_distribution`).
+    pub vdist: Option<VdistPlan>,
     /// Refresh bounds every `refresh_every * N` collisions.
     pub refresh_every: f64,
     /// pi / (4 V): the low-rank rate constant of (43).
@@ -73,6 +76,17 @@ impl TamsdPlan {
     pub fn time(&self, t_end: f64, j: u64) -> f64 {
         grid_time(t_end, self.grid, j)
     }
+}
+
+/// The velocity distribution of a run, resolved: the Sonine coefficient a2 of every species
+/// at every output time, and the histogram of the scaled speed at `times`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VdistPlan {
+    /// Output times (the very values of `output_times`) at which the histogram is recorded.
+    pub times: Vec<f64>,
+    /// Number of bins on [0, c_max).
+    pub bins: u32,
+    pub c_max: f64,
 }
 
 /// The restitution model of a run.

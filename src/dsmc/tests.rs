@@ -23,6 +23,7 @@ fn system(method: Method, msd: bool, viscoelastic: bool, t_end: f64, times: &[f6
         output_times,
         msd,
         tamsd: None,
+        vdist: None,
         refresh_every: 0.3,
         rate_scale: std::f64::consts::PI / (4.0 * volume),
     }
@@ -143,4 +144,66 @@ fn continuation_refusals() {
     let bird = system(Method::Bird, false, false, 20.0, TIMES);
     assert!(DsmcSim::continue_from(bird, &fin).is_err());
     assert!(DsmcSim::continue_from(longer(), &fin).is_ok());
+}
+
+/// The velocity distribution draws no random numbers: for both methods the same seed with and
+/// without it gives the same trajectory (velocities, counters, random streams) and the same
+/// temperature and collision columns; with it, a2 is recorded at every output and the speed
+/// histogram at its times only, its densities summing to the fraction below c_max.
+#[test]
+fn velocity_distribution_leaves_the_trajectory_alone() {
+    for method in [Method::LowRank, Method::Bird] {
+        let plain = system(method, false, false, 12.0, TIMES);
+        let mut with = plain.clone();
+        with.vdist = Some(system::VdistPlan {
+            times: vec![3.0, 12.0],
+            bins: 40,
+            c_max: 4.0,
+        });
+        let mut a = DsmcSim::new(plain.clone(), 9);
+        let mut b = DsmcSim::new(with.clone(), 9);
+        run(&mut a, u64::MAX);
+        run(&mut b, 1_000);
+        // Restored from a checkpoint taken after the first histogram: the same rows (a2
+        // included) and histograms; a plain run's payload is refused for it and vice versa.
+        let mut c = DsmcSim::new(with.clone(), 9);
+        while c.st.hist.is_empty() {
+            c.advance(500).unwrap();
+        }
+        let mut c = DsmcSim::from_state_bytes(with.clone(), &c.state_bytes()).unwrap();
+        run(&mut c, 700);
+        assert_eq!((&c.st.rows, &c.st.hist), (&b.st.rows, &b.st.hist));
+        assert!(DsmcSim::from_state_bytes(with.clone(), &a.state_bytes()).is_err());
+        assert!(DsmcSim::from_state_bytes(plain, &b.state_bytes()).is_err());
+        assert_eq!(a.st.vel, b.st.vel, "{method:?}");
+        assert_eq!(
+            (a.st.trials, a.st.collisions),
+            (b.st.trials, b.st.collisions)
+        );
+        assert_eq!(a.rng.position(), b.rng.position());
+        assert_eq!(a.st.rows.len(), b.st.rows.len());
+        for (x, y) in a.st.rows.iter().zip(&b.st.rows) {
+            assert_eq!(x.temperature.to_bits(), y.temperature.to_bits());
+            assert_eq!((x.t, x.collisions), (y.t, y.collisions));
+            assert!(x.a2.is_none());
+            let a2 = y.a2.expect("a2 recorded");
+            assert!(a2.is_finite() && a2 > -1.0, "{a2}");
+        }
+        let hist = b.take_hist();
+        let species = b.sys.species.len();
+        assert_eq!(hist.len(), 2 * species * 40);
+        assert!(hist.iter().all(|h| h.t == 3.0 || h.t == 12.0));
+        for k in 1..=species as u32 {
+            let h: Vec<_> = hist
+                .iter()
+                .filter(|h| h.species == k && h.t == 12.0)
+                .collect();
+            let n: u64 = h.iter().map(|h| h.count).sum();
+            let integral: f64 = h.iter().map(|h| h.density * (h.c_hi - h.c_lo)).sum();
+            let count = b.sys.species[k as usize - 1].count;
+            assert!(n <= count);
+            assert!((integral - n as f64 / count as f64).abs() < 1e-12);
+        }
+        assert!(a.take_hist().is_empty());
+    }
 }

@@ -1,14 +1,16 @@
 //! The standard figures of a DSMC campaign, from its summary and theory tables: per point,
 //! T_k(t) and <R_k^2(t)> on log-log axes (ensemble mean with standard-error bars, theory lines
 //! where a `dsmc_theory` table exists), and for polydisperse points T_k and <R_k^2>/<R_1^2>
-//! against k at the last time (the paper's Figs 4 and 6); before them the campaign-wide
+//! against k at the last time (the paper's Figs 4 and 6), with the observable
+//! `velocity_distribution` a2_k(t) and the scaled-speed density at the last histogram time
+//! against the Maxwellian and its first Sonine correction; before them the campaign-wide
 //! figures of [`super::overview`] (deviation maps, figures across the sweep). Figure names are
 //! file names and HTML ids: made safe and unique here.
 
 use std::collections::BTreeMap;
 
 use super::params::DsmcParams;
-use super::tables::{DSMC_SPECIES_SUMMARY, DSMC_THEORY};
+use super::tables::{DSMC_SPECIES_SUMMARY, DSMC_SPEED_HISTOGRAM_SUMMARY, DSMC_THEORY};
 use crate::models::CampaignView;
 use crate::plot::{Figure, Series};
 use crate::store::cols::{get_f64, get_u32, opt};
@@ -104,6 +106,12 @@ fn shown_species(all: &[u32]) -> Vec<u32> {
 pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
     let summary = read_summary(c)?;
     let theory = read_theory(c);
+    let (a2, a2_theory, hist) =
+        if super::observes_vdist(&c.points.iter().map(|p| p.params).collect::<Vec<_>>()) {
+            (read_a2(c)?, read_a2_theory(c), read_hist(c)?)
+        } else {
+            Default::default()
+        };
     let mut figs = super::overview::figures(c)?;
     for (&point, species) in &summary {
         let desc = c
@@ -122,6 +130,12 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         figs.extend(time_figures(point, species, theory.get(&point), &title));
         if species.len() > 3 {
             figs.extend(vs_k_figures(point, species, &title));
+        }
+        if let Some(a2) = a2.get(&point) {
+            figs.extend(a2_figure(point, a2, a2_theory.get(&point), &title));
+            if let Some(h) = hist.get(&point) {
+                figs.extend(speed_figure(point, h, a2, &title));
+            }
         }
     }
     let mut names: Vec<String> = figs.iter().map(|f| f.0.clone()).collect();
@@ -282,4 +296,243 @@ fn vs_k_figures(
         ));
     }
     figs
+}
+
+/// (t, a2 mean, a2 sem) per point and species where a2 is observed.
+fn read_a2(c: View) -> Result<ByPoint<(f64, f64, f64)>, StoreError> {
+    let mut out: ByPoint<(f64, f64, f64)> = BTreeMap::new();
+    for f in c.data.files(DSMC_SPECIES_SUMMARY)? {
+        let name = f.display().to_string();
+        for b in c.data.read_file(&f, DSMC_SPECIES_SUMMARY)? {
+            let p = get_u32(&b, &name, "point_id")?;
+            let t = get_f64(&b, &name, "t")?;
+            let s = get_u32(&b, &name, "species")?;
+            let am = get_f64(&b, &name, "a2_mean")?;
+            let asem = get_f64(&b, &name, "a2_sem")?;
+            for i in 0..b.num_rows() {
+                let Some(m) = opt(am, i) else { continue };
+                out.entry(p.value(i))
+                    .or_default()
+                    .entry(s.value(i))
+                    .or_default()
+                    .push((t.value(i), m, opt(asem, i).unwrap_or(0.0)));
+            }
+        }
+    }
+    sort_by_time(&mut out, |r| r.0);
+    Ok(out)
+}
+
+/// (t, a2) per point and species from a `dsmc_theory` column `a2`, where the table has one
+/// (absent: none, silently).
+fn read_a2_theory(c: View) -> ByPoint<(f64, f64)> {
+    let mut out: ByPoint<(f64, f64)> = BTreeMap::new();
+    for b in c.data.read(DSMC_THEORY).unwrap_or_default() {
+        let cols = (|| {
+            Ok::<_, StoreError>((
+                get_u32(&b, DSMC_THEORY, "point_id")?,
+                get_f64(&b, DSMC_THEORY, "t")?,
+                get_u32(&b, DSMC_THEORY, "species")?,
+                get_f64(&b, DSMC_THEORY, "a2")?,
+            ))
+        })();
+        let Ok((p, t, s, a)) = cols else { continue };
+        for i in 0..b.num_rows() {
+            if let Some(a) = opt(a, i) {
+                out.entry(p.value(i))
+                    .or_default()
+                    .entry(s.value(i))
+                    .or_default()
+                    .push((t.value(i), a));
+            }
+        }
+    }
+    sort_by_time(&mut out, |r| r.0);
+    out
+}
+
+/// A histogram summary row: (t, c_lo, c_hi, density mean, density sem).
+type HistPoint = (f64, f64, f64, f64, f64);
+
+/// The speed-histogram summary per point and species, sorted by time then bin.
+fn read_hist(c: View) -> Result<ByPoint<HistPoint>, StoreError> {
+    let mut out: ByPoint<HistPoint> = BTreeMap::new();
+    for f in c.data.files(DSMC_SPEED_HISTOGRAM_SUMMARY)? {
+        let name = f.display().to_string();
+        for b in c.data.read_file(&f, DSMC_SPEED_HISTOGRAM_SUMMARY)? {
+            let p = get_u32(&b, &name, "point_id")?;
+            let t = get_f64(&b, &name, "t")?;
+            let s = get_u32(&b, &name, "species")?;
+            let lo = get_f64(&b, &name, "c_lo")?;
+            let hi = get_f64(&b, &name, "c_hi")?;
+            let m = get_f64(&b, &name, "density_mean")?;
+            let e = get_f64(&b, &name, "density_sem")?;
+            for i in 0..b.num_rows() {
+                out.entry(p.value(i))
+                    .or_default()
+                    .entry(s.value(i))
+                    .or_default()
+                    .push((
+                        t.value(i),
+                        lo.value(i),
+                        hi.value(i),
+                        m.value(i),
+                        opt(e, i).unwrap_or(0.0),
+                    ));
+            }
+        }
+    }
+    for sp in out.values_mut() {
+        for rows in sp.values_mut() {
+            rows.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        }
+    }
+    Ok(out)
+}
+
+/// a2_k(t) with error bars, and the theory's a2 where `dsmc_theory` has it, else the
+/// Maxwellian's 0.
+fn a2_figure(
+    point: u32,
+    a2: &BTreeMap<u32, Vec<(f64, f64, f64)>>,
+    th: Option<&BTreeMap<u32, Vec<(f64, f64)>>>,
+    title: &dyn Fn(&str) -> String,
+) -> Vec<(String, Figure)> {
+    let all: Vec<u32> = a2.keys().copied().collect();
+    let shown = shown_species(&all);
+    let mut series: Vec<Series> = shown
+        .iter()
+        .map(|k| Series {
+            label: format!("a2_{k} (DSMC)"),
+            points: a2[k].iter().filter(|r| r.0 > 0.0).copied().collect(),
+            line: false,
+        })
+        .collect();
+    let n_data = series.len();
+    let (t0, t1) = a2
+        .values()
+        .flatten()
+        .filter(|r| r.0 > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(a, b), r| {
+            (a.min(r.0), b.max(r.0))
+        });
+    let mut theory = false;
+    for k in &shown {
+        if let Some(tr) = th.and_then(|m| m.get(k)) {
+            theory = true;
+            series.push(Series {
+                label: format!("a2_{k} (theory)"),
+                points: tr
+                    .iter()
+                    .filter(|r| r.0 > 0.0)
+                    .map(|r| (r.0, r.1, 0.0))
+                    .collect(),
+                line: true,
+            });
+        }
+    }
+    if !theory && t0 < t1 {
+        series.push(Series {
+            label: "0 (Maxwellian)".into(),
+            points: vec![(t0, 0.0, 0.0), (t1, 0.0, 0.0)],
+            line: true,
+        });
+    }
+    let fig = Figure {
+        log_x: true,
+        ..Figure::new(title("Sonine coefficient a2"), "time t", "a2_k", series)
+    }
+    .with_references_from(n_data);
+    vec![(format!("point-{point:04}-a2"), fig)]
+}
+
+/// f_M(c) = 4/sqrt(pi) c^2 exp(-c^2), the Maxwellian density of the scaled speed.
+pub fn maxwell_speed(c: f64) -> f64 {
+    4.0 / std::f64::consts::PI.sqrt() * c * c * (-c * c).exp()
+}
+
+/// f_M(c) [1 + a2 S2(c^2)] with S2(x) = x^2/2 - 5x/2 + 15/8: the first Sonine correction.
+pub fn sonine_speed(c: f64, a2: f64) -> f64 {
+    let x = c * c;
+    maxwell_speed(c) * (1.0 + a2 * (x * x / 2.0 - 2.5 * x + 15.0 / 8.0))
+}
+
+/// The scaled-speed density at the last histogram time (log y) against the Maxwellian and
+/// the first Sonine curve with the measured a2 (of up to 3 species).
+fn speed_figure(
+    point: u32,
+    hist: &BTreeMap<u32, Vec<HistPoint>>,
+    a2: &BTreeMap<u32, Vec<(f64, f64, f64)>>,
+    title: &dyn Fn(&str) -> String,
+) -> Vec<(String, Figure)> {
+    let all: Vec<u32> = hist.keys().copied().collect();
+    let shown = shown_species(&all);
+    let last = hist
+        .values()
+        .filter_map(|rows| rows.last().map(|r| r.0))
+        .fold(0.0, f64::max);
+    let c_max = hist.values().flatten().map(|r| r.2).fold(0.0, f64::max);
+    let mut series: Vec<Series> = shown
+        .iter()
+        .map(|k| Series {
+            label: format!("species {k} (DSMC)"),
+            points: hist[k]
+                .iter()
+                .filter(|r| r.0 == last && r.3 > 0.0)
+                .map(|r| (0.5 * (r.1 + r.2), r.3, r.4))
+                .collect(),
+            line: false,
+        })
+        .collect();
+    let n_data = series.len();
+    let grid: Vec<f64> = (1..=200).map(|j| j as f64 * c_max / 200.0).collect();
+    series.push(Series {
+        label: "Maxwellian f_M(c)".into(),
+        points: grid.iter().map(|&c| (c, maxwell_speed(c), 0.0)).collect(),
+        line: true,
+    });
+    for k in shown.iter().take(3) {
+        let Some(&(_, a, _)) = a2.get(k).and_then(|r| r.iter().find(|r| r.0 == last)) else {
+            continue;
+        };
+        series.push(Series {
+            label: format!("Sonine, measured a2_{k} = {a:.3}"),
+            points: grid
+                .iter()
+                .map(|&c| (c, sonine_speed(c, a), 0.0))
+                .filter(|r| r.1 > 0.0)
+                .collect(),
+            line: true,
+        });
+    }
+    let fig = crate::plot::semilog_y(Figure::new(
+        title(&format!(
+            "scaled speed c = v / sqrt(2 T_k / m_k) at t = {last}"
+        )),
+        "scaled speed c",
+        "density",
+        series,
+    ))
+    .with_references_from(n_data);
+    vec![(format!("point-{point:04}-speed-distribution"), fig)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The Maxwellian of the scaled speed and its first Sonine correction are normalised (S2
+    /// is orthogonal to the Maxwellian), and a2 = 0 gives the Maxwellian.
+    #[test]
+    fn speed_densities_are_normalised() {
+        let dc = 1e-4;
+        let int = |f: &dyn Fn(f64) -> f64| {
+            (0..100_000)
+                .map(|j| f((j as f64 + 0.5) * dc) * dc)
+                .sum::<f64>()
+        };
+        assert!((int(&maxwell_speed) - 1.0).abs() < 1e-9);
+        assert!((int(&|c| sonine_speed(c, 0.1)) - 1.0).abs() < 1e-9);
+        assert_eq!(sonine_speed(1.3, 0.0), maxwell_speed(1.3));
+    }
 }

@@ -2,8 +2,10 @@
 //! (spec `dsmc.md`), with the kinetic theory beside every measurement.
 //!
 //! - [`params`]: the manifest's `params` and their resolution into a [`DsmcSystem`];
-//! - [`tables`]: `dsmc_species`, `dsmc_tamsd` and the theory tables in Arrow form;
-//! - [`summary`]: `dsmc_species_summary` and `dsmc_tamsd_summary` over replicas;
+//! - [`tables`]: `dsmc_species`, `dsmc_tamsd`, `dsmc_speed_histogram` and the theory tables
+//!   in Arrow form;
+//! - [`summary`]: `dsmc_species_summary`, `dsmc_tamsd_summary` and
+//!   `dsmc_speed_histogram_summary` over replicas;
 //! - [`theory`]: the theory tables of a campaign (predictions of every point in parallel);
 //! - [`figures`]: T_k(t), MSD_k(t), T_k and MSD ratios against k, after the campaign-wide
 //!   figures of [`overview`]: deviation maps (points x species, in sems) and T_k, MSD_k at
@@ -82,6 +84,16 @@ impl Model for Dsmc {
             old.output_times.resolve(old.t_end),
             new.output_times.resolve(new.t_end),
         );
+        // The continued run keeps the shorter run's histograms: they must be the longer
+        // run's up to the old end.
+        let (ha, hb) = (old.vdist_times(), new.vdist_times());
+        let hb_before: Vec<f64> = hb.into_iter().filter(|&t| t <= old.t_end).collect();
+        if ha != hb_before {
+            return CarryOver::Rerun(
+                "the speed histograms' times up to the old end differ (by default only t_end has one)"
+                    .into(),
+            );
+        }
         match crate::dsmc::continuable(old.t_end, &a, new.t_end, &b) {
             Ok(()) => CarryOver::Continue,
             Err(why) => CarryOver::Rerun(why),
@@ -99,7 +111,11 @@ impl Model for Dsmc {
     fn finish(mut sim: DsmcSim, ids: RunIds) -> RunRows {
         let tamsd = sim.tamsd_rows();
         let species = sim.take_rows();
+        let hist = sim.take_hist();
         let mut tables = vec![(DSMC_SPECIES, species_batch(ids, &species))];
+        if !hist.is_empty() {
+            tables.push((DSMC_SPEED_HISTOGRAM, hist_batch(ids, &hist)));
+        }
         if !tamsd.is_empty() {
             tables.push((DSMC_TAMSD, tamsd_batch(ids, &tamsd)));
         }
@@ -121,6 +137,9 @@ impl Model for Dsmc {
         // is an error for DuckDB's globs).
         if observes_tamsd(points) {
             t.extend([DSMC_TAMSD, DSMC_TAMSD_SUMMARY, DSMC_THEORY_TAMSD]);
+        }
+        if observes_vdist(points) {
+            t.extend([DSMC_SPEED_HISTOGRAM, DSMC_SPEED_HISTOGRAM_SUMMARY]);
         }
         t
     }
@@ -152,6 +171,12 @@ impl Model for Dsmc {
 /// the `dsmc_tamsd*` tables).
 pub fn observes_tamsd(points: &[&DsmcParams]) -> bool {
     points.iter().any(|p| p.wants_tamsd())
+}
+
+/// Whether any point records the velocity distribution (then, and only then, the campaign
+/// has the `dsmc_speed_histogram*` tables).
+pub fn observes_vdist(points: &[&DsmcParams]) -> bool {
+    points.iter().any(|p| p.wants_vdist())
 }
 
 impl Simulation for DsmcSim {

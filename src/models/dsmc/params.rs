@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::dsmc::system::{
     grid_time, power_law_species, theory_restitution, Method, RestitutionModel, SpeciesInfo,
-    TamsdPlan, MAX_PARTICLES,
+    TamsdPlan, VdistPlan, MAX_PARTICLES,
 };
 use crate::dsmc::DsmcSystem;
 
@@ -42,12 +42,18 @@ pub struct DsmcParams {
     pub output_times: OutputTimes,
     /// Observables beyond the always-recorded temperature: `msd` enables displacement
     /// bookkeeping (memory and time); `tamsd` records tracer trajectories for the time-averaged
-    /// MSD (needs the `tamsd` object); `temperature` may be listed for clarity.
+    /// MSD (needs the `tamsd` object); `velocity_distribution` records the Sonine coefficient
+    /// a2 and scaled-speed histograms (settings in the optional `velocity_distribution`
+    /// object); `temperature` may be listed for clarity.
     #[serde(default)]
     pub observables: Vec<DsmcObservable>,
     /// Settings of the time-averaged MSD (required with, and only with, the observable `tamsd`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tamsd: Option<TamsdSpec>,
+    /// Settings of the velocity distribution (only with the observable
+    /// `velocity_distribution`; defaults when absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub velocity_distribution: Option<VdistSpec>,
     /// Recompute the exact speed bounds (and rebuild the selection tables) every this many
     /// collisions per particle (default 1, i.e. every ~N collisions).
     #[serde(default = "one")]
@@ -259,6 +265,74 @@ pub enum DsmcObservable {
     /// Time-averaged MSD (26) of tracer particles at the lags of the `tamsd` object
     /// (displacement bookkeeping, plus the tracers' trajectories on a uniform grid).
     Tamsd,
+    /// The Sonine coefficient a2_k = 3 <v^4>_k / (5 <v^2>_k^2) - 1 at every output time and
+    /// the histogram of the scaled speed c = v / sqrt(2 T_k / m_k) at chosen output times
+    /// (settings in the `velocity_distribution` object). Draws no random numbers.
+    VelocityDistribution,
+}
+
+/// Settings of the observable `velocity_distribution`.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct VdistSpec {
+    /// Output times at which the scaled-speed histogram is recorded (each must be an output
+    /// time); default: t_end only. a2 is recorded at every output time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(extend("items" = {"type": "number", "minimum": 0}))]
+    pub times: Option<Vec<f64>>,
+    /// Number of bins of the histogram on [0, c_max) (default 60).
+    #[serde(default = "default_bins")]
+    #[schemars(range(min = 1, max = 10000))]
+    pub bins: u32,
+    /// Upper end of the histogram's scaled speeds (default 4); faster particles are not
+    /// counted.
+    #[serde(default = "default_c_max")]
+    #[schemars(extend("exclusiveMinimum" = 0))]
+    pub c_max: f64,
+}
+
+impl Default for VdistSpec {
+    fn default() -> Self {
+        VdistSpec {
+            times: None,
+            bins: default_bins(),
+            c_max: default_c_max(),
+        }
+    }
+}
+
+fn default_bins() -> u32 {
+    60
+}
+
+fn default_c_max() -> f64 {
+    4.0
+}
+
+/// Most histogram bins.
+pub const MAX_BINS: u32 = 10_000;
+
+impl VdistSpec {
+    /// The histogram times resolved against the output times `outputs` (sorted): each given
+    /// time mapped to the output time it matches (relative 1e-12), sorted, de-duplicated;
+    /// `outputs`' last (t_end) by default. Err(index) for a time that is no output time.
+    pub fn resolve_times(&self, outputs: &[f64]) -> Result<Vec<f64>, usize> {
+        let Some(times) = &self.times else {
+            return Ok(outputs.last().copied().into_iter().collect());
+        };
+        let mut out = Vec::new();
+        for (i, &t) in times.iter().enumerate() {
+            let m = outputs
+                .iter()
+                .copied()
+                .find(|&o| (o - t).abs() <= 1e-12 * o.abs().max(1e-300))
+                .ok_or(i)?;
+            out.push(m);
+        }
+        out.sort_by(f64::total_cmp);
+        out.dedup();
+        Ok(out)
+    }
 }
 
 /// Time-averaged MSD (paper eq. 26): the displacements of `tracers` particles per species are
@@ -467,15 +541,30 @@ impl DsmcParams {
             }
             _ => None,
         };
+        let output_times = p.output_times.resolve(p.t_end);
+        let vdist = if p.wants_vdist() {
+            let spec = p.velocity_distribution.clone().unwrap_or_default();
+            let times = spec
+                .resolve_times(&output_times)
+                .map_err(|i| format!("velocity_distribution.times[{i}] is not an output time"))?;
+            Some(VdistPlan {
+                times,
+                bins: spec.bins,
+                c_max: spec.c_max,
+            })
+        } else {
+            None
+        };
         Ok(DsmcSystem {
             method: p.method.engine(),
             species,
             volume,
             restitution,
             t_end: p.t_end,
-            output_times: p.output_times.resolve(p.t_end),
+            output_times,
             msd: p.wants_msd(),
             tamsd,
+            vdist,
             refresh_every: p.refresh_every,
             rate_scale: std::f64::consts::PI / (4.0 * volume),
         })
@@ -505,9 +594,19 @@ impl DsmcParams {
             _ => 0,
         };
         let m = counts.len() as u64;
+        let hist = if self.wants_vdist() {
+            let spec = self.velocity_distribution.clone().unwrap_or_default();
+            let times = spec.times.as_ref().map_or(1, |t| t.len()) as u64;
+            m.saturating_mul(times)
+                .saturating_mul(spec.bins as u64)
+                .saturating_mul(56)
+        } else {
+            0
+        };
         let rows = m
             .saturating_mul(self.output_times.count_bound())
-            .saturating_mul(80);
+            .saturating_mul(88)
+            .saturating_add(hist);
         n.saturating_mul(per_particle)
             .saturating_add(tracks)
             .saturating_add(rows)
@@ -522,6 +621,24 @@ impl DsmcParams {
 
     pub fn wants_tamsd(&self) -> bool {
         self.observables.contains(&DsmcObservable::Tamsd)
+    }
+
+    pub fn wants_vdist(&self) -> bool {
+        self.observables
+            .contains(&DsmcObservable::VelocityDistribution)
+    }
+
+    /// The histogram times of a run (empty without the observable, or where a time is no
+    /// output time, which `check` refuses).
+    pub fn vdist_times(&self) -> Vec<f64> {
+        if !self.wants_vdist() {
+            return Vec::new();
+        }
+        self.velocity_distribution
+            .clone()
+            .unwrap_or_default()
+            .resolve_times(&self.output_times.resolve(self.t_end))
+            .unwrap_or_default()
     }
 
     /// Particle counts N_k as [`DsmcParams::system`] resolves them, without solving any
@@ -715,6 +832,43 @@ impl DsmcParams {
                 );
             }
             seen.push(*o);
+        }
+        if let Some(vd) = &self.velocity_distribution {
+            if !self.wants_vdist() {
+                err(
+                    "/velocity_distribution",
+                    "given, but `velocity_distribution` is not in `observables`".into(),
+                );
+            }
+            if !(1..=MAX_BINS).contains(&vd.bins) {
+                err(
+                    "/velocity_distribution/bins",
+                    format!("expected 1..={MAX_BINS} bins, got {}", vd.bins),
+                );
+            }
+            if !(vd.c_max.is_finite() && vd.c_max > 0.0) {
+                err(
+                    "/velocity_distribution/c_max",
+                    format!("expected a finite c_max > 0, got {}", vd.c_max),
+                );
+            }
+            if let Some(times) = &vd.times {
+                if self.output_times.count_bound() <= MAX_OUTPUT_TIMES {
+                    let outputs = self.output_times.resolve(self.t_end);
+                    for (i, &t) in times.iter().enumerate() {
+                        let one = VdistSpec {
+                            times: Some(vec![t]),
+                            ..VdistSpec::default()
+                        };
+                        if one.resolve_times(&outputs).is_err() {
+                            err(
+                                &format!("/velocity_distribution/times/{i}"),
+                                format!("{t} is not an output time (0, t_end, the log grid or the list)"),
+                            );
+                        }
+                    }
+                }
+            }
         }
         if let Some(tm) = &self.tamsd {
             if !self.wants_tamsd() {

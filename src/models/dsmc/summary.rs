@@ -31,6 +31,9 @@ pub fn write(c: View) -> Result<(), StoreError> {
     if super::observes_tamsd(&points) {
         write_tamsd_summary(c)?;
     }
+    if super::observes_vdist(&points) {
+        write_hist_summary(c)?;
+    }
     Ok(())
 }
 
@@ -64,8 +67,8 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
     let mut p0 = 0u32;
     while p0 < n_points {
         let p1 = (p0 + points_per_chunk).min(n_points);
-        // (point, t, species) -> [(replica, temperature, msd)]
-        let mut acc: BTreeMap<Key, Vec<(u32, f64, Option<f64>)>> = BTreeMap::new();
+        // (point, t, species) -> [(replica, temperature, msd, a2)]
+        let mut acc: BTreeMap<Key, Vec<(u32, f64, Option<f64>, Option<f64>)>> = BTreeMap::new();
         for f in &files {
             let name = f.display().to_string();
             for b in c.data.read_file(f, DSMC_SPECIES)? {
@@ -75,6 +78,11 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                 let sp = get_u32(&b, &name, "species")?;
                 let temp = get_f64(&b, &name, "temperature")?;
                 let msd = get_f64(&b, &name, "msd")?;
+                // Tables written before the observable existed have no `a2` column.
+                let a2 = match b.schema().index_of("a2") {
+                    Ok(_) => Some(get_f64(&b, &name, "a2")?),
+                    Err(_) => None,
+                };
                 for i in 0..b.num_rows() {
                     let p = point.value(i);
                     let replica = c.done.get(&run.value(i));
@@ -83,7 +91,12 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                     };
                     acc.entry((p, t.value(i).to_bits(), sp.value(i)))
                         .or_default()
-                        .push((replica, temp.value(i), opt(msd, i)));
+                        .push((
+                            replica,
+                            temp.value(i),
+                            opt(msd, i),
+                            a2.and_then(|a| opt(a, i)),
+                        ));
                 }
             }
         }
@@ -108,6 +121,13 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
             } else {
                 (None, None)
             };
+            let a2s: Vec<f64> = v.iter().filter_map(|x| x.3).collect();
+            let (am, as_) = if a2s.len() == v.len() && !a2s.is_empty() {
+                let (m, s) = mean_sem(&a2s);
+                (Some(m), s)
+            } else {
+                (None, None)
+            };
             let th = theory.get(&key).copied();
             out.push(SummaryRow {
                 point: key.0,
@@ -118,6 +138,8 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                 ts,
                 mm,
                 ms,
+                am,
+                as_,
                 t_th: th.map(|x| x.0),
                 m_th: th.and_then(|x| x.1),
                 ts_th: th.and_then(|x| x.2),
@@ -208,6 +230,102 @@ fn read_tamsd_theory(c: View) -> Result<BTreeMap<TamsdKey, f64>, StoreError> {
     Ok(out)
 }
 
+type HistKey = (u32, u64, u32, u32); // point, t bits, species, bin
+
+/// `dsmc_speed_histogram_summary`: mean and standard error of the density over the finished
+/// replicas of each (point, t, species, bin); in chunks of points, summed in replica order.
+fn write_hist_summary(c: View) -> Result<(), StoreError> {
+    let files = c.data.files(DSMC_SPEED_HISTOGRAM)?;
+    let points_per_chunk = points_per_chunk(c, |d| {
+        let bins = d.velocity_distribution.as_ref().map_or(60, |v| v.bins) as u64;
+        species_count(d) * d.vdist_times().len() as u64 * bins
+    });
+    let n_points = c.points.len() as u32;
+    let mut rows: Vec<HistSummaryRow> = Vec::new();
+    let mut p0 = 0u32;
+    while p0 < n_points && !files.is_empty() {
+        let p1 = (p0 + points_per_chunk).min(n_points);
+        // (point, t, species, bin) -> (c_lo, c_hi, [(replica, density)])
+        let mut acc: BTreeMap<HistKey, (f64, f64, Vec<(u32, f64)>)> = BTreeMap::new();
+        for f in &files {
+            let name = f.display().to_string();
+            for b in c.data.read_file(f, DSMC_SPEED_HISTOGRAM)? {
+                let run = get_u64(&b, &name, "run_id")?;
+                let point = get_u32(&b, &name, "point_id")?;
+                let t = get_f64(&b, &name, "t")?;
+                let sp = get_u32(&b, &name, "species")?;
+                let bin = get_u32(&b, &name, "bin")?;
+                let lo = get_f64(&b, &name, "c_lo")?;
+                let hi = get_f64(&b, &name, "c_hi")?;
+                let val = get_f64(&b, &name, "density")?;
+                for i in 0..b.num_rows() {
+                    let p = point.value(i);
+                    let replica = c.done.get(&run.value(i));
+                    let (Some(&replica), true) = (replica, p >= p0 && p < p1) else {
+                        continue;
+                    };
+                    acc.entry((p, t.value(i).to_bits(), sp.value(i), bin.value(i)))
+                        .or_insert_with(|| (lo.value(i), hi.value(i), Vec::new()))
+                        .2
+                        .push((replica, val.value(i)));
+                }
+            }
+        }
+        let mut order: Vec<HistKey> = acc.keys().copied().collect();
+        order.sort_by(|a, b| {
+            (a.0, f64::from_bits(a.1), a.2, a.3)
+                .partial_cmp(&(b.0, f64::from_bits(b.1), b.2, b.3))
+                .expect("finite times")
+        });
+        for key in order {
+            let (c_lo, c_hi, v) = acc.remove(&key).expect("key");
+            let (n, mean, sem) = replica_mean_sem(v);
+            rows.push(HistSummaryRow {
+                point: key.0,
+                t: f64::from_bits(key.1),
+                species: key.2,
+                bin: key.3,
+                c_lo,
+                c_hi,
+                n,
+                mean,
+                sem,
+            });
+        }
+        p0 = p1;
+    }
+    c.write_summary(DSMC_SPEED_HISTOGRAM_SUMMARY, &hist_summary(&rows))
+}
+
+/// One row of `dsmc_speed_histogram_summary`.
+struct HistSummaryRow {
+    point: u32,
+    t: f64,
+    species: u32,
+    bin: u32,
+    c_lo: f64,
+    c_hi: f64,
+    n: u32,
+    mean: f64,
+    sem: Option<f64>,
+}
+
+fn hist_summary(rows: &[HistSummaryRow]) -> RecordBatch {
+    table(rows, |c| {
+        vec![
+            c.u32("point_id", |r| r.point),
+            c.f64("t", |r| r.t),
+            c.u32("species", |r| r.species),
+            c.u32("bin", |r| r.bin),
+            c.f64("c_lo", |r| r.c_lo),
+            c.f64("c_hi", |r| r.c_hi),
+            c.u32("n_replicas", |r| r.n),
+            c.f64("density_mean", |r| r.mean),
+            c.opt_f64("density_sem", |r| r.sem),
+        ]
+    })
+}
+
 /// One row of `dsmc_tamsd_summary`.
 struct TamsdSummaryRow {
     point: u32,
@@ -243,6 +361,8 @@ struct SummaryRow {
     ts: Option<f64>,
     mm: Option<f64>,
     ms: Option<f64>,
+    am: Option<f64>,
+    as_: Option<f64>,
     t_th: Option<f64>,
     m_th: Option<f64>,
     /// Sonine theory (None for velocity-dependent restitution, or a theory table written
@@ -287,6 +407,8 @@ fn species_summary(rows: &[SummaryRow]) -> RecordBatch {
             c.opt_f64("temperature_sonine_dev_rel", |r| {
                 r.temperature_sonine_dev().1
             }),
+            c.opt_f64("a2_mean", |r| r.am),
+            c.opt_f64("a2_sem", |r| r.as_),
             c.opt_f64("a2_theory", |r| r.a2_th),
         ]
     })

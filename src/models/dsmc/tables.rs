@@ -8,7 +8,7 @@ use arrow_array::builder::{Float64Builder, ListBuilder};
 use arrow_array::{ArrayRef, RecordBatch};
 
 use crate::dsmc::predict::{TamsdTheoryRow, TheoryRow};
-use crate::dsmc::{SpeciesRow, TamsdRow};
+use crate::dsmc::{HistRow, SpeciesRow, TamsdRow};
 use crate::models::{run_batch, RunIds};
 use crate::store::cols::table;
 
@@ -16,6 +16,8 @@ pub const DSMC_SPECIES: &str = "dsmc_species";
 pub const DSMC_SPECIES_SUMMARY: &str = "dsmc_species_summary";
 pub const DSMC_TAMSD: &str = "dsmc_tamsd";
 pub const DSMC_TAMSD_SUMMARY: &str = "dsmc_tamsd_summary";
+pub const DSMC_SPEED_HISTOGRAM: &str = "dsmc_speed_histogram";
+pub const DSMC_SPEED_HISTOGRAM_SUMMARY: &str = "dsmc_speed_histogram_summary";
 pub const DSMC_THEORY: &str = "dsmc_theory";
 pub const DSMC_THEORY_TAMSD: &str = "dsmc_theory_tamsd";
 pub const DSMC_THEORY_POINT: &str = "dsmc_theory_point";
@@ -32,6 +34,22 @@ pub fn species_batch(ids: RunIds, rows: &[SpeciesRow]) -> RecordBatch {
             c.f64("temperature", |r| r.temperature),
             c.opt_f64("msd", |r| r.msd),
             c.u64("collisions", |r| r.collisions),
+            c.opt_f64("a2", |r| r.a2),
+        ]
+    })
+}
+
+/// `dsmc_speed_histogram`: per histogram time, species and bin.
+pub fn hist_batch(ids: RunIds, rows: &[HistRow]) -> RecordBatch {
+    run_batch(ids, rows, |c| {
+        vec![
+            c.f64("t", |r| r.t),
+            c.u32("species", |r| r.species),
+            c.u32("bin", |r| r.bin),
+            c.f64("c_lo", |r| r.c_lo),
+            c.f64("c_hi", |r| r.c_hi),
+            c.u64("count", |r| r.count),
+            c.f64("density", |r| r.density),
         ]
     })
 }
