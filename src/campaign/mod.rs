@@ -260,6 +260,7 @@ impl Campaign {
             )
             .map_err(|errs| CampaignError::Refused(errs.join("; ")))?;
         let plan = Plan::new(&manifest, expansion, registry).map_err(CampaignError::Refused)?;
+        self.refuse_missing_columns(&plan, &growth)?;
         self.plan = plan;
         self.manifest = manifest;
         self.manifest_json = canonical(&value);
@@ -270,6 +271,58 @@ impl Campaign {
             self.record(text, growth.new_runs.len() as u64)?;
         }
         Ok((self, growth))
+    }
+
+    /// The new points' runs would fill columns (`Model::valued_columns`) that this campaign's
+    /// tables, written by an earlier granular, do not have: refused before anything is
+    /// written, every such column named (`store::schema` keeps one schema per table).
+    fn refuse_missing_columns(&self, plan: &Plan, growth: &Growth) -> Result<(), CampaignError> {
+        let data = self.data();
+        let mut lacking: BTreeMap<(&str, &str), Vec<u32>> = BTreeMap::new();
+        let mut schemas = BTreeMap::new();
+        for &id in &growth.new_points {
+            let Some(point) = plan.points.iter().find(|p| p.point_id == id) else {
+                continue;
+            };
+            for (table, column) in point.params.valued_columns() {
+                if !schemas.contains_key(table) {
+                    let first = data
+                        .files(table)
+                        .map_err(|e| CampaignError::Io(e.to_string()))?
+                        .into_iter()
+                        .next();
+                    let schema = match first {
+                        Some(f) => Some(
+                            crate::store::schema::file_schema(&f)
+                                .map_err(|e| CampaignError::Io(e.to_string()))?,
+                        ),
+                        None => None,
+                    };
+                    schemas.insert(table, schema);
+                }
+                if let Some(Some(s)) = schemas.get(table) {
+                    if s.index_of(column).is_err() {
+                        lacking.entry((table, column)).or_default().push(id);
+                    }
+                }
+            }
+        }
+        if lacking.is_empty() {
+            return Ok(());
+        }
+        let what: Vec<String> = lacking
+            .iter()
+            .map(|((t, c), points)| {
+                format!(
+                    "the runs of point(s) {points:?} fill column {c:?} of table {t}, which this campaign's table (written by an earlier granular) does not have"
+                )
+            })
+            .collect();
+        Err(CampaignError::Refused(format!(
+            "{}: {}; a table keeps its columns, so record these points in a new campaign (another --out)",
+            self.root.display(),
+            what.join("; ")
+        )))
     }
 
     /// Write the accepted manifest into the history and campaign.json (the commit point: it

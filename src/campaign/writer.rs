@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use arrow_array::RecordBatch;
+use arrow_schema::SchemaRef;
 
 use super::ledger::{self, Commit, CommittedRun, PartCommit, RunStatus};
 use super::tables::{self, RunRow};
@@ -15,7 +16,7 @@ use super::Campaign;
 use crate::fsutil;
 use crate::store::checksum::FileSum;
 use crate::store::parquet_io::{self, Stamp, StoreError};
-use crate::store::{checkpoint, FORMAT_VERSION, LEDGER_FORMAT};
+use crate::store::{checkpoint, schema, FORMAT_VERSION, LEDGER_FORMAT};
 
 /// Flush when this many rows are buffered, whatever the time.
 const FLUSH_ROWS: usize = 1_000_000;
@@ -31,6 +32,9 @@ pub struct Writer<'c> {
     rows: BTreeMap<&'static str, Vec<RecordBatch>>,
     buffered: usize,
     since: Option<Instant>,
+    /// The columns of each table that already has files (fixed by its first file: a campaign
+    /// of an earlier granular keeps its columns; see `store::schema`).
+    schemas: BTreeMap<String, SchemaRef>,
 }
 
 impl<'c> Writer<'c> {
@@ -51,6 +55,7 @@ impl<'c> Writer<'c> {
             rows: BTreeMap::new(),
             buffered: 0,
             since: None,
+            schemas: BTreeMap::new(),
         })
     }
 
@@ -123,19 +128,51 @@ impl<'c> Writer<'c> {
         (rel, abs)
     }
 
-    /// The buffered parts, `runs` first, then the model's tables in their order.
-    fn batches(&mut self) -> Vec<(&'static str, Vec<RecordBatch>)> {
+    /// The buffered parts, `runs` first, then the model's tables in their order. The buffers
+    /// are kept until the commit succeeds: a failed flush leaves them whole, so that a later
+    /// one commits every run with its rows, never a run without them.
+    fn batches(&self) -> Vec<(&'static str, Vec<RecordBatch>)> {
         let mut out = vec![(tables::RUNS, vec![tables::runs_batch(&self.runs)])];
         for t in &self.order {
-            if let Some(b) = self.rows.remove(t) {
-                out.push((t, b));
+            if let Some(b) = self.rows.get(t) {
+                out.push((*t, b.clone()));
             }
         }
         // Rows of a table the campaign does not list (a model bug) are written too, last,
         // rather than lost.
-        out.extend(std::mem::take(&mut self.rows));
-        self.buffered = 0;
+        out.extend(
+            self.rows
+                .iter()
+                .filter(|(t, _)| !self.order.contains(t))
+                .map(|(t, b)| (*t, b.clone())),
+        );
         out
+    }
+
+    /// `batches` in the columns their tables already have (an error names a column whose
+    /// values a table of an earlier granular cannot hold; nothing is written then).
+    fn conformed(
+        &mut self,
+        batches: Vec<(&'static str, Vec<RecordBatch>)>,
+    ) -> Result<Vec<(&'static str, Vec<RecordBatch>)>, StoreError> {
+        let mut out = Vec::with_capacity(batches.len());
+        for (table, parts) in batches {
+            if !self.schemas.contains_key(table) {
+                if let Some(first) = self.c.data().files(table)?.into_iter().next() {
+                    self.schemas
+                        .insert(table.to_string(), schema::file_schema(&first)?);
+                }
+            }
+            let parts = match self.schemas.get(table) {
+                Some(s) => parts
+                    .iter()
+                    .map(|b| schema::conform(b, s, table))
+                    .collect::<Result<Vec<_>, _>>()?,
+                None => parts,
+            };
+            out.push((table, parts));
+        }
+        Ok(out)
     }
 
     /// Commit the buffered runs; returns (runs committed, commit seq).
@@ -144,6 +181,7 @@ impl<'c> Writer<'c> {
             return Ok(None);
         }
         let batches = self.batches();
+        let batches = self.conformed(batches)?;
         // Every part says in its footer which commit it belongs to and which tables that
         // commit wrote, so that a lost commit record can be rebuilt from the parts.
         let part_commit = serde_json::to_string(&PartCommit {
@@ -229,6 +267,8 @@ impl<'c> Writer<'c> {
         }
         let n = self.runs.len();
         let seq = self.seq;
+        self.rows.clear();
+        self.buffered = 0;
         self.runs.clear();
         self.since = None;
         self.seq += 1;

@@ -154,6 +154,13 @@ pub trait Model {
     /// Every table a campaign of these points has (raw, summaries, theory), in the order the
     /// parts of a commit are written.
     fn tables(points: &[&Self::Params]) -> Vec<&'static str>;
+    /// The columns of its run tables, as (table, column), that a run of `p` fills with values
+    /// although runs of other params leave them null (optional observables). A campaign
+    /// written by an earlier granular may lack them: growth that would need one there is
+    /// refused (`store::schema`). None by default.
+    fn valued_columns(_p: &Self::Params) -> Vec<(&'static str, &'static str)> {
+        Vec::new()
+    }
     /// The model's kinetic-theory tables (they depend only on the manifest); none by default.
     fn theory_tables(_points: &[&Self::Params]) -> Vec<&'static str> {
         Vec::new()
@@ -637,6 +644,13 @@ macro_rules! models {
             pub fn memory(&self) -> u64 {
                 match self {
                     $(ModelParams::$variant(p) => <$model as Model>::memory(p),)+
+                }
+            }
+
+            /// See [`Model::valued_columns`].
+            pub fn valued_columns(&self) -> Vec<(&'static str, &'static str)> {
+                match self {
+                    $(ModelParams::$variant(p) => <$model as Model>::valued_columns(p),)+
                 }
             }
 

@@ -880,6 +880,45 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
         assert!(summary.rows.iter().all(|r| r[i] == util::Cell::Null), "{c}");
     }
     assert_same_current_except(&complete, &direct, "upgraded and grown vs direct", &sonine);
+    // One schema per table: the grown campaign's new parts of dsmc_species have the fixture's
+    // columns (no `a2`, which the fresh campaign has, null), so every reader sees one table.
+    let mut schemas = BTreeSet::new();
+    for e in fs::read_dir(complete.join("tables/dsmc_species")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "parquet") {
+            let s = granular::store::schema::file_schema(&p).unwrap();
+            let names: Vec<String> = s.fields().iter().map(|f| f.name().clone()).collect();
+            assert!(!names.contains(&"a2".to_string()), "{}", p.display());
+            schemas.insert(names);
+        }
+    }
+    assert_eq!(schemas.len(), 1, "{schemas:?}");
+    let d_species = granular::store::schema::file_schema(
+        &fs::read_dir(direct.join("tables/dsmc_species"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.extension().is_some_and(|x| x == "parquet"))
+            .unwrap(),
+    )
+    .unwrap();
+    assert!(d_species.index_of("a2").is_ok());
+    // Points that would fill `a2` cannot join that table: refused, naming the column and the
+    // points, and nothing in the directory changes.
+    let mut mv: Value = serde_json::from_slice(&fs::read(&mg).unwrap()).unwrap();
+    mv["params"]["observables"] = json!(["msd", "velocity_distribution"]);
+    let mvp = dir.path().join("vdist.json");
+    util::write_json(&mvp, &mv);
+    let before = util::snapshot(&complete);
+    fs::write(&log, "").unwrap();
+    let (code, out) = run_capture(&["run", s(&mvp), "--out", s(&complete), "--quiet"], &log);
+    let err = log_text(&log);
+    assert_eq!(code, Some(3), "{out}\n{err}");
+    assert!(
+        err.contains("point(s) [") && err.contains("column \"a2\" of table dsmc_species"),
+        "{err}"
+    );
+    assert!(err.contains("new campaign"), "{err}");
+    assert!(util::snapshot(&complete) == before, "a refused growth wrote");
     for cmd in [vec!["compact", s(&complete)], vec!["verify", s(&complete)]] {
         let (code, out) = run_capture(&cmd, &log);
         assert_eq!(code, Some(0), "{cmd:?}: {out}\n{}", log_text(&log));

@@ -126,6 +126,15 @@ impl Model for Dsmc {
         }
     }
 
+    /// `a2` of `dsmc_species` (granular before issue 16 wrote the table without it).
+    fn valued_columns(p: &DsmcParams) -> Vec<(&'static str, &'static str)> {
+        if p.wants_vdist() {
+            vec![(DSMC_SPECIES, "a2")]
+        } else {
+            Vec::new()
+        }
+    }
+
     fn tables(points: &[&DsmcParams]) -> Vec<&'static str> {
         let mut t = vec![
             DSMC_SPECIES,
