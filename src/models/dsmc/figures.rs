@@ -51,9 +51,13 @@ fn read_summary(c: View) -> Result<ByPoint<SummaryPoint>, StoreError> {
     Ok(out)
 }
 
-/// (t, T, msd) per point and species, if the campaign has a readable `dsmc_theory` table.
-fn read_theory(c: View) -> ByPoint<(f64, f64, Option<f64>)> {
-    let mut out: ByPoint<(f64, f64, Option<f64>)> = BTreeMap::new();
+/// A theory row: (t, T, msd, T Sonine, msd Sonine).
+type TheoryPoint = (f64, f64, Option<f64>, Option<f64>, Option<f64>);
+
+/// The theory rows per point and species, if the campaign has a readable `dsmc_theory` table
+/// (the Sonine columns where the table has them).
+fn read_theory(c: View) -> ByPoint<TheoryPoint> {
+    let mut out: ByPoint<TheoryPoint> = BTreeMap::new();
     let batches = c.data.read(DSMC_THEORY).unwrap_or_default();
     for b in batches {
         let cols = (|| {
@@ -68,12 +72,20 @@ fn read_theory(c: View) -> ByPoint<(f64, f64, Option<f64>)> {
         let Ok((p, t, s, tt, m)) = cols else {
             continue;
         };
+        let ts = get_f64(&b, DSMC_THEORY, "temperature_sonine").ok();
+        let ms = get_f64(&b, DSMC_THEORY, "msd_sonine").ok();
         for i in 0..b.num_rows() {
             out.entry(p.value(i))
                 .or_default()
                 .entry(s.value(i))
                 .or_default()
-                .push((t.value(i), tt.value(i), opt(m, i)));
+                .push((
+                    t.value(i),
+                    tt.value(i),
+                    opt(m, i),
+                    ts.and_then(|c| opt(c, i)),
+                    ms.and_then(|c| opt(c, i)),
+                ));
         }
     }
     sort_by_time(&mut out, |r| r.0);
@@ -134,7 +146,7 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         if let Some(a2) = a2.get(&point) {
             figs.extend(a2_figure(point, a2, a2_theory.get(&point), &title));
             if let Some(h) = hist.get(&point) {
-                figs.extend(speed_figure(point, h, a2, &title));
+                figs.extend(speed_figure(point, h, a2, a2_theory.get(&point), &title));
             }
         }
     }
@@ -150,7 +162,7 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
 fn time_figures(
     point: u32,
     species: &BTreeMap<u32, Vec<SummaryPoint>>,
-    th: Option<&BTreeMap<u32, Vec<(f64, f64, Option<f64>)>>>,
+    th: Option<&BTreeMap<u32, Vec<TheoryPoint>>>,
     title: &dyn Fn(&str) -> String,
 ) -> Vec<(String, Figure)> {
     let all: Vec<u32> = species.keys().copied().collect();
@@ -190,6 +202,17 @@ fn time_figures(
                     .collect(),
                 line: true,
             });
+            if tr.iter().any(|r| r.3.is_some()) {
+                temp.push(Series {
+                    label: format!("T_{k} (Sonine)"),
+                    points: tr
+                        .iter()
+                        .filter(|r| r.0 > 0.0 && r.3.is_some_and(|x| x > 0.0))
+                        .map(|r| (r.0, r.3.unwrap_or(0.0), 0.0))
+                        .collect(),
+                    line: true,
+                });
+            }
             if tr.iter().any(|r| r.2.is_some()) && !msd.is_empty() {
                 msd.push(Series {
                     label: format!("<R_{k}^2> (theory)"),
@@ -200,6 +223,17 @@ fn time_figures(
                         .collect(),
                     line: true,
                 });
+                if tr.iter().any(|r| r.4.is_some()) {
+                    msd.push(Series {
+                        label: format!("<R_{k}^2> (Sonine)"),
+                        points: tr
+                            .iter()
+                            .filter(|r| r.0 > 0.0 && r.4.is_some_and(|m| m > 0.0))
+                            .map(|r| (r.0, r.4.unwrap_or(0.0), 0.0))
+                            .collect(),
+                        line: true,
+                    });
+                }
             }
         }
     }
@@ -457,12 +491,16 @@ pub fn sonine_speed(c: f64, a2: f64) -> f64 {
     maxwell_speed(c) * (1.0 + a2 * (x * x / 2.0 - 2.5 * x + 15.0 / 8.0))
 }
 
-/// The scaled-speed density at the last histogram time (log y) against the Maxwellian and
-/// the first Sonine curve with the measured a2 (of up to 3 species).
+/// The scaled-speed density at the last histogram time (log y, so the tail shows) against
+/// the Maxwellian and the first Sonine curve f_M (1 + a2 S2) with the theory's a2 (of up to 3
+/// species; `dsmc_theory`'s a2 at the output time nearest to the histogram's). With one
+/// species, or where the theory has no a2 (velocity-dependent restitution), the Sonine curve
+/// with the measured a2 too (or instead): the shape a first Sonine correction can give.
 fn speed_figure(
     point: u32,
     hist: &BTreeMap<u32, Vec<HistPoint>>,
     a2: &BTreeMap<u32, Vec<(f64, f64, f64)>>,
+    th: Option<&BTreeMap<u32, Vec<(f64, f64)>>>,
     title: &dyn Fn(&str) -> String,
 ) -> Vec<(String, Figure)> {
     let all: Vec<u32> = hist.keys().copied().collect();
@@ -491,19 +529,32 @@ fn speed_figure(
         points: grid.iter().map(|&c| (c, maxwell_speed(c), 0.0)).collect(),
         line: true,
     });
+    let curve = |label: String, a: f64| Series {
+        label,
+        points: grid
+            .iter()
+            .map(|&c| (c, sonine_speed(c, a), 0.0))
+            .filter(|r| r.1 > 0.0)
+            .collect(),
+        line: true,
+    };
     for k in shown.iter().take(3) {
-        let Some(&(_, a, _)) = a2.get(k).and_then(|r| r.iter().find(|r| r.0 == last)) else {
+        let theory = th
+            .and_then(|m| m.get(k))
+            .and_then(|r| {
+                r.iter()
+                    .min_by(|x, y| (x.0 - last).abs().total_cmp(&(y.0 - last).abs()))
+            })
+            .map(|r| r.1);
+        if let Some(a) = theory {
+            series.push(curve(format!("Sonine a2_{k}={a:.3} (theory)"), a));
+        }
+        if theory.is_some() && shown.len() > 1 {
             continue;
-        };
-        series.push(Series {
-            label: format!("Sonine, measured a2_{k} = {a:.3}"),
-            points: grid
-                .iter()
-                .map(|&c| (c, sonine_speed(c, a), 0.0))
-                .filter(|r| r.1 > 0.0)
-                .collect(),
-            line: true,
-        });
+        }
+        if let Some(&(_, a, _)) = a2.get(k).and_then(|r| r.iter().find(|r| r.0 == last)) {
+            series.push(curve(format!("Sonine a2_{k}={a:.3} (DSMC)"), a));
+        }
     }
     let fig = crate::plot::semilog_y(Figure::new(
         title(&format!(
