@@ -21,6 +21,10 @@ pub struct TheoryRow {
     /// T_k(t) with the a2-corrected cooling rates (first Sonine approximation, a2 slaved to
     /// the instantaneous temperatures); None unless the restitution is constant.
     pub temperature_sonine: Option<f64>,
+    /// <R_k^2(t)> in the first Sonine approximation (`sonine::msd_sonine`: the Sonine
+    /// temperature history and the a2-corrected tau_v); None unless MSD is recorded and the
+    /// Sonine theory is given (constant restitution, at most `SONINE_MAX_SPECIES` species).
+    pub msd_sonine: Option<f64>,
 }
 
 /// One row of `dsmc_theory_tamsd`: the TAMSD (27) of a species at a lag, for t = t_end.
@@ -74,6 +78,9 @@ pub fn predict(sys: &DsmcSystem) -> Prediction {
     } else {
         None
     };
+    let msds_sonine = (small && sys.msd)
+        .then(|| sonine::msd_sonine(&species, &r, &t0, times))
+        .flatten();
     let mut rows = Vec::with_capacity(times.len() * species.len());
     for (j, &t) in times.iter().enumerate() {
         let tv = diffusion::tau_v(&species, &temps[j], &r);
@@ -86,6 +93,7 @@ pub fn predict(sys: &DsmcSystem) -> Prediction {
                 tau_v: tv[k],
                 a2: a2.as_ref().map(|a| a[k]),
                 temperature_sonine: sonine_temps.as_ref().map(|s| s[j][k]),
+                msd_sonine: msds_sonine.as_ref().map(|m| m[j][k]),
             });
         }
     }

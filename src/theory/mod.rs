@@ -43,7 +43,15 @@
 //! - `msd_hcs(D0, tau_v0, tau0, t)` (22) (stable; tau0 = inf: elastic), `msd_hcs_literal`,
 //!   `msd_hcs_long(D0, tau0, t)` (23), `msd_hcs_species(species, &r, T0, times)`,
 //!   `msd_numeric(species, &r, T0, times) -> Vec<Vec<f64>>` ((4)-(6) for any temperature
-//!   history, any restitution), `msd_total(species, partial)` (3).
+//!   history, any restitution), `msd_total(species, partial)` (3);
+//!   `msd_from_history(species, T0, times, history)` ((4)-(6) for a given history of T_k,
+//!   reduced times and tau_v,k: `HistoryPoint`).
+//!
+//! First Sonine approximation ([`sonine`], constant restitution)
+//! - `a2_one_species`, `cooling_rate_one_species`, `a2_at`, `hcs_temperatures_sonine`,
+//!   `evolve_temperatures_sonine`; `tau_v_inv_pairs_sonine`, `tau_v_sonine`,
+//!   `tau_v_sonine_factor` (the a2-corrected (11)), `msd_sonine` ((4)-(6) along the Sonine
+//!   history with the a2-corrected tau_v).
 //!
 //! Tracer limit ([`tracer`]), n_2 -> 0
 //! - `tau0_tracer` (29), `tau_v1_tracer` (30), `msd_gas_tracer` (31), `tau_v2_tracer` (32),

@@ -84,8 +84,49 @@ pub fn msd_numeric(
     t0: &[f64],
     times: &[f64],
 ) -> Vec<Vec<f64>> {
+    let table = PairTable::new(species, restitution);
+    msd_from_history(species, t0, times, |ts: &[f64], nodes: bool| {
+        evolve(species, restitution, t0, ts, nodes, 1e-11)
+            .into_iter()
+            .map(|st| {
+                let tv = if nodes {
+                    table.tau_v(&st.temperatures)
+                } else {
+                    tau_v(species, &st.temperatures, restitution)
+                };
+                HistoryPoint {
+                    temperatures: st.temperatures,
+                    reduced_times: st.reduced_times,
+                    tau_v: tv,
+                }
+            })
+            .collect()
+    })
+}
+
+/// What (4)-(6) need of a temperature history at one time t: T_k(t), the reduced times
+/// int_0^t sqrt(T_k(t')/T_k(0)) dt' (= tau_k(t) tau_c(0)) and tau_v,k(t).
+#[derive(Clone, Debug, PartialEq)]
+pub struct HistoryPoint {
+    pub temperatures: Vec<f64>,
+    pub reduced_times: Vec<f64>,
+    pub tau_v: Vec<f64>,
+}
+
+/// Partial MSDs (4) for the temperature history and velocity correlation times given by
+/// `history(ts, nodes)` (the [`HistoryPoint`]s at the sorted times `ts`, starting at `t0` at
+/// t = 0; it is called twice: at the output times, where only T_k and tau_v,k are used
+/// (`nodes` false: the reduced times may be left empty), then at all quadrature nodes), with the
+/// quadrature of [`msd_numeric`] (see the module docs): `result[j][k]` = `<R_k^2(times[j])>`.
+/// `msd_numeric` is this with the Maxwellian history; `sonine::msd_sonine` with the Sonine one.
+pub fn msd_from_history(
+    species: &[Species],
+    t0: &[f64],
+    times: &[f64],
+    history: impl Fn(&[f64], bool) -> Vec<HistoryPoint>,
+) -> Vec<Vec<f64>> {
     let m = species.len();
-    let first = evolve(species, restitution, t0, times, false, 1e-11);
+    let first = history(times, false);
     let t_s = time_scale(species, t0);
     let t_max = times.iter().cloned().fold(0.0, f64::max);
     let ds = 0.5;
@@ -101,8 +142,10 @@ pub fn msd_numeric(
             per_output.push((vec![], vec![]));
             continue;
         }
-        let w = tau_v(species, &first[j].temperatures, restitution)
-            .into_iter()
+        let w = first[j]
+            .tau_v
+            .iter()
+            .cloned()
             .fold(f64::INFINITY, f64::min)
             .min(t);
         let mut b: Vec<f64> = global.iter().cloned().filter(|&x| x < t).collect();
@@ -117,14 +160,14 @@ pub fn msd_numeric(
         per_output.push(composite_nodes(&b));
     }
 
-    // One integration through all nodes (and the output times themselves).
+    // One history through all nodes (and the output times themselves).
     let mut all: Vec<f64> = times.to_vec();
     for (nodes, _) in &per_output {
         all.extend_from_slice(nodes);
     }
     all.sort_by(f64::total_cmp);
     all.dedup();
-    let states = evolve(species, restitution, t0, &all, true, 1e-11);
+    let states = history(&all, true);
     let find = |t: f64| -> usize {
         all.binary_search_by(|x| x.total_cmp(&t))
             .expect("node time")
@@ -132,9 +175,8 @@ pub fn msd_numeric(
     // D_k, tau_hat_k (without tau_c(0)) and tau_k at each node.
     let mut node_d = vec![vec![0.0; m]; all.len()];
     let mut node_that = vec![vec![0.0; m]; all.len()];
-    let table = PairTable::new(species, restitution);
     for (idx, st) in states.iter().enumerate() {
-        let tv = table.tau_v(&st.temperatures);
+        let tv = &st.tau_v;
         for k in 0..m {
             node_d[idx][k] = st.temperatures[k] * tv[k] / species[k].mass;
             node_that[idx][k] = tv[k] * (st.temperatures[k] / t0[k]).sqrt();

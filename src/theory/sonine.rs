@@ -39,7 +39,34 @@
 //! instantaneous temperatures (the stationary solution of the fourth-moment equations at each
 //! instant, exact in the HCS; the relaxation of a2 itself, a few collision times, is not
 //! modelled). Constant restitution only (per pair allowed).
+//!
+//! # Velocity correlation time and MSD
+//! The paper's (11) is tau_v,ki^-1 = nu^v_ki - xi_ki/2 (see [`super::restitution`]): nu^v_ki
+//! = <-v_k . dv_k>/<v_k^2> is the rate at which collisions with species i decorrelate a
+//! tagged k particle's velocity, averaged over the velocity distributions, and xi_ki/2 the
+//! part of it that only follows the cooling. Its a2 correction is taken by the same route
+//! (route (a), the velocity-autocorrelation one of the paper and of Brilliantov & Poeschel,
+//! PRE 61, 1716 (2000)): both terms averaged over f_M,k (1 + a2_k S2) f_M,i (1 + a2_i S2),
+//! linear in the a2, by the exact quadrature ([`tau_v_inv_pairs_sonine`], R_ki in
+//! `pair_moments`). Pointwise R + J[v^2]/2 = mu_i^2 (1 + e)^2 (g.s)^2/2, so tau_v,ki^-1 sees the
+//! distributions only through <|g|^3>, whence the closed form (tested)
+//! tau_v,ki^-1 = (11) [1 + (3/8) (a2_k theta_k^2 + a2_i theta_i^2)/(theta_k + theta_i)^2]
+//! ([`tau_v_sonine_factor`]); one species: (11) (1 + 3 a2/16) = the Maxwellian rate times the
+//! same factor as zeta (<v1 . g |g|> = <|g|^3>/2 for identical species).
+//!
+//! Route (b), not taken: the Chapman-Enskog first Sonine tracer/self-diffusion coefficient
+//! (Garzo & Montanero, PRE 69, 021301 (2004); Garzo & Vega Reyes 2009) has
+//! D = (T/m) / (nu_D - zeta/2) with the trial function f_M,k v: only the gas's a2 enters
+//! nu_D, and for one species nu_D = nu^v_M (1 - a2/32) (the -1/32 of the 3/16 split
+//! 7/32 + (-1/32) between tagged and gas, tested), while zeta keeps (1 + 3 a2/16). The
+//! paper's tau_v is the velocity decorrelation time of (4)-(6), so route (a) is the one that
+//! is consistent with it. The two differ by O(a2): for one species with e = 0.5
+//! (a2 = 0.0525) tau_v^-1 is (11) times 1.0098 by (a), 0.9945 by (b).
+//!
+//! [`msd_sonine`]: (4)-(6) with D_k = T_k tau_v,k / m_k along the Sonine temperature history
+//! ([`evolve_temperatures_sonine`]) with these tau_v,k (a2 slaved to the temperatures).
 
+use super::msd::{msd_from_history, HistoryPoint};
 use super::restitution::PairRestitution;
 use super::species::Species;
 use super::temperature::{check_input, time_scale};
@@ -150,15 +177,16 @@ fn gauss_laguerre(n: usize) -> Vec<(f64, f64)> {
 }
 
 /// Collision moments of species k (mass `mk`, theta1 = T_k/m_k) with species i (mass `mi`,
-/// theta2), per unit n_i sigma_ki^2: `[psi][c]` with psi = v^2, v^4 and c the coefficient of
-/// 1, a2_k, a2_i (J = c0 + a2_k c1 + a2_i c2).
-fn pair_moments(mk: f64, th1: f64, mi: f64, th2: f64, e: f64) -> [[f64; 3]; 2] {
+/// theta2), per unit n_i sigma_ki^2: `[psi][c]` with psi = v^2, v^4 (J_ki[psi]) and the
+/// velocity-relaxation moment R_ki = <-v1 . dv1> (index 2), and c the coefficient of 1, a2_k,
+/// a2_i (J = c0 + a2_k c1 + a2_i c2).
+fn pair_moments(mk: f64, th1: f64, mi: f64, th2: f64, e: f64) -> [[f64; 3]; 3] {
     let rl = rules();
     let s2 = th1 + th2;
     let beta = th1 / s2;
     let sw = (th1 * th2 / s2).sqrt();
     let mu = mi / (mk + mi) * (1.0 + e);
-    let mut acc = [[0.0; 3]; 2];
+    let mut acc = [[0.0; 3]; 3];
     for &(u, wu) in &rl.lag {
         let g = (2.0 * s2 * u).sqrt();
         // (2/sqrt(pi)) w sqrt(u) F(g): the density of g folded in.
@@ -176,7 +204,7 @@ fn pair_moments(mk: f64, th1: f64, mi: f64, th2: f64, e: f64) -> [[f64; 3]; 2] {
                     let sk = 0.5 * c1 * c1 - 2.5 * c1 + 1.875;
                     let si = 0.5 * c2 * c2 - 2.5 * c2 + 1.875;
                     let wv = wg * wx * wy * wz;
-                    let (mut d2, mut d4) = (0.0, 0.0);
+                    let (mut d2, mut d4, mut d1) = (0.0, 0.0, 0.0);
                     for sp in &rl.sphere {
                         let gs = g * sp[2];
                         let v1s = v1[0] * sp[0] + v1[1] * sp[1] + v1[2] * sp[2];
@@ -186,8 +214,10 @@ fn pair_moments(mk: f64, th1: f64, mi: f64, th2: f64, e: f64) -> [[f64; 3]; 2] {
                         let ws = sp[3] * gs;
                         d2 += ws * (vp - v1sq);
                         d4 += ws * (vp * vp - v1sq * v1sq);
+                        // -v1 . dv1 = k (v1.s).
+                        d1 += ws * k * v1s;
                     }
-                    for (p, d) in [(0, d2), (1, d4)] {
+                    for (p, d) in [(0, d2), (1, d4), (2, d1)] {
                         acc[p][0] += wv * d;
                         acc[p][1] += wv * d * sk;
                         acc[p][2] += wv * d * si;
@@ -200,7 +230,7 @@ fn pair_moments(mk: f64, th1: f64, mi: f64, th2: f64, e: f64) -> [[f64; 3]; 2] {
 }
 
 /// Per pair (k, i): n_i sigma_ki^2 times [`pair_moments`].
-fn moments(species: &[Species], t: &[f64], eps: &[Vec<f64>]) -> Vec<Vec<[[f64; 3]; 2]>> {
+fn moments(species: &[Species], t: &[f64], eps: &[Vec<f64>]) -> Vec<Vec<[[f64; 3]; 3]>> {
     let m = species.len();
     (0..m)
         .map(|k| {
@@ -210,7 +240,7 @@ fn moments(species: &[Species], t: &[f64], eps: &[Vec<f64>]) -> Vec<Vec<[[f64; 3
                     let sig = 0.5 * (sk.diameter + si.diameter);
                     let f = si.density * sig * sig;
                     if f == 0.0 {
-                        return [[0.0; 3]; 2];
+                        return [[0.0; 3]; 3];
                     }
                     let mut j =
                         pair_moments(sk.mass, t[k] / sk.mass, si.mass, t[i] / si.mass, eps[k][i]);
@@ -236,8 +266,15 @@ pub fn constant_pairs(m: usize, r: &PairRestitution) -> Option<Vec<Vec<f64>>> {
 /// The a2_k (stationary fourth-moment equations, linearised) and the cooling rates zeta_k at
 /// temperatures `t`: `(a2, zeta)`.
 pub fn a2_at(species: &[Species], t: &[f64], eps: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
-    let m = species.len();
     let j = moments(species, t, eps);
+    let a2 = a2_from(species, t, &j);
+    let zeta = zeta_from(species, t, &j, &a2);
+    (a2, zeta)
+}
+
+/// The linearised stationary fourth-moment equations solved for the a2_k.
+fn a2_from(species: &[Species], t: &[f64], j: &[Vec<[[f64; 3]; 3]>]) -> Vec<f64> {
+    let m = species.len();
     let mut a = vec![0.0; m * m];
     let mut b = vec![0.0; m];
     for k in 0..m {
@@ -260,19 +297,80 @@ pub fn a2_at(species: &[Species], t: &[f64], eps: &[Vec<f64>]) -> (Vec<f64>, Vec
     Lu::new(m, a)
         .expect("singular fourth-moment system")
         .solve(&mut b);
-    let zeta = (0..m)
+    b
+}
+
+/// zeta_k = -(1/(3 theta_k)) sum_i J_ki[v^2] at the given a2.
+fn zeta_from(species: &[Species], t: &[f64], j: &[Vec<[[f64; 3]; 3]>], a2: &[f64]) -> Vec<f64> {
+    let m = species.len();
+    (0..m)
         .map(|k| {
             let th = t[k] / species[k].mass;
             let j2: f64 = (0..m)
                 .map(|i| {
                     let p = &j[k][i][0];
-                    p[0] + b[k] * p[1] + b[i] * p[2]
+                    p[0] + a2[k] * p[1] + a2[i] * p[2]
                 })
                 .sum();
             -j2 / (3.0 * th)
         })
+        .collect()
+}
+
+/// tau_v,ki^-1 = nu^v_ki - xi_ki/2 = (R_ki + J_ki[v^2]/2) / (3 theta_k) at the given a2.
+fn tau_v_inv_from(
+    species: &[Species],
+    t: &[f64],
+    j: &[Vec<[[f64; 3]; 3]>],
+    a2: &[f64],
+) -> Vec<Vec<f64>> {
+    let m = species.len();
+    (0..m)
+        .map(|k| {
+            let th = t[k] / species[k].mass;
+            (0..m)
+                .map(|i| {
+                    let (r, j2) = (&j[k][i][2], &j[k][i][0]);
+                    let lin = |p: &[f64; 3]| p[0] + a2[k] * p[1] + a2[i] * p[2];
+                    (lin(r) + 0.5 * lin(j2)) / (3.0 * th)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The a2-corrected tau_v,ki^-1 (route (a) of the module docs: the paper's (11),
+/// nu^v_ki - xi_ki/2, averaged over f_M,k (1 + a2_k S2) f_M,i (1 + a2_i S2), linear in the
+/// a2) at temperatures `t` and the given `a2`: `result[k][i]`, by the exact quadrature.
+pub fn tau_v_inv_pairs_sonine(
+    species: &[Species],
+    t: &[f64],
+    eps: &[Vec<f64>],
+    a2: &[f64],
+) -> Vec<Vec<f64>> {
+    tau_v_inv_from(species, t, &moments(species, t, eps), a2)
+}
+
+/// The closed form of [`tau_v_inv_pairs_sonine`] relative to the Maxwellian (11):
+/// tau_v,ki^-1 depends on the pair distribution only through <|g|^3>, and
+/// E[S2(c_k^2) | g] = (theta_k/(theta_k + theta_i))^2 S2(g^2/(2 (theta_k + theta_i))), so
+/// tau_v,ki^-1 = tau_v,ki^-1(Maxwell) [1 + (3/8) (a2_k theta_k^2 + a2_i theta_i^2) /
+/// (theta_k + theta_i)^2]; one species: 1 + 3 a2/16.
+pub fn tau_v_sonine_factor(th_k: f64, th_i: f64, a2_k: f64, a2_i: f64) -> f64 {
+    let s = th_k + th_i;
+    1.0 + 0.375 * (a2_k * th_k * th_k + a2_i * th_i * th_i) / (s * s)
+}
+
+/// tau_v,k in the first Sonine approximation at temperatures `t`, with the a2_k slaved to
+/// them (as [`a2_at`]): `(a2, tau_v)`.
+pub fn tau_v_sonine(species: &[Species], t: &[f64], eps: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
+    let j = moments(species, t, eps);
+    let a2 = a2_from(species, t, &j);
+    let tv = tau_v_inv_from(species, t, &j, &a2)
+        .iter()
+        .map(|row| 1.0 / row.iter().sum::<f64>())
         .collect();
-    (b, zeta)
+    (a2, tv)
 }
 
 /// The Sonine HCS: temperatures with equal cooling rates zeta_k (a2-corrected) and
@@ -348,18 +446,46 @@ struct SonineOde<'a> {
     species: &'a [Species],
     eps: Vec<Vec<f64>>,
     t_s: f64,
+    /// a2 = 0 throughout (the Maxwellian theory through the same machinery; for tests).
+    maxwell: bool,
+    /// ln T_k(0), when the reduced times (6) ride along as quadrature components.
+    y0: Option<Vec<f64>>,
+}
+
+impl SonineOde<'_> {
+    /// (a2, zeta) at temperatures `t`.
+    fn rates(&self, t: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        if self.maxwell {
+            let j = moments(self.species, t, &self.eps);
+            let a2 = vec![0.0; t.len()];
+            let z = zeta_from(self.species, t, &j, &a2);
+            (a2, z)
+        } else {
+            a2_at(self.species, t, &self.eps)
+        }
+    }
 }
 
 impl OdeSystem for SonineOde<'_> {
     fn dim(&self) -> usize {
         self.species.len()
     }
+    fn quad_dim(&self) -> usize {
+        self.y0.as_ref().map_or(0, |y| y.len())
+    }
     fn rhs(&self, s: f64, y: &[f64], dy: &mut [f64]) {
         let t: Vec<f64> = y.iter().map(|v| v.exp()).collect();
-        let (_, z) = a2_at(self.species, &t, &self.eps);
+        let (_, z) = self.rates(&t);
         let dtds = self.t_s * s.exp();
         for k in 0..y.len() {
             dy[k] = -z[k] * dtds;
+        }
+    }
+    fn quad(&self, s: f64, y: &[f64], dq: &mut [f64]) {
+        let y0 = self.y0.as_ref().expect("quadrature components");
+        let dtds = self.t_s * s.exp();
+        for k in 0..y.len() {
+            dq[k] = (0.5 * (y[k] - y0[k])).exp() * dtds;
         }
     }
 }
@@ -376,7 +502,13 @@ pub fn evolve_temperatures_sonine(
     check_input(species, t0);
     let eps = constant_pairs(species.len(), r)?;
     let t_s = time_scale(species, t0);
-    let sys = SonineOde { species, eps, t_s };
+    let sys = SonineOde {
+        species,
+        eps,
+        t_s,
+        maxwell: false,
+        y0: None,
+    };
     let y0: Vec<f64> = t0.iter().map(|t| t.ln()).collect();
     let s_out: Vec<f64> = times.iter().map(|t| (t / t_s).ln_1p()).collect();
     let tols = Tolerances {
@@ -392,6 +524,211 @@ pub fn evolve_temperatures_sonine(
             .map(|(y, _)| y.iter().map(|v| v.exp()).collect())
             .collect(),
     )
+}
+
+/// The largest step of the history grid in s = ln(1 + t/t_s) (see [`msd_sonine`]).
+const HISTORY_STEP: f64 = 0.05;
+
+/// The Sonine temperature history on a grid in s = ln(1 + t/t_s), interpolated in between:
+/// ln T_k and the reduced times by cubic Hermite with their exact derivatives (from the
+/// cooling rates at the grid points), the ratio tau_v,k(Sonine)/tau_v,k(Maxwell, same T) by
+/// cubic Hermite with three-point slopes. The grid is uniform (step [`HISTORY_STEP`]) and
+/// halved geometrically towards s = 0 down to a quarter of the first output's s, so the
+/// interpolation error is relative at short times too.
+struct SonineHistory<'a> {
+    species: &'a [Species],
+    r: &'a PairRestitution,
+    t_s: f64,
+    s: Vec<f64>,
+    /// Per grid point: ln T_k, d ln T_k/ds, reduced times, their derivatives, tau_v ratios.
+    y: Vec<Vec<f64>>,
+    dy: Vec<Vec<f64>>,
+    q: Vec<Vec<f64>>,
+    dq: Vec<Vec<f64>>,
+    c: Vec<Vec<f64>>,
+    dc: Vec<Vec<f64>>,
+}
+
+fn hermite(h: f64, x: f64, y0: f64, d0: f64, y1: f64, d1: f64) -> f64 {
+    let x2 = x * x;
+    let x3 = x2 * x;
+    (2.0 * x3 - 3.0 * x2 + 1.0) * y0
+        + (x3 - 2.0 * x2 + x) * h * d0
+        + (-2.0 * x3 + 3.0 * x2) * y1
+        + (x3 - x2) * h * d1
+}
+
+impl<'a> SonineHistory<'a> {
+    fn new(
+        species: &'a [Species],
+        r: &'a PairRestitution,
+        eps: Vec<Vec<f64>>,
+        t0: &[f64],
+        times: &[f64],
+        maxwell: bool,
+    ) -> Self {
+        check_input(species, t0);
+        let m = species.len();
+        let t_s = time_scale(species, t0);
+        let t_max = times.iter().cloned().fold(0.0, f64::max);
+        let t_min = times
+            .iter()
+            .cloned()
+            .filter(|&t| t > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        let s_max = (t_max / t_s).ln_1p().max(HISTORY_STEP);
+        let n = (s_max / HISTORY_STEP).ceil() as usize;
+        let h = s_max / n as f64;
+        let s_min = if t_min.is_finite() {
+            0.25 * (t_min / t_s).ln_1p()
+        } else {
+            h
+        };
+        let mut grid: Vec<f64> = (0..=n).map(|j| j as f64 * h).collect();
+        grid[n] = s_max;
+        let mut d = 0.5 * h;
+        for _ in 0..60 {
+            if d < s_min {
+                break;
+            }
+            grid.push(d);
+            d *= 0.5;
+        }
+        grid.sort_by(f64::total_cmp);
+        let y0: Vec<f64> = t0.iter().map(|t| t.ln()).collect();
+        let sys = SonineOde {
+            species,
+            eps,
+            t_s,
+            maxwell,
+            y0: Some(y0.clone()),
+        };
+        let tols = Tolerances {
+            atol_y: 1e-10,
+            rtol_y: 0.0,
+            atol_q: 1e-10 * t_s,
+            rtol_q: 1e-10,
+        };
+        let res = integrate(&sys, &y0, &vec![0.0; m], &grid, tols, 1e-3)
+            .unwrap_or_else(|e| panic!("Sonine temperature ODE failed: {e}"));
+        let mut out = SonineHistory {
+            species,
+            r,
+            t_s,
+            s: grid.clone(),
+            y: Vec::new(),
+            dy: Vec::new(),
+            q: Vec::new(),
+            dq: Vec::new(),
+            c: Vec::new(),
+            dc: Vec::new(),
+        };
+        for (&s, (y, q)) in grid.iter().zip(res) {
+            let t: Vec<f64> = y.iter().map(|v| v.exp()).collect();
+            let dtds = t_s * s.exp();
+            let j = moments(species, &t, &sys.eps);
+            let a2 = if maxwell {
+                vec![0.0; m]
+            } else {
+                a2_from(species, &t, &j)
+            };
+            let z = zeta_from(species, &t, &j, &a2);
+            let tv_inv = tau_v_inv_from(species, &t, &j, &a2);
+            let tv_m = super::diffusion::tau_v(species, &t, r);
+            out.dy.push(z.iter().map(|z| -z * dtds).collect());
+            out.dq
+                .push((0..m).map(|k| (0.5 * (y[k] - y0[k])).exp() * dtds).collect());
+            out.c.push(
+                (0..m)
+                    .map(|k| 1.0 / tv_inv[k].iter().sum::<f64>() / tv_m[k])
+                    .collect(),
+            );
+            out.y.push(y);
+            out.q.push(q);
+        }
+        // Three-point slopes of the tau_v ratios (one-sided at the ends).
+        let g = out.s.len();
+        for j in 0..g {
+            let (a, b) = (j.saturating_sub(1), (j + 1).min(g - 1));
+            let slope: Vec<f64> = (0..m)
+                .map(|k| {
+                    if a == j || b == j {
+                        (out.c[b][k] - out.c[a][k]) / (out.s[b] - out.s[a])
+                    } else {
+                        let (h0, h1) = (out.s[j] - out.s[a], out.s[b] - out.s[j]);
+                        let (d0, d1) = (
+                            (out.c[j][k] - out.c[a][k]) / h0,
+                            (out.c[b][k] - out.c[j][k]) / h1,
+                        );
+                        (h1 * d0 + h0 * d1) / (h0 + h1)
+                    }
+                })
+                .collect();
+            out.dc.push(slope);
+        }
+        out
+    }
+
+    fn at(&self, t: f64) -> HistoryPoint {
+        let m = self.species.len();
+        let s = (t / self.t_s).ln_1p();
+        let g = self.s.len();
+        let j = match self.s.binary_search_by(|x| x.total_cmp(&s)) {
+            Ok(j) => j.min(g - 2),
+            Err(j) => j.clamp(1, g - 1) - 1,
+        };
+        let h = self.s[j + 1] - self.s[j];
+        let x = (s - self.s[j]) / h;
+        let ip = |v: &[Vec<f64>], d: &[Vec<f64>], k: usize| {
+            hermite(h, x, v[j][k], d[j][k], v[j + 1][k], d[j + 1][k])
+        };
+        let temperatures: Vec<f64> = (0..m).map(|k| ip(&self.y, &self.dy, k).exp()).collect();
+        let reduced_times = (0..m).map(|k| ip(&self.q, &self.dq, k)).collect();
+        let tv_m = super::diffusion::tau_v(self.species, &temperatures, self.r);
+        let tau_v = (0..m)
+            .map(|k| ip(&self.c, &self.dc, k) * tv_m[k])
+            .collect();
+        HistoryPoint {
+            temperatures,
+            reduced_times,
+            tau_v,
+        }
+    }
+}
+
+/// Partial MSDs (4)-(6) in the first Sonine approximation: along the Sonine temperature
+/// history (a2-corrected cooling rates, a2 slaved to the temperatures, as
+/// [`evolve_temperatures_sonine`]) with the a2-corrected tau_v,k of [`tau_v_sonine`];
+/// `result[j][k]` = `<R_k^2(times[j])>`, or None for velocity-dependent restitution.
+///
+/// The quadrature is that of [`super::msd::msd_numeric`]; the history at its (many) nodes is
+/// interpolated from a grid in s = ln(1 + t/t_s) with step <= 0.05 (see `SonineHistory`:
+/// the collision moments are computed only at the grid points), ~1e-7 relative.
+pub fn msd_sonine(
+    species: &[Species],
+    r: &PairRestitution,
+    t0: &[f64],
+    times: &[f64],
+) -> Option<Vec<Vec<f64>>> {
+    let eps = constant_pairs(species.len(), r)?;
+    Some(msd_sonine_with(species, r, eps, t0, times, false))
+}
+
+fn msd_sonine_with(
+    species: &[Species],
+    r: &PairRestitution,
+    eps: Vec<Vec<f64>>,
+    t0: &[f64],
+    times: &[f64],
+    maxwell: bool,
+) -> Vec<Vec<f64>> {
+    if times.iter().all(|&t| t <= 0.0) {
+        return vec![vec![0.0; species.len()]; times.len()];
+    }
+    let hist = SonineHistory::new(species, r, eps, t0, times, maxwell);
+    msd_from_history(species, t0, times, |ts: &[f64], _| {
+        ts.iter().map(|&t| hist.at(t)).collect()
+    })
 }
 
 #[cfg(test)]
@@ -522,5 +859,148 @@ mod tests {
         }
         let v = PairRestitution::velocity_dependent(|_, _, g: f64| 0.5 + 0.01 * g);
         assert!(hcs_temperatures_sonine(&s, &v, 1.0).is_none());
+    }
+
+    /// The quadrature tau_v,ki^-1 with Sonine distributions equals the closed form
+    /// Maxwell (11) x [1 + (3/8)(a2_k theta_k^2 + a2_i theta_i^2)/(theta_k + theta_i)^2] (1e-12),
+    /// for unequal masses, diameters, temperatures, restitutions and arbitrary a2; with all
+    /// a2 = 0 it is the Maxwellian (11) of `diffusion::tau_v_inv_pairs` (1e-12).
+    #[test]
+    fn tau_v_quadrature_is_closed_form() {
+        use crate::theory::diffusion::tau_v_inv_pairs;
+        let s = vec![
+            Species::new(1.0, 1.0, 0.1),
+            Species::new(7.0, 2.0, 0.02),
+            Species::new(100.0, 100f64.cbrt(), 0.001),
+        ];
+        let eps = vec![
+            vec![0.5, 0.7, 0.9],
+            vec![0.7, 0.3, 0.8],
+            vec![0.9, 0.8, 0.6],
+        ];
+        let r = PairRestitution::ConstantPairs(eps.clone());
+        let t = [0.6, 3.0, 45.0];
+        let a2 = [0.07, -0.03, 0.2];
+        let maxw = tau_v_inv_pairs(&s, &t, &r);
+        let got = tau_v_inv_pairs_sonine(&s, &t, &eps, &a2);
+        let zero = tau_v_inv_pairs_sonine(&s, &t, &eps, &[0.0; 3]);
+        for k in 0..3 {
+            for i in 0..3 {
+                let (thk, thi) = (t[k] / s[k].mass, t[i] / s[i].mass);
+                let want = maxw[k][i] * tau_v_sonine_factor(thk, thi, a2[k], a2[i]);
+                assert!((got[k][i] / want - 1.0).abs() < 1e-12, "{k}{i}: {got:?}");
+                assert!((zero[k][i] / maxw[k][i] - 1.0).abs() < 1e-12, "{k}{i}");
+            }
+        }
+    }
+
+    /// Elastic, equal temperatures (equal masses: a2 = 0): tau_v_sonine is the Maxwellian
+    /// tau_v of `theory::diffusion` (1e-10).
+    #[test]
+    fn tau_v_elastic_is_maxwellian() {
+        use crate::theory::diffusion::tau_v;
+        let s = vec![Species::new(1.0, 1.0, 0.1), Species::new(1.0, 2.0, 0.02)];
+        let r = PairRestitution::Constant(1.0);
+        let (a2, tv) = tau_v_sonine(&s, &[1.0, 1.0], &constant_pairs(2, &r).unwrap());
+        let want = tau_v(&s, &[1.0, 1.0], &r);
+        for k in 0..2 {
+            assert!(a2[k].abs() < 1e-12, "{a2:?}");
+            assert!((tv[k] / want[k] - 1.0).abs() < 1e-10, "{tv:?} {want:?}");
+        }
+    }
+
+    /// One species: tau_v^-1 = tau_v,M^-1 (1 + 3 a2/16) with the van Noije-Ernst a2, and so
+    /// is the bare velocity-relaxation rate nu^v alone (<v1 . g |g|> = <|g|^3>/2); 1e-10.
+    /// The split of 3/16 between the tagged particle's a2 (7/32) and the gas's (-1/32): the
+    /// latter alone is the Chapman-Enskog first Sonine nu_D (route (b) of the module docs).
+    #[test]
+    fn one_species_tau_v() {
+        use crate::theory::diffusion::tau_v;
+        for e in [0.1, 0.5, 0.9] {
+            let (s, r) = one(e);
+            let eps = constant_pairs(1, &r).unwrap();
+            let (a2, tv) = tau_v_sonine(&[s], &[1.3], &eps);
+            let a = a2_one_species(e);
+            assert!((a2[0] - a).abs() < 1e-10);
+            let want = tau_v(&[s], &[1.3], &r)[0] / (1.0 + 3.0 * a / 16.0);
+            assert!((tv[0] / want - 1.0).abs() < 1e-10, "{e}: {tv:?} vs {want}");
+            let p = moments(&[s], &[1.3], &eps)[0][0][2];
+            assert!(((p[1] + p[2]) / p[0] - 3.0 / 16.0).abs() < 1e-12, "{p:?}");
+            assert!((p[1] / p[0] - 7.0 / 32.0).abs() < 1e-12, "{p:?}");
+            assert!((p[2] / p[0] + 1.0 / 32.0).abs() < 1e-12, "{p:?}");
+        }
+    }
+
+    /// One species: msd_sonine is the closed form (22) with the Sonine D(0), tau_v(0) and
+    /// tau_0 = 2/zeta(T0) (1e-6, t from 1e-3 to 1e6 tau_0).
+    #[test]
+    fn one_species_msd_closed_form() {
+        use crate::theory::diffusion::tau_v;
+        use crate::theory::msd::msd_hcs;
+        for e in [0.3, 0.8] {
+            let (s, r) = one(e);
+            let t0 = 1.7;
+            let a = a2_one_species(e);
+            let tv0 = tau_v(&[s], &[t0], &r)[0] / (1.0 + 3.0 * a / 16.0);
+            let d0 = t0 * tv0 / s.mass;
+            let tau0 = 2.0 / cooling_rate_one_species(&s, t0, e);
+            let times: Vec<f64> = [1e-3, 0.1, 1.0, 10.0, 1e3, 1e6]
+                .iter()
+                .map(|x| x * tau0)
+                .collect();
+            let got = msd_sonine(&[s], &r, &[t0], &times).unwrap();
+            for (t, g) in times.iter().zip(&got) {
+                let want = msd_hcs(d0, tv0, tau0, *t);
+                assert!((g[0] / want - 1.0).abs() < 1e-6, "{e} {t}: {g:?} vs {want}");
+            }
+        }
+    }
+
+    /// A mixture of identical species (unequal densities) is one species: its msd_sonine
+    /// equals that of the merged species (1e-7), from a common start.
+    #[test]
+    fn identical_species_msd_is_one_species() {
+        let r = PairRestitution::Constant(0.5);
+        let s = vec![Species::new(2.0, 1.5, 0.03), Species::new(2.0, 1.5, 0.07)];
+        let times = [0.01, 1.0, 30.0, 1e4];
+        let two = msd_sonine(&s, &r, &[1.3, 1.3], &times).unwrap();
+        let one = msd_sonine(&[Species::new(2.0, 1.5, 0.1)], &r, &[1.3], &times).unwrap();
+        for (a, b) in two.iter().zip(&one) {
+            for k in 0..2 {
+                assert!((a[k] / b[0] - 1.0).abs() < 1e-7, "{a:?} {b:?}");
+            }
+        }
+    }
+
+    /// With all a2 = 0 the Sonine machinery (moments, history grid, interpolation) gives
+    /// msd_numeric (1e-6): the Fig 1 binary from equipartition (a transient) and the Fig 2
+    /// intruders in their HCS. Velocity-dependent restitution gives None.
+    #[test]
+    fn zero_a2_msd_is_msd_numeric() {
+        use crate::theory::hcs::hcs_temperatures;
+        use crate::theory::msd::msd_numeric;
+        let r = PairRestitution::Constant(0.5);
+        let fig1 = vec![Species::new(1.0, 1.0, 0.1), Species::new(100.0, 1.0, 0.1)];
+        let fig2 = vec![
+            Species::new(1.0, 1.0, 0.1),
+            Species::new(100.0, 100f64.cbrt(), 0.001),
+        ];
+        let t2 = hcs_temperatures(&fig2, &r, 1.0);
+        let times = [0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4];
+        for (s, t0) in [(fig1, vec![1.0, 1.0]), (fig2, t2)] {
+            let eps = constant_pairs(2, &r).unwrap();
+            let got = msd_sonine_with(&s, &r, eps, &t0, &times, true);
+            let want = msd_numeric(&s, &r, &t0, &times);
+            let mut worst: f64 = 0.0;
+            for (g, w) in got.iter().zip(&want) {
+                for k in 0..2 {
+                    worst = worst.max((g[k] / w[k] - 1.0).abs());
+                }
+            }
+            eprintln!("a2 = 0 Sonine MSD vs msd_numeric: worst {worst:.2e}");
+            assert!(worst < 1e-6, "{worst}");
+        }
+        let v = PairRestitution::velocity_dependent(|_, _, g: f64| 0.5 + 0.01 * g);
+        assert!(msd_sonine(&[Species::new(1.0, 1.0, 0.1)], &v, &[1.0], &[1.0]).is_none());
     }
 }

@@ -870,12 +870,15 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
         "temperature_sonine",
         "temperature_sonine_dev_sigma",
         "temperature_sonine_dev_rel",
+        "msd_sonine",
+        "msd_sonine_dev_sigma",
+        "msd_sonine_dev_rel",
         "a2_theory",
     ];
     let theory = read_table(&complete, "dsmc_theory");
     assert!(!theory.columns.iter().any(|(n, _)| n == "a2"));
     let summary = read_table(&complete, "dsmc_species_summary");
-    for c in ["temperature_sonine", "a2_theory"] {
+    for c in ["temperature_sonine", "msd_sonine", "a2_theory"] {
         let i = summary.columns.iter().position(|(n, _)| n == c).expect(c);
         assert!(summary.rows.iter().all(|r| r[i] == util::Cell::Null), "{c}");
     }

@@ -144,6 +144,7 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                 m_th: th.and_then(|x| x.1),
                 ts_th: th.and_then(|x| x.2),
                 a2_th: th.and_then(|x| x.3),
+                ms_th: th.and_then(|x| x.4),
             });
         }
         p0 = p1;
@@ -369,6 +370,8 @@ struct SummaryRow {
     /// before the Sonine columns existed).
     ts_th: Option<f64>,
     a2_th: Option<f64>,
+    /// msd_sonine (None also where the msd is not recorded).
+    ms_th: Option<f64>,
 }
 
 impl SummaryRow {
@@ -380,6 +383,9 @@ impl SummaryRow {
     }
     fn temperature_sonine_dev(&self) -> (Option<f64>, Option<f64>) {
         deviations(Some(self.tm), self.ts, self.ts_th)
+    }
+    fn msd_sonine_dev(&self) -> (Option<f64>, Option<f64>) {
+        deviations(self.mm, self.ms, self.ms_th)
     }
 }
 
@@ -407,6 +413,9 @@ fn species_summary(rows: &[SummaryRow]) -> RecordBatch {
             c.opt_f64("temperature_sonine_dev_rel", |r| {
                 r.temperature_sonine_dev().1
             }),
+            c.opt_f64("msd_sonine", |r| r.ms_th),
+            c.opt_f64("msd_sonine_dev_sigma", |r| r.msd_sonine_dev().0),
+            c.opt_f64("msd_sonine_dev_rel", |r| r.msd_sonine_dev().1),
             c.opt_f64("a2_mean", |r| r.am),
             c.opt_f64("a2_sem", |r| r.as_),
             c.opt_f64("a2_theory", |r| r.a2_th),
@@ -430,9 +439,10 @@ fn deviations(
 }
 
 /// Theory values by (point, t bits, species), if the table exists.
-type TheoryValues = (f64, Option<f64>, Option<f64>, Option<f64>);
+type TheoryValues = (f64, Option<f64>, Option<f64>, Option<f64>, Option<f64>);
 
-/// Theory values (temperature, msd, temperature_sonine, a2) by (point, t bits, species), if
+/// Theory values (temperature, msd, temperature_sonine, a2, msd_sonine) by (point, t bits,
+/// species), if
 /// the table exists. The Sonine columns are None where a theory file predates them.
 fn read_theory(c: View) -> Result<BTreeMap<Key, TheoryValues>, StoreError> {
     let mut out = BTreeMap::new();
@@ -446,6 +456,7 @@ fn read_theory(c: View) -> Result<BTreeMap<Key, TheoryValues>, StoreError> {
             let m = get_f64(&b, &name, "msd")?;
             let ts = optional_f64(&b, &name, "temperature_sonine")?;
             let a2 = optional_f64(&b, &name, "a2")?;
+            let msn = optional_f64(&b, &name, "msd_sonine")?;
             for i in 0..b.num_rows() {
                 out.insert(
                     (p.value(i), t.value(i).to_bits(), s.value(i)),
@@ -454,6 +465,7 @@ fn read_theory(c: View) -> Result<BTreeMap<Key, TheoryValues>, StoreError> {
                         opt(m, i),
                         ts.and_then(|a| opt(a, i)),
                         a2.and_then(|a| opt(a, i)),
+                        msn.and_then(|a| opt(a, i)),
                     ),
                 );
             }

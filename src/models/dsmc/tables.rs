@@ -78,6 +78,7 @@ pub fn theory_batch(rows: &[(u32, TheoryRow)]) -> RecordBatch {
             c.f64("tau_v", |r| r.1.tau_v),
             c.opt_f64("a2", |r| r.1.a2),
             c.opt_f64("temperature_sonine", |r| r.1.temperature_sonine),
+            c.opt_f64("msd_sonine", |r| r.1.msd_sonine),
         ]
     })
 }
