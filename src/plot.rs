@@ -273,8 +273,11 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(e)?;
     let (lx, ly) = (p.log_x, p.log_y);
-    let fx = move |v: &f64| if lx { log_tick(*v) } else { tick(*v) };
-    let fy = move |v: &f64| if ly { log_tick(*v) } else { tick(*v) };
+    // A linear tick at zero computed as a sum of steps may come out as -1e-17: it is 0.
+    let (sx, sy) = ((x1 - x0).abs() * 1e-9, (y1 - y0).abs() * 1e-9);
+    let snap = |v: f64, eps: f64| if v.abs() < eps { 0.0 } else { v };
+    let fx = move |v: &f64| if lx { log_tick(*v) } else { tick(snap(*v, sx)) };
+    let fy = move |v: &f64| if ly { log_tick(*v) } else { tick(snap(*v, sy)) };
     chart
         .configure_mesh()
         .x_desc(&fig.x_label)

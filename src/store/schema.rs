@@ -104,15 +104,29 @@ mod tests {
     #[test]
     fn a_null_new_column_is_dropped_and_the_order_kept() {
         let b = batch(vec![
-            ("temperature", Arc::new(Float64Array::from(vec![1.0, 2.0])) as ArrayRef),
+            (
+                "temperature",
+                Arc::new(Float64Array::from(vec![1.0, 2.0])) as ArrayRef,
+            ),
             ("a2", Arc::new(Float64Array::from(vec![None, None]))),
             ("run_id", Arc::new(UInt32Array::from(vec![3, 4]))),
         ]);
         let c = conform(&b, &old_schema(), "t").unwrap();
         assert_eq!(c.schema().fields(), old_schema().fields());
-        assert_eq!(c.column(0).as_any().downcast_ref::<UInt32Array>().unwrap().value(1), 4);
         assert_eq!(
-            c.column(1).as_any().downcast_ref::<Float64Array>().unwrap().value(0),
+            c.column(0)
+                .as_any()
+                .downcast_ref::<UInt32Array>()
+                .unwrap()
+                .value(1),
+            4
+        );
+        assert_eq!(
+            c.column(1)
+                .as_any()
+                .downcast_ref::<Float64Array>()
+                .unwrap()
+                .value(0),
             1.0
         );
     }
@@ -124,17 +138,28 @@ mod tests {
             ("temperature", Arc::new(Float64Array::from(vec![1.0]))),
             ("a2", Arc::new(Float64Array::from(vec![Some(0.1)]))),
         ]);
-        let e = conform(&b, &old_schema(), "dsmc_species").unwrap_err().to_string();
-        assert!(e.contains("table dsmc_species") && e.contains("\"a2\""), "{e}");
+        let e = conform(&b, &old_schema(), "dsmc_species")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("table dsmc_species") && e.contains("\"a2\""),
+            "{e}"
+        );
     }
 
     #[test]
     fn a_missing_nullable_column_is_filled_with_nulls_and_a_type_change_refused() {
-        let b = batch(vec![("run_id", Arc::new(UInt32Array::from(vec![3, 4])) as ArrayRef)]);
+        let b = batch(vec![(
+            "run_id",
+            Arc::new(UInt32Array::from(vec![3, 4])) as ArrayRef,
+        )]);
         let c = conform(&b, &old_schema(), "t").unwrap();
         assert_eq!(c.column(1).null_count(), 2);
         let b = batch(vec![
-            ("run_id", Arc::new(Float64Array::from(vec![3.0])) as ArrayRef),
+            (
+                "run_id",
+                Arc::new(Float64Array::from(vec![3.0])) as ArrayRef,
+            ),
             ("temperature", Arc::new(Float64Array::from(vec![1.0]))),
         ]);
         let e = conform(&b, &old_schema(), "t").unwrap_err().to_string();

@@ -636,8 +636,11 @@ impl<'a> SonineHistory<'a> {
             let tv_inv = tau_v_inv_from(species, &t, &j, &a2);
             let tv_m = super::diffusion::tau_v(species, &t, r);
             out.dy.push(z.iter().map(|z| -z * dtds).collect());
-            out.dq
-                .push((0..m).map(|k| (0.5 * (y[k] - y0[k])).exp() * dtds).collect());
+            out.dq.push(
+                (0..m)
+                    .map(|k| (0.5 * (y[k] - y0[k])).exp() * dtds)
+                    .collect(),
+            );
             out.c.push(
                 (0..m)
                     .map(|k| 1.0 / tv_inv[k].iter().sum::<f64>() / tv_m[k])
@@ -685,9 +688,7 @@ impl<'a> SonineHistory<'a> {
         let temperatures: Vec<f64> = (0..m).map(|k| ip(&self.y, &self.dy, k).exp()).collect();
         let reduced_times = (0..m).map(|k| ip(&self.q, &self.dq, k)).collect();
         let tv_m = super::diffusion::tau_v(self.species, &temperatures, self.r);
-        let tau_v = (0..m)
-            .map(|k| ip(&self.c, &self.dc, k) * tv_m[k])
-            .collect();
+        let tau_v = (0..m).map(|k| ip(&self.c, &self.dc, k) * tv_m[k]).collect();
         HistoryPoint {
             temperatures,
             reduced_times,

@@ -921,7 +921,10 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
         "{err}"
     );
     assert!(err.contains("new campaign"), "{err}");
-    assert!(util::snapshot(&complete) == before, "a refused growth wrote");
+    assert!(
+        util::snapshot(&complete) == before,
+        "a refused growth wrote"
+    );
     for cmd in [vec!["compact", s(&complete)], vec!["verify", s(&complete)]] {
         let (code, out) = run_capture(&cmd, &log);
         assert_eq!(code, Some(0), "{cmd:?}: {out}\n{}", log_text(&log));

@@ -140,6 +140,9 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
             }
         };
         figs.extend(time_figures(point, species, theory.get(&point), &title));
+        if let Some(th) = theory.get(&point) {
+            figs.extend(ratio_figures(point, species, th, &title));
+        }
         if species.len() > 3 {
             figs.extend(vs_k_figures(point, species, &title));
         }
@@ -266,6 +269,98 @@ fn time_figures(
                 heatmap: None,
             },
         ));
+    }
+    figs
+}
+
+/// The measurement over each theory against time, T_k and MSD_k: DSMC / Maxwellian and
+/// DSMC / first Sonine with the sem as error bars and a line at 1, so the two theories'
+/// errors can be told apart (on the log axes of T_k(t) they are a few % of many decades).
+/// Only where the theory table has Sonine columns.
+fn ratio_figures(
+    point: u32,
+    species: &BTreeMap<u32, Vec<SummaryPoint>>,
+    th: &BTreeMap<u32, Vec<TheoryPoint>>,
+    title: &dyn Fn(&str) -> String,
+) -> Vec<(String, Figure)> {
+    let all: Vec<u32> = species.keys().copied().collect();
+    let shown = shown_species(&all);
+    let mut figs = Vec::new();
+    // (what, id, label, measured (value, sem), Maxwellian, Sonine)
+    type Pick = fn(&SummaryPoint) -> Option<(f64, f64)>;
+    type PickTh = fn(&TheoryPoint) -> Option<f64>;
+    let kinds: [(&str, &str, &str, Pick, PickTh, PickTh); 2] = [
+        (
+            "temperature",
+            "temperature-vs-theory",
+            "T_{k}",
+            |r| Some((r.1, r.2)),
+            |t| Some(t.1),
+            |t| t.3,
+        ),
+        (
+            "MSD",
+            "msd-vs-theory",
+            "MSD_{k}",
+            |r| r.3.map(|m| (m, r.4)),
+            |t| t.2,
+            |t| t.4,
+        ),
+    ];
+    for (what, id, sym, pick, maxwell, sonine) in kinds {
+        let mut series = Vec::new();
+        let (mut t0, mut t1) = (f64::INFINITY, 0.0f64);
+        for k in &shown {
+            let Some(tr) = th.get(k) else { continue };
+            let at = |t: f64| tr.iter().find(|r| r.0 == t);
+            for (name, f) in [("Maxwell", maxwell), ("Sonine", sonine)] {
+                let points: Vec<(f64, f64, f64)> = species[k]
+                    .iter()
+                    .filter(|r| r.0 > 0.0)
+                    .filter_map(|r| {
+                        let (v, e) = pick(r)?;
+                        let x = f(at(r.0)?)?;
+                        (x > 0.0).then(|| (r.0, v / x, e / x))
+                    })
+                    .collect();
+                if name == "Sonine" && points.is_empty() {
+                    return figs;
+                }
+                for p in &points {
+                    t0 = t0.min(p.0);
+                    t1 = t1.max(p.0);
+                }
+                series.push(Series {
+                    label: format!("{} / {name}", sym.replace("{k}", &k.to_string())),
+                    points,
+                    line: false,
+                });
+            }
+        }
+        if series.iter().all(|s| s.points.is_empty()) {
+            continue;
+        }
+        let n_data = series.len();
+        if t0 < t1 {
+            series.push(Series {
+                label: "1".into(),
+                points: vec![(t0, 1.0, 0.0), (t1, 1.0, 0.0)],
+                line: true,
+            });
+        }
+        let fig = Figure {
+            log_x: true,
+            ..Figure::new(
+                title(&format!(
+                    "{what}: DSMC over the Maxwellian and the Sonine theory"
+                )),
+                "time t",
+                "DSMC / theory",
+                series,
+            )
+        }
+        .with_references_from(n_data);
+        figs.push((format!("point-{point:04}-{id}"), fig));
     }
     figs
 }
@@ -571,6 +666,53 @@ fn speed_figure(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The ratio figures divide each measurement (and its sem) by the theory at the same
+    /// time, one series per species and theory, and are absent without Sonine columns.
+    #[test]
+    fn ratio_figures_divide_by_each_theory() {
+        let title = |w: &str| w.to_string();
+        let species: BTreeMap<u32, Vec<SummaryPoint>> = BTreeMap::from([(
+            1,
+            vec![
+                (1.0, 2.04, 0.02, Some(3.0), 0.3),
+                (2.0, 1.1, 0.01, None, 0.0),
+            ],
+        )]);
+        let th: BTreeMap<u32, Vec<TheoryPoint>> = BTreeMap::from([(
+            1,
+            vec![
+                (1.0, 2.0, Some(2.0), Some(2.04), Some(3.0)),
+                (2.0, 1.0, None, Some(1.0), None),
+            ],
+        )]);
+        let figs = ratio_figures(0, &species, &th, &title);
+        let names: Vec<&str> = figs.iter().map(|f| f.0.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "point-0000-temperature-vs-theory",
+                "point-0000-msd-vs-theory"
+            ]
+        );
+        let t = &figs[0].1.series;
+        assert_eq!(t[0].label, "T_1 / Maxwell");
+        assert!((t[0].points[0].1 - 1.02).abs() < 1e-12 && (t[0].points[0].2 - 0.01).abs() < 1e-12);
+        assert!((t[0].points[1].1 - 1.1).abs() < 1e-12);
+        assert!((t[1].points[0].1 - 1.0).abs() < 1e-12 && (t[1].points[1].1 - 1.1).abs() < 1e-12);
+        let m = &figs[1].1.series;
+        let close = |a: &[(f64, f64, f64)], b: (f64, f64, f64)| {
+            a.len() == 1
+                && (a[0].0 - b.0).abs() < 1e-12
+                && (a[0].1 - b.1).abs() < 1e-12
+                && (a[0].2 - b.2).abs() < 1e-12
+        };
+        assert!(close(&m[0].points, (1.0, 1.5, 0.15)), "{:?}", m[0].points);
+        assert!(close(&m[1].points, (1.0, 1.0, 0.1)), "{:?}", m[1].points);
+        let maxwell_only: BTreeMap<u32, Vec<TheoryPoint>> =
+            BTreeMap::from([(1, vec![(1.0, 2.0, Some(2.0), None, None)])]);
+        assert!(ratio_figures(0, &species, &maxwell_only, &title).is_empty());
+    }
 
     /// The Maxwellian of the scaled speed and its first Sonine correction are normalised (S2
     /// is orthogonal to the Maxwellian), and a2 = 0 gives the Maxwellian.
