@@ -286,19 +286,10 @@ impl Campaign {
             };
             for (table, column) in point.params.valued_columns() {
                 if !schemas.contains_key(table) {
-                    let first = data
+                    let files = data
                         .files(table)
-                        .map_err(|e| CampaignError::Io(e.to_string()))?
-                        .into_iter()
-                        .next();
-                    let schema = match first {
-                        Some(f) => Some(
-                            crate::store::schema::file_schema(&f)
-                                .map_err(|e| CampaignError::Io(e.to_string()))?,
-                        ),
-                        None => None,
-                    };
-                    schemas.insert(table, schema);
+                        .map_err(|e| CampaignError::Io(e.to_string()))?;
+                    schemas.insert(table, crate::store::schema::table_schema(&files));
                 }
                 if let Some(Some(s)) = schemas.get(table) {
                     if s.index_of(column).is_err() {

@@ -158,9 +158,8 @@ impl<'c> Writer<'c> {
         let mut out = Vec::with_capacity(batches.len());
         for (table, parts) in batches {
             if !self.schemas.contains_key(table) {
-                if let Some(first) = self.c.data().files(table)?.into_iter().next() {
-                    self.schemas
-                        .insert(table.to_string(), schema::file_schema(&first)?);
+                if let Some(s) = schema::table_schema(&self.c.data().files(table)?) {
+                    self.schemas.insert(table.to_string(), s);
                 }
             }
             let parts = match self.schemas.get(table) {

@@ -3,7 +3,7 @@
 //! that DuckDB, Polars and pyarrow read its directory as one table (pyarrow would otherwise
 //! silently take the first file's columns, Polars would refuse the mix).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use arrow_array::{new_null_array, ArrayRef, RecordBatch};
@@ -16,6 +16,13 @@ pub fn file_schema(path: &Path) -> Result<SchemaRef, StoreError> {
     let (_, builder) = parquet_io::inspect(path)?;
     let s = builder.schema();
     Ok(Arc::new(Schema::new(s.fields().clone())))
+}
+
+/// The columns of a table: those of the first of its `files` whose footer reads (every file
+/// of a table has them; a damaged one is the integrity checks' business, not this), or None
+/// when none does.
+pub fn table_schema(files: &[PathBuf]) -> Option<SchemaRef> {
+    files.iter().find_map(|f| file_schema(f).ok())
 }
 
 /// `batch` in the columns of `established` (a table's existing files), in their order:
