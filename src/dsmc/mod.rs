@@ -535,7 +535,6 @@ impl DsmcSim {
             );
         }
         let rng = RunRng::restore(&st.rng);
-        let mut st = st;
         st.vel = crate::memory::huge_copy(&st.vel);
         st.disp = crate::memory::huge_copy(&st.disp);
         if let Some(plan) = &sys.tamsd {

@@ -55,6 +55,12 @@ fn species_count(d: &DsmcParams) -> u64 {
     d.species_counts().map_or(1, |c| c.len().max(1)) as u64
 }
 
+/// One replica's values at a (point, t, species): (replica, temperature, msd, a2).
+type ReplicaValues = (u32, f64, Option<f64>, Option<f64>);
+
+/// A histogram bin across replicas: (c_lo, c_hi, [(replica, density)]).
+type HistBin = (f64, f64, Vec<(u32, f64)>);
+
 fn write_species_summary(c: View) -> Result<(), StoreError> {
     let files = c.data.files(DSMC_SPECIES)?;
     let points_per_chunk = points_per_chunk(c, |d| {
@@ -68,7 +74,7 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
     while p0 < n_points {
         let p1 = (p0 + points_per_chunk).min(n_points);
         // (point, t, species) -> [(replica, temperature, msd, a2)]
-        let mut acc: BTreeMap<Key, Vec<(u32, f64, Option<f64>, Option<f64>)>> = BTreeMap::new();
+        let mut acc: BTreeMap<Key, Vec<ReplicaValues>> = BTreeMap::new();
         for f in &files {
             let name = f.display().to_string();
             for b in c.data.read_file(f, DSMC_SPECIES)? {
@@ -247,7 +253,7 @@ fn write_hist_summary(c: View) -> Result<(), StoreError> {
     while p0 < n_points && !files.is_empty() {
         let p1 = (p0 + points_per_chunk).min(n_points);
         // (point, t, species, bin) -> (c_lo, c_hi, [(replica, density)])
-        let mut acc: BTreeMap<HistKey, (f64, f64, Vec<(u32, f64)>)> = BTreeMap::new();
+        let mut acc: BTreeMap<HistKey, HistBin> = BTreeMap::new();
         for f in &files {
             let name = f.display().to_string();
             for b in c.data.read_file(f, DSMC_SPEED_HISTOGRAM)? {
