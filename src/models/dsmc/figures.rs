@@ -21,8 +21,8 @@ type View<'a, 'b> = &'a CampaignView<'b, DsmcParams>;
 /// point -> species -> rows, each list sorted by time.
 type ByPoint<T> = BTreeMap<u32, BTreeMap<u32, Vec<T>>>;
 
-/// A summary row: (t, T mean, T sem, msd mean, msd sem).
-type SummaryPoint = (f64, f64, f64, Option<f64>, f64);
+/// A summary row: (t, T mean, T sem, msd mean, msd sem, a2 (mean, sem) where observed).
+type SummaryPoint = (f64, f64, f64, Option<f64>, f64, Option<(f64, f64)>);
 
 /// The summary rows per point and species.
 fn read_summary(c: View) -> Result<ByPoint<SummaryPoint>, StoreError> {
@@ -37,13 +37,19 @@ fn read_summary(c: View) -> Result<ByPoint<SummaryPoint>, StoreError> {
             let ts = get_f64(&b, &name, "temperature_sem")?;
             let mm = get_f64(&b, &name, "msd_mean")?;
             let ms = get_f64(&b, &name, "msd_sem")?;
+            // Absent from a summary written before the observable existed.
+            let am = get_f64(&b, &name, "a2_mean").ok();
+            let asem = get_f64(&b, &name, "a2_sem").ok();
             for i in 0..b.num_rows() {
                 let sem = |a| opt(a, i).unwrap_or(0.0);
+                let a2 = am
+                    .and_then(|a| opt(a, i))
+                    .map(|m| (m, asem.map_or(0.0, sem)));
                 out.entry(p.value(i))
                     .or_default()
                     .entry(s.value(i))
                     .or_default()
-                    .push((t.value(i), tm.value(i), sem(ts), opt(mm, i), sem(ms)));
+                    .push((t.value(i), tm.value(i), sem(ts), opt(mm, i), sem(ms), a2));
             }
         }
     }
@@ -51,11 +57,11 @@ fn read_summary(c: View) -> Result<ByPoint<SummaryPoint>, StoreError> {
     Ok(out)
 }
 
-/// A theory row: (t, T, msd, T Sonine, msd Sonine).
-type TheoryPoint = (f64, f64, Option<f64>, Option<f64>, Option<f64>);
+/// A theory row: (t, T, msd, T Sonine, msd Sonine, a2).
+type TheoryPoint = (f64, f64, Option<f64>, Option<f64>, Option<f64>, Option<f64>);
 
 /// The theory rows per point and species, if the campaign has a readable `dsmc_theory` table
-/// (the Sonine columns where the table has them).
+/// (the Sonine columns and a2 where the table has them).
 fn read_theory(c: View) -> ByPoint<TheoryPoint> {
     let mut out: ByPoint<TheoryPoint> = BTreeMap::new();
     let batches = c.data.read(DSMC_THEORY).unwrap_or_default();
@@ -74,6 +80,7 @@ fn read_theory(c: View) -> ByPoint<TheoryPoint> {
         };
         let ts = get_f64(&b, DSMC_THEORY, "temperature_sonine").ok();
         let ms = get_f64(&b, DSMC_THEORY, "msd_sonine").ok();
+        let a2 = get_f64(&b, DSMC_THEORY, "a2").ok();
         for i in 0..b.num_rows() {
             out.entry(p.value(i))
                 .or_default()
@@ -85,6 +92,7 @@ fn read_theory(c: View) -> ByPoint<TheoryPoint> {
                     opt(m, i),
                     ts.and_then(|c| opt(c, i)),
                     ms.and_then(|c| opt(c, i)),
+                    a2.and_then(|c| opt(c, i)),
                 ));
         }
     }
@@ -118,12 +126,11 @@ fn shown_species(all: &[u32]) -> Vec<u32> {
 pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
     let summary = read_summary(c)?;
     let theory = read_theory(c);
-    let (a2, a2_theory, hist) =
-        if super::observes_vdist(&c.points.iter().map(|p| p.params).collect::<Vec<_>>()) {
-            (read_a2(c)?, read_a2_theory(c), read_hist(c)?)
-        } else {
-            Default::default()
-        };
+    let hist = if super::observes_vdist(&c.points.iter().map(|p| p.params).collect::<Vec<_>>()) {
+        read_hist(c)?
+    } else {
+        Default::default()
+    };
     let mut figs = super::overview::figures(c)?;
     for (&point, species) in &summary {
         let desc = c
@@ -146,10 +153,12 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         if species.len() > 3 {
             figs.extend(vs_k_figures(point, species, &title));
         }
-        if let Some(a2) = a2.get(&point) {
-            figs.extend(a2_figure(point, a2, a2_theory.get(&point), &title));
+        let a2 = measured_a2(species);
+        if !a2.is_empty() {
+            let a2_theory = theory.get(&point).map(theory_a2);
+            figs.extend(a2_figure(point, &a2, a2_theory.as_ref(), &title));
             if let Some(h) = hist.get(&point) {
-                figs.extend(speed_figure(point, h, a2, a2_theory.get(&point), &title));
+                figs.extend(speed_figure(point, h, &a2, a2_theory.as_ref(), &title));
             }
         }
     }
@@ -427,57 +436,30 @@ fn vs_k_figures(
     figs
 }
 
-/// (t, a2 mean, a2 sem) per point and species where a2 is observed.
-fn read_a2(c: View) -> Result<ByPoint<(f64, f64, f64)>, StoreError> {
-    let mut out: ByPoint<(f64, f64, f64)> = BTreeMap::new();
-    for f in c.data.files(DSMC_SPECIES_SUMMARY)? {
-        let name = f.display().to_string();
-        for b in c.data.read_file(&f, DSMC_SPECIES_SUMMARY)? {
-            let p = get_u32(&b, &name, "point_id")?;
-            let t = get_f64(&b, &name, "t")?;
-            let s = get_u32(&b, &name, "species")?;
-            let am = get_f64(&b, &name, "a2_mean")?;
-            let asem = get_f64(&b, &name, "a2_sem")?;
-            for i in 0..b.num_rows() {
-                let Some(m) = opt(am, i) else { continue };
-                out.entry(p.value(i))
-                    .or_default()
-                    .entry(s.value(i))
-                    .or_default()
-                    .push((t.value(i), m, opt(asem, i).unwrap_or(0.0)));
-            }
-        }
-    }
-    sort_by_time(&mut out, |r| r.0);
-    Ok(out)
+/// (t, a2 mean, a2 sem) per species where a2 is observed (none: no `velocity_distribution`).
+fn measured_a2(species: &BTreeMap<u32, Vec<SummaryPoint>>) -> BTreeMap<u32, Vec<(f64, f64, f64)>> {
+    species
+        .iter()
+        .map(|(&k, rows)| {
+            let a2: Vec<(f64, f64, f64)> = rows
+                .iter()
+                .filter_map(|r| r.5.map(|(m, e)| (r.0, m, e)))
+                .collect();
+            (k, a2)
+        })
+        .filter(|(_, a2)| !a2.is_empty())
+        .collect()
 }
 
-/// (t, a2) per point and species from a `dsmc_theory` column `a2`, where the table has one
-/// (absent: none, silently).
-fn read_a2_theory(c: View) -> ByPoint<(f64, f64)> {
-    let mut out: ByPoint<(f64, f64)> = BTreeMap::new();
-    for b in c.data.read(DSMC_THEORY).unwrap_or_default() {
-        let cols = (|| {
-            Ok::<_, StoreError>((
-                get_u32(&b, DSMC_THEORY, "point_id")?,
-                get_f64(&b, DSMC_THEORY, "t")?,
-                get_u32(&b, DSMC_THEORY, "species")?,
-                get_f64(&b, DSMC_THEORY, "a2")?,
-            ))
-        })();
-        let Ok((p, t, s, a)) = cols else { continue };
-        for i in 0..b.num_rows() {
-            if let Some(a) = opt(a, i) {
-                out.entry(p.value(i))
-                    .or_default()
-                    .entry(s.value(i))
-                    .or_default()
-                    .push((t.value(i), a));
-            }
-        }
-    }
-    sort_by_time(&mut out, |r| r.0);
-    out
+/// (t, a2) per species from the theory rows that have one.
+fn theory_a2(th: &BTreeMap<u32, Vec<TheoryPoint>>) -> BTreeMap<u32, Vec<(f64, f64)>> {
+    th.iter()
+        .map(|(&k, rows)| {
+            let a2: Vec<(f64, f64)> = rows.iter().filter_map(|r| r.5.map(|a| (r.0, a))).collect();
+            (k, a2)
+        })
+        .filter(|(_, a2)| !a2.is_empty())
+        .collect()
 }
 
 /// A histogram summary row: (t, c_lo, c_hi, density mean, density sem).
@@ -675,15 +657,15 @@ mod tests {
         let species: BTreeMap<u32, Vec<SummaryPoint>> = BTreeMap::from([(
             1,
             vec![
-                (1.0, 2.04, 0.02, Some(3.0), 0.3),
-                (2.0, 1.1, 0.01, None, 0.0),
+                (1.0, 2.04, 0.02, Some(3.0), 0.3, None),
+                (2.0, 1.1, 0.01, None, 0.0, None),
             ],
         )]);
         let th: BTreeMap<u32, Vec<TheoryPoint>> = BTreeMap::from([(
             1,
             vec![
-                (1.0, 2.0, Some(2.0), Some(2.04), Some(3.0)),
-                (2.0, 1.0, None, Some(1.0), None),
+                (1.0, 2.0, Some(2.0), Some(2.04), Some(3.0), None),
+                (2.0, 1.0, None, Some(1.0), None, None),
             ],
         )]);
         let figs = ratio_figures(0, &species, &th, &title);
@@ -710,7 +692,7 @@ mod tests {
         assert!(close(&m[0].points, (1.0, 1.5, 0.15)), "{:?}", m[0].points);
         assert!(close(&m[1].points, (1.0, 1.0, 0.1)), "{:?}", m[1].points);
         let maxwell_only: BTreeMap<u32, Vec<TheoryPoint>> =
-            BTreeMap::from([(1, vec![(1.0, 2.0, Some(2.0), None, None)])]);
+            BTreeMap::from([(1, vec![(1.0, 2.0, Some(2.0), None, None, None)])]);
         assert!(ratio_figures(0, &species, &maxwell_only, &title).is_empty());
     }
 

@@ -120,26 +120,20 @@ fn covered_points(c: &CampaignView<'_, DsmcParams>) -> Result<BTreeSet<u32>, Sto
     Ok(out)
 }
 
-/// `batch` with only the columns of the table's existing files (the first one's), so that a
-/// campaign whose theory was written by an older version (without the Sonine columns) keeps
-/// one schema per table when it grows: its summaries then have nulls there.
+/// `batch` with only the columns of the table's existing files (`store::schema::table_schema`,
+/// read from a footer), so that a campaign whose theory was written by an older version
+/// (without the Sonine columns) keeps one schema per table when it grows: its summaries then
+/// have nulls there.
 fn same_columns(
     c: &CampaignView<'_, DsmcParams>,
     table: &str,
     batch: arrow_array::RecordBatch,
 ) -> Result<arrow_array::RecordBatch, StoreError> {
-    let Some(first) = c.data.files(table)?.into_iter().next() else {
-        return Ok(batch);
-    };
-    let Some(old) = c.data.read_file(&first, table)?.into_iter().next() else {
+    let Some(old) = crate::store::schema::table_schema(&c.data.files(table)?) else {
         return Ok(batch);
     };
     let keep: Vec<usize> = (0..batch.num_columns())
-        .filter(|&i| {
-            old.schema()
-                .column_with_name(batch.schema().field(i).name())
-                .is_some()
-        })
+        .filter(|&i| old.index_of(batch.schema().field(i).name()).is_ok())
         .collect();
     if keep.len() == batch.num_columns() {
         return Ok(batch);
