@@ -12,10 +12,14 @@ rows do). `runs.wall_seconds` (a clock reading) is always ignored. Exits 1 on an
 columns, then the floats) with a relative tolerance X on floats (exact on everything else),
 and prints each float column's largest relative difference: for a change that reorders sums.
 
---current compares only what each directory's latest manifest asks for (points with
-`in_manifest`), with rows keyed by their point's params and their run's replica instead of
-`point_id` and `run_id` (which depend on the order in which a campaign grew), and without
-`runs.continued_from`: a grown campaign against one started from its final manifest.
+--current compares only what each directory's latest manifest asks for (points and
+`registered_runs` with `in_manifest`), with rows keyed by their point's params and their run's
+replica in the latest manifest (`registered_runs.manifest_replica`) instead of `point_id` and
+`run_id` (which depend on the order in which a campaign grew), and without
+`runs.continued_from` and the registry's own numbering (`runs.replica`,
+`registered_runs.replica`, `registered_runs.continues`): a grown campaign against one started
+from its final manifest. (A directory without `registered_runs`, written by an earlier
+granular, is keyed by `runs.replica` and filtered by points only.)
 
 A table whose columns differ between A and B (by name) fails, naming the columns present on
 one side only; with --allow-extra-columns those columns are left out and the shared ones
@@ -40,23 +44,41 @@ def quoted(cols: list[str], prefix: str = "") -> str:
 
 
 def current(d: Path, t: str, keep: list[str], src) -> str:
-    """The rows of table t of the points the latest manifest asks for, keyed by params and
-    replica instead of point_id and run_id."""
+    """The rows of table t of the runs and points the latest manifest asks for, keyed by
+    params and replica (the run's replica in the latest manifest, from `registered_runs`)
+    instead of point_id and run_id."""
     points = f"read_parquet('{d}/tables/points/*.parquet')"
     runs = f"read_parquet('{d}/tables/runs/*.parquet')"
+    has_reg = any((d / "tables" / "registered_runs").glob("*.parquet"))
+    reg = f"read_parquet('{d}/tables/registered_runs/*.parquet')"
     cols = [c for c in keep if c not in ("run_id", "point_id")]
     if t == "points":
         return f"SELECT {quoted(cols)} FROM {points} WHERE in_manifest"
+    if t == "registered_runs":
+        # The registry's own numbering (replica, continues) depends on how the campaign grew.
+        cols = [c for c in cols if c not in ("replica", "continues")]
+        return (
+            f"SELECT {quoted(cols, 'x.')}, p.params AS point_params FROM {reg} x"
+            f" JOIN {points} p ON p.point_id = x.point_id WHERE x.in_manifest"
+        )
     has_point = "point_id" in keep
-    has_run = "run_id" in keep and t != "runs"
+    has_run = "run_id" in keep and (t != "runs" or has_reg)
+    if t == "runs" and has_reg:
+        # `replica` is the registry's; the latest manifest's is compared instead.
+        cols = [c for c in cols if c != "replica"]
     if not has_point:
         return f"SELECT {quoted(cols, 'x.')} FROM {src(d)} x"
     sel = f"SELECT {quoted(cols, 'x.')}, p.params AS point_params"
     frm = f" FROM {src(d)} x JOIN {points} p ON p.point_id = x.point_id"
-    if has_run:
+    where = " WHERE p.in_manifest"
+    if has_run and has_reg:
+        sel += ", r.manifest_replica AS run_replica"
+        frm += f" JOIN {reg} r ON r.run_id = x.run_id"
+        where += " AND r.in_manifest"
+    elif has_run:
         sel += ", r.replica AS run_replica"
         frm += f" JOIN {runs} r ON r.run_id = x.run_id"
-    return sel + frm + " WHERE p.in_manifest"
+    return sel + frm + where
 
 
 def within(con, qa: str, qb: str, rtol: float) -> tuple[bool, str]:

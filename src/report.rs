@@ -650,7 +650,19 @@ fn section_figures(
     // tables are missing (or of fewer runs): the figures are of the runs finished so far,
     // their summaries computed for this page only.
     let unfinished = st.current.done + st.current.failed < st.current_runs;
-    let figs = if unfinished && st.counts.done > 0 {
+    let outside = (st.counts.done + st.counts.failed)
+        .saturating_sub(st.current.done + st.current.failed);
+    if outside > 0 {
+        let _ = writeln!(
+            h,
+            "<p class=\"note\" id=\"figures-outside\">The summaries and figures describe the runs \
+             of the latest manifest only: {outside} finished run{} it no longer asks for (fewer \
+             replicas, other seeds, points it no longer lists) keep their rows in the raw tables \
+             (<code>registered_runs.in_manifest</code> is false for them) and are left out.</p>",
+            if outside == 1 { "" } else { "s" }
+        );
+    }
+    let figs = if unfinished && st.current.done > 0 {
         match ledger {
             Ok(l) => {
                 let _ = writeln!(
@@ -658,7 +670,7 @@ fn section_figures(
                     "<p class=\"note\" id=\"figures-so-far\">Figures of the {} runs finished so far \
                      (of {}): their summaries are computed for this page; the campaign's summary \
                      tables are written when every run has finished.</p>",
-                    st.counts.done, st.runs
+                    st.current.done, st.current_runs
                 );
                 c.figures_so_far(&finished_runs(&l.commits))
                     .map_err(|e| e.to_string())

@@ -36,6 +36,9 @@
 //!   points.
 //! - `aux_models`: bisection, cascade and SPM against exact theory and the thesis's values;
 //!   kill + resume bit-identity of their tables.
+//! - `races`: two commands at once (racing growths, a stale resume, a growth refused while
+//!   another holds the lock, `upgrade` while a shard runs), summaries of the latest manifest
+//!   (fewer replicas, switched to seeds), a commit record lost during a run.
 //! - `vdist`: the DSMC observable `velocity_distribution` swept on and off: `a2` where
 //!   observed (null elsewhere), the speed histograms and their summary with sweep columns.
 //!
@@ -55,6 +58,7 @@ mod it {
     pub mod manifests;
     pub mod models;
     pub mod physics;
+    pub mod races;
     pub mod report;
     pub mod resume;
     pub mod rfm;

@@ -18,7 +18,7 @@
 //! after it, `ledger::recover` finishes the job. The previous generation is kept for readers
 //! that listed it just before the switch; older ones are deleted.
 //!
-//! Runs only while no shard runs (`ledger::CompactLock`), after `ledger::recover`, on a
+//! Runs only while no shard runs (`ledger::ExclusiveLock`), after `ledger::recover`, on a
 //! campaign whose every file checks out (a full scrub; damage is refused, exit 3, and
 //! `granular resume` heals it).
 
@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 
 use std::collections::BTreeMap;
 
-use super::ledger::{self, CompactLock, PartCommit};
+use super::ledger::{self, ExclusiveLock, PartCommit, Purpose};
 use super::{integrity, Campaign, CampaignError};
 use crate::fsutil;
 use crate::store::checksum::FileSum;
@@ -85,7 +85,10 @@ fn io(p: &Path, e: impl std::fmt::Display) -> CampaignError {
 
 /// Compact every table of the campaign and fold its ledger.
 pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, CampaignError> {
-    let _lock = CompactLock::acquire(&c.root).map_err(CampaignError::Refused)?;
+    let _lock = ExclusiveLock::acquire(&c.root, Purpose::Compaction)?;
+    // Decided on the campaign as read under the lock.
+    let fresh = Campaign::open(&c.root)?;
+    let c = &fresh;
     let mut report = CompactReport {
         notes: ledger::recover(&c.root, ledger::COMPACT_TAG).map_err(CampaignError::Io)?,
         ..Default::default()

@@ -2,13 +2,13 @@
 //! pool while one dispatcher (the calling thread) owns the campaign state, fans events out to
 //! the reporter and feeds the single table writer; summaries once every run is finished.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
 use super::integrity;
-use super::ledger::{self, RunStatus, ShardLock};
+use super::ledger::{self, RunStatus, ShardLock, Upkeep};
 use super::plan::RunSpec;
 use super::resources::{self, Memory};
 use super::worker::{self, RunResult};
@@ -17,23 +17,54 @@ use super::{
 };
 use crate::fsutil;
 
+/// Rounds of a shard's loop (run the pending runs, heal, summarise) before giving up: damage
+/// that keeps coming back, or runs that keep being undone, is a failing disk or another
+/// process at odds with this one, not something to loop on.
+const MAX_ROUNDS: u32 = 3;
+
 /// Run (or continue) the pending runs of `opts.shard`.
+///
+/// Everything is decided under the shard's lock, on the campaign as read under it: `c` is
+/// only where the campaign is; its manifest and registry are read again once the lock is
+/// held (a growth accepted since `c` was opened is run, not overwritten by a stale plan:
+/// growth needs the exclusive lock, which no shard holds while another shard runs).
 pub fn run(
     c: &Campaign,
     opts: &RunOptions,
     reporter: &mut dyn Reporter,
 ) -> Result<Outcome, CampaignError> {
+    let _lock = ShardLock::acquire(&c.root, opts.shard)?;
+    super::test_hook::pause("shard-locked");
+    let fresh = Campaign::open(&c.root)?;
+    if fresh.manifest_json != c.manifest_json || fresh.plan.registry != c.plan.registry {
+        reporter.event(&Event::Warning {
+            message: format!(
+                "{}: the campaign was changed by another command since this one read it; running its latest manifest ({})",
+                c.root.display(),
+                fresh
+                    .history
+                    .last()
+                    .map(|h| h.file.as_str())
+                    .unwrap_or("campaign.json")
+            ),
+        });
+    }
+    let c = &fresh;
     let memory = Memory::of_this_machine();
     if let Some(mem) = memory {
         resources::check(&c.plan, mem).map_err(CampaignError::TooLarge)?;
     }
-    let _lock = ShardLock::acquire(&c.root, opts.shard).map_err(CampaignError::Refused)?;
+    c.repair_manifest_copy();
     let tag = opts.shard.tag();
-    for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
-        reporter.event(&Event::Warning { message: note });
+    {
+        // Dead shards' commits and damage, one shard process at a time.
+        let _upkeep = Upkeep::acquire(&c.root)?;
+        for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
+            reporter.event(&Event::Warning { message: note });
+        }
+        // The tables against the ledger (sizes), healed before anything is planned.
+        heal(c, integrity::Depth::Quick, &tag, reporter)?;
     }
-    // The tables against the ledger (sizes), healed before anything is planned.
-    heal(c, integrity::Depth::Quick, &tag, reporter)?;
     let ckpt_dir = c.checkpoint_dir();
     fsutil::create_dir_durable(&ckpt_dir).map_err(|e| io_err(&ckpt_dir, e))?;
     let io = |e: crate::store::parquet_io::StoreError| CampaignError::Io(e.to_string());
@@ -90,7 +121,9 @@ pub fn run(
         if opts.interrupt.load(Ordering::SeqCst) > 0 {
             outcome.interrupted = true;
         }
-        let finished = finished_runs(c)?;
+        // The ledger as it is now; a record damaged meanwhile is healed below.
+        let ledger = ledger::read_ledger(&c.root).map_err(CampaignError::Io)?;
+        let finished = ledger::finished_runs(&ledger.commits);
         outcome.remaining = mine
             .iter()
             .filter(|r| !finished.contains_key(&r.run_id))
@@ -102,26 +135,64 @@ pub fn run(
         if outcome.remaining == 0 {
             outcome.interrupted = false;
         }
-        if outcome.interrupted
-            || !c
-                .plan
-                .current_runs()
-                .all(|r| finished.contains_key(&r.run_id))
+        if outcome.interrupted {
+            return Ok(outcome);
+        }
+        let _upkeep = Upkeep::acquire(&c.root)?;
+        if outcome.remaining > 0 || ledger.damaged() {
+            // Not interrupted, every pending run ended, and yet runs of this shard are not
+            // finished: their commits were lost meanwhile (a record deleted or damaged, runs
+            // undone by another process's healing). Heal, and run them again.
+            rounds += 1;
+            if rounds >= MAX_ROUNDS {
+                return Err(CampaignError::Io(format!(
+                    "{}: {} run(s) of shard {} are still unfinished after {rounds} rounds (their commits keep being lost); check the disk and the processes writing to the campaign, then `granular resume`",
+                    c.root.display(),
+                    outcome.remaining,
+                    opts.shard
+                )));
+            }
+            reporter.event(&Event::Warning {
+                message: format!(
+                    "{} run(s) of this shard are not in the ledger any more{}; healing and running them again",
+                    outcome.remaining,
+                    if ledger.damaged() { " (the ledger was damaged meanwhile)" } else { "" }
+                ),
+            });
+            heal(c, integrity::Depth::Quick, &tag, reporter)?;
+            continue;
+        }
+        if !c
+            .plan
+            .current_runs()
+            .all(|r| finished.contains_key(&r.run_id))
         {
+            // Other shards' runs are left: the shard that finishes last writes the summaries.
             return Ok(outcome);
         }
         // Every run is finished: scrub every file before the summaries read them. Damage
-        // found now is healed and its runs run again (a few rounds at most: damage that keeps
-        // coming back is a failing disk, not something to loop on).
+        // found now is healed and its runs run again.
         let acted = heal(c, integrity::Depth::Full, &tag, reporter)?;
         if acted == 0 {
-            c.write_summaries(&finished)
-                .map_err(|e| CampaignError::Io(e.to_string()))?;
-            outcome.complete = true;
-            return Ok(outcome);
+            // The summaries of the ledger as it is now (read under the upkeep lock, after the
+            // scrub), checked again after they are written.
+            let finished = finished_runs(c)?;
+            if c
+                .plan
+                .current_runs()
+                .all(|r| finished.contains_key(&r.run_id))
+            {
+                c.write_summaries(&finished)
+                    .map_err(|e| CampaignError::Io(e.to_string()))?;
+                let after = finished_runs(c)?;
+                if c.done_replicas(&after) == c.done_replicas(&finished) {
+                    outcome.complete = true;
+                    return Ok(outcome);
+                }
+            }
         }
         rounds += 1;
-        if rounds >= 3 {
+        if rounds >= MAX_ROUNDS {
             return Err(CampaignError::Io(format!(
                 "{}: the tables were found damaged again after {rounds} rounds of healing; check the disk",
                 c.root.display()
@@ -130,9 +201,7 @@ pub fn run(
     }
 }
 
-fn finished_runs(
-    c: &Campaign,
-) -> Result<std::collections::BTreeMap<u64, RunStatus>, CampaignError> {
+fn finished_runs(c: &Campaign) -> Result<BTreeMap<u64, RunStatus>, CampaignError> {
     Ok(ledger::finished_runs(
         &ledger::read_commits(&c.root).map_err(CampaignError::Refused)?,
     ))
@@ -301,7 +370,10 @@ impl Dispatcher<'_, '_> {
     fn tick(&mut self) {
         if self.fatal.is_none() && self.writer.due(self.opts.flush_every) {
             match self.writer.flush() {
-                Ok(Some((runs, seq))) => self.reporter.event(&Event::Committed { runs, seq }),
+                Ok(Some((runs, seq))) => {
+                    self.reporter.event(&Event::Committed { runs, seq });
+                    super::test_hook::pause("committed");
+                }
                 Ok(None) => {}
                 Err(e) => {
                     self.opts.interrupt.fetch_max(1, Ordering::SeqCst);

@@ -581,7 +581,7 @@ fn remove_stale_temporaries(root: &Path) -> Vec<String> {
     notes
 }
 
-/// Who holds a shard.
+/// Who holds a lock of the campaign: a shard, or the exclusive lock (`compact.lock`).
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct LockInfo {
     pub pid: u32,
@@ -593,6 +593,10 @@ pub struct LockInfo {
     /// that a lock whose pid was reused by another process is seen to be stale.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start_time: Option<u64>,
+    /// What the holder of the exclusive lock does ([`Purpose`]); absent in shard locks and in
+    /// the locks of granular before it was recorded (then: a compaction).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub purpose: Option<Purpose>,
 }
 
 impl LockInfo {
@@ -606,6 +610,93 @@ impl LockInfo {
             shard_tag: shard_tag.into(),
             shard_count,
             start_time: process_start_time(pid),
+            purpose: None,
+        }
+    }
+
+    /// Whether this lock was taken by this process.
+    pub fn is_ours(&self) -> bool {
+        self.pid == std::process::id()
+            && self.host == hostname()
+            && self.start_time == process_start_time(self.pid)
+    }
+
+    /// Whether this is the exclusive lock (compaction, growth, upgrade, ...).
+    pub fn is_exclusive(&self) -> bool {
+        self.shard_tag == COMPACT_TAG
+    }
+
+    /// What the holder does, in words: `shard 2/4 (granular run/resume)`, `a growth ...`.
+    pub fn doing(&self) -> String {
+        if self.is_exclusive() {
+            self.purpose.unwrap_or(Purpose::Compaction).doing().into()
+        } else {
+            format!("shard {} (`granular run`, `resume` or a SLURM task)", self.shard)
+        }
+    }
+
+    /// `process N on HOST`.
+    pub fn by(&self) -> String {
+        format!("process {} on {}", self.pid, self.host)
+    }
+}
+
+/// Why the exclusive lock is held: every change to the campaign other than running its runs.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Purpose {
+    /// `granular compact`.
+    Compaction,
+    /// A manifest being accepted: a new campaign recorded, or a campaign grown.
+    Growth,
+    /// `granular upgrade`.
+    Upgrade,
+    /// `granular theory` writing kinetic-theory tables.
+    Theory,
+}
+
+impl Purpose {
+    fn doing(self) -> &'static str {
+        match self {
+            Purpose::Compaction => "a compaction (`granular compact`)",
+            Purpose::Growth => "a change of the campaign's manifest (`granular run` or `submit` with a new manifest)",
+            Purpose::Upgrade => "an upgrade (`granular upgrade`)",
+            Purpose::Theory => "the kinetic-theory tables (`granular theory`)",
+        }
+    }
+}
+
+/// Why a lock could not be taken: another live process holds the directory (exit 3), or the
+/// lock file could not be written (no space, read-only file system, permissions: exit 4).
+#[derive(Debug, Clone, PartialEq)]
+pub enum LockError {
+    Held(String),
+    Io(String),
+}
+
+impl std::fmt::Display for LockError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LockError::Held(m) | LockError::Io(m) => f.write_str(m),
+        }
+    }
+}
+
+impl LockError {
+    /// The message with `what` before it (`cannot change the campaign: ...`).
+    pub fn context(self, what: &str) -> LockError {
+        match self {
+            LockError::Held(m) => LockError::Held(format!("{what}: {m}")),
+            LockError::Io(m) => LockError::Io(format!("{what}: {m}")),
+        }
+    }
+}
+
+impl From<LockError> for crate::campaign::CampaignError {
+    fn from(e: LockError) -> Self {
+        match e {
+            LockError::Held(m) => crate::campaign::CampaignError::Refused(m),
+            LockError::Io(m) => crate::campaign::CampaignError::Io(m),
         }
     }
 }
@@ -643,7 +734,8 @@ pub fn pid_alive(pid: u32) -> bool {
 /// process is taken to be gone (node failure). Heartbeats are written every 2 s.
 pub const REMOTE_STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(600);
 
-/// The lock's tag of a compaction (`granular compact`).
+/// The lock's tag of the exclusive lock (`locks/compact.lock`: compaction, growth, upgrade,
+/// theory; the name is kept from when only compaction took it).
 pub const COMPACT_TAG: &str = "compact";
 
 fn lock_is_live(root: &Path, l: &LockInfo) -> bool {
@@ -661,12 +753,21 @@ fn lock_is_live(root: &Path, l: &LockInfo) -> bool {
         locks.join(format!("{}.lock", l.shard_tag)),
     ]
     .iter()
-    .filter_map(|p| fs::metadata(p).ok()?.modified().ok())
+    .filter_map(|p| fs::symlink_metadata(p).ok()?.modified().ok())
     .max();
     match newest {
         Some(t) => t.elapsed().map_or(true, |age| age < REMOTE_STALE_AFTER),
         None => false,
     }
+}
+
+/// The holder recorded in a lock file (None: missing, unreadable, a link, or not a lock).
+fn read_lock(path: &Path) -> Option<LockInfo> {
+    let m = fs::symlink_metadata(path).ok()?;
+    if !m.file_type().is_file() {
+        return None;
+    }
+    serde_json::from_str::<LockInfo>(&fs::read_to_string(path).ok()?).ok()
 }
 
 /// Locks of live processes.
@@ -677,18 +778,61 @@ pub fn live_locks(root: &Path) -> Vec<LockInfo> {
     entries
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().ends_with(".lock"))
-        .filter_map(|e| serde_json::from_str::<LockInfo>(&fs::read_to_string(e.path()).ok()?).ok())
+        .filter_map(|e| read_lock(&e.path()))
         .filter(|l| lock_is_live(root, l))
         .collect()
 }
 
+/// A mutual exclusion among the processes of this campaign held for a short while, by
+/// `flock(2)` on a file of `locks/` that is never deleted (the kernel releases it when its
+/// process dies, kill -9 included). Used to take over stale lock files one process at a time
+/// and to serialise the upkeep of shards that run at the same time ([`Upkeep`]).
+struct Flock {
+    _file: fs::File,
+}
+
+impl Flock {
+    /// Block until `locks/<name>` is ours. A file system without `flock` (some network file
+    /// systems) gives `Ok(None)`: the caller goes on without it (its other checks stand).
+    fn acquire(root: &Path, name: &str) -> Result<Option<Flock>, LockError> {
+        use std::os::unix::fs::OpenOptionsExt;
+        use std::os::unix::io::AsRawFd;
+        let dir = root.join("locks");
+        let io = |e: std::io::Error, p: &Path| LockError::Io(format!("{}: {e}", p.display()));
+        fsutil::create_dir_durable(&dir).map_err(|e| io(e, &dir))?;
+        let path = dir.join(name);
+        let file = fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+            .open(&path)
+            .map_err(|e| io(e, &path))?;
+        loop {
+            // SAFETY: flock on a file descriptor we own; no memory is passed.
+            let r = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX) };
+            if r == 0 {
+                return Ok(Some(Flock { _file: file }));
+            }
+            let e = std::io::Error::last_os_error();
+            match e.raw_os_error() {
+                Some(libc::EINTR) => continue,
+                Some(libc::ENOLCK) | Some(libc::EOPNOTSUPP) => return Ok(None),
+                _ => return Err(io(e, &path)),
+            }
+        }
+    }
+}
+
 /// Create `locks/<tag>.lock` exclusively (O_EXCL, which NFS v3+ honours), replacing a stale
-/// one; `Err` names the live holder.
-fn take_lock_file(root: &Path, info: &LockInfo) -> Result<PathBuf, String> {
+/// one; `Err(Held)` names the live holder and what it does.
+fn take_lock_file(root: &Path, info: &LockInfo) -> Result<PathBuf, LockError> {
     let dir = root.join("locks");
-    fsutil::create_dir_durable(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let io = |e: std::io::Error, p: &Path| LockError::Io(format!("{}: {e}", p.display()));
+    fsutil::create_dir_durable(&dir).map_err(|e| io(e, &dir))?;
     let path = dir.join(format!("{}.lock", info.shard_tag));
-    for _ in 0..2 {
+    for _ in 0..3 {
         match fs::OpenOptions::new()
             .write(true)
             .create_new(true)
@@ -696,77 +840,107 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<PathBuf, String> {
         {
             Ok(mut f) => {
                 use std::io::Write;
-                f.write_all(serde_json::to_string(info).expect("lock info").as_bytes())
-                    .and_then(|_| f.sync_all())
-                    .map_err(|e| format!("{}: {e}", path.display()))?;
+                let written = f
+                    .write_all(serde_json::to_string(info).expect("lock info").as_bytes())
+                    .and_then(|_| f.sync_all());
+                if let Err(e) = written {
+                    drop(f);
+                    let _ = fs::remove_file(&path);
+                    return Err(io(e, &path));
+                }
                 let _ = fsutil::sync_dir(&dir);
                 return Ok(path);
             }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                let holder = fs::read_to_string(&path)
-                    .ok()
-                    .and_then(|s| serde_json::from_str::<LockInfo>(&s).ok());
-                match holder {
-                    Some(h) if lock_is_live(root, &h) => {
-                        return Err(format!(
-                            "{} is in use: {} is being run by process {} on {} (lock {})",
-                            root.display(),
-                            if h.shard_tag == COMPACT_TAG {
-                                "a compaction".to_string()
-                            } else {
-                                format!("shard {}", h.shard)
-                            },
-                            h.pid,
-                            h.host,
-                            path.display()
-                        ))
-                    }
-                    _ => {
-                        // Stale (its process is gone) or unreadable (crashed while writing).
+                if let Some(h) = read_lock(&path).filter(|h| lock_is_live(root, h)) {
+                    return Err(LockError::Held(format!(
+                        "{} is in use: {} is being run by {} (lock {})",
+                        root.display(),
+                        h.doing(),
+                        h.by(),
+                        path.display()
+                    )));
+                }
+                // Stale (its process is gone) or unreadable (crashed while writing): removed
+                // by one process at a time, after reading it again under the takeover lock,
+                // so that a lock just taken by another process is never removed.
+                let _guard = Flock::acquire(root, "takeover.flock")?;
+                let seen = fs::symlink_metadata(&path);
+                match read_lock(&path) {
+                    Some(h) if lock_is_live(root, &h) => continue,
+                    Some(_) => {
                         let _ = fs::remove_file(&path);
+                    }
+                    None => {
+                        // Unreadable: a lock being written right now looks the same for a
+                        // moment; only one older than a few seconds is taken to be a crash.
+                        let old = seen
+                            .ok()
+                            .and_then(|m| m.modified().ok())
+                            .and_then(|t| t.elapsed().ok())
+                            .is_some_and(|age| age > std::time::Duration::from_secs(5));
+                        if old {
+                            let _ = fs::remove_file(&path);
+                        } else {
+                            std::thread::sleep(std::time::Duration::from_millis(100));
+                        }
                     }
                 }
             }
-            Err(e) => return Err(format!("{}: {e}", path.display())),
+            Err(e) => return Err(io(e, &path)),
         }
     }
-    Err(format!("{}: could not take the lock", path.display()))
+    Err(LockError::Held(format!(
+        "{}: could not take the lock (another process keeps taking it); try again",
+        path.display()
+    )))
 }
 
-/// An exclusive claim on a campaign directory for `granular compact`: no shard may run while
-/// it is held, and it is refused while any shard runs. Released on drop.
-pub struct CompactLock {
+/// Remove a lock file if it is still ours (a lock taken over as stale by another process,
+/// a remote node's after `REMOTE_STALE_AFTER`, is left to its new holder).
+fn release(path: &Path) {
+    if read_lock(path).is_some_and(|l| l.is_ours()) {
+        let _ = fs::remove_file(path);
+    }
+}
+
+/// An exclusive claim on a campaign directory: no shard may run while it is held, and it is
+/// refused while any shard runs or another process holds it. Taken by every change to the
+/// campaign other than running its runs ([`Purpose`]): the holder then reads `campaign.json`,
+/// the registry and the ledger, and decides on what it read. Released on drop.
+pub struct ExclusiveLock {
     path: PathBuf,
 }
 
-impl CompactLock {
-    pub fn acquire(root: &Path) -> Result<CompactLock, String> {
-        let info = LockInfo::ours(COMPACT_TAG, COMPACT_TAG, 0);
+impl ExclusiveLock {
+    pub fn acquire(root: &Path, purpose: Purpose) -> Result<ExclusiveLock, LockError> {
+        let mut info = LockInfo::ours(COMPACT_TAG, COMPACT_TAG, 0);
+        info.purpose = Some(purpose);
         let path = take_lock_file(root, &info)?;
-        let lock = CompactLock { path };
+        let lock = ExclusiveLock { path };
         // Take, then check (shards do the same the other way round): of two processes
         // starting at once, at least one sees the other.
         let running: Vec<LockInfo> = live_locks(root)
             .into_iter()
-            .filter(|l| l.shard_tag != COMPACT_TAG)
+            .filter(|l| !l.is_exclusive())
             .collect();
         if let Some(l) = running.first() {
-            return Err(format!(
-                "{} is in use: shard {} is being run by process {} on {} ({} shard(s) running); compact when no shard runs",
+            return Err(LockError::Held(format!(
+                "{} is in use: {} is being run by {} ({} shard(s) running); {} waits until no shard runs",
                 root.display(),
-                l.shard,
-                l.pid,
-                l.host,
-                running.len()
-            ));
+                l.doing(),
+                l.by(),
+                running.len(),
+                purpose.doing()
+            )));
         }
         Ok(lock)
     }
 }
 
-impl Drop for CompactLock {
+impl Drop for ExclusiveLock {
     fn drop(&mut self) {
-        let _ = fs::remove_file(&self.path);
+        release(&self.path);
     }
 }
 
@@ -776,38 +950,37 @@ pub struct ShardLock {
 }
 
 impl ShardLock {
-    pub fn acquire(root: &Path, shard: Shard) -> Result<ShardLock, String> {
-        let compacting = |root: &Path| {
+    pub fn acquire(root: &Path, shard: Shard) -> Result<ShardLock, LockError> {
+        let exclusive = |root: &Path| {
             live_locks(root)
                 .into_iter()
-                .find(|l| l.shard_tag == COMPACT_TAG)
+                .find(|l| l.is_exclusive() && !l.is_ours())
                 .map(|l| {
-                    format!(
-                        "{} is being compacted by process {} on {}; run or resume when `granular compact` has finished",
+                    LockError::Held(format!(
+                        "{} is in use: {} is being made by {}; run or resume when it has finished",
                         root.display(),
-                        l.pid,
-                        l.host
-                    )
+                        l.doing(),
+                        l.by()
+                    ))
                 })
         };
-        if let Some(e) = compacting(root) {
+        if let Some(e) = exclusive(root) {
             return Err(e);
         }
         for other in live_locks(root) {
-            if other.shard_tag != COMPACT_TAG && other.shard_count != shard.count {
-                return Err(format!(
-                    "{} is in use by process {} on {} running shard {} (a different shard layout than {shard})",
+            if !other.is_exclusive() && other.shard_count != shard.count {
+                return Err(LockError::Held(format!(
+                    "{} is in use by {} running shard {} (a different shard layout than {shard})",
                     root.display(),
-                    other.pid,
-                    other.host,
+                    other.by(),
                     other.shard
-                ));
+                )));
             }
         }
         let info = LockInfo::ours(&shard.to_string(), &shard.tag(), shard.count);
         let path = take_lock_file(root, &info)?;
         let lock = ShardLock { path };
-        if let Some(e) = compacting(root) {
+        if let Some(e) = exclusive(root) {
             return Err(e);
         }
         Ok(lock)
@@ -816,6 +989,23 @@ impl ShardLock {
 
 impl Drop for ShardLock {
     fn drop(&mut self) {
-        let _ = fs::remove_file(&self.path);
+        release(&self.path);
+    }
+}
+
+/// The upkeep of a campaign by the shards that run it at the same time, one process at a
+/// time: recovering dead shards' commits, healing damage, and writing the summaries (each
+/// reads the ledger under it and acts on what it read). Held by a shard that holds its
+/// [`ShardLock`] (so the registry cannot change meanwhile: growth needs the
+/// [`ExclusiveLock`]). Released on drop, or by the kernel when the process dies.
+pub struct Upkeep {
+    _flock: Option<Flock>,
+}
+
+impl Upkeep {
+    pub fn acquire(root: &Path) -> Result<Upkeep, LockError> {
+        Ok(Upkeep {
+            _flock: Flock::acquire(root, "upkeep.flock")?,
+        })
     }
 }

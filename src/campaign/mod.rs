@@ -52,6 +52,7 @@ use crate::store::FORMAT_VERSION;
 use crate::CODE_VERSION;
 use ledger::RunStatus;
 use plan::{canonical, Plan, Shard};
+use ledger::{ExclusiveLock, Purpose};
 use registry::{Asked, Growth, Registry};
 
 #[derive(Debug, thiserror::Error)]
@@ -92,10 +93,18 @@ impl CampaignInfo {
     pub fn read(root: &Path) -> Result<CampaignInfo, CampaignError> {
         let info_path = root.join("campaign.json");
         let text = std::fs::read_to_string(&info_path).map_err(|e| {
-            CampaignError::Refused(format!(
-                "{}: not a granular campaign directory ({e})",
-                root.display()
-            ))
+            CampaignError::Refused(if e.kind() == std::io::ErrorKind::NotFound {
+                format!(
+                    "{}: not a granular campaign directory (no campaign.json in it)",
+                    root.display()
+                )
+            } else {
+                format!(
+                    "{}: not a readable granular campaign directory ({}: {e})",
+                    root.display(),
+                    info_path.display()
+                )
+            })
         })?;
         serde_json::from_str(&text).map_err(|e| {
             CampaignError::Refused(format!(
@@ -153,6 +162,55 @@ fn refuse_non_directory(out: &Path) -> Result<(), CampaignError> {
     }
 }
 
+/// A directory that is not a campaign must be empty (or hold only `allowed`: the lock a
+/// process creating the campaign has just taken) to become one.
+fn refuse_non_empty(out: &Path, allowed: &[&str]) -> Result<(), CampaignError> {
+    let entries = match std::fs::read_dir(out) {
+        Ok(it) => it,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(io_err(out, e)),
+    };
+    for e in entries {
+        let e = e.map_err(|e| io_err(out, e))?;
+        if !allowed.iter().any(|a| e.file_name() == **a) {
+            return Err(CampaignError::Refused(format!(
+                "{} exists and is not a granular campaign directory (no campaign.json); refusing to write into it",
+                out.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Pauses for tests of races: `GRANULAR_TEST_PAUSE=<point>:<file>` makes a process that
+/// first reaches `<point>` create `<file>` and wait (up to a minute) until the test removes it, so
+/// that a test holds one process at a known moment (holding a lock, say) while it starts
+/// another. Without the variable nothing happens (one environment lookup).
+pub mod test_hook {
+    pub fn pause(point: &str) {
+        let Some(spec) = std::env::var_os("GRANULAR_TEST_PAUSE") else {
+            return;
+        };
+        let spec = spec.to_string_lossy();
+        let Some((at, file)) = spec.split_once(':') else {
+            return;
+        };
+        // Once per process: the first time the point is reached.
+        static FIRED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+        if at != point || FIRED.swap(true, std::sync::atomic::Ordering::SeqCst) {
+            return;
+        }
+        let file = std::path::Path::new(file);
+        if std::fs::write(file, std::process::id().to_string()).is_err() {
+            return;
+        }
+        let start = std::time::Instant::now();
+        while file.exists() && start.elapsed() < std::time::Duration::from_secs(60) {
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+}
+
 pub(crate) fn io_err(p: &Path, e: impl std::fmt::Display) -> CampaignError {
     CampaignError::Io(format!("{}: {e}", p.display()))
 }
@@ -168,6 +226,12 @@ impl Campaign {
 
     /// As `create_or_open`; with `apply` false nothing is written (what would be: the
     /// campaign as it would be, and what the manifest adds).
+    ///
+    /// A manifest that changes the campaign (a new campaign, growth) is accepted under the
+    /// campaign's exclusive lock, on `campaign.json` as read under it: of two processes that
+    /// grow a campaign at once, the second sees the first's registry (or is refused while the
+    /// first holds the lock), never overwrites it. A manifest equal to the campaign's latest
+    /// changes nothing and takes no lock (the shards of a campaign start side by side).
     pub fn prepare(
         manifest_path: &Path,
         out: &Path,
@@ -183,51 +247,71 @@ impl Campaign {
         refuse_non_directory(out)?;
         if out.join("campaign.json").exists() {
             let existing = Self::open(out)?;
-            return existing.accept(manifest, &text, apply);
-        }
-        if out.exists() {
-            let non_empty = std::fs::read_dir(out)
-                .map_err(|e| io_err(out, e))?
-                .next()
-                .is_some();
-            if non_empty {
-                return Err(CampaignError::Refused(format!(
-                    "{} exists and is not a granular campaign directory (no campaign.json); refusing to write into it",
-                    out.display()
-                )));
+            if !apply {
+                return existing.accept(manifest, &text, false);
             }
+            existing.refuse_other_identity(&manifest)?;
+            let asked = canonical(&serde_json::to_value(&manifest).expect("serialises"));
+            if existing.manifest_json == asked {
+                return Ok((existing, Growth::default()));
+            }
+            test_hook::pause("accept-read");
+        } else {
+            refuse_non_empty(out, &[])?;
+            if !apply {
+                let growth = everything(&fresh);
+                return Ok((Self::new_campaign(out, manifest, fresh), growth));
+            }
+            fsutil::create_dir_durable(out).map_err(|e| io_err(out, e))?;
         }
+        // Under the lock, on what is on disk now.
+        let _lock = ExclusiveLock::acquire(out, Purpose::Growth)
+            .map_err(|e| e.context("cannot change the campaign"))?;
+        test_hook::pause("accept-locked");
+        if out.join("campaign.json").exists() {
+            return Self::open(out)?.accept(manifest, &text, true);
+        }
+        // A new campaign: the directory holds nothing but the lock just taken.
+        refuse_non_empty(out, &["locks"])?;
         let growth = everything(&fresh);
-        let mut c = Campaign {
+        let mut c = Self::new_campaign(out, manifest, fresh);
+        c.record(&text, growth.new_runs.len() as u64)?;
+        Ok((c, growth))
+    }
+
+    fn new_campaign(out: &Path, manifest: Manifest, plan: Plan) -> Campaign {
+        Campaign {
             root: out.to_path_buf(),
             manifest_json: canonical(&serde_json::to_value(&manifest).expect("serialises")),
             identity: manifest.identity(),
             manifest,
-            plan: fresh,
+            plan,
             history: Vec::new(),
-        };
-        if apply {
-            fsutil::create_dir_durable(out).map_err(|e| io_err(out, e))?;
-            c.record(&text, growth.new_runs.len() as u64)?;
         }
-        Ok((c, growth))
     }
 
-    /// Accept `manifest` as this campaign's latest (see `create_or_open`).
+    /// A manifest of another campaign (name, model or seed) is refused.
+    fn refuse_other_identity(&self, manifest: &Manifest) -> Result<(), CampaignError> {
+        let differs = history::identity_differences(&self.manifest, manifest);
+        if differs.is_empty() {
+            return Ok(());
+        }
+        Err(CampaignError::Refused(format!(
+            "{} holds another campaign: {}; a campaign keeps its name, model and seed (use another --out)",
+            self.root.display(),
+            differs.join(", ")
+        )))
+    }
+
+    /// Accept `manifest` as this campaign's latest (see `create_or_open`); with `apply` the
+    /// caller holds the exclusive lock and `self` was opened under it.
     fn accept(
         mut self,
         manifest: Manifest,
         text: &[u8],
         apply: bool,
     ) -> Result<(Campaign, Growth), CampaignError> {
-        let differs = history::identity_differences(&self.manifest, &manifest);
-        if !differs.is_empty() {
-            return Err(CampaignError::Refused(format!(
-                "{} holds another campaign: {}; a campaign keeps its name, model and seed (use another --out)",
-                self.root.display(),
-                differs.join(", ")
-            )));
-        }
+        self.refuse_other_identity(&manifest)?;
         let value = serde_json::to_value(&manifest).expect("manifest serialises");
         if canonical(&value) == self.manifest_json {
             if apply {
@@ -265,9 +349,6 @@ impl Campaign {
         self.manifest = manifest;
         self.manifest_json = canonical(&value);
         if apply {
-            // No shard may run while the registry changes (they hold the old one).
-            let _lock = ledger::CompactLock::acquire(&self.root)
-                .map_err(|e| CampaignError::Refused(format!("cannot change the campaign: {e}")))?;
             self.record(text, growth.new_runs.len() as u64)?;
         }
         Ok((self, growth))
@@ -343,7 +424,7 @@ impl Campaign {
     /// `manifest.json` is written after campaign.json: a crash between the two leaves the
     /// previous manifest there. Rewrite it from the history's latest entry if it differs
     /// (best effort: it is a copy for people, nothing reads it).
-    fn repair_manifest_copy(&self) {
+    pub(crate) fn repair_manifest_copy(&self) {
         let Some(latest) = self.history.last() else {
             return;
         };
@@ -415,12 +496,24 @@ impl Campaign {
         Dataset::new(&self.root, &self.identity, &self.manifest_json)
     }
 
-    /// The campaign as its model sees it; `done` maps the runs finished with status done to
-    /// their replica numbers.
+    /// The campaign as its model sees it for summaries and figures: the points of the latest
+    /// manifest, the runs it asks for per point; `done` maps the runs finished with status
+    /// done to their replica numbers in the latest manifest ([`Campaign::done_replicas`]).
     pub fn view<'a>(
         &'a self,
         data: &'a Dataset,
         done: &'a BTreeMap<u64, u32>,
+    ) -> CampaignView<'a, ModelParams> {
+        self.view_of(data, done, true)
+    }
+
+    /// As [`Campaign::view`], with every registered point (the kinetic-theory tables have a
+    /// prediction for every point, in the manifest or not).
+    fn view_of<'a>(
+        &'a self,
+        data: &'a Dataset,
+        done: &'a BTreeMap<u64, u32>,
+        current_only: bool,
     ) -> CampaignView<'a, ModelParams> {
         CampaignView {
             name: &self.manifest.name,
@@ -428,13 +521,14 @@ impl Campaign {
                 .plan
                 .points
                 .iter()
+                .filter(|p| p.current || !current_only)
                 .map(|p| PointView {
                     point_id: p.point_id,
                     params: &p.params,
                     label: self.plan.label(p.point_id),
                 })
                 .collect(),
-            replicas: self.plan.max_runs_per_point(),
+            replicas: self.plan.runs_asked_per_point(),
             done,
             data,
             sweep: tables::sweep_batch(&self.plan),
@@ -444,7 +538,7 @@ impl Campaign {
     /// Every table of the campaign (the model's and `runs`, `points`).
     pub fn tables(&self) -> Vec<&'static str> {
         let points: Vec<&ModelParams> = self.plan.points.iter().map(|p| &p.params).collect();
-        let mut t = vec![tables::RUNS, tables::POINTS];
+        let mut t = vec![tables::RUNS, tables::POINTS, tables::REGISTERED_RUNS];
         t.extend(self.plan.model.tables(&points));
         t
     }
@@ -459,12 +553,17 @@ impl Campaign {
         self.plan.model.write_summaries(&self.view(&data, &done))
     }
 
-    /// The runs finished with status done, with their replica numbers: what a summary is of.
-    fn done_replicas(&self, finished: &BTreeMap<u64, RunStatus>) -> BTreeMap<u64, u32> {
+    /// The runs of the latest manifest finished with status done, with their replica numbers
+    /// in it (`Plan::manifest_replica`): what a summary is of. Runs the latest manifest no
+    /// longer asks for (fewer replicas, other seeds, points it no longer lists) keep their
+    /// rows in the raw tables but are in no summary, so a summary equals that of a campaign
+    /// started from the latest manifest.
+    pub fn done_replicas(&self, finished: &BTreeMap<u64, RunStatus>) -> BTreeMap<u64, u32> {
         finished
             .iter()
             .filter(|(_, s)| **s == RunStatus::Done)
-            .map(|(r, _)| (*r, self.plan.replica_of(*r)))
+            .filter(|(r, _)| **r < self.plan.n_runs())
+            .filter_map(|(r, _)| Some((*r, self.plan.manifest_replica(&self.plan.run(*r))?)))
             .collect()
     }
 
@@ -477,17 +576,21 @@ impl Campaign {
     pub fn write_theory(&self) -> Result<(), crate::store::parquet_io::StoreError> {
         let data = self.data();
         let none = BTreeMap::new();
-        self.plan.model.write_theory(&self.view(&data, &none))
+        self.plan.model.write_theory(&self.view_of(&data, &none, false))
     }
 
-    /// The model's standard figures from the summary tables; `Ok(None)` if it has none.
+    /// The model's standard figures from the summary tables (and, for figures drawn from raw
+    /// tables, the rows of the latest manifest's finished runs); `Ok(None)` if it has none.
     pub fn figures(
         &self,
     ) -> Result<Option<Vec<(String, crate::plot::Figure)>>, crate::store::parquet_io::StoreError>
     {
         let data = self.data();
-        let none = BTreeMap::new();
-        self.plan.model.figures(&self.view(&data, &none))
+        let ledger = ledger::read_ledger(&self.root).map_err(|e| {
+            crate::store::parquet_io::StoreError::Corrupt(self.root.display().to_string(), e)
+        })?;
+        let done = self.done_replicas(&ledger::finished_runs(&ledger.commits));
+        self.plan.model.figures(&self.view(&data, &done))
     }
 
     /// The model's figures of the runs finished so far (`finished`, from the ledger): the
@@ -516,8 +619,7 @@ impl Campaign {
         let data = self.data().overlay(&scratch.0);
         let view = self.view(&data, &done);
         self.plan.model.write_summaries(&view)?;
-        let none = BTreeMap::new();
-        self.plan.model.figures(&self.view(&data, &none))
+        self.plan.model.figures(&self.view(&data, &done))
     }
 
     /// `DIR/analysis`: where `granular analyze` writes its tables and `figures/` by default,

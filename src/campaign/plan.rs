@@ -147,15 +147,6 @@ impl Plan {
         self.registry.n_runs()
     }
 
-    /// The most runs any point has.
-    pub fn max_runs_per_point(&self) -> u32 {
-        let mut per = vec![0u32; self.points.len()];
-        for b in &self.registry.blocks {
-            per[b.point as usize] += b.count;
-        }
-        per.into_iter().max().unwrap_or(0)
-    }
-
     /// What the latest manifest asks per point, in words (`2 replicas`, `3 seeds`).
     pub fn runs_per_point_text(&self) -> String {
         match &self.runs_per_point {
@@ -207,6 +198,27 @@ impl Plan {
                 RunsPerPoint::Replicas(n) => r.replica < *n,
                 RunsPerPoint::Seeds(s) => s.contains(&r.seed),
             }
+    }
+
+    /// The run's replica number in the latest manifest (None if it does not ask for the run):
+    /// its replica with `replicas`, its seed's place in the list with `seeds`, as in a campaign
+    /// started from the latest manifest.
+    pub fn manifest_replica(&self, r: &RunSpec) -> Option<u32> {
+        if !self.points[r.point_id as usize].current {
+            return None;
+        }
+        match &self.runs_per_point {
+            RunsPerPoint::Replicas(n) => (r.replica < *n).then_some(r.replica),
+            RunsPerPoint::Seeds(s) => s.iter().position(|x| *x == r.seed).map(|i| i as u32),
+        }
+    }
+
+    /// The runs the latest manifest asks for per point (`replicas`, or the number of `seeds`).
+    pub fn runs_asked_per_point(&self) -> u32 {
+        match &self.runs_per_point {
+            RunsPerPoint::Replicas(n) => *n,
+            RunsPerPoint::Seeds(s) => s.len() as u32,
+        }
     }
 
     /// Every run the latest manifest asks for, in run order.

@@ -15,6 +15,7 @@ use crate::store::cols::table;
 
 pub const RUNS: &str = "runs";
 pub const POINTS: &str = "points";
+pub const REGISTERED_RUNS: &str = "registered_runs";
 
 /// How a swept parameter is stored: as a typed column, never as a string of a number.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -212,4 +213,35 @@ pub fn points_batch(plan: &Plan) -> RecordBatch {
     ));
     RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays)
         .expect("points batch matches its schema")
+}
+
+/// The `registered_runs` table: every run the campaign has registered (finished or not, asked
+/// for by the latest manifest or not), with whether the latest manifest asks for it and its
+/// replica number there (`Plan::manifest_replica`: what summaries number it by, as in a
+/// campaign started from the latest manifest). Written whole, like `points`, when the registry
+/// or the latest manifest changes.
+pub fn registered_runs_batch(plan: &Plan) -> RecordBatch {
+    let runs: Vec<(super::plan::RunSpec, Option<u32>)> = (0..plan.n_runs())
+        .map(|r| {
+            let spec = plan.run(r);
+            (spec, plan.manifest_replica(&spec))
+        })
+        .collect();
+    table(&runs, |c| {
+        vec![
+            c.u64("run_id", |r| r.0.run_id),
+            c.u32("point_id", |r| r.0.point_id),
+            c.u32("replica", |r| r.0.replica),
+            c.u64("seed", |r| r.0.seed),
+            c.opt_u64("continues", |r| r.0.continues),
+            c.bool("in_manifest", |r| r.1.is_some()),
+            c.array("manifest_replica", true, |rows| {
+                Arc::new(
+                    rows.iter()
+                        .map(|r| r.1)
+                        .collect::<arrow_array::UInt32Array>(),
+                )
+            }),
+        ]
+    })
 }

@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use arrow_array::RecordBatch;
 
 use super::history;
-use super::ledger::{self, CompactLock};
+use super::ledger::{self, ExclusiveLock, Purpose};
 use super::plan::{self, canonical, Plan};
 use super::registry::{Registry, RunBlock, SeedSource};
 use super::tables::{self, POINTS, RUNS};
@@ -47,6 +47,11 @@ pub struct UpgradeReport {
 /// Upgrade the campaign directory `root` to this granular's format (nothing to do if it is).
 pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     let info_path = root.join("campaign.json");
+    // Not a campaign: refused before anything (the lock) is written.
+    CampaignInfo::read(root)?;
+    // Decided under the lock on what is read under it (a shard running, another upgrade).
+    let _lock = ExclusiveLock::acquire(root, Purpose::Upgrade)
+        .map_err(|e| e.context("cannot upgrade"))?;
     let info = CampaignInfo::read(root)?;
     let mut report = UpgradeReport {
         from: info.format_version,
@@ -63,8 +68,6 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
             )))
         }
     }
-    let _lock = CompactLock::acquire(root)
-        .map_err(|e| CampaignError::Refused(format!("cannot upgrade: {e}")))?;
     report.steps.extend(recover_ledger1(root)?);
     let manifest_text = serde_json::to_string(&info.manifest).expect("value serialises");
     let manifest =

@@ -59,25 +59,39 @@ impl<'c> Writer<'c> {
         })
     }
 
-    /// Write the `points` table unless it is that of the latest manifest (it depends only on
-    /// the registry and the latest manifest; rewritten whole, atomically, when they change).
+    /// Write the `points` and `registered_runs` tables unless they are those of the latest
+    /// manifest and registry (they depend only on them; rewritten whole, atomically, when they
+    /// change).
     pub fn ensure_points(&self) -> Result<(), StoreError> {
         let data = self.c.data();
-        let path = data.dir(tables::POINTS).join("points.parquet");
-        let current = path.exists()
-            && parquet_io::inspect(&path).ok().is_some_and(|(info, _)| {
-                info.format_version == Some(FORMAT_VERSION)
-                    && info.manifest.as_deref() == Some(self.c.manifest_json.as_str())
-                    && info.rows == self.c.plan.points.len() as u64
-            });
-        if current {
-            return Ok(());
+        let current = |table: &str, file: &str, rows: u64| {
+            let path = data.dir(table).join(file);
+            path.exists()
+                && parquet_io::inspect(&path).ok().is_some_and(|(info, _)| {
+                    info.format_version == Some(FORMAT_VERSION)
+                        && info.manifest.as_deref() == Some(self.c.manifest_json.as_str())
+                        && info.rows == rows
+                })
+        };
+        if !current(tables::POINTS, "points.parquet", self.c.plan.points.len() as u64) {
+            data.write_whole(
+                tables::POINTS,
+                "points.parquet",
+                &tables::points_batch(&self.c.plan),
+            )?;
         }
-        data.write_whole(
-            tables::POINTS,
-            "points.parquet",
-            &tables::points_batch(&self.c.plan),
-        )
+        if !current(
+            tables::REGISTERED_RUNS,
+            "registered_runs.parquet",
+            self.c.plan.n_runs(),
+        ) {
+            data.write_whole(
+                tables::REGISTERED_RUNS,
+                "registered_runs.parquet",
+                &tables::registered_runs_batch(&self.c.plan),
+            )?;
+        }
+        Ok(())
     }
 
     /// Write the model's kinetic-theory tables once (they depend only on the manifest).

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use super::{fail, report_error};
+use crate::campaign::ledger::{ExclusiveLock, Purpose};
 use crate::campaign::Campaign;
 use crate::exit_codes;
 
@@ -31,6 +32,15 @@ pub fn run(a: Args) -> i32 {
         Err(e) => return report_error(e.into()),
     }
     let c = match Campaign::create_or_open(&a.manifest, &a.out) {
+        Ok(c) => c,
+        Err(e) => return report_error(e),
+    };
+    // Written under the exclusive lock, for the campaign as read under it.
+    let _lock = match ExclusiveLock::acquire(&c.root, Purpose::Theory) {
+        Ok(l) => l,
+        Err(e) => return report_error(e.into()),
+    };
+    let c = match Campaign::open(&c.root) {
         Ok(c) => c,
         Err(e) => return report_error(e),
     };

@@ -278,6 +278,31 @@ impl<P> CampaignView<'_, P> {
 }
 
 impl<P> CampaignView<'_, P> {
+    /// The batches of a raw table (one row per run and more, with a `run_id` column) holding
+    /// only the rows of the runs this view describes (`done`: the latest manifest's finished
+    /// runs), as every figure drawn from a raw table must: rows of runs the latest manifest no
+    /// longer asks for stay in the table but in no figure.
+    pub fn read_done(&self, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+        self.data
+            .read(table)?
+            .iter()
+            .map(|b| self.keep_done(b, table))
+            .collect()
+    }
+
+    /// The rows of `b` (of `table`, with a `run_id` column) of the runs in `done`.
+    pub fn keep_done(&self, b: &RecordBatch, table: &str) -> Result<RecordBatch, StoreError> {
+        let runs = crate::store::cols::get_u64(b, table, "run_id")?;
+        let keep: arrow_array::BooleanArray = runs
+            .iter()
+            .map(|r| Some(r.is_some_and(|r| self.done.contains_key(&r))))
+            .collect();
+        arrow_select::filter::filter_record_batch(b, &keep)
+            .map_err(|e| StoreError::Arrow(format!("{table}: {e}")))
+    }
+}
+
+impl<P> CampaignView<'_, P> {
     /// The legend label of a point: its swept values (quotes dropped), `point <id>` without a
     /// sweep.
     pub fn point_label(&self, point: u32) -> String {

@@ -536,11 +536,13 @@ pub fn read_all(dir: &Path) -> BTreeMap<String, Table> {
         .collect()
 }
 
-/// The rows of every table for the points the latest manifest asks for (`in_manifest`), with
-/// `point_id` replaced by the point's params and `run_id` by params and replica (ids depend
-/// on the order in which a campaign grew; params and replica do not), `runs.wall_seconds`
-/// and `runs.continued_from` blanked, rows sorted: comparable between a grown campaign and
-/// one started from its final manifest.
+/// The rows of every table for the points and runs the latest manifest asks for
+/// (`in_manifest` of `points` and `registered_runs`), with `point_id` replaced by the point's
+/// params and `run_id` by params and the run's replica in the latest manifest (ids depend on
+/// the order in which a campaign grew; params and that replica do not), `runs.wall_seconds`,
+/// `runs.continued_from` and the registry's numbering (`runs.replica`,
+/// `registered_runs.replica`, `.continues`) blanked, rows sorted: comparable between a grown
+/// campaign and one started from its final manifest.
 pub fn current_view(
     t: &BTreeMap<String, Table>,
 ) -> BTreeMap<String, (Vec<String>, Vec<Vec<Cell>>)> {
@@ -560,41 +562,74 @@ pub fn current_view(
             )
         })
         .collect();
-    let runs = &t["runs"];
-    let (rid, rpoint, rrep) = (
-        runs.col("run_id"),
-        runs.col("point_id"),
-        runs.col("replica"),
-    );
-    let run: BTreeMap<u64, Cell> = runs
-        .rows
-        .iter()
-        .map(|r| {
-            let p = point[&r[rpoint].as_u64()].0.as_str().to_string();
-            (r[rid].as_u64(), Cell::S(format!("{p} replica {}", r[rrep])))
-        })
-        .collect();
+    // run_id -> (key "params replica r", in the latest manifest), from `registered_runs` (the
+    // replica in the latest manifest) or, in a campaign of an earlier granular without it,
+    // from `runs` (its replica; every run of a current point counted).
+    let reg = t.get("registered_runs");
+    let run: BTreeMap<u64, (Cell, bool)> = match reg {
+        Some(reg) => {
+            let (rid, rpoint, rcur, rrep) = (
+                reg.col("run_id"),
+                reg.col("point_id"),
+                reg.col("in_manifest"),
+                reg.col("manifest_replica"),
+            );
+            reg.rows
+                .iter()
+                .map(|r| {
+                    let p = point[&r[rpoint].as_u64()].0.as_str().to_string();
+                    (
+                        r[rid].as_u64(),
+                        (
+                            Cell::S(format!("{p} replica {}", r[rrep])),
+                            r[rcur] == Cell::Bool(true),
+                        ),
+                    )
+                })
+                .collect()
+        }
+        None => {
+            let runs = &t["runs"];
+            let (rid, rpoint, rrep) = (
+                runs.col("run_id"),
+                runs.col("point_id"),
+                runs.col("replica"),
+            );
+            runs.rows
+                .iter()
+                .map(|r| {
+                    let p = point[&r[rpoint].as_u64()].0.as_str().to_string();
+                    (
+                        r[rid].as_u64(),
+                        (Cell::S(format!("{p} replica {}", r[rrep])), true),
+                    )
+                })
+                .collect()
+        }
+    };
     t.iter()
         .map(|(name, table)| {
             let names: Vec<String> = table.columns.iter().map(|c| c.0.clone()).collect();
             let col = |c: &str| names.iter().position(|n| n == c);
             let (p, r) = (col("point_id"), col("run_id"));
-            let blank: Vec<usize> = if name == "runs" {
-                ["wall_seconds", "continued_from"]
-                    .iter()
-                    .filter_map(|c| col(c))
-                    .collect()
-            } else {
-                Vec::new()
+            // Clock readings and the registry's own numbering (which depends on how the
+            // campaign grew) are left out.
+            let blanked: &[&str] = match (name.as_str(), reg.is_some()) {
+                ("runs", true) => &["wall_seconds", "continued_from", "replica"],
+                ("runs", false) => &["wall_seconds", "continued_from"],
+                ("registered_runs", _) => &["replica", "continues"],
+                _ => &[],
             };
+            let blank: Vec<usize> = blanked.iter().filter_map(|c| col(c)).collect();
             let mut rows: Vec<Vec<Cell>> = table
                 .rows
                 .iter()
                 .filter(|row| p.is_none_or(|j| point[&row[j].as_u64()].1))
+                .filter(|row| r.is_none_or(|j| run[&row[j].as_u64()].1))
                 .map(|row| {
                     let mut row = row.clone();
                     if let Some(j) = r {
-                        row[j] = run[&row[j].as_u64()].clone();
+                        row[j] = run[&row[j].as_u64()].0.clone();
                     }
                     if let Some(j) = p {
                         row[j] = point[&row[j].as_u64()].0.clone();

@@ -165,7 +165,8 @@ fn curves(
         .collect()
 }
 
-/// The batches of every file of `table`, file by file.
+/// The batches of every file of `table`, file by file, with the rows of the runs the view
+/// describes (the latest manifest's).
 fn read_files(
     c: &CampaignView<'_, BisectionParams>,
     table: &str,
@@ -173,7 +174,13 @@ fn read_files(
     c.data
         .files(table)?
         .iter()
-        .map(|f| c.data.read_file(f, table))
+        .map(|f| {
+            c.data
+                .read_file(f, table)?
+                .iter()
+                .map(|b| c.keep_done(b, table))
+                .collect()
+        })
         .collect()
 }
 

@@ -131,7 +131,7 @@ fn label(c: &CampaignView<'_, CascadeParams>, p: u32) -> String {
 /// The standard figures of a campaign (data only; `plot` draws them).
 pub fn figures(c: &CampaignView<'_, CascadeParams>) -> Result<Vec<(String, Figure)>, StoreError> {
     let sk = read_summary(&c.data.read(CASCADE_STRUCTURE_FACTOR_SUMMARY)?)?;
-    let fits = read_fits(&c.data.read(CASCADE_FIT)?)?;
+    let fits = read_fits(&c.read_done(CASCADE_FIT)?)?;
     let mut figs = Vec::new();
     for (source, id, what) in [
         (
@@ -189,7 +189,7 @@ fn placements(c: &CampaignView<'_, CascadeParams>) -> Result<Vec<(String, Figure
     let t = CASCADE_PLACEMENT;
     // point -> (first run, its discs)
     let mut first: BTreeMap<u32, (u64, Rows)> = BTreeMap::new();
-    for b in c.data.read(t)? {
+    for b in c.read_done(t)? {
         let (r, p) = (get_u64(&b, t, "run_id")?, get_u32(&b, t, "point_id")?);
         let (x, y) = (get_f64(&b, t, "x")?, get_f64(&b, t, "y")?);
         for i in 0..b.num_rows() {

@@ -66,7 +66,8 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
     let points_per_chunk = points_per_chunk(c, |d| {
         species_count(d) * d.output_times.resolve(d.t_end).len() as u64
     });
-    let n_points = c.points.len() as u32;
+    // Point ids of the view (the latest manifest's points) are not contiguous: chunks of ids.
+    let n_points = c.points.iter().map(|p| p.point_id + 1).max().unwrap_or(0);
 
     let theory = read_theory(c)?;
     let mut out: Vec<SummaryRow> = Vec::new();
@@ -168,7 +169,8 @@ fn write_tamsd_summary(c: View) -> Result<(), StoreError> {
         (Some(tm), true) => species_count(d) * tm.lags.len() as u64,
         _ => 0,
     });
-    let n_points = c.points.len() as u32;
+    // Point ids of the view (the latest manifest's points) are not contiguous: chunks of ids.
+    let n_points = c.points.iter().map(|p| p.point_id + 1).max().unwrap_or(0);
     let theory = read_tamsd_theory(c)?;
     let mut rows: Vec<TamsdSummaryRow> = Vec::new();
     let mut p0 = 0u32;
@@ -247,7 +249,8 @@ fn write_hist_summary(c: View) -> Result<(), StoreError> {
         let bins = d.velocity_distribution.as_ref().map_or(60, |v| v.bins) as u64;
         species_count(d) * d.vdist_times().len() as u64 * bins
     });
-    let n_points = c.points.len() as u32;
+    // Point ids of the view (the latest manifest's points) are not contiguous: chunks of ids.
+    let n_points = c.points.iter().map(|p| p.point_id + 1).max().unwrap_or(0);
     let mut rows: Vec<HistSummaryRow> = Vec::new();
     let mut p0 = 0u32;
     while p0 < n_points && !files.is_empty() {

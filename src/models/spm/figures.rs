@@ -119,8 +119,8 @@ fn label(p: &SpmParams) -> String {
 
 /// The standard figures of a campaign (data only; `plot` draws them).
 pub fn figures(c: &CampaignView<'_, SpmParams>) -> Result<Vec<(String, Figure)>, StoreError> {
-    let runs = read_histogram(&c.data.read(SPM_VELOCITY_HISTOGRAM)?)?;
-    let alphas = read_alphas(&c.data.read(SPM_SUMMARY)?)?;
+    let runs = read_histogram(&c.read_done(SPM_VELOCITY_HISTOGRAM)?)?;
+    let alphas = read_alphas(&c.read_done(SPM_SUMMARY)?)?;
     let point_label = |p: u32| {
         let mut l = c
             .points
