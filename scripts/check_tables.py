@@ -12,11 +12,12 @@ libraries, the way the README tells users to read them:
     polars.scan_parquet("RUNS_DIR/tables/<t>/*.parquet", hive_partitioning=True)
 
 Checks:
-  * the row counts of runs, points, dsmc_species, dsmc_species_summary are the same in all
+  * the row counts of runs, points, registered_runs, dsmc_species, dsmc_species_summary are the same in all
     three libraries and equal to what campaign.json implies (for a campaign that never grew,
     runs = product of the sweep list lengths x replicas (or seeds); for a grown one, the
     registry's points and runs; dsmc_species = done runs x species x output times, the latter
-    two counted per point in the table itself);
+    two counted per point in the table itself; dsmc_species_summary = the latest manifest's
+    points x species x output times; registered_runs = every registered run);
   * no (run_id, t, species) row is doubled;
   * every file carries the `granular.manifest` key-value metadata (pyarrow schema.metadata,
     DuckDB parquet_kv_metadata, Polars read_parquet_metadata) and it equals the manifest of
@@ -24,7 +25,7 @@ Checks:
     files written before the latest manifest carrying an earlier one);
   * at t = 0 every species with count >= 2 has exactly its initial temperature (relative
     tolerance 1e-9), read through each library;
-  * dsmc_species_summary.temperature_mean equals the mean over replicas of
+  * dsmc_species_summary.temperature_mean equals the mean over the latest manifest's replicas of
     dsmc_species.temperature for one (point, t, species) through each library, and for every
     (point, t, species) through DuckDB (relative tolerance 1e-12).
 
@@ -44,7 +45,7 @@ import polars as pl
 import pyarrow.compute as pc
 import pyarrow.dataset as ds
 
-TABLES = ["runs", "points", "dsmc_species", "dsmc_species_summary"]
+TABLES = ["runs", "points", "registered_runs", "dsmc_species", "dsmc_species_summary"]
 LIBS = ["duckdb", "pyarrow", "polars"]
 T0_RTOL = 1e-9
 MEAN_RTOL = 1e-12
@@ -249,6 +250,18 @@ def main() -> int:
     distinct_runs = rd.duck("runs").aggregate("count(DISTINCT run_id)").fetchall()[0][0]
     rep.check(distinct_runs == counts["runs"]["duckdb"], f"runs: run_id unique ({distinct_runs} distinct)")
     rep.check(counts["points"]["duckdb"] == n_points, f"points: {counts['points']['duckdb']} rows, expected {n_points}")
+    rep.check(
+        counts["registered_runs"]["duckdb"] == n_runs,
+        f"registered_runs: {counts['registered_runs']['duckdb']} rows, expected {n_runs}",
+    )
+    in_manifest = {p for (p,) in rd.duck("points").filter("in_manifest").project("point_id").fetchall()}
+    reg_points = {
+        p for (p,) in rd.duck("registered_runs").filter("in_manifest").project("point_id").distinct().fetchall()
+    }
+    rep.check(
+        reg_points == in_manifest,
+        f"registered_runs: runs in the latest manifest belong to exactly its {len(in_manifest)} points",
+    )
     cols = set(rd.duck("points").columns)
     for key in manifest.get("sweep") or {}:
         col = key.replace(".", "_")
@@ -276,7 +289,8 @@ def main() -> int:
         )
     distinct = rd.duck("dsmc_species").aggregate("count(DISTINCT (run_id, t, species))").fetchall()[0][0]
     rep.check(distinct == counts["dsmc_species"]["duckdb"], f"dsmc_species: no (run_id, t, species) doubled ({distinct} distinct)")
-    exp_summary = sum(s * n_t for s, n_t in per_point.values())
+    # Summaries are of the latest manifest's points only.
+    exp_summary = sum(s * n_t for p, (s, n_t) in per_point.items() if p in in_manifest)
     for lib in LIBS:
         rep.check(
             counts["dsmc_species_summary"][lib] == exp_summary,
@@ -329,8 +343,14 @@ def main() -> int:
             f"max rel. dev. {worst:.1e}" + (f"; off: {bad[:3]}" if bad else ""),
         )
 
-    # One (point, t, species): the first point, t_end, species 1.
-    point, species = min(per_point), 1
+    # One (point, t, species): the first point of the latest manifest all of whose runs it asks
+    # for, t_end, species 1 (its replicas read back through each library).
+    current_runs = dict(
+        rd.duck("registered_runs").filter("in_manifest").aggregate("point_id, count(*)", "point_id").fetchall()
+    )
+    whole = [p for p in per_point if p in in_manifest and current_runs.get(p) == done_per_point.get(p)]
+    rep.check(bool(whole), "a point of the latest manifest with every run in it")
+    point, species = min(whole or per_point), 1
     t_end = rd.duck("dsmc_species").filter(f"point_id = {point}").aggregate("max(t)").fetchall()[0][0]
     for lib in LIBS:
         temps = rd.replica_temperatures(lib, point, t_end, species)
@@ -347,7 +367,9 @@ def main() -> int:
         f"""
         WITH m AS (
             SELECT point_id, t, species, avg(temperature) AS mean, count(*) AS n
-            FROM read_parquet('{rd.glob("dsmc_species")}', hive_partitioning = true)
+            FROM read_parquet('{rd.glob("dsmc_species")}', hive_partitioning = true) x
+            SEMI JOIN read_parquet('{rd.glob("registered_runs")}', hive_partitioning = true) r
+            ON r.run_id = x.run_id AND r.in_manifest
             GROUP BY ALL
         )
         SELECT count(*),

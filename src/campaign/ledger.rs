@@ -692,15 +692,6 @@ impl LockError {
     }
 }
 
-impl From<LockError> for crate::campaign::CampaignError {
-    fn from(e: LockError) -> Self {
-        match e {
-            LockError::Held(m) => crate::campaign::CampaignError::Refused(m),
-            LockError::Io(m) => crate::campaign::CampaignError::Io(m),
-        }
-    }
-}
-
 /// When a process of this host started (clock ticks after boot), if it exists.
 pub fn process_start_time(pid: u32) -> Option<u64> {
     let s = fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;

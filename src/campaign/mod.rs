@@ -52,7 +52,7 @@ use crate::store::FORMAT_VERSION;
 use crate::CODE_VERSION;
 use ledger::RunStatus;
 use plan::{canonical, Plan, Shard};
-use ledger::{ExclusiveLock, Purpose};
+use ledger::{ExclusiveLock, LockError, Purpose};
 use registry::{Asked, Growth, Registry};
 
 #[derive(Debug, thiserror::Error)]
@@ -85,6 +85,15 @@ pub struct CampaignInfo {
     /// Every accepted manifest (the latest last).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub history: Vec<history::Accepted>,
+}
+
+impl From<LockError> for CampaignError {
+    fn from(e: LockError) -> Self {
+        match e {
+            LockError::Held(m) => CampaignError::Refused(m),
+            LockError::Io(m) => CampaignError::Io(m),
+        }
+    }
 }
 
 impl CampaignInfo {
@@ -250,11 +259,14 @@ impl Campaign {
             if !apply {
                 return existing.accept(manifest, &text, false);
             }
-            existing.refuse_other_identity(&manifest)?;
             let asked = canonical(&serde_json::to_value(&manifest).expect("serialises"));
             if existing.manifest_json == asked {
+                existing.refuse_other_identity(&manifest)?;
                 return Ok((existing, Growth::default()));
             }
+            // What would be refused is refused before anything (the lock) is written; the
+            // growth is computed again under the lock, on the campaign as it is then.
+            existing.accept(manifest.clone(), &text, false)?;
             test_hook::pause("accept-read");
         } else {
             refuse_non_empty(out, &[])?;

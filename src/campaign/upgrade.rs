@@ -47,8 +47,24 @@ pub struct UpgradeReport {
 /// Upgrade the campaign directory `root` to this granular's format (nothing to do if it is).
 pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     let info_path = root.join("campaign.json");
-    // Not a campaign: refused before anything (the lock) is written.
-    CampaignInfo::read(root)?;
+    // Not a campaign: refused before anything (the lock) is written. A directory of this
+    // format has nothing to upgrade and nothing is written, but while another process holds it
+    // (a shard runs, a compaction) that is said (exit 3), as for any other directory.
+    if CampaignInfo::read(root)?.format_version == FORMAT_VERSION {
+        if let Some(l) = ledger::live_locks(root).into_iter().find(|l| !l.is_ours()) {
+            return Err(CampaignError::Refused(format!(
+                "cannot upgrade: {} is in use: {} is being run by {}",
+                root.display(),
+                l.doing(),
+                l.by()
+            )));
+        }
+        return Ok(UpgradeReport {
+            from: FORMAT_VERSION,
+            to: FORMAT_VERSION,
+            steps: Vec::new(),
+        });
+    }
     // Decided under the lock on what is read under it (a shard running, another upgrade).
     let _lock = ExclusiveLock::acquire(root, Purpose::Upgrade)
         .map_err(|e| e.context("cannot upgrade"))?;

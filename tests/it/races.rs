@@ -410,3 +410,32 @@ fn a_non_campaign_directory_is_named_as_such() {
     }
     let _ = log;
 }
+
+/// A campaign read again from `campaign.json` (as every command now does under its lock) is
+/// the campaign that was written: a sweep value that a fast float parser reads one unit in the
+/// last place off (7.000000000000001e-9: serde_json without `float_roundtrip` read it as
+/// 7.0000000000000015e-9, and the same value read again from campaign.json as a third one)
+/// keeps its point in the manifest, and its run is run.
+#[test]
+fn a_reread_campaign_keeps_every_point() {
+    let _g = heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let camp = dir.path().join("camp");
+    let text = r#"{"name": "ulp", "model": "rfm", "seed": 4,
+        "params": {"dim": 2, "n_particles": 20, "packing_fraction": 0.1, "warmup": 0.001,
+                   "duration": 0.004, "sample_every": 200, "noise_strength": 1e-8},
+        "sweep": {"noise_strength": [6.000000000000001e-09, 7.000000000000001e-09, 1e-08]}}"#;
+    let m = dir.path().join("m.json");
+    fs::write(&m, text).unwrap();
+    run_ok(&m, &camp, &log);
+    let st = util::status_json(&camp, &log);
+    assert_eq!(st["current_runs"], json!(3), "{st:#}");
+    assert_eq!(st["current"]["done"], json!(3), "{st:#}");
+    let points = st["points"].as_array().unwrap();
+    assert!(points.iter().all(|p| p["in_manifest"] == json!(true)), "{st:#}");
+    let summary = read_table(&camp, "rfm_timeseries_summary");
+    let ids: std::collections::BTreeSet<u64> =
+        summary.column("point_id").iter().map(|c| c.as_u64()).collect();
+    assert_eq!(ids.len(), 3, "every point summarised");
+}

@@ -375,8 +375,9 @@ pub fn read_table(dir: &Path, table: &str) -> Table {
 }
 
 /// The tables of a campaign and the key columns that identify a row.
-pub const TABLES: [(&str, &[&str]); 9] = [
+pub const TABLES: [(&str, &[&str]); 10] = [
     ("runs", &["run_id"]),
+    ("registered_runs", &["run_id"]),
     ("dsmc_species", &["run_id", "t", "species"]),
     ("dsmc_species_summary", &["point_id", "t", "species"]),
     ("dsmc_tamsd", &["run_id", "species", "lag"]),
