@@ -33,10 +33,22 @@ fn parse_addr(s: &str) -> Result<SocketAddr, String> {
 }
 
 pub fn run(a: Args) -> i32 {
+    // campaign.json is read through no link (the campaign directory is a closed world).
+    let info = a.dir.join("campaign.json");
+    if std::fs::symlink_metadata(&info).is_ok_and(|m| m.file_type().is_symlink()) {
+        return fail(
+            exit_codes::DIRECTORY_REFUSED,
+            format!(
+                "{}: a symbolic link; granular serve reads no campaign through one (granular writes campaign.json as a file)",
+                info.display()
+            ),
+        );
+    }
     let c = match Campaign::open(&a.dir) {
         Ok(c) => c,
         Err(e) => return report_error(e),
     };
+    let links = serve::links_out(&c.root);
     let server = match serve::bind(c, a.addr) {
         Ok(s) => s,
         Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => {
@@ -54,6 +66,11 @@ pub fn run(a: Args) -> i32 {
         Ok(x) => x,
         Err(e) => return fail(exit_codes::IO_ERROR, e),
     };
+    for l in &links {
+        eprintln!(
+            "warning: {l}: granular follows no such link, so the page and the status are refused (503) while it is there; the table files inside are served"
+        );
+    }
     if !addr.ip().is_loopback() {
         eprintln!(
             "warning: {addr} is not a loopback address: whoever reaches it can read this campaign (read-only, no authentication)"
