@@ -1,5 +1,5 @@
-//! `granular serve`: a read-only live dashboard of a campaign over HTTP/1.1 (axum on a
-//! current-thread tokio runtime).
+//! `granular serve`: a read-only live dashboard of a campaign over HTTP/1.1 (hyper, the
+//! response types of axum, on a current-thread tokio runtime).
 //!
 //! - `/`: the report page (`report::build`) with a small inline script that polls
 //!   `/api/status` every 2 s, updates the progress counts and bars in place, and swaps in the
@@ -30,19 +30,33 @@
 //! through paths; before each computation [`links_out`] looks (without following) at what
 //! they read, and while it finds a link (or a FIFO, socket or device) they are refused (503)
 //! naming it.
+//!
+//! Hostile clients: a request's head must arrive within `header_timeout` of the connection
+//! being ready for it (accepted, or the previous answer sent: also the keep-alive idle
+//! timeout); an answer that makes no progress for `send_timeout` closes its connection; at
+//! most `max_connections` connections are open (derived from the limit of open files): one
+//! more closes the connection that has waited longest without progress and is not computing
+//! an answer, or, if every one is, is closed itself. A request must have one `Host` (none only
+//! in HTTP/1.0); on loopback it and an absolute request target must name this machine.
 
+use std::collections::BTreeMap;
+use std::convert::Infallible;
 use std::ffi::{CStr, CString};
+use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
 use std::os::fd::{AsRawFd, FromRawFd, IntoRawFd, OwnedFd};
 use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 
 use axum::body::{Body, Bytes};
-use axum::extract::State;
-use axum::http::{header, HeaderMap, HeaderValue, Method, StatusCode, Uri};
+use axum::http::{header, request, HeaderValue, Method, StatusCode, Version};
 use axum::response::Response;
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 
 use crate::campaign::{status, Campaign};
 use crate::report;
@@ -64,11 +78,77 @@ const REFRESH: Duration = Duration::from_millis(250);
 const WATCHED: Duration = Duration::from_secs(10);
 const STALE_LIMIT: Duration = Duration::from_secs(10);
 
+/// How long a request's head may take, from the moment its connection is ready for it
+/// (accepted, or the previous answer sent): a slow client (half a head, then nothing) and an
+/// idle keep-alive connection are closed after it. A browser's dashboard asks every 2 s.
+pub const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
+/// How long an answer may make no progress (a client that stopped reading) before its
+/// connection is closed. Computing the answer (a large campaign's page) is not counted.
+pub const SEND_TIMEOUT: Duration = Duration::from_secs(30);
+/// The most connections open at once, fewer where the limit of open files is low
+/// ([`connection_cap`]).
+pub const MAX_CONNECTIONS: usize = 256;
+/// The fewest, however low the limit of open files.
+pub const MIN_CONNECTIONS: usize = 4;
+/// File descriptors left for the rest of the process (standard streams, the listener, the
+/// runtime, the files the report and the status read), out of the limit of open files.
+const RESERVED_FDS: u64 = 32;
+/// After a failed accept (out of file descriptors: one idle connection is closed first).
+const ACCEPT_BACKOFF: Duration = Duration::from_millis(10);
+
+/// What one client may take of the server.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub header_timeout: Duration,
+    pub send_timeout: Duration,
+    pub max_connections: usize,
+}
+
+impl Limits {
+    /// The defaults, with the connection cap derived from this process's limit of open files.
+    pub fn for_this_process() -> Limits {
+        Limits {
+            header_timeout: HEADER_TIMEOUT,
+            send_timeout: SEND_TIMEOUT,
+            max_connections: connection_cap(open_files_limit()),
+        }
+    }
+}
+
+/// The soft limit of open files (`ulimit -n`); `None` if unlimited or unknown.
+pub fn open_files_limit() -> Option<u64> {
+    let mut r = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `r` is a valid rlimit for getrlimit to fill.
+    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut r) } != 0
+        || r.rlim_cur == libc::RLIM_INFINITY
+    {
+        return None;
+    }
+    Some(r.rlim_cur as u64)
+}
+
+/// The connections served at once under a limit of `nofile` open files: each holds its socket
+/// and, while it streams a table file, that file; `RESERVED_FDS` are left for the rest.
+/// Between [`MIN_CONNECTIONS`] and [`MAX_CONNECTIONS`] (below the minimum's need, a failed
+/// accept closes an idle connection and tries again).
+pub fn connection_cap(nofile: Option<u64>) -> usize {
+    match nofile {
+        None => MAX_CONNECTIONS,
+        Some(n) => usize::try_from(n.saturating_sub(RESERVED_FDS) / 2)
+            .unwrap_or(MAX_CONNECTIONS)
+            .clamp(MIN_CONNECTIONS, MAX_CONNECTIONS),
+    }
+}
+
 /// A bound server: `local_addr` is known before `run` serves.
 pub struct Server {
     rt: tokio::runtime::Runtime,
     listener: std::net::TcpListener,
     state: Arc<Served>,
+    limits: Limits,
 }
 
 /// What one computed item is cached with.
@@ -104,7 +184,7 @@ struct Served {
 
 /// Bind `addr` for the campaign `c` (already opened by the caller, so that its refusals are
 /// the other commands').
-pub fn bind(c: Campaign, addr: SocketAddr) -> io::Result<Server> {
+pub fn bind(c: Campaign, addr: SocketAddr, limits: Limits) -> io::Result<Server> {
     let listener = std::net::TcpListener::bind(addr)?;
     listener.set_nonblocking(true)?;
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -115,6 +195,7 @@ pub fn bind(c: Campaign, addr: SocketAddr) -> io::Result<Server> {
     Ok(Server {
         rt,
         listener,
+        limits,
         state: Arc::new(Served {
             root,
             loopback: addr.ip().is_loopback(),
@@ -139,6 +220,7 @@ impl Server {
             rt,
             listener,
             state,
+            limits,
         } = self;
         let s = state.clone();
         std::thread::Builder::new()
@@ -156,9 +238,267 @@ impl Server {
             })?;
         rt.block_on(async move {
             let listener = tokio::net::TcpListener::from_std(listener)?;
-            let app = axum::Router::new().fallback(dispatch).with_state(state);
-            axum::serve(listener, app).await
+            accept_loop(listener, state, limits).await
         })
+    }
+}
+
+/// Accept connections for ever, each served on a task of its own within `limits`.
+async fn accept_loop(
+    listener: tokio::net::TcpListener,
+    state: Arc<Served>,
+    limits: Limits,
+) -> io::Result<()> {
+    let conns = Arc::new(Conns::new(limits.max_connections));
+    loop {
+        let stream = match listener.accept().await {
+            Ok((stream, _)) => stream,
+            Err(e) => {
+                // Out of file descriptors: make room. Otherwise a connection that ended
+                // before it was accepted; either way, go on after a moment.
+                if matches!(
+                    e.raw_os_error(),
+                    Some(libc::EMFILE | libc::ENFILE | libc::ENOBUFS | libc::ENOMEM)
+                ) {
+                    conns.evict_one();
+                }
+                tokio::time::sleep(ACCEPT_BACKOFF).await;
+                continue;
+            }
+        };
+        // None: every connection is computing an answer; this one is closed at once.
+        let Some(conn) = conns.admit() else {
+            continue;
+        };
+        let _ = stream.set_nodelay(true);
+        tokio::spawn(serve_connection(
+            stream,
+            conn,
+            conns.clone(),
+            state.clone(),
+            limits,
+        ));
+    }
+}
+
+/// One open connection, as the cap sees it.
+struct Conn {
+    id: u64,
+    epoch: Instant,
+    /// Milliseconds from `epoch` to the last byte received or sent.
+    last: AtomicU64,
+    /// Requests whose answer is being computed (such a connection is not closed for room).
+    busy: AtomicUsize,
+    /// Closes the connection (to make room for a new one).
+    evict: tokio::sync::Notify,
+}
+
+impl Conn {
+    fn touch(&self) {
+        let ms = u64::try_from(self.epoch.elapsed().as_millis()).unwrap_or(u64::MAX);
+        self.last.store(ms, Ordering::Relaxed);
+    }
+}
+
+/// The open connections, at most `cap`.
+struct Conns {
+    epoch: Instant,
+    cap: usize,
+    next: AtomicU64,
+    live: Mutex<BTreeMap<u64, Arc<Conn>>>,
+}
+
+impl Conns {
+    fn new(cap: usize) -> Conns {
+        Conns {
+            epoch: Instant::now(),
+            cap: cap.max(1),
+            next: AtomicU64::new(0),
+            live: Mutex::new(BTreeMap::new()),
+        }
+    }
+
+    /// A new connection, room made if the cap is reached; `None` if there is none to make.
+    fn admit(&self) -> Option<Arc<Conn>> {
+        let mut live = self.live.lock().unwrap_or_else(|e| e.into_inner());
+        if live.len() >= self.cap && !Self::evict_from(&mut live) {
+            return None;
+        }
+        let id = self.next.fetch_add(1, Ordering::Relaxed);
+        let c = Arc::new(Conn {
+            id,
+            epoch: self.epoch,
+            last: AtomicU64::new(0),
+            busy: AtomicUsize::new(0),
+            evict: tokio::sync::Notify::new(),
+        });
+        c.touch();
+        live.insert(id, c.clone());
+        Some(c)
+    }
+
+    fn evict_one(&self) -> bool {
+        Self::evict_from(&mut self.live.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// Close the connection that has waited longest without progress (idle, a slow client,
+    /// a stalled answer) among those not computing an answer.
+    fn evict_from(live: &mut BTreeMap<u64, Arc<Conn>>) -> bool {
+        let victim = live
+            .values()
+            .filter(|c| c.busy.load(Ordering::Relaxed) == 0)
+            .min_by_key(|c| (c.last.load(Ordering::Relaxed), c.id))
+            .map(|c| c.id);
+        match victim.and_then(|id| live.remove(&id)) {
+            Some(c) => {
+                c.evict.notify_one();
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn leave(&self, id: u64) {
+        self.live
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(&id);
+    }
+}
+
+/// Marks a connection as computing an answer while alive.
+struct Busy<'a>(&'a Conn);
+
+impl<'a> Busy<'a> {
+    fn enter(c: &'a Conn) -> Busy<'a> {
+        c.busy.fetch_add(1, Ordering::Relaxed);
+        c.touch();
+        Busy(c)
+    }
+}
+
+impl Drop for Busy<'_> {
+    fn drop(&mut self) {
+        self.0.touch();
+        self.0.busy.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// Serve one connection (HTTP/1.1, keep-alive) until it ends, times out or is evicted.
+async fn serve_connection(
+    stream: tokio::net::TcpStream,
+    conn: Arc<Conn>,
+    conns: Arc<Conns>,
+    s: Arc<Served>,
+    limits: Limits,
+) {
+    let io = hyper_util::rt::TokioIo::new(Tracked {
+        inner: stream,
+        conn: conn.clone(),
+        send_timeout: limits.send_timeout,
+        stall: None,
+    });
+    let c = conn.clone();
+    let svc = hyper::service::service_fn(move |req: hyper::Request<hyper::body::Incoming>| {
+        let (s, c) = (s.clone(), c.clone());
+        async move {
+            // The request's body is never read (GET and HEAD have none).
+            let (parts, _) = req.into_parts();
+            let _busy = Busy::enter(&c);
+            Ok::<_, Infallible>(dispatch(&s, &parts).await)
+        }
+    });
+    let mut b = hyper::server::conn::http1::Builder::new();
+    b.timer(hyper_util::rt::TokioTimer::new())
+        .header_read_timeout(limits.header_timeout)
+        .keep_alive(true);
+    let served = b.serve_connection(io, svc);
+    let evicted = conn.evict.notified();
+    futures_util::future::select(std::pin::pin!(served), std::pin::pin!(evicted)).await;
+    conns.leave(conn.id);
+}
+
+/// A connection's socket that notes its progress for the cap and fails a write that makes no
+/// progress for `send_timeout`.
+struct Tracked {
+    inner: tokio::net::TcpStream,
+    conn: Arc<Conn>,
+    send_timeout: Duration,
+    stall: Option<Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl Tracked {
+    fn sent<T>(&mut self, cx: &mut Context<'_>, r: Poll<io::Result<T>>) -> Poll<io::Result<T>> {
+        match r {
+            Poll::Pending => {
+                let d = self.send_timeout;
+                let stall = self
+                    .stall
+                    .get_or_insert_with(|| Box::pin(tokio::time::sleep(d)));
+                if stall.as_mut().poll(cx).is_ready() {
+                    return Poll::Ready(Err(io::Error::new(
+                        io::ErrorKind::TimedOut,
+                        "the client took none of the answer for the send timeout",
+                    )));
+                }
+                Poll::Pending
+            }
+            Poll::Ready(r) => {
+                self.stall = None;
+                if r.is_ok() {
+                    self.conn.touch();
+                }
+                Poll::Ready(r)
+            }
+        }
+    }
+}
+
+impl AsyncRead for Tracked {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        let before = buf.filled().len();
+        let r = Pin::new(&mut this.inner).poll_read(cx, buf);
+        if matches!(r, Poll::Ready(Ok(()))) && buf.filled().len() > before {
+            this.conn.touch();
+        }
+        r
+    }
+}
+
+impl AsyncWrite for Tracked {
+    fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, b: &[u8]) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_write(cx, b);
+        this.sent(cx, r)
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[io::IoSlice<'_>],
+    ) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_write_vectored(cx, bufs);
+        this.sent(cx, r)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_flush(cx);
+        this.sent(cx, r)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.get_mut().inner).poll_shutdown(cx)
     }
 }
 
@@ -256,13 +596,33 @@ async fn blocking<T: Send + 'static>(
         .map_err(|e| format!("internal error: {e}"))
 }
 
-/// Every request: the method, the host, then the path, decided here.
-async fn dispatch(
-    State(s): State<Arc<Served>>,
-    method: Method,
-    uri: Uri,
-    headers: HeaderMap,
-) -> Response {
+/// Every request: its `Host`, the method, then the path, decided here; every answer with
+/// `nosniff` and, unless it says otherwise, `no-store`.
+async fn dispatch(s: &Arc<Served>, req: &request::Parts) -> Response {
+    let mut r = route(s, req).await;
+    let h = r.headers_mut();
+    h.insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
+    );
+    h.entry(header::CACHE_CONTROL)
+        .or_insert(HeaderValue::from_static("no-store"));
+    r
+}
+
+async fn route(s: &Arc<Served>, req: &request::Parts) -> Response {
+    let (method, uri) = (&req.method, &req.uri);
+    let mut hosts = req.headers.get_all(header::HOST).iter();
+    let host = hosts.next();
+    if hosts.next().is_some() {
+        return text(StatusCode::BAD_REQUEST, "more than one Host header\n");
+    }
+    if host.is_none() && req.version == Version::HTTP_11 {
+        return text(
+            StatusCode::BAD_REQUEST,
+            "an HTTP/1.1 request needs a Host header\n",
+        );
+    }
     if method != Method::GET && method != Method::HEAD {
         let mut r = text(
             StatusCode::METHOD_NOT_ALLOWED,
@@ -272,20 +632,22 @@ async fn dispatch(
             .insert(header::ALLOW, HeaderValue::from_static("GET, HEAD"));
         return r;
     }
-    if s.loopback && !local_host(headers.get(header::HOST)) {
+    // An absolute request target's authority overrides Host: both must name this machine.
+    if s.loopback
+        && !(local_host(host) && uri.authority().is_none_or(|a| local_host_name(a.as_str())))
+    {
         return text(
             StatusCode::FORBIDDEN,
             "the Host header must name this machine (localhost or an IP address)\n",
         );
     }
     let head = method == Method::HEAD;
-    let path = uri.path();
-    let mut r = match path {
-        "/" | "/index.html" => match blocking(&s, |s| s.page()).await.and_then(|r| r) {
+    match uri.path() {
+        "/" | "/index.html" => match blocking(s, |s| s.page()).await.and_then(|r| r) {
             Ok(page) => html(dashboard(&page)),
             Err(e) => unavailable(&e),
         },
-        "/api/status" => match blocking(&s, |s| {
+        "/api/status" => match blocking(s, |s| {
             *s.watched.lock().unwrap_or_else(|e| e.into_inner()) = Some(Instant::now());
             s.status_json(true)
         })
@@ -295,7 +657,7 @@ async fn dispatch(
             Ok(j) => json(j.as_str().to_owned()),
             Err(e) => unavailable(&e),
         },
-        "/report.html" => match blocking(&s, |s| s.page()).await.and_then(|r| r) {
+        "/report.html" => match blocking(s, |s| s.page()).await.and_then(|r| r) {
             Ok(page) => {
                 let mut r = html(page.as_str().to_owned());
                 r.headers_mut().insert(
@@ -312,35 +674,32 @@ async fn dispatch(
                 .insert(header::LOCATION, HeaderValue::from_static("/tables/"));
             r
         }
-        "/tables/" => match blocking(&s, |s| list_tables(&s.root)).await {
+        "/tables/" => match blocking(s, |s| list_tables(&s.root)).await {
             Ok(files) => html(tables_page(&files)),
             Err(e) => unavailable(&e),
         },
-        "/api/tables" => match blocking(&s, |s| list_tables(&s.root)).await {
+        "/api/tables" => match blocking(s, |s| list_tables(&s.root)).await {
             Ok(files) => json(tables_json(&files)),
             Err(e) => unavailable(&e),
         },
         p => match p.strip_prefix("/tables/") {
-            Some(rest) => table_file(&s, rest.to_owned(), head).await,
+            Some(rest) => table_file(s, rest.to_owned(), head).await,
             None => text(StatusCode::NOT_FOUND, "not found\n"),
         },
-    };
-    let h = r.headers_mut();
-    h.insert(
-        header::X_CONTENT_TYPE_OPTIONS,
-        HeaderValue::from_static("nosniff"),
-    );
-    h.entry(header::CACHE_CONTROL)
-        .or_insert(HeaderValue::from_static("no-store"));
-    r
+    }
 }
 
 /// Whether a Host header names this machine: `localhost` or an IP literal, any port.
 fn local_host(h: Option<&HeaderValue>) -> bool {
-    let Some(h) = h.and_then(|h| h.to_str().ok()) else {
+    match h {
         // HTTP/1.0 without Host: no browser sends that.
-        return true;
-    };
+        None => true,
+        Some(h) => h.to_str().is_ok_and(local_host_name),
+    }
+}
+
+/// Whether `host[:port]` is `localhost` or an IP literal.
+fn local_host_name(h: &str) -> bool {
     let host = if let Some(v6) = h.strip_prefix('[') {
         return v6
             .split(']')
@@ -1017,6 +1376,7 @@ async fn table_file(s: &Arc<Served>, raw: String, head: bool) -> Response {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use futures_util::FutureExt;
 
     #[test]
     fn traversal_segments_refused() {
@@ -1202,6 +1562,33 @@ mod tests {
         std::os::unix::fs::symlink(tmp.path().join("t"), root.join("tables")).unwrap();
         assert!(links_out(&root).contains(&format!("{r}/tables: a symbolic link")));
         assert!(list_tables(&root).is_empty());
+    }
+
+    #[test]
+    fn the_connection_cap_follows_the_limit_of_open_files() {
+        assert_eq!(connection_cap(None), MAX_CONNECTIONS);
+        assert_eq!(connection_cap(Some(1 << 20)), MAX_CONNECTIONS);
+        assert_eq!(connection_cap(Some(64)), 16);
+        assert_eq!(connection_cap(Some(1024)), 496.min(MAX_CONNECTIONS));
+        assert_eq!(connection_cap(Some(10)), MIN_CONNECTIONS);
+    }
+
+    #[test]
+    fn a_full_server_closes_the_connection_idle_longest() {
+        let conns = Conns::new(2);
+        let a = conns.admit().unwrap();
+        let b = conns.admit().unwrap();
+        a.last.store(5, Ordering::Relaxed);
+        b.last.store(1, Ordering::Relaxed);
+        // b has waited longest: closed for c.
+        let c = conns.admit().unwrap();
+        assert!(b.evict.notified().now_or_never().is_some());
+        assert!(a.evict.notified().now_or_never().is_none());
+        // Both left computing an answer: no room is made, the new one is refused.
+        let (_x, _y) = (Busy::enter(&a), Busy::enter(&c));
+        assert!(conns.admit().is_none());
+        conns.leave(c.id);
+        assert!(conns.admit().is_some());
     }
 
     #[test]

@@ -8,7 +8,12 @@
 //! A hostile campaign directory (a closed world: no symbolic link out of it is followed):
 //! `tables` itself, a table directory or a part file linked outside are neither served nor
 //! listed, the page and status are refused naming the link, nothing outside is read (a FIFO
-//! outside has no reader) or changed; `campaign.json` a link is refused.
+//! outside has no reader) or changed; `campaign.json` a link is refused. Hostile clients: a
+//! slow client is disconnected after the header timeout while others are answered, an idle
+//! keep-alive connection is closed, 200 idle sockets against a server with 64 file
+//! descriptors do not keep the dashboard from answering, and two `Host` headers (or none in
+//! HTTP/1.1, or a foreign authority in the request target) are refused; a bad test-only limit
+//! in the environment is refused (2).
 //!
 //! Requests are raw HTTP/1.1 over `TcpStream` (no client library: the paths go out exactly as
 //! written, undecoded).
@@ -429,8 +434,9 @@ fn serve_refuses_what_status_refuses() {
 }
 
 /// `campaign.json` a link (to a file outside): refused (3) before anything is read through it.
+/// A bad test-only limit in the environment: refused (2), naming the variable.
 #[test]
-fn serve_refuses_a_linked_campaign_json() {
+fn serve_refuses_a_linked_campaign_json_and_bad_limits() {
     let tmp = tempfile::tempdir().unwrap();
     let (c, log) = (tmp.path().join("c"), tmp.path().join("log"));
     std::fs::create_dir(&c).unwrap();
@@ -447,6 +453,23 @@ fn serve_refuses_a_linked_campaign_json() {
         )),
         "{text}"
     );
+    let log = tmp.path().join("log2");
+    let out = Command::new(bin())
+        .args(["serve", s(tmp.path()), "--addr", "127.0.0.1:0"])
+        .env("GRANULAR_SERVE_HEADER_TIMEOUT_MS", "soon")
+        .env("GRANULAR_SERVE_MAX_CONNECTIONS", "0")
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    std::fs::write(&log, &out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(2), "log:\n{}", log_text(&log));
+    let text = log_text(&log);
+    for var in [
+        "GRANULAR_SERVE_HEADER_TIMEOUT_MS",
+        "GRANULAR_SERVE_MAX_CONNECTIONS",
+    ] {
+        assert!(text.contains(var), "{text}");
+    }
 }
 
 /// A campaign run by another process: `/api/status` shows a run running, then more runs done,
@@ -822,4 +845,119 @@ fn serve_refuses_part_files_that_are_links() {
         before_outside == entries(&outside),
         "serving changed the outside"
     );
+}
+
+/// A slow client (half a request head, then nothing) is disconnected after the header timeout
+/// while others are answered; an idle keep-alive connection is closed too.
+#[test]
+fn serve_disconnects_slow_and_idle_clients() {
+    let tmp = tempfile::tempdir().unwrap();
+    let c = finished_campaign(tmp.path());
+    let log = tmp.path().join("log");
+    let srv = serve_with(
+        &c,
+        &log,
+        &[("GRANULAR_SERVE_HEADER_TIMEOUT_MS", "300")],
+        None,
+    );
+    let a = srv.addr.as_str();
+    let mut slow = TcpStream::connect(a).unwrap();
+    slow.set_read_timeout(Some(Duration::from_secs(60)))
+        .unwrap();
+    slow.write_all(format!("GET /api/status HTTP/1.1\r\nHost: {a}\r\n").as_bytes())
+        .unwrap();
+    // Another client is answered meanwhile.
+    let r = get(a, "/api/status");
+    assert_eq!(r.code, 200, "{}", r.text());
+    // The slow one gets no answer, only the end of the connection.
+    let mut got = Vec::new();
+    let end = slow.read_to_end(&mut got);
+    assert!(end.is_ok(), "the slow client was not disconnected: {end:?}");
+    assert!(
+        !got.starts_with(b"HTTP/1.1 200"),
+        "{:?}",
+        String::from_utf8_lossy(&got)
+    );
+
+    // A keep-alive connection: one answer, then closed when idle.
+    let mut ka = TcpStream::connect(a).unwrap();
+    ka.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    ka.write_all(format!("GET /api/status HTTP/1.1\r\nHost: {a}\r\n\r\n").as_bytes())
+        .unwrap();
+    let mut raw = Vec::new();
+    let end = ka.read_to_end(&mut raw);
+    assert!(end.is_ok(), "the idle connection was not closed: {end:?}");
+    let text = String::from_utf8_lossy(&raw);
+    assert!(text.starts_with("HTTP/1.1 200"), "{text}");
+    assert_eq!(text.matches("HTTP/1.1 ").count(), 1, "{text}");
+}
+
+/// 200 idle sockets (half of them with half a request head) against a server allowed 64 open
+/// files: the dashboard still answers.
+#[test]
+fn serve_answers_while_idle_sockets_are_held() {
+    let tmp = tempfile::tempdir().unwrap();
+    let c = finished_campaign(tmp.path());
+    let log = tmp.path().join("log");
+    let srv = serve_with(&c, &log, &[], Some(64));
+    let a = srv.addr.as_str();
+    let addr: std::net::SocketAddr = a.parse().unwrap();
+    let mut idle = Vec::new();
+    for i in 0..200 {
+        let mut st = TcpStream::connect_timeout(&addr, Duration::from_secs(20))
+            .unwrap_or_else(|e| panic!("idle socket {i}: {e}; log:\n{}", log_text(&log)));
+        if i % 2 == 0 {
+            // The server may have closed it already.
+            let _ = st.write_all(b"GET / HTTP/1.1\r\n");
+        }
+        idle.push(st);
+    }
+    for target in ["/api/status", "/", "/api/tables"] {
+        let r = get(a, target);
+        assert_eq!(r.code, 200, "{target}: {}", r.text());
+    }
+    assert!(get(a, "/").text().contains("4: 4 done"));
+    drop(idle);
+}
+
+/// `Host` decides whether a request may read the campaign (DNS rebinding): two of them, none
+/// in HTTP/1.1, or a foreign authority in the request target are refused.
+#[test]
+fn serve_refuses_ambiguous_hosts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let c = finished_campaign(tmp.path());
+    let log = tmp.path().join("log");
+    let srv = serve(&c, &log);
+    let a = srv.addr.as_str();
+    for (head, code) in [
+        (
+            format!("GET /api/status HTTP/1.1\r\nHost: {a}\r\nHost: evil.example\r\n"),
+            400,
+        ),
+        (
+            format!("GET /api/status HTTP/1.1\r\nHost: evil.example\r\nHost: {a}\r\n"),
+            400,
+        ),
+        (
+            format!("GET /api/status HTTP/1.1\r\nHost: {a}\r\nHost: {a}\r\n"),
+            400,
+        ),
+        ("GET /api/status HTTP/1.1\r\n".to_string(), 400),
+        (
+            format!("GET http://evil.example/api/status HTTP/1.1\r\nHost: {a}\r\n"),
+            403,
+        ),
+        (
+            format!("GET http://{a}/api/status HTTP/1.1\r\nHost: {a}\r\n"),
+            200,
+        ),
+        ("GET /api/status HTTP/1.0\r\n".to_string(), 200),
+        (format!("GET /api/status HTTP/1.1\r\nHost: {a}\r\n"), 200),
+    ] {
+        let r = raw_request(a, &format!("{head}Connection: close\r\n\r\n"));
+        assert_eq!(r.code, code, "{head:?}: {}", r.text());
+        if code != 200 {
+            assert!(!r.text().contains("\"runs\""), "{head:?}: {}", r.text());
+        }
+    }
 }
