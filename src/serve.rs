@@ -1,5 +1,5 @@
-//! `granular serve`: a read-only live dashboard of a campaign over HTTP/1.1 (axum on a
-//! current-thread tokio runtime).
+//! `granular serve`: a read-only live dashboard of a campaign over HTTP/1.1 (hyper, the
+//! response types of axum, on a current-thread tokio runtime).
 //!
 //! - `/`: the report page (`report::build`) with a small inline script that polls
 //!   `/api/status` every 2 s, updates the progress counts and bars in place, and swaps in the
@@ -18,25 +18,49 @@
 //! processes (shards, SLURM tasks) is followed. Computations run on blocking threads; one at
 //! a time per cached item.
 //!
-//! A table file is served only if its request path, percent-decoded segment by segment, has
-//! at least two segments, none empty, hidden (`.`, `..`, `.gen`, pending parts), or holding
-//! `/`, `\` or NUL, and if the file it opens, symlinks resolved, is a regular file inside the
-//! campaign's `tables/` directory (checked on the canonical path before opening, and on the
-//! opened descriptor after).
+//! The campaign directory is a closed world: the only symbolic links granular writes are the
+//! generation links `tables/<table>` -> `.gen/<table>.<n>` (`store::layout`), and serve
+//! follows no other. A table file is opened component by component from the campaign
+//! directory (`openat` with `O_NOFOLLOW`: `tables` must be a directory, `<table>` a directory
+//! or a generation link whose target is read and opened as `.gen/<table>.<n>` under `tables`,
+//! the file a regular file), so a link swapped in between a check and the open cannot lead
+//! out; the request path, percent-decoded segment by segment, must be `<table>/<file>`, no
+//! segment empty, hidden (`.`, `..`, `.gen`, pending parts), or holding `/`, `\`, NUL or a
+//! control character. The page and the status are read by the report and the campaign
+//! through paths; before each computation [`links_out`] looks (without following) at what
+//! they read, and while it finds a link (or a FIFO, socket or device) they are refused (503)
+//! naming it.
+//!
+//! Hostile clients: a request's head must arrive within `header_timeout` of the connection
+//! being ready for it (accepted, or the previous answer sent: also the keep-alive idle
+//! timeout); an answer that makes no progress for `send_timeout` closes its connection; at
+//! most `max_connections` connections are open (derived from the limit of open files): one
+//! more closes the connection that has waited longest without progress and is not computing
+//! an answer, or, if every one is, is closed itself. A request must have one `Host` (none only
+//! in HTTP/1.0); on loopback it and an absolute request target must name this machine.
 
+use std::collections::BTreeMap;
+use std::convert::Infallible;
+use std::ffi::{CStr, CString};
+use std::future::Future;
 use std::io;
 use std::net::SocketAddr;
+use std::os::fd::{AsRawFd, FromRawFd, IntoRawFd, OwnedFd};
 use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 
 use axum::body::{Body, Bytes};
-use axum::extract::State;
-use axum::http::{header, HeaderMap, HeaderValue, Method, StatusCode, Uri};
+use axum::http::{header, request, HeaderValue, Method, StatusCode, Version};
 use axum::response::Response;
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 
 use crate::campaign::{status, Campaign};
 use crate::report;
+use crate::store::layout::GEN_DIR;
 
 /// The default address: loopback only.
 pub const DEFAULT_ADDR: &str = "127.0.0.1:8080";
@@ -54,11 +78,77 @@ const REFRESH: Duration = Duration::from_millis(250);
 const WATCHED: Duration = Duration::from_secs(10);
 const STALE_LIMIT: Duration = Duration::from_secs(10);
 
+/// How long a request's head may take, from the moment its connection is ready for it
+/// (accepted, or the previous answer sent): a slow client (half a head, then nothing) and an
+/// idle keep-alive connection are closed after it. A browser's dashboard asks every 2 s.
+pub const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
+/// How long an answer may make no progress (a client that stopped reading) before its
+/// connection is closed. Computing the answer (a large campaign's page) is not counted.
+pub const SEND_TIMEOUT: Duration = Duration::from_secs(30);
+/// The most connections open at once, fewer where the limit of open files is low
+/// ([`connection_cap`]).
+pub const MAX_CONNECTIONS: usize = 256;
+/// The fewest, however low the limit of open files.
+pub const MIN_CONNECTIONS: usize = 4;
+/// File descriptors left for the rest of the process (standard streams, the listener, the
+/// runtime, the files the report and the status read), out of the limit of open files.
+const RESERVED_FDS: u64 = 32;
+/// After a failed accept (out of file descriptors: one idle connection is closed first).
+const ACCEPT_BACKOFF: Duration = Duration::from_millis(10);
+
+/// What one client may take of the server.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub header_timeout: Duration,
+    pub send_timeout: Duration,
+    pub max_connections: usize,
+}
+
+impl Limits {
+    /// The defaults, with the connection cap derived from this process's limit of open files.
+    pub fn for_this_process() -> Limits {
+        Limits {
+            header_timeout: HEADER_TIMEOUT,
+            send_timeout: SEND_TIMEOUT,
+            max_connections: connection_cap(open_files_limit()),
+        }
+    }
+}
+
+/// The soft limit of open files (`ulimit -n`); `None` if unlimited or unknown.
+pub fn open_files_limit() -> Option<u64> {
+    let mut r = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `r` is a valid rlimit for getrlimit to fill.
+    if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut r) } != 0
+        || r.rlim_cur == libc::RLIM_INFINITY
+    {
+        return None;
+    }
+    Some(r.rlim_cur as u64)
+}
+
+/// The connections served at once under a limit of `nofile` open files: each holds its socket
+/// and, while it streams a table file, that file; `RESERVED_FDS` are left for the rest.
+/// Between [`MIN_CONNECTIONS`] and [`MAX_CONNECTIONS`] (below the minimum's need, a failed
+/// accept closes an idle connection and tries again).
+pub fn connection_cap(nofile: Option<u64>) -> usize {
+    match nofile {
+        None => MAX_CONNECTIONS,
+        Some(n) => usize::try_from(n.saturating_sub(RESERVED_FDS) / 2)
+            .unwrap_or(MAX_CONNECTIONS)
+            .clamp(MIN_CONNECTIONS, MAX_CONNECTIONS),
+    }
+}
+
 /// A bound server: `local_addr` is known before `run` serves.
 pub struct Server {
     rt: tokio::runtime::Runtime,
     listener: std::net::TcpListener,
     state: Arc<Served>,
+    limits: Limits,
 }
 
 /// What one computed item is cached with.
@@ -94,7 +184,7 @@ struct Served {
 
 /// Bind `addr` for the campaign `c` (already opened by the caller, so that its refusals are
 /// the other commands').
-pub fn bind(c: Campaign, addr: SocketAddr) -> io::Result<Server> {
+pub fn bind(c: Campaign, addr: SocketAddr, limits: Limits) -> io::Result<Server> {
     let listener = std::net::TcpListener::bind(addr)?;
     listener.set_nonblocking(true)?;
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -105,6 +195,7 @@ pub fn bind(c: Campaign, addr: SocketAddr) -> io::Result<Server> {
     Ok(Server {
         rt,
         listener,
+        limits,
         state: Arc::new(Served {
             root,
             loopback: addr.ip().is_loopback(),
@@ -129,6 +220,7 @@ impl Server {
             rt,
             listener,
             state,
+            limits,
         } = self;
         let s = state.clone();
         std::thread::Builder::new()
@@ -146,9 +238,267 @@ impl Server {
             })?;
         rt.block_on(async move {
             let listener = tokio::net::TcpListener::from_std(listener)?;
-            let app = axum::Router::new().fallback(dispatch).with_state(state);
-            axum::serve(listener, app).await
+            accept_loop(listener, state, limits).await
         })
+    }
+}
+
+/// Accept connections for ever, each served on a task of its own within `limits`.
+async fn accept_loop(
+    listener: tokio::net::TcpListener,
+    state: Arc<Served>,
+    limits: Limits,
+) -> io::Result<()> {
+    let conns = Arc::new(Conns::new(limits.max_connections));
+    loop {
+        let stream = match listener.accept().await {
+            Ok((stream, _)) => stream,
+            Err(e) => {
+                // Out of file descriptors: make room. Otherwise a connection that ended
+                // before it was accepted; either way, go on after a moment.
+                if matches!(
+                    e.raw_os_error(),
+                    Some(libc::EMFILE | libc::ENFILE | libc::ENOBUFS | libc::ENOMEM)
+                ) {
+                    conns.evict_one();
+                }
+                tokio::time::sleep(ACCEPT_BACKOFF).await;
+                continue;
+            }
+        };
+        // None: every connection is computing an answer; this one is closed at once.
+        let Some(conn) = conns.admit() else {
+            continue;
+        };
+        let _ = stream.set_nodelay(true);
+        tokio::spawn(serve_connection(
+            stream,
+            conn,
+            conns.clone(),
+            state.clone(),
+            limits,
+        ));
+    }
+}
+
+/// One open connection, as the cap sees it.
+struct Conn {
+    id: u64,
+    epoch: Instant,
+    /// Milliseconds from `epoch` to the last byte received or sent.
+    last: AtomicU64,
+    /// Requests whose answer is being computed (such a connection is not closed for room).
+    busy: AtomicUsize,
+    /// Closes the connection (to make room for a new one).
+    evict: tokio::sync::Notify,
+}
+
+impl Conn {
+    fn touch(&self) {
+        let ms = u64::try_from(self.epoch.elapsed().as_millis()).unwrap_or(u64::MAX);
+        self.last.store(ms, Ordering::Relaxed);
+    }
+}
+
+/// The open connections, at most `cap`.
+struct Conns {
+    epoch: Instant,
+    cap: usize,
+    next: AtomicU64,
+    live: Mutex<BTreeMap<u64, Arc<Conn>>>,
+}
+
+impl Conns {
+    fn new(cap: usize) -> Conns {
+        Conns {
+            epoch: Instant::now(),
+            cap: cap.max(1),
+            next: AtomicU64::new(0),
+            live: Mutex::new(BTreeMap::new()),
+        }
+    }
+
+    /// A new connection, room made if the cap is reached; `None` if there is none to make.
+    fn admit(&self) -> Option<Arc<Conn>> {
+        let mut live = self.live.lock().unwrap_or_else(|e| e.into_inner());
+        if live.len() >= self.cap && !Self::evict_from(&mut live) {
+            return None;
+        }
+        let id = self.next.fetch_add(1, Ordering::Relaxed);
+        let c = Arc::new(Conn {
+            id,
+            epoch: self.epoch,
+            last: AtomicU64::new(0),
+            busy: AtomicUsize::new(0),
+            evict: tokio::sync::Notify::new(),
+        });
+        c.touch();
+        live.insert(id, c.clone());
+        Some(c)
+    }
+
+    fn evict_one(&self) -> bool {
+        Self::evict_from(&mut self.live.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// Close the connection that has waited longest without progress (idle, a slow client,
+    /// a stalled answer) among those not computing an answer.
+    fn evict_from(live: &mut BTreeMap<u64, Arc<Conn>>) -> bool {
+        let victim = live
+            .values()
+            .filter(|c| c.busy.load(Ordering::Relaxed) == 0)
+            .min_by_key(|c| (c.last.load(Ordering::Relaxed), c.id))
+            .map(|c| c.id);
+        match victim.and_then(|id| live.remove(&id)) {
+            Some(c) => {
+                c.evict.notify_one();
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn leave(&self, id: u64) {
+        self.live
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(&id);
+    }
+}
+
+/// Marks a connection as computing an answer while alive.
+struct Busy<'a>(&'a Conn);
+
+impl<'a> Busy<'a> {
+    fn enter(c: &'a Conn) -> Busy<'a> {
+        c.busy.fetch_add(1, Ordering::Relaxed);
+        c.touch();
+        Busy(c)
+    }
+}
+
+impl Drop for Busy<'_> {
+    fn drop(&mut self) {
+        self.0.touch();
+        self.0.busy.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// Serve one connection (HTTP/1.1, keep-alive) until it ends, times out or is evicted.
+async fn serve_connection(
+    stream: tokio::net::TcpStream,
+    conn: Arc<Conn>,
+    conns: Arc<Conns>,
+    s: Arc<Served>,
+    limits: Limits,
+) {
+    let io = hyper_util::rt::TokioIo::new(Tracked {
+        inner: stream,
+        conn: conn.clone(),
+        send_timeout: limits.send_timeout,
+        stall: None,
+    });
+    let c = conn.clone();
+    let svc = hyper::service::service_fn(move |req: hyper::Request<hyper::body::Incoming>| {
+        let (s, c) = (s.clone(), c.clone());
+        async move {
+            // The request's body is never read (GET and HEAD have none).
+            let (parts, _) = req.into_parts();
+            let _busy = Busy::enter(&c);
+            Ok::<_, Infallible>(dispatch(&s, &parts).await)
+        }
+    });
+    let mut b = hyper::server::conn::http1::Builder::new();
+    b.timer(hyper_util::rt::TokioTimer::new())
+        .header_read_timeout(limits.header_timeout)
+        .keep_alive(true);
+    let served = b.serve_connection(io, svc);
+    let evicted = conn.evict.notified();
+    futures_util::future::select(std::pin::pin!(served), std::pin::pin!(evicted)).await;
+    conns.leave(conn.id);
+}
+
+/// A connection's socket that notes its progress for the cap and fails a write that makes no
+/// progress for `send_timeout`.
+struct Tracked {
+    inner: tokio::net::TcpStream,
+    conn: Arc<Conn>,
+    send_timeout: Duration,
+    stall: Option<Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl Tracked {
+    fn sent<T>(&mut self, cx: &mut Context<'_>, r: Poll<io::Result<T>>) -> Poll<io::Result<T>> {
+        match r {
+            Poll::Pending => {
+                let d = self.send_timeout;
+                let stall = self
+                    .stall
+                    .get_or_insert_with(|| Box::pin(tokio::time::sleep(d)));
+                if stall.as_mut().poll(cx).is_ready() {
+                    return Poll::Ready(Err(io::Error::new(
+                        io::ErrorKind::TimedOut,
+                        "the client took none of the answer for the send timeout",
+                    )));
+                }
+                Poll::Pending
+            }
+            Poll::Ready(r) => {
+                self.stall = None;
+                if r.is_ok() {
+                    self.conn.touch();
+                }
+                Poll::Ready(r)
+            }
+        }
+    }
+}
+
+impl AsyncRead for Tracked {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        let before = buf.filled().len();
+        let r = Pin::new(&mut this.inner).poll_read(cx, buf);
+        if matches!(r, Poll::Ready(Ok(()))) && buf.filled().len() > before {
+            this.conn.touch();
+        }
+        r
+    }
+}
+
+impl AsyncWrite for Tracked {
+    fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, b: &[u8]) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_write(cx, b);
+        this.sent(cx, r)
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[io::IoSlice<'_>],
+    ) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_write_vectored(cx, bufs);
+        this.sent(cx, r)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_flush(cx);
+        this.sent(cx, r)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.get_mut().inner).poll_shutdown(cx)
     }
 }
 
@@ -172,7 +522,8 @@ impl Served {
     }
 
     /// A cached item, computed again when the fingerprint changed or it is too old; with
-    /// `stale_ok`, the previous value while it is younger than `STALE_LIMIT`.
+    /// `stale_ok`, the previous value while it is younger than `STALE_LIMIT`. Refused while
+    /// the campaign directory has a link out of it ([`links_out`]).
     fn cached(
         &self,
         slot: &Slot,
@@ -197,7 +548,13 @@ impl Served {
                 return v;
             }
         }
-        let (value, slurm) = match self.campaign().and_then(|c| make(&c)) {
+        let links = links_out(&self.root);
+        let computed = if links.is_empty() {
+            self.campaign().and_then(|c| make(&c))
+        } else {
+            Err(links_refusal(&links))
+        };
+        let (value, slurm) = match computed {
             Ok((v, slurm)) => (Ok(Arc::new(v)), slurm),
             Err(e) => (Err(e), false),
         };
@@ -239,13 +596,33 @@ async fn blocking<T: Send + 'static>(
         .map_err(|e| format!("internal error: {e}"))
 }
 
-/// Every request: the method, the host, then the path, decided here.
-async fn dispatch(
-    State(s): State<Arc<Served>>,
-    method: Method,
-    uri: Uri,
-    headers: HeaderMap,
-) -> Response {
+/// Every request: its `Host`, the method, then the path, decided here; every answer with
+/// `nosniff` and, unless it says otherwise, `no-store`.
+async fn dispatch(s: &Arc<Served>, req: &request::Parts) -> Response {
+    let mut r = route(s, req).await;
+    let h = r.headers_mut();
+    h.insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
+    );
+    h.entry(header::CACHE_CONTROL)
+        .or_insert(HeaderValue::from_static("no-store"));
+    r
+}
+
+async fn route(s: &Arc<Served>, req: &request::Parts) -> Response {
+    let (method, uri) = (&req.method, &req.uri);
+    let mut hosts = req.headers.get_all(header::HOST).iter();
+    let host = hosts.next();
+    if hosts.next().is_some() {
+        return text(StatusCode::BAD_REQUEST, "more than one Host header\n");
+    }
+    if host.is_none() && req.version == Version::HTTP_11 {
+        return text(
+            StatusCode::BAD_REQUEST,
+            "an HTTP/1.1 request needs a Host header\n",
+        );
+    }
     if method != Method::GET && method != Method::HEAD {
         let mut r = text(
             StatusCode::METHOD_NOT_ALLOWED,
@@ -255,20 +632,22 @@ async fn dispatch(
             .insert(header::ALLOW, HeaderValue::from_static("GET, HEAD"));
         return r;
     }
-    if s.loopback && !local_host(headers.get(header::HOST)) {
+    // An absolute request target's authority overrides Host: both must name this machine.
+    if s.loopback
+        && !(local_host(host) && uri.authority().is_none_or(|a| local_host_name(a.as_str())))
+    {
         return text(
             StatusCode::FORBIDDEN,
             "the Host header must name this machine (localhost or an IP address)\n",
         );
     }
     let head = method == Method::HEAD;
-    let path = uri.path();
-    let mut r = match path {
-        "/" | "/index.html" => match blocking(&s, |s| s.page()).await.and_then(|r| r) {
+    match uri.path() {
+        "/" | "/index.html" => match blocking(s, |s| s.page()).await.and_then(|r| r) {
             Ok(page) => html(dashboard(&page)),
             Err(e) => unavailable(&e),
         },
-        "/api/status" => match blocking(&s, |s| {
+        "/api/status" => match blocking(s, |s| {
             *s.watched.lock().unwrap_or_else(|e| e.into_inner()) = Some(Instant::now());
             s.status_json(true)
         })
@@ -278,7 +657,7 @@ async fn dispatch(
             Ok(j) => json(j.as_str().to_owned()),
             Err(e) => unavailable(&e),
         },
-        "/report.html" => match blocking(&s, |s| s.page()).await.and_then(|r| r) {
+        "/report.html" => match blocking(s, |s| s.page()).await.and_then(|r| r) {
             Ok(page) => {
                 let mut r = html(page.as_str().to_owned());
                 r.headers_mut().insert(
@@ -295,35 +674,32 @@ async fn dispatch(
                 .insert(header::LOCATION, HeaderValue::from_static("/tables/"));
             r
         }
-        "/tables/" => match blocking(&s, |s| list_tables(&s.root)).await {
+        "/tables/" => match blocking(s, |s| list_tables(&s.root)).await {
             Ok(files) => html(tables_page(&files)),
             Err(e) => unavailable(&e),
         },
-        "/api/tables" => match blocking(&s, |s| list_tables(&s.root)).await {
+        "/api/tables" => match blocking(s, |s| list_tables(&s.root)).await {
             Ok(files) => json(tables_json(&files)),
             Err(e) => unavailable(&e),
         },
         p => match p.strip_prefix("/tables/") {
-            Some(rest) => table_file(&s, rest.to_owned(), head).await,
+            Some(rest) => table_file(s, rest.to_owned(), head).await,
             None => text(StatusCode::NOT_FOUND, "not found\n"),
         },
-    };
-    let h = r.headers_mut();
-    h.insert(
-        header::X_CONTENT_TYPE_OPTIONS,
-        HeaderValue::from_static("nosniff"),
-    );
-    h.entry(header::CACHE_CONTROL)
-        .or_insert(HeaderValue::from_static("no-store"));
-    r
+    }
 }
 
 /// Whether a Host header names this machine: `localhost` or an IP literal, any port.
 fn local_host(h: Option<&HeaderValue>) -> bool {
-    let Some(h) = h.and_then(|h| h.to_str().ok()) else {
+    match h {
         // HTTP/1.0 without Host: no browser sends that.
-        return true;
-    };
+        None => true,
+        Some(h) => h.to_str().is_ok_and(local_host_name),
+    }
+}
+
+/// Whether `host[:port]` is `localhost` or an IP literal.
+fn local_host_name(h: &str) -> bool {
     let host = if let Some(v6) = h.strip_prefix('[') {
         return v6
             .split(']')
@@ -493,7 +869,8 @@ pub struct TableFile {
 pub enum Refused {
     /// A malformed or forbidden path (400).
     BadPath(&'static str),
-    /// No such servable file (404): missing, not a regular file, or outside `tables/`.
+    /// No such servable file (404): missing, not a regular file, a symbolic link, or reached
+    /// through one that is not a table's generation link.
     NotFound,
 }
 
@@ -515,6 +892,20 @@ fn percent_decode(s: &str) -> Option<Vec<u8>> {
     Some(out)
 }
 
+/// Why a (decoded) name may not be a table's or a table file's.
+fn segment_refused(seg: &str) -> Option<&'static str> {
+    if seg.is_empty() {
+        return Some("an empty path segment");
+    }
+    if seg.starts_with('.') {
+        return Some("a hidden, `.` or `..` path segment");
+    }
+    if seg.contains(['/', '\\', '\0']) || seg.chars().any(char::is_control) {
+        return Some("an encoded separator or control character");
+    }
+    None
+}
+
 /// The decoded segments of a raw request path under `/tables/` (`table/file`).
 pub fn table_segments(raw: &str) -> Result<Vec<String>, Refused> {
     if raw.contains('\\') || raw.contains('\0') {
@@ -524,16 +915,8 @@ pub fn table_segments(raw: &str) -> Result<Vec<String>, Refused> {
     for seg in raw.split('/') {
         let bytes = percent_decode(seg).ok_or(Refused::BadPath("malformed percent-encoding"))?;
         let seg = String::from_utf8(bytes).map_err(|_| Refused::BadPath("not UTF-8"))?;
-        if seg.is_empty() {
-            return Err(Refused::BadPath("an empty path segment"));
-        }
-        if seg.starts_with('.') {
-            return Err(Refused::BadPath("a hidden, `.` or `..` path segment"));
-        }
-        if seg.contains(['/', '\\', '\0']) || seg.chars().any(char::is_control) {
-            return Err(Refused::BadPath(
-                "an encoded separator or control character",
-            ));
+        if let Some(why) = segment_refused(&seg) {
+            return Err(Refused::BadPath(why));
         }
         out.push(seg);
     }
@@ -543,65 +926,215 @@ pub fn table_segments(raw: &str) -> Result<Vec<String>, Refused> {
     Ok(out)
 }
 
-/// Open the regular file `root/tables/<segments>`, refusing anything whose real path (symlinks
-/// resolved) is not inside the real `root/tables`.
-pub fn open_table_file(root: &Path, segments: &[String]) -> Result<(std::fs::File, u64), Refused> {
-    let tables = root.join("tables");
-    let real_tables = tables.canonicalize().map_err(|_| Refused::NotFound)?;
-    let mut p = tables;
-    for s in segments {
-        p.push(s);
-    }
-    let real = p.canonicalize().map_err(|_| Refused::NotFound)?;
-    if !real.starts_with(&real_tables) || real == real_tables {
-        return Err(Refused::NotFound);
-    }
-    let mut o = std::fs::OpenOptions::new();
-    o.read(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        o.custom_flags(libc::O_NOFOLLOW);
-    }
-    let f = o.open(&real).map_err(|_| Refused::NotFound)?;
-    let m = f.metadata().map_err(|_| Refused::NotFound)?;
-    if !m.is_file() {
-        return Err(Refused::NotFound);
-    }
-    // What was opened, if a directory on the way was swapped for a link since.
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::fd::AsRawFd;
-        let opened = std::fs::read_link(format!("/proc/self/fd/{}", f.as_raw_fd()))
-            .map_err(|_| Refused::NotFound)?;
-        if !opened.starts_with(&real_tables) {
-            return Err(Refused::NotFound);
+/// Opening without following links: `openat(2)` relative to a directory descriptor, one
+/// name (no `/`) at a time.
+mod nofollow {
+    use super::*;
+
+    fn cstr(name: &str) -> io::Result<CString> {
+        if name.contains('/') {
+            return Err(io::Error::from(io::ErrorKind::InvalidInput));
         }
+        CString::new(name).map_err(|_| io::Error::from(io::ErrorKind::InvalidInput))
     }
-    Ok((f, m.len()))
+
+    fn owned(fd: libc::c_int) -> io::Result<OwnedFd> {
+        if fd < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        // SAFETY: a descriptor just returned by the kernel, owned by no one else.
+        Ok(unsafe { OwnedFd::from_raw_fd(fd) })
+    }
+
+    /// The directory `root` (following a link: it is the one the user named).
+    pub fn open_root(root: &Path) -> io::Result<OwnedFd> {
+        use std::os::unix::fs::OpenOptionsExt;
+        let f = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_DIRECTORY)
+            .open(root)?;
+        Ok(OwnedFd::from(f))
+    }
+
+    /// The directory `name` in `dir`; a link there fails (`ELOOP` or `ENOTDIR`).
+    pub fn open_dir(dir: &OwnedFd, name: &str) -> io::Result<OwnedFd> {
+        let c = cstr(name)?;
+        // SAFETY: a valid descriptor and C string.
+        owned(unsafe {
+            libc::openat(
+                dir.as_raw_fd(),
+                c.as_ptr(),
+                libc::O_RDONLY | libc::O_DIRECTORY | libc::O_NOFOLLOW | libc::O_CLOEXEC,
+            )
+        })
+    }
+
+    /// The regular file `name` in `dir` and its length; a link, a FIFO (opened without
+    /// waiting for a writer), a device or a directory fails.
+    pub fn open_file(dir: &OwnedFd, name: &str) -> io::Result<(std::fs::File, u64)> {
+        let c = cstr(name)?;
+        // SAFETY: a valid descriptor and C string.
+        let fd = owned(unsafe {
+            libc::openat(
+                dir.as_raw_fd(),
+                c.as_ptr(),
+                libc::O_RDONLY
+                    | libc::O_NOFOLLOW
+                    | libc::O_NONBLOCK
+                    | libc::O_NOCTTY
+                    | libc::O_CLOEXEC,
+            )
+        })?;
+        // O_NONBLOCK does not change how a regular file is read.
+        let f = std::fs::File::from(fd);
+        let m = f.metadata()?;
+        if !m.is_file() {
+            return Err(io::Error::from(io::ErrorKind::NotFound));
+        }
+        Ok((f, m.len()))
+    }
+
+    /// The target of the link `name` in `dir`.
+    pub fn read_link(dir: &OwnedFd, name: &str) -> io::Result<Vec<u8>> {
+        let c = cstr(name)?;
+        let mut buf = vec![0u8; 4096];
+        // SAFETY: a valid descriptor, C string and buffer of that length.
+        let n = unsafe {
+            libc::readlinkat(
+                dir.as_raw_fd(),
+                c.as_ptr(),
+                buf.as_mut_ptr().cast(),
+                buf.len(),
+            )
+        };
+        if n < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        buf.truncate(n as usize);
+        Ok(buf)
+    }
+
+    /// The length of `name` in `dir` if it is a regular file (not following a link).
+    pub fn regular_len(dir: &OwnedFd, name: &str) -> Option<u64> {
+        let c = cstr(name).ok()?;
+        let mut st = std::mem::MaybeUninit::<libc::stat>::uninit();
+        // SAFETY: a valid descriptor, C string and stat buffer.
+        let rc = unsafe {
+            libc::fstatat(
+                dir.as_raw_fd(),
+                c.as_ptr(),
+                st.as_mut_ptr(),
+                libc::AT_SYMLINK_NOFOLLOW,
+            )
+        };
+        if rc != 0 {
+            return None;
+        }
+        // SAFETY: filled by fstatat.
+        let st = unsafe { st.assume_init() };
+        (st.st_mode & libc::S_IFMT == libc::S_IFREG).then(|| st.st_size as u64)
+    }
+
+    /// The names in `dir` (UTF-8 ones, sorted; `.` and `..` left out).
+    pub fn names(dir: &OwnedFd) -> io::Result<Vec<String>> {
+        // fdopendir takes its descriptor over (closedir closes it): give it a duplicate.
+        let fd = dir.try_clone()?.into_raw_fd();
+        // SAFETY: `fd` is an open directory descriptor that the stream now owns.
+        let d = unsafe { libc::fdopendir(fd) };
+        if d.is_null() {
+            let e = io::Error::last_os_error();
+            // SAFETY: not taken over by a stream.
+            unsafe { libc::close(fd) };
+            return Err(e);
+        }
+        let mut out = Vec::new();
+        // SAFETY: `d` is a valid stream until closedir; each entry is read before the next
+        // readdir call.
+        unsafe {
+            // A duplicate shares the offset of its original: from the start.
+            libc::rewinddir(d);
+            loop {
+                let e = libc::readdir(d);
+                if e.is_null() {
+                    break;
+                }
+                let name = CStr::from_ptr((*e).d_name.as_ptr());
+                if let Ok(n) = name.to_str() {
+                    if n != "." && n != ".." {
+                        out.push(n.to_string());
+                    }
+                }
+            }
+            libc::closedir(d);
+        }
+        out.sort();
+        Ok(out)
+    }
 }
 
-/// Every servable table file: `tables/<table>/<file>`, hidden names skipped, each checked as
-/// a download would be.
-pub fn list_tables(root: &Path) -> Vec<TableFile> {
-    let names = |d: &Path| -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(d)
-            .map(|it| {
-                it.filter_map(|e| e.ok())
-                    .filter_map(|e| e.file_name().into_string().ok())
-                    .filter(|n| !n.starts_with('.'))
-                    .collect()
-            })
-            .unwrap_or_default();
-        v.sort();
-        v
+/// `<table>.<n>` if `target` is `.gen/<table>.<n>`: the form of the only links granular
+/// writes (`store::layout`).
+pub fn generation_of(table: &str, target: &[u8]) -> Option<String> {
+    let target = std::str::from_utf8(target).ok()?;
+    let (dir, name) = target.split_once('/')?;
+    let n = name.strip_prefix(table)?.strip_prefix('.')?;
+    (dir == GEN_DIR && !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| name.to_string())
+}
+
+/// `root/tables`, a directory (not a link).
+fn open_tables(root: &Path) -> io::Result<OwnedFd> {
+    nofollow::open_dir(&nofollow::open_root(root)?, "tables")
+}
+
+/// The directory of `table` under `tables`: a plain directory, or the generation its link
+/// names (`.gen/<table>.<n>`), opened as such under `tables` (so a link swapped in since it
+/// was read leads nowhere else).
+fn open_table_dir(tables: &OwnedFd, table: &str) -> io::Result<OwnedFd> {
+    match nofollow::open_dir(tables, table) {
+        Err(e) if matches!(e.raw_os_error(), Some(libc::ELOOP | libc::ENOTDIR)) => {
+            let target = nofollow::read_link(tables, table)?;
+            let gen = generation_of(table, &target)
+                .ok_or_else(|| io::Error::from(io::ErrorKind::NotFound))?;
+            nofollow::open_dir(&nofollow::open_dir(tables, GEN_DIR)?, &gen)
+        }
+        r => r,
+    }
+}
+
+/// Open the regular file `root/tables/<table>/<file>`, following no link but the table's
+/// generation link (see the module's documentation).
+pub fn open_table_file(root: &Path, segments: &[String]) -> Result<(std::fs::File, u64), Refused> {
+    let [table, file] = segments else {
+        return Err(Refused::NotFound);
     };
-    let tables = root.join("tables");
+    if segment_refused(table).is_some() || segment_refused(file).is_some() {
+        return Err(Refused::NotFound);
+    }
+    let tables = open_tables(root).map_err(|_| Refused::NotFound)?;
+    let dir = open_table_dir(&tables, table).map_err(|_| Refused::NotFound)?;
+    nofollow::open_file(&dir, file).map_err(|_| Refused::NotFound)
+}
+
+/// Every servable table file: `tables/<table>/<file>`, hidden names skipped, found as a
+/// download would open it.
+pub fn list_tables(root: &Path) -> Vec<TableFile> {
+    let Ok(tables) = open_tables(root) else {
+        return Vec::new();
+    };
     let mut out = Vec::new();
-    for t in names(&tables) {
-        for f in names(&tables.join(&t)) {
-            let segs = [t.clone(), f.clone()];
-            if let Ok((_, bytes)) = open_table_file(root, &segs) {
+    for t in nofollow::names(&tables).unwrap_or_default() {
+        if segment_refused(&t).is_some() {
+            continue;
+        }
+        let Ok(dir) = open_table_dir(&tables, &t) else {
+            continue;
+        };
+        for f in nofollow::names(&dir).unwrap_or_default() {
+            if segment_refused(&f).is_some() {
+                continue;
+            }
+            if let Some(bytes) = nofollow::regular_len(&dir, &f) {
                 out.push(TableFile {
                     table: t.clone(),
                     file: f,
@@ -611,6 +1144,121 @@ pub fn list_tables(root: &Path) -> Vec<TableFile> {
         }
     }
     out
+}
+
+/// What the report and the status read of the campaign directory, below this depth.
+const WALK_DEPTH: usize = 3;
+/// The entries of the campaign directory that the report and the status read (besides
+/// `tables`); `checkpoints` and `finals` only by name.
+const READ_ENTRIES: [&str; 8] = [
+    "campaign.json",
+    "manifest.json",
+    "manifests",
+    "ledger",
+    "locks",
+    "sums",
+    "slurm",
+    "analysis",
+];
+
+/// Every symbolic link (and FIFO, socket or device) where the report and the status of `root`
+/// read granular's own files and directories, but the generation links `tables/<t>` ->
+/// `.gen/<t>.<n>`; hidden names (files being written) are not read and not looked at. As
+/// `PATH: what` (PATH as the readers reach it: `tables/<t>/<file>`), sorted.
+pub fn links_out(root: &Path) -> Vec<String> {
+    fn walk(real: &Path, shown: &Path, depth: usize, out: &mut Vec<String>) {
+        let Ok(m) = std::fs::symlink_metadata(real) else {
+            return;
+        };
+        let t = m.file_type();
+        if t.is_symlink() {
+            out.push(format!("{}: a symbolic link", shown.display()));
+        } else if t.is_dir() {
+            if depth < WALK_DEPTH {
+                for n in visible_names(real) {
+                    walk(&real.join(&n), &shown.join(&n), depth + 1, out);
+                }
+            }
+        } else if !t.is_file() {
+            out.push(format!(
+                "{}: not a regular file (a FIFO, socket or device)",
+                shown.display()
+            ));
+        }
+    }
+    fn visible_names(d: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .map(|it| {
+                it.filter_map(|e| e.ok())
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| !n.starts_with('.'))
+                    .collect()
+            })
+            .unwrap_or_default();
+        v.sort();
+        v
+    }
+    let mut out = Vec::new();
+    for name in READ_ENTRIES {
+        walk(&root.join(name), &root.join(name), 0, &mut out);
+    }
+    let tables = root.join("tables");
+    match std::fs::symlink_metadata(&tables) {
+        Ok(m) if m.is_dir() => {
+            let gens = tables.join(GEN_DIR);
+            for t in visible_names(&tables) {
+                let p = tables.join(&t);
+                let Ok(m) = std::fs::symlink_metadata(&p) else {
+                    continue;
+                };
+                if !m.file_type().is_symlink() {
+                    walk(&p, &p, 1, &mut out);
+                    continue;
+                }
+                let gen = std::fs::read_link(&p)
+                    .ok()
+                    .and_then(|l| generation_of(&t, l.as_os_str().as_encoded_bytes()));
+                let Some(gen) = gen else {
+                    out.push(format!("{}: a symbolic link", p.display()));
+                    continue;
+                };
+                match std::fs::symlink_metadata(&gens) {
+                    Ok(g) if g.file_type().is_symlink() => {
+                        out.push(format!("{}: a symbolic link", gens.display()));
+                    }
+                    Ok(g) if g.is_dir() => {
+                        let dir = gens.join(&gen);
+                        if std::fs::symlink_metadata(&dir).is_ok_and(|m| m.file_type().is_symlink())
+                        {
+                            out.push(format!("{}: a symbolic link", dir.display()));
+                        } else {
+                            walk(&dir, &p, 1, &mut out);
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+        _ => walk(&tables, &tables, WALK_DEPTH, &mut out),
+    }
+    out.sort();
+    out.dedup();
+    out
+}
+
+/// The refusal of the page and the status while [`links_out`] finds something.
+fn links_refusal(links: &[String]) -> String {
+    const SHOWN: usize = 20;
+    let mut s = format!(
+        "granular serve reads no campaign file through a symbolic link (granular writes none \
+         but tables/<table> -> .gen/<table>.<n>), so it shows no page or status while the \
+         campaign directory has one: {}",
+        links[..links.len().min(SHOWN)].join("; ")
+    );
+    if links.len() > SHOWN {
+        s.push_str(&format!("; and {} more", links.len() - SHOWN));
+    }
+    s
 }
 
 /// A path segment percent-encoded for a link.
@@ -728,6 +1376,7 @@ async fn table_file(s: &Arc<Served>, raw: String, head: bool) -> Response {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use futures_util::FutureExt;
 
     #[test]
     fn traversal_segments_refused() {
@@ -832,6 +1481,114 @@ mod tests {
             assert!(!local_host(h(bad).as_ref()), "{bad}");
         }
         assert!(local_host(None));
+    }
+
+    #[test]
+    fn only_generation_links_of_the_table_are_followed() {
+        assert_eq!(
+            generation_of("runs", b".gen/runs.00000003").as_deref(),
+            Some("runs.00000003")
+        );
+        for bad in [
+            &b".gen/points.00000003"[..],
+            b".gen/runs.",
+            b".gen/runs.3/x",
+            b".gen/runs.3x",
+            b"../.gen/runs.3",
+            b"/c/tables/.gen/runs.3",
+            b".gen/../runs.3",
+            b"gen/runs.3",
+            b".gen/runs",
+            b"runs.3",
+        ] {
+            assert_eq!(
+                generation_of("runs", bad),
+                None,
+                "{}",
+                String::from_utf8_lossy(bad)
+            );
+        }
+    }
+
+    #[test]
+    fn plain_table_directories_are_served() {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path();
+        std::fs::create_dir_all(root.join("tables/points")).unwrap();
+        std::fs::write(root.join("tables/points/points.parquet"), b"PAR1PAR1").unwrap();
+        std::fs::write(root.join("tables/points/.points.parquet.1.tmp"), b"x").unwrap();
+        let segs = vec!["points".to_string(), "points.parquet".to_string()];
+        assert_eq!(open_table_file(root, &segs).unwrap().1, 8);
+        assert_eq!(list_tables(root).len(), 1);
+        assert!(links_out(root).is_empty(), "{:?}", links_out(root));
+    }
+
+    #[test]
+    fn links_out_of_the_campaign_are_found() {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path().join("c");
+        let gen = root.join("tables/.gen/runs.00000001");
+        std::fs::create_dir_all(&gen).unwrap();
+        std::fs::create_dir_all(root.join("ledger/s1of1")).unwrap();
+        std::fs::create_dir_all(root.join("analysis/figures")).unwrap();
+        std::fs::write(root.join("campaign.json"), b"{}").unwrap();
+        std::os::unix::fs::symlink(".gen/runs.00000001", root.join("tables/runs")).unwrap();
+        std::fs::write(gen.join("part.parquet"), b"PAR1").unwrap();
+        // Being written (hidden): not read, not looked at.
+        std::os::unix::fs::symlink(".gen/runs.00000002", root.join("tables/.runs.7.tmp")).unwrap();
+        assert_eq!(links_out(&root), Vec::<String>::new());
+        let outside = tmp.path().join("outside");
+        std::fs::create_dir_all(&outside).unwrap();
+        std::os::unix::fs::symlink(&outside, gen.join("x.parquet")).unwrap();
+        std::os::unix::fs::symlink(&outside, root.join("ledger/s1of1/commit-1.json")).unwrap();
+        std::os::unix::fs::symlink(&outside, root.join("analysis/figures/f.svg")).unwrap();
+        std::os::unix::fs::symlink(".gen/runs.00000001", root.join("tables/other")).unwrap();
+        let c = std::ffi::CString::new(root.join("analysis/a.parquet").to_str().unwrap()).unwrap();
+        // SAFETY: a valid path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let r = root.display();
+        assert_eq!(
+            links_out(&root),
+            vec![
+                format!("{r}/analysis/a.parquet: not a regular file (a FIFO, socket or device)"),
+                format!("{r}/analysis/figures/f.svg: a symbolic link"),
+                format!("{r}/ledger/s1of1/commit-1.json: a symbolic link"),
+                format!("{r}/tables/other: a symbolic link"),
+                format!("{r}/tables/runs/x.parquet: a symbolic link"),
+            ]
+        );
+        // `tables` itself a link: that is all that is said of it.
+        std::fs::rename(root.join("tables"), tmp.path().join("t")).unwrap();
+        std::os::unix::fs::symlink(tmp.path().join("t"), root.join("tables")).unwrap();
+        assert!(links_out(&root).contains(&format!("{r}/tables: a symbolic link")));
+        assert!(list_tables(&root).is_empty());
+    }
+
+    #[test]
+    fn the_connection_cap_follows_the_limit_of_open_files() {
+        assert_eq!(connection_cap(None), MAX_CONNECTIONS);
+        assert_eq!(connection_cap(Some(1 << 20)), MAX_CONNECTIONS);
+        assert_eq!(connection_cap(Some(64)), 16);
+        assert_eq!(connection_cap(Some(1024)), 496.min(MAX_CONNECTIONS));
+        assert_eq!(connection_cap(Some(10)), MIN_CONNECTIONS);
+    }
+
+    #[test]
+    fn a_full_server_closes_the_connection_idle_longest() {
+        let conns = Conns::new(2);
+        let a = conns.admit().unwrap();
+        let b = conns.admit().unwrap();
+        a.last.store(5, Ordering::Relaxed);
+        b.last.store(1, Ordering::Relaxed);
+        // b has waited longest: closed for c.
+        let c = conns.admit().unwrap();
+        assert!(b.evict.notified().now_or_never().is_some());
+        assert!(a.evict.notified().now_or_never().is_none());
+        // Both left computing an answer: no room is made, the new one is refused.
+        let (_x, _y) = (Busy::enter(&a), Busy::enter(&c));
+        assert!(conns.admit().is_none());
+        conns.leave(c.id);
+        assert!(conns.admit().is_some());
     }
 
     #[test]

@@ -2,6 +2,10 @@
 //! HTTP (`crate::serve`): the report page kept current, `/api/status` (the JSON of `status
 //! --json`), the table files. Loopback unless told otherwise; Ctrl-C/SIGTERM exits at once
 //! with 130 (`signals`: it writes nothing, so there is nothing to finish).
+//!
+//! For the tests only (README, Live dashboard), the environment can shorten the limits on
+//! clients: `GRANULAR_SERVE_HEADER_TIMEOUT_MS`, `GRANULAR_SERVE_SEND_TIMEOUT_MS`,
+//! `GRANULAR_SERVE_MAX_CONNECTIONS` (whole numbers from 1).
 
 use std::net::{Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
@@ -32,12 +36,61 @@ fn parse_addr(s: &str) -> Result<SocketAddr, String> {
         .map_err(|_| format!("{s:?} is not an address: IP:PORT, e.g. 127.0.0.1:8080 or [::1]:8080"))
 }
 
+/// The test-only settings of the environment, over the defaults; every bad one named.
+fn limits_from_env() -> Result<serve::Limits, String> {
+    let mut l = serve::Limits::for_this_process();
+    let mut errors = Vec::new();
+    let mut number = |var: &str| -> Option<u64> {
+        let v = std::env::var_os(var)?;
+        match v.to_str().and_then(|s| s.trim().parse::<u64>().ok()) {
+            Some(n) if n >= 1 => Some(n),
+            _ => {
+                errors.push(format!(
+                    "{var}: expected a whole number from 1, got {:?}",
+                    v.to_string_lossy()
+                ));
+                None
+            }
+        }
+    };
+    if let Some(ms) = number("GRANULAR_SERVE_HEADER_TIMEOUT_MS") {
+        l.header_timeout = std::time::Duration::from_millis(ms);
+    }
+    if let Some(ms) = number("GRANULAR_SERVE_SEND_TIMEOUT_MS") {
+        l.send_timeout = std::time::Duration::from_millis(ms);
+    }
+    if let Some(n) = number("GRANULAR_SERVE_MAX_CONNECTIONS") {
+        l.max_connections = usize::try_from(n).unwrap_or(usize::MAX);
+    }
+    if errors.is_empty() {
+        Ok(l)
+    } else {
+        Err(errors.join("\nerror: "))
+    }
+}
+
 pub fn run(a: Args) -> i32 {
+    let limits = match limits_from_env() {
+        Ok(l) => l,
+        Err(e) => return fail(exit_codes::INVALID_INPUT, e),
+    };
+    // campaign.json is read through no link (the campaign directory is a closed world).
+    let info = a.dir.join("campaign.json");
+    if std::fs::symlink_metadata(&info).is_ok_and(|m| m.file_type().is_symlink()) {
+        return fail(
+            exit_codes::DIRECTORY_REFUSED,
+            format!(
+                "{}: a symbolic link; granular serve reads no campaign through one (granular writes campaign.json as a file)",
+                info.display()
+            ),
+        );
+    }
     let c = match Campaign::open(&a.dir) {
         Ok(c) => c,
         Err(e) => return report_error(e),
     };
-    let server = match serve::bind(c, a.addr) {
+    let links = serve::links_out(&c.root);
+    let server = match serve::bind(c, a.addr, limits) {
         Ok(s) => s,
         Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => {
             return fail(
@@ -54,6 +107,11 @@ pub fn run(a: Args) -> i32 {
         Ok(x) => x,
         Err(e) => return fail(exit_codes::IO_ERROR, e),
     };
+    for l in &links {
+        eprintln!(
+            "warning: {l}: granular follows no such link, so the page and the status are refused (503) while it is there; the table files inside are served"
+        );
+    }
     if !addr.ip().is_loopback() {
         eprintln!(
             "warning: {addr} is not a loopback address: whoever reaches it can read this campaign (read-only, no authentication)"
