@@ -1000,3 +1000,62 @@ impl Upkeep {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lock that cannot be written (here `locks` is a file, as a full disk or a read-only
+    /// file system would refuse it) is an I/O error (exit 4), not "in use" (exit 3); a lock held
+    /// by a live process is "in use", naming what the holder does and its pid.
+    #[test]
+    fn lock_errors_are_io_or_held() {
+        let d = tempfile::tempdir().unwrap();
+        fs::write(d.path().join("locks"), b"not a directory").unwrap();
+        match ShardLock::acquire(d.path(), Shard::ALL) {
+            Err(LockError::Io(m)) => assert!(m.contains("locks"), "{m}"),
+            Err(other) => panic!("expected an I/O error, got {other:?}"),
+            Ok(_) => panic!("took a lock in a file"),
+        }
+        assert!(ExclusiveLock::acquire(d.path(), Purpose::Growth).is_err());
+
+        let d = tempfile::tempdir().unwrap();
+        let held = ExclusiveLock::acquire(d.path(), Purpose::Upgrade).unwrap();
+        match ShardLock::acquire(d.path(), Shard::ALL) {
+            Err(LockError::Held(m)) => {
+                assert!(m.contains("an upgrade"), "{m}");
+                assert!(m.contains(&format!("process {}", std::process::id())), "{m}");
+            }
+            Err(other) => panic!("expected held, got {other:?}"),
+            Ok(_) => panic!("a shard started while an upgrade held the campaign"),
+        }
+        drop(held);
+        assert!(!d.path().join("locks/compact.lock").exists(), "released on drop");
+        let shard = ShardLock::acquire(d.path(), Shard::ALL).unwrap();
+        match ExclusiveLock::acquire(d.path(), Purpose::Compaction) {
+            Err(LockError::Held(m)) => assert!(m.contains("shard 1/1"), "{m}"),
+            other => panic!("expected held by the shard, got {:?}", other.err()),
+        }
+        drop(shard);
+    }
+
+    /// A stale lock (its process gone) is taken over; a lock file that is not ours is never
+    /// removed by our drop.
+    #[test]
+    fn stale_locks_are_taken_over_and_others_are_left_alone() {
+        let d = tempfile::tempdir().unwrap();
+        fs::create_dir(d.path().join("locks")).unwrap();
+        let mut dead = LockInfo::ours("compact", COMPACT_TAG, 0);
+        dead.pid = u32::MAX - 1; // no such process
+        dead.start_time = Some(1);
+        let path = d.path().join("locks/compact.lock");
+        fs::write(&path, serde_json::to_string(&dead).unwrap()).unwrap();
+        let lock = ExclusiveLock::acquire(d.path(), Purpose::Theory).unwrap();
+        let now: LockInfo = serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
+        assert!(now.is_ours() && now.purpose == Some(Purpose::Theory));
+        // Someone else's lock in its place (taken over as stale from another host, say).
+        fs::write(&path, serde_json::to_string(&dead).unwrap()).unwrap();
+        drop(lock);
+        assert!(path.exists(), "a lock that is not ours was removed");
+    }
+}

@@ -393,7 +393,7 @@ fn a_non_campaign_directory_is_named_as_such() {
     let log = dir.path().join("log");
     let empty = dir.path().join("empty");
     fs::create_dir(&empty).unwrap();
-    for cmd in ["upgrade", "report", "status", "verify", "resume", "compact", "plot"] {
+    for cmd in ["upgrade", "report", "status", "verify", "resume", "compact", "plot", "serve"] {
         let clog = dir.path().join(format!("{cmd}.log"));
         let code = run_granular(&[cmd, s(&empty)], &clog, LIMIT);
         let text = log_text(&clog);
