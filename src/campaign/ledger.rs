@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::campaign::plan::Shard;
-use crate::fsutil;
+use crate::fsutil::{self, Dir, Kind};
 use crate::store::checksum::FileSum;
 use crate::store::layout;
 use crate::store::LEDGER_FORMAT;
@@ -200,12 +200,20 @@ pub const JOURNAL_KIND: &str = "granular.compaction_journal";
 
 pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
     let p = index_path(root);
-    let text = match fs::read_to_string(&p) {
-        Ok(t) => t,
+    // Only granular's own files are read: a link (`ledger` or the index) is not followed; it
+    // is damage that `integrity` names and `resume` sets aside.
+    let read = Dir::open(root).and_then(|d| match d.sub("ledger")? {
+        Some(l) => l.read("index.json"),
+        None => Ok(None),
+    });
+    let text = match read {
+        Ok(Some(t)) => t,
+        Ok(None) => return Ok(None),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) if fsutil::not_own(&e).is_some() => return Ok(None),
         Err(e) => return Err(format!("{}: {e}", p.display())),
     };
-    let ix: LedgerIndex = serde_json::from_str(&text)
+    let ix: LedgerIndex = serde_json::from_slice(&text)
         .map_err(|e| format!("{}: corrupt ledger index: {e}", p.display()))?;
     if ix.kind != INDEX_KIND || ix.format_version != LEDGER_FORMAT {
         return Err(format!(
@@ -213,6 +221,18 @@ pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
             p.display(),
             ix.kind,
             ix.format_version
+        ));
+    }
+    if let Some(f) = ix
+        .groups
+        .iter()
+        .flat_map(|g| &g.files)
+        .find(|f| !layout::is_table_file(&f.path))
+    {
+        return Err(format!(
+            "{}: a ledger index naming {:?}, not a file of a table (tables/<table>/<name>)",
+            p.display(),
+            f.path
         ));
     }
     Ok(Some(ix))
@@ -227,37 +247,67 @@ pub fn write_index(root: &Path, ix: &LedgerIndex) -> Result<(), String> {
         .map_err(|e| format!("{}: {e}", p.display()))
 }
 
-/// The shard directories of `ledger/`, sorted (none if there is no ledger).
+/// The shard directories of `ledger/`, sorted (none if there is no ledger). Only directories
+/// of granular's own: a link (to a directory elsewhere) is not a shard's, and is not followed.
 pub fn shard_dirs(root: &Path) -> Vec<PathBuf> {
-    let Ok(entries) = fs::read_dir(root.join("ledger")) else {
+    let Some(ledger) = Dir::open(root)
+        .ok()
+        .and_then(|d| d.sub("ledger").ok().flatten())
+    else {
         return Vec::new();
     };
-    let mut tags: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .filter(|p| p.is_dir())
-        .collect();
-    tags.sort();
-    tags
+    ledger
+        .entries()
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|(_, k)| *k == Kind::Dir)
+        .map(|(n, _)| root.join("ledger").join(n))
+        .collect()
 }
 
-/// Commit record files of a shard directory with their sequence numbers, sorted.
+/// Commit record files (`commit-<seq>.json`, regular files) of a shard's directory with their
+/// sequence numbers, sorted: from the directory's entries, not following a link at `dir`
+/// (refused) or at a record (not listed); `ledger` itself must not be a link.
 pub fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
-    let mut files: Vec<(u64, PathBuf)> = fs::read_dir(dir)
-        .map_err(|e| format!("{}: {e}", dir.display()))?
-        .filter_map(|e| e.ok())
-        .filter_map(|e| {
-            let n = e.file_name().to_string_lossy().into_owned();
+    let err = |e: std::io::Error| match fsutil::not_own(&e) {
+        Some(n) => n.to_string(),
+        None => format!("{}: {e}", dir.display()),
+    };
+    if let Some(parent) = dir.parent() {
+        if let Ok(Some(k)) = fsutil::kind(parent) {
+            if k != Kind::Dir {
+                return Err(format!(
+                    "{}: {}, where granular keeps its own directory (not followed)",
+                    parent.display(),
+                    fsutil::describe_kind(k)
+                ));
+            }
+        }
+    }
+    let d = Dir::open_nofollow(dir).map_err(err)?;
+    Ok(record_names(&d.entries().map_err(err)?)
+        .into_iter()
+        .map(|(seq, n)| (seq, dir.join(n)))
+        .collect())
+}
+
+/// The commit records among a shard directory's entries (regular files named
+/// `commit-<seq>.json`), sorted by sequence number.
+fn record_names(entries: &[(String, Kind)]) -> Vec<(u64, String)> {
+    let mut v: Vec<(u64, String)> = entries
+        .iter()
+        .filter(|(_, k)| *k == Kind::File)
+        .filter_map(|(n, _)| {
             let seq = n
                 .strip_prefix("commit-")?
                 .strip_suffix(".json")?
                 .parse::<u64>()
                 .ok()?;
-            Some((seq, e.path()))
+            Some((seq, n.clone()))
         })
         .collect();
-    files.sort();
-    Ok(files)
+    v.sort();
+    v
 }
 
 /// The whole ledger as read: good commits, and what could not be read.
@@ -319,7 +369,8 @@ pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
     Ok(l.commits)
 }
 
-/// `Ok(None)`: a commit record listed was gone when opened.
+/// `Ok(None)`: a commit record listed was gone when opened. Only granular's own directories
+/// and files are read (never through a link: a link is damage that `integrity` names).
 fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, String> {
     let mut out = Ledger::default();
     match read_index(root) {
@@ -329,27 +380,54 @@ fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, String> {
     if let Some(ix) = &out.index {
         out.commits.extend(ix.groups.iter().map(Group::as_commit));
     }
-    for tag in shard_dirs(root) {
-        let name = tag
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+    let at = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
+    let ledger = match Dir::open(root).and_then(|d| d.sub("ledger")) {
+        Ok(Some(l)) => l,
+        Ok(None) => return Ok(Some(out)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Some(out)),
+        Err(e) if fsutil::not_own(&e).is_some() => return Ok(Some(out)),
+        Err(e) => return Err(at(&root.join("ledger"), e)),
+    };
+    let entries = ledger.entries().map_err(|e| at(&root.join("ledger"), e))?;
+    for (name, kind) in entries {
+        if kind != Kind::Dir {
+            continue;
+        }
+        let tag = root.join("ledger").join(&name);
+        let shard = match ledger.sub(&name) {
+            Ok(Some(d)) => d,
+            Ok(None) => continue,
+            Err(e) if fsutil::not_own(&e).is_some() => continue,
+            Err(e) => return Err(at(&tag, e)),
+        };
         let folded = out
             .index
             .as_ref()
             .and_then(|ix| ix.folded.get(&name).copied())
             .unwrap_or(0);
-        for (seq, f) in commit_files(&tag)? {
+        for (seq, file) in record_names(&shard.entries().map_err(|e| at(&tag, e))?) {
             if seq <= folded {
                 continue;
             }
-            let text = match fs::read(&f) {
-                Ok(t) => t,
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-                Err(e) => return Err(format!("{}: {e}", f.display())),
+            let f = tag.join(&file);
+            let text = match shard.read(&file) {
+                Ok(Some(t)) => t,
+                Ok(None) => return Ok(None),
+                // Swapped for a link since it was listed: not read.
+                Err(e) if fsutil::not_own(&e).is_some() => continue,
+                Err(e) => return Err(at(&f, e)),
             };
             match parse_commit(&text, &name, seq) {
-                Ok(c) => out.commits.push(c),
+                Ok(c) => match c.files.iter().find(|x| !layout::is_table_file(&x.path)) {
+                    None => out.commits.push(c),
+                    Some(x) => out.bad_records.push((
+                        f,
+                        format!(
+                            "a commit record naming {:?}, not a file of a table (tables/<table>/<name>)",
+                            x.path
+                        ),
+                    )),
+                },
                 Err(why) => out.bad_records.push((f, why)),
             }
         }
@@ -431,8 +509,16 @@ pub fn roll_forward_compaction(root: &Path) -> Result<Option<String>, String> {
     )))
 }
 
-/// Steps 2-4 of a compaction whose journal is durable (idempotent).
+/// Steps 2-4 of a compaction whose journal is durable (idempotent). Nothing is followed: the
+/// generation links are written in `tables` opened without following a link, and records are
+/// deleted only in shard directories of granular's own (`ledger` a link is refused).
 pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), String> {
+    let at = |p: &Path, e: std::io::Error| match fsutil::not_own(&e) {
+        Some(n) => n.to_string(),
+        None => format!("{}: {e}", p.display()),
+    };
+    let rd = Dir::open(root).map_err(|e| at(root, e))?;
+    rd.sub("ledger").map_err(|e| at(&root.join("ledger"), e))?;
     for (table, gen) in &j.publish {
         let current = match layout::table_dir(root, table) {
             Ok(layout::TableDir::Generation { gen: g, .. }) => Some(g),
@@ -444,36 +530,76 @@ pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), String> {
         }
     }
     write_index(root, &j.index)?;
+    let ledger = rd
+        .sub("ledger")
+        .map_err(|e| at(&root.join("ledger"), e))?
+        .ok_or_else(|| format!("{}: gone", root.join("ledger").display()))?;
     for (tag, &upto) in &j.index.folded {
-        if let Ok(files) = commit_files(&ledger_dir(root, tag)) {
-            for (seq, f) in files {
-                if seq <= upto {
-                    let _ = fs::remove_file(f);
-                }
+        // A shard directory that is a link is not followed: nothing is deleted through it.
+        let Ok(Some(d)) = ledger.sub(tag) else {
+            continue;
+        };
+        for (seq, name) in record_names(&d.entries().unwrap_or_default()) {
+            if seq <= upto {
+                let _ = d.remove_file(&name);
             }
         }
-        let _ = fsutil::sync_dir(&ledger_dir(root, tag));
+        let _ = d.sync();
     }
     let jp = journal_path(root);
-    match fs::remove_file(&jp) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => return Err(format!("{}: {e}", jp.display())),
-    }
-    let _ = fsutil::sync_dir(&root.join("ledger"));
+    ledger
+        .remove_file("compaction.json")
+        .map_err(|e| at(&jp, e))?;
+    let _ = ledger.sync();
     Ok(())
 }
 
 /// Roll forward committed parts and roll back uncommitted ones, for every shard whose lock
 /// is not held by a live process (our own shard's lock is held by us: pass it as `ours`).
+///
+/// Nothing is followed out of the campaign directory: directories are opened without
+/// following links (`fsutil::Dir`), tables only through granular's own generation links.
+/// Where the ledger is not granular's own (`ledger`, a shard's directory or the compaction
+/// journal a link), the commits behind it are unknown: no compaction is rolled forward and no
+/// pending part of those shards is discarded, until `granular resume` has set the link aside.
 pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
     let mut notes = Vec::new();
+    let at = |p: &Path, e: std::io::Error| match fsutil::not_own(&e) {
+        Some(n) => n.to_string(),
+        None => format!("{}: {e}", p.display()),
+    };
     let live: Vec<String> = live_locks(root)
         .into_iter()
         .map(|l| l.shard_tag)
         .filter(|t| t != ours)
         .collect();
-    if !live.iter().any(|t| t == COMPACT_TAG) {
+    let rd = Dir::open(root).map_err(|e| at(root, e))?;
+    // The shards whose commits cannot be known (`None`: none of them can).
+    let unknown: Option<Vec<String>> = match rd.sub("ledger") {
+        Ok(None) => Some(Vec::new()),
+        Ok(Some(l)) => {
+            let entries = l.entries().map_err(|e| at(&root.join("ledger"), e))?;
+            if entries
+                .iter()
+                .any(|(n, k)| n == "compaction.json" && *k != Kind::File)
+            {
+                None
+            } else {
+                Some(
+                    entries
+                        .into_iter()
+                        .filter(|(n, k)| {
+                            *k != Kind::Dir && !n.ends_with(".json") && !n.starts_with('.')
+                        })
+                        .map(|(n, _)| n)
+                        .collect(),
+                )
+            }
+        }
+        Err(e) if fsutil::not_own(&e).is_some() => None,
+        Err(e) => return Err(at(&root.join("ledger"), e)),
+    };
+    if unknown.is_some() && !live.iter().any(|t| t == COMPACT_TAG) {
         notes.extend(roll_forward_compaction(root)?);
     }
     // Unreadable records are left to `integrity` (they are set aside there); their pending
@@ -482,45 +608,72 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
     let mut referenced = std::collections::HashSet::new();
     for c in &commits {
         for f in &c.files {
-            let fin = root.join(&f.path);
-            referenced.insert(pending_path(&fin));
+            let (dir, name) = layout::split(&f.path);
+            let pending = format!(".{name}.pending");
+            referenced.insert(format!("{dir}/{pending}"));
             if live.contains(&c.shard) {
                 continue;
             }
-            let pend = pending_path(&fin);
-            if !fin.exists() && pend.exists() {
-                fs::rename(&pend, &fin).map_err(|e| format!("{}: {e}", pend.display()))?;
-                notes.push(format!("completed the commit of {}", fin.display()));
+            // A table behind a link that is not granular's own is not touched.
+            let Ok(Some(d)) = layout::walk(&rd, dir) else {
+                continue;
+            };
+            let here = |n: &str| d.kind(n).map_err(|e| at(&root.join(dir).join(n), e));
+            if here(name)?.is_none() && here(&pending)? == Some(Kind::File) {
+                d.rename(&pending, &d, name)
+                    .map_err(|e| at(&root.join(dir).join(&pending), e))?;
+                let _ = d.sync();
+                notes.push(format!(
+                    "completed the commit of {}",
+                    root.join(&f.path).display()
+                ));
             }
         }
     }
     notes.extend(remove_stale_temporaries(root));
-    let tables = root.join("tables");
-    if let Ok(entries) = fs::read_dir(&tables) {
-        for t in entries.filter_map(|e| e.ok()) {
-            let Ok(files) = fs::read_dir(t.path()) else {
+    let Some(unknown) = unknown else {
+        return Ok(notes);
+    };
+    let Ok(Some(tables)) = rd.sub("tables") else {
+        return Ok(notes);
+    };
+    for (t, _) in tables.entries().map_err(|e| at(&root.join("tables"), e))? {
+        if t.starts_with('.') {
+            continue;
+        }
+        // Only granular's own table directories (a link out is not followed).
+        let Ok(Some(d)) = layout::open_table_at(&tables, &t) else {
+            continue;
+        };
+        let mut removed = false;
+        for (name, kind) in d.entries().map_err(|e| at(d.path(), e))? {
+            if !name.ends_with(".pending")
+                || kind == Kind::Dir
+                || referenced.contains(&format!("tables/{t}/{name}"))
+            {
                 continue;
-            };
-            for f in files.filter_map(|e| e.ok()) {
-                let p = f.path();
-                let name = f.file_name().to_string_lossy().into_owned();
-                if !name.ends_with(".pending") || referenced.contains(&p) {
-                    continue;
-                }
-                // `.part-<tag>-<seq>.parquet.pending`
-                let tag = name
-                    .trim_start_matches(".part-")
-                    .split('-')
-                    .next()
-                    .unwrap_or("")
-                    .to_string();
-                if live.contains(&tag) {
-                    continue;
-                }
-                fs::remove_file(&p).map_err(|e| format!("{}: {e}", p.display()))?;
-                notes.push(format!("discarded the uncommitted part {}", p.display()));
             }
-            let _ = fsutil::sync_dir(&t.path());
+            // `.part-<tag>-<seq>.parquet.pending`
+            let tag = name
+                .trim_start_matches(".part-")
+                .split('-')
+                .next()
+                .unwrap_or("")
+                .to_string();
+            if live.contains(&tag) || unknown.contains(&tag) {
+                continue;
+            }
+            // A file, or a link itself (never what it points to).
+            d.remove_file(&name)
+                .map_err(|e| at(&d.path().join(&name), e))?;
+            removed = true;
+            notes.push(format!(
+                "discarded the uncommitted part {}",
+                d.path().join(&name).display()
+            ));
+        }
+        if removed {
+            let _ = d.sync();
         }
     }
     Ok(notes)
@@ -529,29 +682,44 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
 /// Delete temporary files (`.NAME.<pid>-<nanos>@<host>.tmp`, see `fsutil::temp_path`) left by
 /// processes of this host that died while writing (a kill during a checkpoint, say). Files of
 /// other hosts are left alone: their processes cannot be checked from here.
+///
+/// Directories are opened without following links (`fsutil::Dir`; a table only through its
+/// generation link): nothing is removed outside the campaign directory.
 fn remove_stale_temporaries(root: &Path) -> Vec<String> {
     let mut notes = Vec::new();
-    let mut dirs = vec![
-        root.to_path_buf(),
-        root.join("checkpoints"),
-        root.join("finals"),
-        root.join("locks"),
-        root.join("tables"),
-        root.join("ledger"),
-    ];
-    for sub in ["tables", "ledger", "sums"] {
-        if let Ok(it) = fs::read_dir(root.join(sub)) {
-            dirs.extend(
-                it.filter_map(|e| e.ok())
-                    .map(|e| e.path())
-                    .filter(|p| p.is_dir()),
-            );
+    let Ok(rd) = Dir::open(root) else {
+        return notes;
+    };
+    let mut dirs: Vec<Dir> = Vec::new();
+    for name in ["checkpoints", "finals", "locks", "tables", "ledger"] {
+        if let Ok(Some(d)) = rd.sub(name) {
+            dirs.push(d);
         }
     }
+    for sub in ["tables", "ledger", "sums"] {
+        let Ok(Some(d)) = rd.sub(sub) else { continue };
+        for (n, k) in d.entries().unwrap_or_default() {
+            let opened = if sub == "tables" && !n.starts_with('.') {
+                layout::open_table_at(&d, &n)
+            } else if k == Kind::Dir {
+                d.sub(&n)
+            } else {
+                continue;
+            };
+            if let Ok(Some(x)) = opened {
+                dirs.push(x);
+            }
+        }
+    }
+    if let Ok(r) = rd.try_clone() {
+        dirs.insert(0, r);
+    }
     for dir in dirs {
-        let Ok(it) = fs::read_dir(&dir) else { continue };
-        for f in it.filter_map(|e| e.ok()) {
-            let name = f.file_name().to_string_lossy().into_owned();
+        let Ok(entries) = dir.entries() else { continue };
+        for (name, kind) in entries {
+            if kind != Kind::File && kind != Kind::Link {
+                continue;
+            }
             let Some(stem) = name.strip_suffix(".tmp") else {
                 continue;
             };
@@ -569,10 +737,10 @@ fn remove_stale_temporaries(root: &Path) -> Vec<String> {
                 .and_then(|(_, tail)| tail.split('-').next())
                 .and_then(|p| p.parse::<u32>().ok());
             if let Some(pid) = pid {
-                if !pid_alive(pid) && fs::remove_file(f.path()).is_ok() {
+                if !pid_alive(pid) && dir.remove_file(&name).unwrap_or(false) {
                     notes.push(format!(
                         "removed the stale temporary file {}",
-                        f.path().display()
+                        dir.path().join(&name).display()
                     ));
                 }
             }
