@@ -23,6 +23,10 @@
 //!   records, ledger; corrupt records; foreign and orphan files) named by `verify`, refused by
 //!   `compact`, healed by `resume` to identical tables; stale locks of reused pids; compaction
 //!   killed at any moment.
+//! - `links`: the campaign directory is a closed world: a symbolic link where granular keeps
+//!   its own file or directory (`tables`, a table, a part, `quarantine`, a ledger shard,
+//!   `checkpoints`, `campaign.json`) is named by `verify`, refused by the readers, never
+//!   followed (the outside directory hashed unchanged), set aside itself by `resume`.
 //! - `slurm`: `granular submit --slurm` with stand-in sbatch/squeue/scontrol.
 //! - `report`: `granular report` on a finished and a half-finished campaign: one HTML file,
 //!   an inline SVG per figure, progress per point, no network references, escaped strings.
@@ -55,6 +59,7 @@ mod it {
     pub mod figures;
     pub mod growth;
     pub mod interrupt;
+    pub mod links;
     pub mod manifests;
     pub mod models;
     pub mod physics;

@@ -20,16 +20,18 @@
 //!
 //! Runs only while no shard runs (`ledger::ExclusiveLock`), after `ledger::recover`, on a
 //! campaign whose every file checks out (a full scrub; damage is refused, exit 3, and
-//! `granular resume` heals it).
+//! `granular resume` heals it; a link where granular keeps its own file or directory is
+//! damage). Every directory is opened without following a link (`fsutil::Dir`; the tables
+//! through their generation links only), so that nothing is read, written or removed outside
+//! the campaign directory, even if a link is swapped in while it runs.
 
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use std::collections::BTreeMap;
 
 use super::ledger::{self, ExclusiveLock, PartCommit, Purpose};
 use super::{integrity, Campaign, CampaignError};
-use crate::fsutil;
+use crate::fsutil::{self, Dir, Kind};
 use crate::store::checksum::FileSum;
 use crate::store::layout::{self, TableDir};
 use crate::store::parquet_io::{self, Stamp};
@@ -83,6 +85,23 @@ fn io(p: &Path, e: impl std::fmt::Display) -> CampaignError {
     CampaignError::Io(format!("{}: {e}", p.display()))
 }
 
+/// An error of a primitive of `fsutil::Dir` at `p`: something that is not granular's own is
+/// refused (it names itself), anything else is an I/O error.
+fn fs_err(p: &Path, e: std::io::Error) -> CampaignError {
+    match fsutil::not_own(&e) {
+        Some(n) => CampaignError::Refused(n.to_string()),
+        None => io(p, e),
+    }
+}
+
+/// The regular file `rel` of the campaign directory (as `layout::open_file`).
+fn open_rel(c: &Campaign, rd: &Dir, rel: &str) -> Result<std::fs::File, CampaignError> {
+    let path = c.root.join(rel);
+    layout::open_file(rd, rel)
+        .map_err(|e| fs_err(&path, e))?
+        .ok_or_else(|| io(&path, "gone"))
+}
+
 /// Compact every table of the campaign and fold its ledger.
 pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, CampaignError> {
     let _lock = ExclusiveLock::acquire(&c.root, Purpose::Compaction)?;
@@ -104,13 +123,15 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
     let ledger = ledger::read_ledger(&c.root).map_err(CampaignError::Io)?;
     let old_index = ledger.index.clone().unwrap_or_default();
     let units = ledger.commits;
+    let rd = Dir::open(&c.root).map_err(|e| io(&c.root, e))?;
     // Schemas and sizes of every committed part.
     let mut parts: BTreeMap<String, Part> = BTreeMap::new();
     for u in &units {
         for f in &u.files {
             let path = c.root.join(&f.path);
             let table = integrity::table_and_name(&f.path).0.to_string();
-            parts.insert(f.path.clone(), read_part(c, &table, &path)?);
+            let file = open_rel(c, &rd, &f.path)?;
+            parts.insert(f.path.clone(), read_part(c, &table, file, &path)?);
         }
     }
     let sizes: Vec<u64> = units
@@ -143,7 +164,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
         + 1;
     let tables = c.root.join("tables");
     // table -> (current generation, its directory, next generation's directory)
-    let mut gens: BTreeMap<String, (u64, PathBuf, PathBuf)> = BTreeMap::new();
+    let mut gens: BTreeMap<String, (u64, Dir, Dir)> = BTreeMap::new();
     let mut new_groups = Vec::new();
     let mut merged_away: BTreeMap<String, Vec<String>> = BTreeMap::new();
     for (bin, g) in groups.iter().enumerate() {
@@ -175,12 +196,11 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
         let mut files = Vec::new();
         for table in &tables_of_bin {
             if !gens.contains_key(table) {
-                let (gen, dir) = prepare_generation(c, table, &mut report.notes)?;
-                let next = gens_dir(&tables).join(layout::generation_name(table, gen + 1));
-                if next.exists() {
-                    fs::remove_dir_all(&next).map_err(|e| io(&next, e))?;
-                }
-                fsutil::create_dir_durable(&next).map_err(|e| io(&next, e))?;
+                let (gen, dir, all) = prepare_generation(c, &rd, table, &mut report.notes)?;
+                let name = layout::generation_name(table, gen + 1);
+                let path = gens_dir(&tables).join(&name);
+                all.remove_tree(&name).map_err(|e| fs_err(&path, e))?;
+                let next = all.create_dir(&name).map_err(|e| fs_err(&path, e))?;
                 gens.insert(table.clone(), (gen, dir, next));
             }
             let (_, _, next) = &gens[table];
@@ -193,8 +213,9 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
                     .filter(|f| integrity::table_and_name(&f.path).0.to_string() == *table)
                 {
                     let path = c.root.join(&f.path);
+                    let file = open_rel(c, &rd, &f.path)?;
                     batches.extend(
-                        parquet_io::read_campaign_file(&path, table, &c.identity)
+                        parquet_io::read_campaign_opened(file, &path, table, &c.identity)
                             .map_err(|e| CampaignError::Io(e.to_string()))?,
                     );
                     want += parts[&f.path].rows;
@@ -205,7 +226,8 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
                 }
             }
             let name = format!("part-{shard}-{seq:08}.parquet");
-            let out = next.join(&name);
+            // The new generation's directory, made above inside `.gen` (never a link).
+            let out = next.path().join(&name);
             let stamp = Stamp {
                 commit: Some(&part_commit),
                 ..c.stamp()
@@ -242,19 +264,25 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
     // The kept files of each changed table (every visible file not merged away).
     for (table, (_, dir, next)) in &gens {
         let away = merged_away.get(table).cloned().unwrap_or_default();
-        for e in fs::read_dir(dir).map_err(|e| io(dir, e))? {
-            let e = e.map_err(|e| io(dir, e))?;
-            let name = e.file_name().to_string_lossy().into_owned();
+        for (name, kind) in dir.entries().map_err(|e| io(dir.path(), e))? {
             let keep = !name.starts_with('.') && !away.contains(&name);
-            if !keep || next.join(&name).exists() {
+            if !keep || next.kind(&name).map_err(|e| io(next.path(), e))?.is_some() {
                 continue;
             }
-            let to = next.join(&name);
-            fs::hard_link(e.path(), &to)
-                .or_else(|_| fs::copy(e.path(), &to).map(|_| ()))
-                .map_err(|err| io(&to, err))?;
+            let to = next.path().join(&name);
+            if kind != Kind::File {
+                // The scrub found none: one came while we worked. Not followed, not kept.
+                return Err(CampaignError::Refused(format!(
+                    "{}: {}, where granular keeps its own files (not followed); nothing published",
+                    dir.path().join(&name).display(),
+                    dir.describe(&name, kind)
+                )));
+            }
+            dir.hard_link(&name, next, &name)
+                .or_else(|_| dir.copy_file(&name, next, &name))
+                .map_err(|err| fs_err(&to, err))?;
         }
-        fsutil::sync_dir(next).map_err(|e| io(next, e))?;
+        next.sync().map_err(|e| io(next.path(), e))?;
     }
     let mut folded = old_index.folded.clone();
     let mut records = 0;
@@ -289,18 +317,22 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
     ledger::complete_compaction(&c.root, &journal).map_err(CampaignError::Io)?;
     report.commits_folded = records;
     // The generation before the previous one of each changed table can go now.
-    for (table, (gen, _, _)) in &gens {
-        if *gen > 0 {
-            let old = gens_dir(&tables).join(layout::generation_name(table, gen - 1));
-            if old.exists() {
-                fs::remove_dir_all(&old).map_err(|e| io(&old, e))?;
+    if let Some(all) = rd
+        .walk(&format!("tables/{}", layout::GEN_DIR))
+        .map_err(|e| fs_err(&gens_dir(&tables), e))?
+    {
+        for (table, (gen, _, _)) in &gens {
+            if *gen > 0 {
+                let name = layout::generation_name(table, gen - 1);
+                all.remove_tree(&name)
+                    .map_err(|e| fs_err(&gens_dir(&tables).join(&name), e))?;
             }
         }
     }
     for table in layout::table_names(&c.root).map_err(|e| io(&tables, e))? {
         report
             .tables
-            .push(table_report(c, &table, gens.get(&table))?);
+            .push(table_report(c, &rd, &table, gens.get(&table))?);
     }
     Ok(report)
 }
@@ -309,8 +341,13 @@ fn gens_dir(tables: &Path) -> PathBuf {
     tables.join(layout::GEN_DIR)
 }
 
-fn read_part(c: &Campaign, table: &str, path: &Path) -> Result<Part, CampaignError> {
-    let (info, builder) = parquet_io::inspect(path).map_err(|e| {
+fn read_part(
+    c: &Campaign,
+    table: &str,
+    file: std::fs::File,
+    path: &Path,
+) -> Result<Part, CampaignError> {
+    let (info, builder) = parquet_io::inspect_file(file, path).map_err(|e| {
         CampaignError::Refused(format!(
             "{e}; `granular resume {}` heals it",
             c.root.display()
@@ -331,65 +368,78 @@ fn read_part(c: &Campaign, table: &str, path: &Path) -> Result<Part, CampaignErr
     })
 }
 
-/// The table's current generation and directory (a plain directory of an older granular is
-/// moved to generation 0 first); generations other than the current and the previous one
-/// (old, or half-built by a compaction that stopped) are removed.
+/// The table's current generation, its directory, and `.gen` (a plain directory of an older
+/// granular is moved to generation 0 first); generations other than the current and the
+/// previous one (old, or half-built by a compaction that stopped) are removed, never
+/// following a link.
 fn prepare_generation(
     c: &Campaign,
+    rd: &Dir,
     table: &str,
     notes: &mut Vec<String>,
-) -> Result<(u64, PathBuf), CampaignError> {
+) -> Result<(u64, Dir, Dir), CampaignError> {
     let tables = c.root.join("tables");
-    let (gen, dir) = match layout::table_dir(&c.root, table).map_err(|e| io(&tables, e))? {
-        TableDir::Generation { gen, dir } => (gen, dir),
+    let gen = match layout::table_dir(&c.root, table).map_err(|e| fs_err(&tables.join(table), e))? {
+        TableDir::Generation { gen, .. } => gen,
         TableDir::Plain(_) => {
-            layout::migrate_plain(&c.root, table).map_err(|e| io(&tables.join(table), e))?;
+            layout::migrate_plain(&c.root, table).map_err(|e| fs_err(&tables.join(table), e))?;
             notes.push(format!(
                 "{table}: moved to the generation layout (made by an older granular)"
             ));
-            (0, gens_dir(&tables).join(layout::generation_name(table, 0)))
+            0
         }
     };
-    if let Ok(it) = fs::read_dir(gens_dir(&tables)) {
-        for e in it.filter_map(|e| e.ok()) {
-            let name = e.file_name().to_string_lossy().into_owned();
-            let Some(g) = name
-                .strip_prefix(&format!("{table}."))
-                .and_then(|g| g.parse::<u64>().ok())
-            else {
-                continue;
-            };
-            if g != gen && g + 1 != gen {
-                fs::remove_dir_all(e.path()).map_err(|err| io(&e.path(), err))?;
-            }
+    let dir = layout::open_table(rd, table)
+        .map_err(|e| fs_err(&tables.join(table), e))?
+        .ok_or_else(|| io(&tables.join(table), "its generation is not there"))?;
+    let all = rd
+        .walk(&format!("tables/{}", layout::GEN_DIR))
+        .map_err(|e| fs_err(&gens_dir(&tables), e))?
+        .ok_or_else(|| io(&gens_dir(&tables), "not there"))?;
+    for (name, _) in all.entries().map_err(|e| io(&gens_dir(&tables), e))? {
+        let Some(g) = name
+            .strip_prefix(&format!("{table}."))
+            .and_then(|g| g.parse::<u64>().ok())
+        else {
+            continue;
+        };
+        if g != gen && g + 1 != gen {
+            all.remove_tree(&name)
+                .map_err(|e| fs_err(&gens_dir(&tables).join(&name), e))?;
         }
     }
-    Ok((gen, dir))
+    Ok((gen, dir, all))
 }
 
 fn table_report(
     c: &Campaign,
+    rd: &Dir,
     table: &str,
-    changed: Option<&(u64, PathBuf, PathBuf)>,
+    changed: Option<&(u64, Dir, Dir)>,
 ) -> Result<TableReport, CampaignError> {
-    let stats = |dir: &Path| -> Result<(usize, u64, u64), CampaignError> {
+    let stats = |d: &Dir| -> Result<(usize, u64, u64), CampaignError> {
         let (mut files, mut rows, mut bytes) = (0, 0, 0);
-        for e in fs::read_dir(dir).map_err(|e| io(dir, e))? {
-            let e = e.map_err(|e| io(dir, e))?;
-            let name = e.file_name().to_string_lossy().into_owned();
-            if name.starts_with('.') || !name.ends_with(".parquet") {
+        for (name, kind) in d.entries().map_err(|e| io(d.path(), e))? {
+            if name.starts_with('.') || !name.ends_with(".parquet") || kind != Kind::File {
                 continue;
             }
+            let path = d.path().join(&name);
+            let Some(f) = d.open_file(&name).map_err(|e| fs_err(&path, e))? else {
+                continue;
+            };
             files += 1;
-            bytes += e.metadata().map_err(|err| io(&e.path(), err))?.len();
-            rows += parquet_io::inspect(&e.path())
+            bytes += f.metadata().map_err(|e| io(&path, e))?.len();
+            rows += parquet_io::inspect_file(f, &path)
                 .map(|(i, _)| i.rows)
                 .map_err(|err| CampaignError::Io(err.to_string()))?;
         }
         Ok((files, rows, bytes))
     };
     let link = c.root.join("tables").join(table);
-    let (files_after, rows, bytes_after) = stats(&link)?;
+    let now = layout::open_table(rd, table)
+        .map_err(|e| fs_err(&link, e))?
+        .ok_or_else(|| io(&link, "not there"))?;
+    let (files_after, rows, bytes_after) = stats(&now)?;
     let generation = match layout::table_dir(&c.root, table) {
         Ok(TableDir::Generation { gen, .. }) => gen,
         _ => 0,

@@ -17,9 +17,20 @@
 //!   aside and its runs run again;
 //! - a rebuilt table whose file does not match its sidecar, and the summaries once runs are
 //!   undone, are set aside and written again.
+//!
+//! The campaign directory is a closed world: nothing is followed out of it. Everything is
+//! read, moved and removed through `fsutil::Dir` (directories opened without following a
+//! link, files with `O_NOFOLLOW`); the only links followed are the generation links
+//! granular writes itself (`tables/<t>` -> `.gen/<t>.<n>`, see `store::layout`). A link, or
+//! an entry of the wrong kind, where granular keeps its own file or directory
+//! ([`OWN_DIRS`], [`OWN_FILES`], and below them) is damage (`Check::not_own`), named by
+//! every check and healed first: the link itself (never its target) is moved into the
+//! quarantine, then everything is looked at again without it (the files it hid are then
+//! missing, and healed as such). A `quarantine` that is not a directory is renamed to a
+//! fresh name in the campaign directory (`quarantine.moved-<time>-<pid>`): nothing is ever
+//! written through it.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use arrow_array::cast::AsArray;
@@ -27,16 +38,17 @@ use arrow_array::types::UInt64Type;
 
 use super::ledger::{self, Commit, CommittedRun, PartCommit, RunStatus};
 use super::{tables, Campaign};
-use crate::fsutil;
+use crate::fsutil::{self, Dir, Kind};
 use crate::store::checksum::{self, FileSum, Mismatch};
 use crate::store::layout;
 use crate::store::parquet_io;
 use crate::store::LEDGER_FORMAT;
 
 /// How deep the check goes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Depth {
     /// Presence and sizes (cheap: one `stat` per file).
+    #[default]
     Quick,
     /// Sizes and SHA-256 of every file (reads everything).
     Full,
@@ -67,6 +79,12 @@ pub struct Check {
     pub bad_derived: Vec<(String, String)>,
     /// Visible files in a table directory that are not Parquet files.
     pub foreign: Vec<String>,
+    /// Entries that are not granular's own where granular keeps its own file or directory
+    /// (a symbolic link, never followed, or an entry of the wrong kind): (relative path,
+    /// what is there). What is behind them is not judged until they are set aside.
+    pub not_own: Vec<(String, String)>,
+    /// How deep this check went.
+    pub depth: Depth,
     /// Shards whose writers are live (their commits in flight are not judged).
     pub live: Vec<String>,
     /// Why the check was skipped (a compaction running), if it was.
@@ -81,11 +99,15 @@ impl Check {
             && self.orphans.is_empty()
             && self.bad_derived.is_empty()
             && self.foreign.is_empty()
+            && self.not_own.is_empty()
     }
 
     /// One line per problem.
     pub fn problems(&self) -> Vec<String> {
         let mut v = Vec::new();
+        for (p, what) in &self.not_own {
+            v.push(format!("{p}: {what}"));
+        }
         for (p, why) in &self.bad_ledger {
             v.push(format!("{}: {why}", p.display()));
         }
@@ -94,6 +116,12 @@ impl Check {
             v.push(match &b.found {
                 Mismatch::Missing => format!(
                     "{}: missing (committed by {} with {} runs)",
+                    b.file.path,
+                    c.name(),
+                    c.runs.len()
+                ),
+                Mismatch::NotOwn(what) => format!(
+                    "{}: {what} (committed by {} with {} runs)",
                     b.file.path,
                     c.name(),
                     c.runs.len()
@@ -144,7 +172,10 @@ pub fn check(c: &Campaign, depth: Depth) -> Result<Check, String> {
 }
 
 fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
-    let mut out = Check::default();
+    let mut out = Check {
+        depth,
+        ..Default::default()
+    };
     let live_locks = ledger::live_locks(root);
     let ours = |l: &ledger::LockInfo| l.pid == std::process::id() && l.host == ledger::hostname();
     if let Some(l) = live_locks
@@ -162,6 +193,9 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
         .filter(|l| !ours(l))
         .map(|l| l.shard_tag)
         .collect();
+    // The campaign directory as the user named it (a link there is followed, once).
+    let rd = Dir::open(root).map_err(|e| format!("{}: {e}", root.display()))?;
+    out.not_own = not_own(&rd);
     let l = ledger::read_ledger(root)?;
     out.bad_ledger = l.bad_records.clone();
     if let Some(why) = &l.bad_index {
@@ -169,6 +203,7 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
     }
     out.commits = l.commits;
     let full = depth == Depth::Full;
+    let at = |rel: &str, e: std::io::Error| format!("{}: {e}", root.join(rel).display());
     let mut committed: BTreeSet<String> = BTreeSet::new();
     let mut runs: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
     for (i, c) in out.commits.iter().enumerate() {
@@ -178,13 +213,31 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
         let live = out.live.contains(&c.shard);
         for f in &c.files {
             committed.insert(f.path.clone());
-            let path = root.join(&f.path);
-            if live && ledger::pending_path(&path).exists() {
+            let (parent, name) = layout::split(&f.path);
+            let dir = match layout::walk(&rd, parent) {
+                Ok(d) => d,
+                // Behind an entry that is not granular's own (named in `not_own`): not judged.
+                Err(e) if fsutil::not_own(&e).is_some() => continue,
+                Err(e) => return Err(at(parent, e)),
+            };
+            if live
+                && dir.as_ref().is_some_and(|d| {
+                    d.kind(&format!(".{name}.pending")).ok().flatten() == Some(Kind::File)
+                })
+            {
                 continue; // in flight
             }
-            if let Some(found) =
-                checksum::check(&path, f, full).map_err(|e| format!("{}: {e}", path.display()))?
-            {
+            let found = match dir.map(|d| d.open_file(name)).transpose() {
+                Ok(None) | Ok(Some(None)) => Some(Mismatch::Missing),
+                Ok(Some(Some(file))) => {
+                    checksum::check_open(file, f, full).map_err(|e| at(&f.path, e))?
+                }
+                Err(e) => match fsutil::not_own(&e) {
+                    Some(n) => Some(Mismatch::NotOwn(n.what())),
+                    None => return Err(at(&f.path, e)),
+                },
+            };
+            if let Some(found) = found {
                 out.bad_files.push(BadFile {
                     commit: i,
                     file: f.clone(),
@@ -196,7 +249,13 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
     out.doubled = runs.into_iter().filter(|(_, v)| v.len() > 1).collect();
     // A sidecar without its file: a rebuilt table's file is gone.
     for (table, name) in checksum::sidecars(root) {
-        if !root.join("tables").join(&table).join(&name).exists() {
+        let there = match layout::open_table(&rd, &table) {
+            Ok(Some(d)) => d.kind(&name).ok().flatten().is_some(),
+            Ok(None) => false,
+            // Behind an entry that is not granular's own (named in `not_own`): not judged.
+            Err(_) => continue,
+        };
+        if !there {
             out.bad_derived.push((
                 format!("tables/{table}/{name}"),
                 "missing (its checksum sidecar is there)".into(),
@@ -204,16 +263,13 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
         }
     }
     for table in layout::table_names(root).map_err(|e| format!("{}: {e}", root.display()))? {
-        let dir = root.join("tables").join(&table);
-        let Ok(entries) = fs::read_dir(&dir) else {
+        let Ok(Some(dir)) = layout::open_table(&rd, &table) else {
             continue;
         };
-        let mut names: Vec<String> = entries
-            .filter_map(|e| e.ok())
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
-        for name in names {
+        let Ok(entries) = dir.entries() else {
+            continue;
+        };
+        for (name, kind) in entries {
             if name.starts_with('.') {
                 continue;
             }
@@ -221,7 +277,17 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
             if committed.contains(&rel) {
                 continue;
             }
-            if !name.ends_with(".parquet") {
+            if matches!(kind, Kind::Link | Kind::Other) {
+                out.not_own.push((
+                    rel,
+                    format!(
+                        "{}, where granular keeps its own files (not followed)",
+                        dir.describe(&name, kind)
+                    ),
+                ));
+                continue;
+            }
+            if kind == Kind::Dir || !name.ends_with(".parquet") {
                 out.foreign.push(rel);
                 continue;
             }
@@ -229,17 +295,21 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
                 out.orphans.push(rel);
                 continue;
             }
-            let path = dir.join(&name);
             let why = match checksum::read_sidecar(root, &table, &name) {
                 None => Some("a rebuilt table's file without a valid checksum sidecar".to_string()),
-                Some(rec) => checksum::check(&path, &rec, full)
-                    .map_err(|e| format!("{}: {e}", path.display()))?
-                    .map(|m| {
-                        format!(
-                            "{m}, but its sidecar recorded {} bytes, SHA-256 {}",
-                            rec.bytes, rec.sha256
-                        )
-                    }),
+                Some(rec) => match dir.open_file(&name) {
+                    // Replaced while we looked (a writer rewriting it): looked at next time.
+                    Ok(None) => None,
+                    Ok(Some(file)) => checksum::check_open(file, &rec, full)
+                        .map_err(|e| at(&rel, e))?
+                        .map(|m| {
+                            format!(
+                                "{m}, but its sidecar recorded {} bytes, SHA-256 {}",
+                                rec.bytes, rec.sha256
+                            )
+                        }),
+                    Err(e) => Some(e.to_string()),
+                },
             };
             if let Some(why) = why {
                 out.bad_derived.push((rel, why));
@@ -247,6 +317,130 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
         }
     }
     Ok(out)
+}
+
+/// The directories granular keeps in a campaign directory.
+pub const OWN_DIRS: [&str; 11] = [
+    "manifests",
+    "ledger",
+    "locks",
+    "checkpoints",
+    "finals",
+    "sums",
+    "quarantine",
+    "tables",
+    super::ANALYSIS_DIR,
+    "figures",
+    "slurm",
+];
+
+/// The files granular keeps in a campaign directory.
+pub const OWN_FILES: [&str; 4] = [
+    "campaign.json",
+    "manifest.json",
+    "report.html",
+    "upgrade.log",
+];
+
+/// Granular's directories that hold only its own files and directories, and how deep: a
+/// link anywhere in them is not granular's (`tables/` is looked at on its own; `quarantine/`
+/// holds what healing set aside, links included).
+const NO_LINKS_BELOW: [(&str, usize); 9] = [
+    ("manifests", 1),
+    ("ledger", 2),
+    ("locks", 1),
+    ("checkpoints", 1),
+    ("finals", 1),
+    ("sums", 2),
+    (super::ANALYSIS_DIR, 2),
+    ("figures", 1),
+    ("slurm", 2),
+];
+
+/// Entries that are not granular's own where granular keeps its own (see the module's text),
+/// parents before what is below them: (relative path, what is there). Nothing is followed.
+fn not_own(rd: &Dir) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let what = |found: String, expected: &str| {
+        format!("{found}, where granular keeps its own {expected} (not followed)")
+    };
+    for (names, want, expected) in [
+        (&OWN_DIRS[..], Kind::Dir, "directory"),
+        (&OWN_FILES[..], Kind::File, "file"),
+    ] {
+        for name in names {
+            if let Ok(Some(k)) = rd.kind(name) {
+                if k != want {
+                    out.push((name.to_string(), what(rd.describe(name, k), expected)));
+                }
+            }
+        }
+    }
+    fn links_below(d: &Dir, rel: &str, depth: usize, out: &mut Vec<(String, String)>) {
+        for (n, k) in d.entries().unwrap_or_default() {
+            let r = format!("{rel}/{n}");
+            match k {
+                Kind::Link => out.push((
+                    r,
+                    format!(
+                        "{}, where granular keeps its own files (not followed)",
+                        d.describe(&n, k)
+                    ),
+                )),
+                Kind::Dir if depth > 1 => {
+                    if let Ok(Some(s)) = d.sub(&n) {
+                        links_below(&s, &r, depth - 1, out);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    for (name, depth) in NO_LINKS_BELOW {
+        if let Ok(Some(d)) = rd.sub(name) {
+            links_below(&d, name, depth, &mut out);
+        }
+    }
+    let Ok(Some(tables)) = rd.sub("tables") else {
+        return out;
+    };
+    for (name, kind) in tables.entries().unwrap_or_default() {
+        let rel = format!("tables/{name}");
+        if name == layout::GEN_DIR {
+            match kind {
+                Kind::Dir => {
+                    if let Ok(Some(gens)) = tables.sub(&name) {
+                        links_below(&gens, &rel, 1, &mut out);
+                    }
+                }
+                k => out.push((rel, what(tables.describe(&name, k), "directory"))),
+            }
+            continue;
+        }
+        if name.starts_with('.') {
+            continue; // a temporary (`ledger::recover` removes those of dead processes)
+        }
+        match layout::open_table_at(&tables, &name) {
+            Ok(Some(_)) => {}
+            Ok(None) => out.push((
+                rel,
+                what(
+                    format!(
+                        "{}, a generation that is not there",
+                        tables.describe(&name, kind)
+                    ),
+                    "table directory",
+                ),
+            )),
+            Err(e) => match fsutil::not_own(&e) {
+                Some(n) if n.path == tables.path().join(&name) => out.push((rel, n.what())),
+                // `.gen` not granular's own: named above.
+                Some(_) => {}
+                None => out.push((rel, format!("cannot be read: {e}"))),
+            },
+        }
+    }
+    out
 }
 
 /// `tables/<t>/<name>` (a path relative to the campaign directory) -> (`<t>`, `<name>`).
@@ -272,48 +466,144 @@ pub struct Healed {
     pub quarantine: Option<PathBuf>,
 }
 
-struct Quarantine {
-    root: PathBuf,
-    dir: PathBuf,
+/// Where healing sets things aside: `quarantine/<time>-<pid>/`, created when first needed,
+/// in directories opened without following links; an entry is moved itself (a link too,
+/// never what it points to), to the same relative path inside it.
+struct Quarantine<'a> {
+    root: &'a Dir,
+    stamp: String,
+    dir: Option<Dir>,
     used: bool,
 }
 
-impl Quarantine {
-    fn new(root: &Path) -> Self {
+impl<'a> Quarantine<'a> {
+    fn new(root: &'a Dir) -> Self {
         let secs = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_secs())
             .unwrap_or(0);
         Quarantine {
-            root: root.to_path_buf(),
-            dir: root
-                .join("quarantine")
-                .join(format!("{secs}-{}", std::process::id())),
+            root,
+            stamp: format!("{secs}-{}", std::process::id()),
+            dir: None,
             used: false,
         }
     }
 
+    fn path(&self) -> PathBuf {
+        self.root.path().join("quarantine").join(&self.stamp)
+    }
+
+    /// The quarantine directory (made now if need be: a `quarantine` that is a link or a
+    /// file is refused, never written through).
+    fn dir(&mut self) -> Result<&Dir, String> {
+        if self.dir.is_none() {
+            let path = self.path();
+            let d = self
+                .root
+                .create_dir("quarantine")
+                .and_then(|q| q.create_dir(&self.stamp))
+                .map_err(|e| match fsutil::not_own(&e) {
+                    Some(n) => n.to_string(),
+                    None => format!("{}: {e}", path.display()),
+                })?;
+            self.dir = Some(d);
+        }
+        Ok(self.dir.as_ref().expect("made above"))
+    }
+
     /// Move `rel` (relative to the campaign directory) into the quarantine; a file already
-    /// gone is fine.
+    /// gone is fine. The directories on the way are opened without following a link (but a
+    /// table's generation link): one that is not granular's own is an error.
     fn set_aside(&mut self, rel: &str) -> Result<bool, String> {
-        let from = self.root.join(rel);
-        if fs::symlink_metadata(&from).is_err() {
+        let full = self.root.path().join(rel);
+        let at = |e: std::io::Error| match fsutil::not_own(&e) {
+            Some(n) => n.to_string(),
+            None => format!("{}: {e}", full.display()),
+        };
+        let (parent, name) = layout::split(rel);
+        let Some(from) = layout::walk(self.root, parent).map_err(at)? else {
+            return Ok(false);
+        };
+        if from.kind(name).map_err(at)?.is_none() {
             return Ok(false);
         }
-        let to = self.dir.join(rel);
-        let parent = to.parent().expect("parent");
-        fsutil::create_dir_durable(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
-        match fs::rename(&from, &to) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
-            Err(e) => return Err(format!("{}: {e}", from.display())),
+        let to = self.dir()?.create_dirs(parent).map_err(at)?;
+        if !from.rename(name, &to, name).map_err(at)? {
+            return Ok(false);
         }
-        if let Some(d) = from.parent() {
-            let _ = fsutil::sync_dir(d);
-        }
+        let _ = from.sync();
+        let _ = to.sync();
         self.used = true;
         Ok(true)
     }
+
+    /// Write `actions.log` into the quarantine.
+    fn log(&mut self, actions: &[String]) -> Result<PathBuf, String> {
+        let mut text = actions.join("\n");
+        text.push('\n');
+        let path = self.path().join("actions.log");
+        self.dir()?
+            .write_atomic("actions.log", text.as_bytes())
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(self.path())
+    }
+}
+
+/// Set aside what `found.not_own` names, parents first (what is below an entry set aside
+/// goes with it): the entry itself, never what a link points to. A `quarantine` that is not a
+/// directory is renamed to a fresh name beside it. `manifest.json` (a copy for people) is
+/// written again from the history.
+fn set_aside_not_own(
+    c: &Campaign,
+    rd: &Dir,
+    found: &Check,
+    q: &mut Quarantine,
+    h: &mut Healed,
+) -> Result<(), String> {
+    let mut gone: Vec<String> = Vec::new();
+    if let Some((_, what)) = found.not_own.iter().find(|(r, _)| r == "quarantine") {
+        let to = format!("quarantine.moved-{}", q.stamp);
+        let moved = rd
+            .rename("quarantine", rd, &to)
+            .map_err(|e| format!("{}: {e}", rd.path().join("quarantine").display()))?;
+        if moved {
+            let _ = rd.sync();
+            h.actions.push(format!(
+                "renamed quarantine ({what}) to {to}: nothing was written into it; what healing sets aside goes to a quarantine directory of its own"
+            ));
+            q.used = true;
+        }
+        gone.push("quarantine".into());
+    }
+    for (rel, what) in &found.not_own {
+        if gone
+            .iter()
+            .any(|g| rel == g || rel.starts_with(&format!("{g}/")))
+        {
+            continue;
+        }
+        if q.set_aside(rel)? {
+            h.actions.push(format!(
+                "set aside {rel} ({what}); moved itself, nothing it points to was read or changed"
+            ));
+        }
+        gone.push(rel.clone());
+    }
+    if found.not_own.iter().any(|(r, _)| r == "manifest.json") {
+        if let Some(latest) = c.history.last() {
+            let (dir, name) = layout::split(&latest.file);
+            if let Ok(Some(Some(text))) =
+                layout::walk(rd, dir).and_then(|d| d.map(|d| d.read(name)).transpose())
+            {
+                rd.write_atomic("manifest.json", &text)
+                    .map_err(|e| format!("{}: {e}", rd.path().join("manifest.json").display()))?;
+                h.actions
+                    .push(format!("wrote manifest.json again from {}", latest.file));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Heal what `check` found (see the module's text), for a process holding a shard lock (or
@@ -321,10 +611,25 @@ impl Quarantine {
 /// action is returned and logged in the quarantine's `actions.log`.
 pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
     let root = &c.root;
+    let rd = Dir::open(root).map_err(|e| format!("{}: {e}", root.display()))?;
     let mut h = Healed::default();
-    let mut q = Quarantine::new(root);
+    let mut q = Quarantine::new(&rd);
     let live: Vec<&String> = found.live.iter().filter(|t| *t != ours).collect();
     let is_live = |shard: &str| live.iter().any(|t| *t == shard);
+
+    // What is not granular's own first; then everything again, without it (what it hid may
+    // be not granular's own in turn: a table's link to a generation under a `.gen` that was
+    // a link, say).
+    let mut fresh: Option<Check> = None;
+    for _ in 0..3 {
+        let cur = fresh.as_ref().unwrap_or(found);
+        if cur.not_own.is_empty() {
+            break;
+        }
+        set_aside_not_own(c, &rd, cur, &mut q, &mut h)?;
+        fresh = Some(check_once(root, found.depth)?);
+    }
+    let found = fresh.as_ref().unwrap_or(found);
 
     // Unreadable ledger files: set aside; the parts they named become parts without a commit.
     for (p, why) in &found.bad_ledger {
@@ -421,7 +726,7 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
 
     // Parts without a commit (including those of records set aside above).
     let after = check_once(root, Depth::Quick)?;
-    adopt_or_set_aside(c, &after, &is_live, &mut q, &mut h)?;
+    adopt_or_set_aside(c, &rd, &after, &is_live, &mut q, &mut h)?;
 
     // Rebuilt tables: damaged ones, and the summaries once runs were undone.
     let mut derived: Vec<(String, String)> = found.bad_derived.clone();
@@ -451,12 +756,12 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
     }
     for (rel, why) in &derived {
         let (t, n) = table_and_name(rel);
-        let side = checksum::sidecar_path(root, t, n);
+        let remove_sidecar = || checksum::remove_sidecar(root, t, n).unwrap_or(false);
         if q.set_aside(rel)? {
-            let _ = fs::remove_file(&side);
+            remove_sidecar();
             h.actions
                 .push(format!("set aside {rel} ({why}); it is written again"));
-        } else if fs::remove_file(&side).is_ok() {
+        } else if remove_sidecar() {
             h.actions.push(format!(
                 "removed the checksum sidecar of the missing {rel}; it is written again"
             ));
@@ -477,20 +782,18 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
         }
     }
     if q.used {
-        let log = q.dir.join("actions.log");
-        let mut text = h.actions.join("\n");
-        text.push('\n');
-        fsutil::write_atomic(&log, text.as_bytes())
-            .map_err(|e| format!("{}: {e}", log.display()))?;
-        h.quarantine = Some(q.dir.clone());
+        h.quarantine = Some(q.log(&h.actions)?);
     }
     Ok(h)
 }
 
 /// A part without a commit: its footer's commit, or why it has none.
-fn part_commit(c: &Campaign, rel: &str) -> Result<PartCommit, String> {
+fn part_commit(c: &Campaign, rd: &Dir, rel: &str) -> Result<PartCommit, String> {
     let path = c.root.join(rel);
-    let (info, _) = parquet_io::inspect(&path).map_err(|e| e.to_string())?;
+    let file = layout::open_file(rd, rel)
+        .map_err(|e| parquet_io::open_error(&path, e).to_string())?
+        .ok_or_else(|| format!("{rel}: gone"))?;
+    let (info, _) = parquet_io::inspect_file(file, &path).map_err(|e| e.to_string())?;
     let table = table_and_name(rel).0;
     parquet_io::check_part(&path, &info, table, Some(&c.identity)).map_err(|e| e.to_string())?;
     let Some(json) = info.commit else {
@@ -502,11 +805,13 @@ fn part_commit(c: &Campaign, rel: &str) -> Result<PartCommit, String> {
 }
 
 /// Every row of a part, decoded (a damaged page is an error), and its runs if it is `runs`.
-fn read_whole(c: &Campaign, rel: &str) -> Result<Vec<CommittedRun>, String> {
+fn read_whole(c: &Campaign, rd: &Dir, rel: &str) -> Result<Vec<CommittedRun>, String> {
     let table = table_and_name(rel).0;
-    let batches = c
-        .data()
-        .read_file(&c.root.join(rel), table)
+    let path = c.root.join(rel);
+    let file = layout::open_file(rd, rel)
+        .map_err(|e| parquet_io::open_error(&path, e).to_string())?
+        .ok_or_else(|| format!("{rel}: gone"))?;
+    let batches = parquet_io::read_campaign_opened(file, &path, table, &c.identity)
         .map_err(|e| e.to_string())?;
     if table != tables::RUNS {
         return Ok(Vec::new());
@@ -538,6 +843,7 @@ fn read_whole(c: &Campaign, rel: &str) -> Result<Vec<CommittedRun>, String> {
 
 fn adopt_or_set_aside(
     c: &Campaign,
+    rd: &Dir,
     found: &Check,
     is_live: &dyn Fn(&str) -> bool,
     q: &mut Quarantine,
@@ -549,7 +855,7 @@ fn adopt_or_set_aside(
     let mut groups: BTreeMap<(String, u64), (PartCommit, Vec<String>)> = BTreeMap::new();
     let mut loose: Vec<(String, String)> = Vec::new();
     for rel in &found.orphans {
-        match part_commit(c, rel) {
+        match part_commit(c, rd, rel) {
             Ok(pc) => groups
                 .entry((pc.shard.clone(), pc.seq))
                 .or_insert_with(|| (pc.clone(), Vec::new()))
@@ -573,6 +879,9 @@ fn adopt_or_set_aside(
             continue;
         }
         let verdict = (|| -> Result<Vec<CommittedRun>, String> {
+            if shard.is_empty() || shard.starts_with('.') || shard.contains(['/', '\0']) {
+                return Err(format!("its footer names the shard {shard:?}"));
+            }
             if existing.contains(&(shard.clone(), seq)) {
                 return Err(format!("commit {shard}/{seq} exists and does not name it"));
             }
@@ -582,7 +891,7 @@ fn adopt_or_set_aside(
                     .iter()
                     .find(|f| table_and_name(f).0 == t.as_str())
                     .ok_or_else(|| format!("its {t} part is missing"))?;
-                let r = read_whole(c, rel)?;
+                let r = read_whole(c, rd, rel)?;
                 if t == tables::RUNS {
                     runs = r;
                 }
@@ -610,7 +919,10 @@ fn adopt_or_set_aside(
                         .find(|f| table_and_name(f).0 == t.as_str())
                         .expect("checked");
                     let path = c.root.join(rel);
-                    let (bytes, sha256) = checksum::sum_file(&path)
+                    let file = layout::open_file(rd, rel)
+                        .map_err(|e| parquet_io::open_error(&path, e).to_string())?
+                        .ok_or_else(|| format!("{rel}: gone"))?;
+                    let (bytes, sha256) = checksum::sum_reader(file)
                         .map_err(|e| format!("{}: {e}", path.display()))?;
                     sums.push(FileSum {
                         path: rel.clone(),
@@ -629,10 +941,22 @@ fn adopt_or_set_aside(
                     in_index: false,
                 };
                 let p = ledger::commit_path(&c.root, &shard, seq);
-                let dir = ledger::ledger_dir(&c.root, &shard);
-                fsutil::create_dir_durable(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-                fsutil::write_atomic(&p, &serde_json::to_vec(&commit).expect("commit serialises"))
-                    .map_err(|e| format!("{}: {e}", p.display()))?;
+                let name = p
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                rd.create_dir("ledger")
+                    .and_then(|l| l.create_dir(&shard))
+                    .and_then(|d| {
+                        d.write_atomic(
+                            &name,
+                            &serde_json::to_vec(&commit).expect("commit serialises"),
+                        )
+                    })
+                    .map_err(|e| match fsutil::not_own(&e) {
+                        Some(n) => n.to_string(),
+                        None => format!("{}: {e}", p.display()),
+                    })?;
                 h.actions.push(format!(
                     "rebuilt the commit record of {shard}/{seq} ({n} runs, {} parts) from its parts' footers",
                     files.len()

@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::campaign::plan::Shard;
-use crate::fsutil;
+use crate::fsutil::{self, Dir, Kind};
 use crate::store::checksum::FileSum;
 use crate::store::layout;
 use crate::store::LEDGER_FORMAT;
@@ -200,12 +200,20 @@ pub const JOURNAL_KIND: &str = "granular.compaction_journal";
 
 pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
     let p = index_path(root);
-    let text = match fs::read_to_string(&p) {
-        Ok(t) => t,
+    // Only granular's own files are read: a link (`ledger` or the index) is not followed; it
+    // is damage that `integrity` names and `resume` sets aside.
+    let read = Dir::open(root).and_then(|d| match d.sub("ledger")? {
+        Some(l) => l.read("index.json"),
+        None => Ok(None),
+    });
+    let text = match read {
+        Ok(Some(t)) => t,
+        Ok(None) => return Ok(None),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) if fsutil::not_own(&e).is_some() => return Ok(None),
         Err(e) => return Err(format!("{}: {e}", p.display())),
     };
-    let ix: LedgerIndex = serde_json::from_str(&text)
+    let ix: LedgerIndex = serde_json::from_slice(&text)
         .map_err(|e| format!("{}: corrupt ledger index: {e}", p.display()))?;
     if ix.kind != INDEX_KIND || ix.format_version != LEDGER_FORMAT {
         return Err(format!(
@@ -213,6 +221,18 @@ pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
             p.display(),
             ix.kind,
             ix.format_version
+        ));
+    }
+    if let Some(f) = ix
+        .groups
+        .iter()
+        .flat_map(|g| &g.files)
+        .find(|f| !layout::is_table_file(&f.path))
+    {
+        return Err(format!(
+            "{}: a ledger index naming {:?}, not a file of a table (tables/<table>/<name>)",
+            p.display(),
+            f.path
         ));
     }
     Ok(Some(ix))
@@ -227,37 +247,67 @@ pub fn write_index(root: &Path, ix: &LedgerIndex) -> Result<(), String> {
         .map_err(|e| format!("{}: {e}", p.display()))
 }
 
-/// The shard directories of `ledger/`, sorted (none if there is no ledger).
+/// The shard directories of `ledger/`, sorted (none if there is no ledger). Only directories
+/// of granular's own: a link (to a directory elsewhere) is not a shard's, and is not followed.
 pub fn shard_dirs(root: &Path) -> Vec<PathBuf> {
-    let Ok(entries) = fs::read_dir(root.join("ledger")) else {
+    let Some(ledger) = Dir::open(root)
+        .ok()
+        .and_then(|d| d.sub("ledger").ok().flatten())
+    else {
         return Vec::new();
     };
-    let mut tags: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .filter(|p| p.is_dir())
-        .collect();
-    tags.sort();
-    tags
+    ledger
+        .entries()
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|(_, k)| *k == Kind::Dir)
+        .map(|(n, _)| root.join("ledger").join(n))
+        .collect()
 }
 
-/// Commit record files of a shard directory with their sequence numbers, sorted.
+/// Commit record files (`commit-<seq>.json`, regular files) of a shard's directory with their
+/// sequence numbers, sorted: from the directory's entries, not following a link at `dir`
+/// (refused) or at a record (not listed); `ledger` itself must not be a link.
 pub fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
-    let mut files: Vec<(u64, PathBuf)> = fs::read_dir(dir)
-        .map_err(|e| format!("{}: {e}", dir.display()))?
-        .filter_map(|e| e.ok())
-        .filter_map(|e| {
-            let n = e.file_name().to_string_lossy().into_owned();
+    let err = |e: std::io::Error| match fsutil::not_own(&e) {
+        Some(n) => n.to_string(),
+        None => format!("{}: {e}", dir.display()),
+    };
+    if let Some(parent) = dir.parent() {
+        if let Ok(Some(k)) = fsutil::kind(parent) {
+            if k != Kind::Dir {
+                return Err(format!(
+                    "{}: {}, where granular keeps its own directory (not followed)",
+                    parent.display(),
+                    fsutil::describe_kind(k)
+                ));
+            }
+        }
+    }
+    let d = Dir::open_nofollow(dir).map_err(err)?;
+    Ok(record_names(&d.entries().map_err(err)?)
+        .into_iter()
+        .map(|(seq, n)| (seq, dir.join(n)))
+        .collect())
+}
+
+/// The commit records among a shard directory's entries (regular files named
+/// `commit-<seq>.json`), sorted by sequence number.
+fn record_names(entries: &[(String, Kind)]) -> Vec<(u64, String)> {
+    let mut v: Vec<(u64, String)> = entries
+        .iter()
+        .filter(|(_, k)| *k == Kind::File)
+        .filter_map(|(n, _)| {
             let seq = n
                 .strip_prefix("commit-")?
                 .strip_suffix(".json")?
                 .parse::<u64>()
                 .ok()?;
-            Some((seq, e.path()))
+            Some((seq, n.clone()))
         })
         .collect();
-    files.sort();
-    Ok(files)
+    v.sort();
+    v
 }
 
 /// The whole ledger as read: good commits, and what could not be read.
@@ -319,7 +369,8 @@ pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
     Ok(l.commits)
 }
 
-/// `Ok(None)`: a commit record listed was gone when opened.
+/// `Ok(None)`: a commit record listed was gone when opened. Only granular's own directories
+/// and files are read (never through a link: a link is damage that `integrity` names).
 fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, String> {
     let mut out = Ledger::default();
     match read_index(root) {
@@ -329,27 +380,54 @@ fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, String> {
     if let Some(ix) = &out.index {
         out.commits.extend(ix.groups.iter().map(Group::as_commit));
     }
-    for tag in shard_dirs(root) {
-        let name = tag
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+    let at = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
+    let ledger = match Dir::open(root).and_then(|d| d.sub("ledger")) {
+        Ok(Some(l)) => l,
+        Ok(None) => return Ok(Some(out)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Some(out)),
+        Err(e) if fsutil::not_own(&e).is_some() => return Ok(Some(out)),
+        Err(e) => return Err(at(&root.join("ledger"), e)),
+    };
+    let entries = ledger.entries().map_err(|e| at(&root.join("ledger"), e))?;
+    for (name, kind) in entries {
+        if kind != Kind::Dir {
+            continue;
+        }
+        let tag = root.join("ledger").join(&name);
+        let shard = match ledger.sub(&name) {
+            Ok(Some(d)) => d,
+            Ok(None) => continue,
+            Err(e) if fsutil::not_own(&e).is_some() => continue,
+            Err(e) => return Err(at(&tag, e)),
+        };
         let folded = out
             .index
             .as_ref()
             .and_then(|ix| ix.folded.get(&name).copied())
             .unwrap_or(0);
-        for (seq, f) in commit_files(&tag)? {
+        for (seq, file) in record_names(&shard.entries().map_err(|e| at(&tag, e))?) {
             if seq <= folded {
                 continue;
             }
-            let text = match fs::read(&f) {
-                Ok(t) => t,
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-                Err(e) => return Err(format!("{}: {e}", f.display())),
+            let f = tag.join(&file);
+            let text = match shard.read(&file) {
+                Ok(Some(t)) => t,
+                Ok(None) => return Ok(None),
+                // Swapped for a link since it was listed: not read.
+                Err(e) if fsutil::not_own(&e).is_some() => continue,
+                Err(e) => return Err(at(&f, e)),
             };
             match parse_commit(&text, &name, seq) {
-                Ok(c) => out.commits.push(c),
+                Ok(c) => match c.files.iter().find(|x| !layout::is_table_file(&x.path)) {
+                    None => out.commits.push(c),
+                    Some(x) => out.bad_records.push((
+                        f,
+                        format!(
+                            "a commit record naming {:?}, not a file of a table (tables/<table>/<name>)",
+                            x.path
+                        ),
+                    )),
+                },
                 Err(why) => out.bad_records.push((f, why)),
             }
         }
@@ -431,8 +509,16 @@ pub fn roll_forward_compaction(root: &Path) -> Result<Option<String>, String> {
     )))
 }
 
-/// Steps 2-4 of a compaction whose journal is durable (idempotent).
+/// Steps 2-4 of a compaction whose journal is durable (idempotent). Nothing is followed: the
+/// generation links are written in `tables` opened without following a link, and records are
+/// deleted only in shard directories of granular's own (`ledger` a link is refused).
 pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), String> {
+    let at = |p: &Path, e: std::io::Error| match fsutil::not_own(&e) {
+        Some(n) => n.to_string(),
+        None => format!("{}: {e}", p.display()),
+    };
+    let rd = Dir::open(root).map_err(|e| at(root, e))?;
+    rd.sub("ledger").map_err(|e| at(&root.join("ledger"), e))?;
     for (table, gen) in &j.publish {
         let current = match layout::table_dir(root, table) {
             Ok(layout::TableDir::Generation { gen: g, .. }) => Some(g),
@@ -444,36 +530,76 @@ pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), String> {
         }
     }
     write_index(root, &j.index)?;
+    let ledger = rd
+        .sub("ledger")
+        .map_err(|e| at(&root.join("ledger"), e))?
+        .ok_or_else(|| format!("{}: gone", root.join("ledger").display()))?;
     for (tag, &upto) in &j.index.folded {
-        if let Ok(files) = commit_files(&ledger_dir(root, tag)) {
-            for (seq, f) in files {
-                if seq <= upto {
-                    let _ = fs::remove_file(f);
-                }
+        // A shard directory that is a link is not followed: nothing is deleted through it.
+        let Ok(Some(d)) = ledger.sub(tag) else {
+            continue;
+        };
+        for (seq, name) in record_names(&d.entries().unwrap_or_default()) {
+            if seq <= upto {
+                let _ = d.remove_file(&name);
             }
         }
-        let _ = fsutil::sync_dir(&ledger_dir(root, tag));
+        let _ = d.sync();
     }
     let jp = journal_path(root);
-    match fs::remove_file(&jp) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => return Err(format!("{}: {e}", jp.display())),
-    }
-    let _ = fsutil::sync_dir(&root.join("ledger"));
+    ledger
+        .remove_file("compaction.json")
+        .map_err(|e| at(&jp, e))?;
+    let _ = ledger.sync();
     Ok(())
 }
 
 /// Roll forward committed parts and roll back uncommitted ones, for every shard whose lock
 /// is not held by a live process (our own shard's lock is held by us: pass it as `ours`).
+///
+/// Nothing is followed out of the campaign directory: directories are opened without
+/// following links (`fsutil::Dir`), tables only through granular's own generation links.
+/// Where the ledger is not granular's own (`ledger`, a shard's directory or the compaction
+/// journal a link), the commits behind it are unknown: no compaction is rolled forward and no
+/// pending part of those shards is discarded, until `granular resume` has set the link aside.
 pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
     let mut notes = Vec::new();
+    let at = |p: &Path, e: std::io::Error| match fsutil::not_own(&e) {
+        Some(n) => n.to_string(),
+        None => format!("{}: {e}", p.display()),
+    };
     let live: Vec<String> = live_locks(root)
         .into_iter()
         .map(|l| l.shard_tag)
         .filter(|t| t != ours)
         .collect();
-    if !live.iter().any(|t| t == COMPACT_TAG) {
+    let rd = Dir::open(root).map_err(|e| at(root, e))?;
+    // The shards whose commits cannot be known (`None`: none of them can).
+    let unknown: Option<Vec<String>> = match rd.sub("ledger") {
+        Ok(None) => Some(Vec::new()),
+        Ok(Some(l)) => {
+            let entries = l.entries().map_err(|e| at(&root.join("ledger"), e))?;
+            if entries
+                .iter()
+                .any(|(n, k)| n == "compaction.json" && *k != Kind::File)
+            {
+                None
+            } else {
+                Some(
+                    entries
+                        .into_iter()
+                        .filter(|(n, k)| {
+                            *k != Kind::Dir && !n.ends_with(".json") && !n.starts_with('.')
+                        })
+                        .map(|(n, _)| n)
+                        .collect(),
+                )
+            }
+        }
+        Err(e) if fsutil::not_own(&e).is_some() => None,
+        Err(e) => return Err(at(&root.join("ledger"), e)),
+    };
+    if unknown.is_some() && !live.iter().any(|t| t == COMPACT_TAG) {
         notes.extend(roll_forward_compaction(root)?);
     }
     // Unreadable records are left to `integrity` (they are set aside there); their pending
@@ -482,45 +608,72 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
     let mut referenced = std::collections::HashSet::new();
     for c in &commits {
         for f in &c.files {
-            let fin = root.join(&f.path);
-            referenced.insert(pending_path(&fin));
+            let (dir, name) = layout::split(&f.path);
+            let pending = format!(".{name}.pending");
+            referenced.insert(format!("{dir}/{pending}"));
             if live.contains(&c.shard) {
                 continue;
             }
-            let pend = pending_path(&fin);
-            if !fin.exists() && pend.exists() {
-                fs::rename(&pend, &fin).map_err(|e| format!("{}: {e}", pend.display()))?;
-                notes.push(format!("completed the commit of {}", fin.display()));
+            // A table behind a link that is not granular's own is not touched.
+            let Ok(Some(d)) = layout::walk(&rd, dir) else {
+                continue;
+            };
+            let here = |n: &str| d.kind(n).map_err(|e| at(&root.join(dir).join(n), e));
+            if here(name)?.is_none() && here(&pending)? == Some(Kind::File) {
+                d.rename(&pending, &d, name)
+                    .map_err(|e| at(&root.join(dir).join(&pending), e))?;
+                let _ = d.sync();
+                notes.push(format!(
+                    "completed the commit of {}",
+                    root.join(&f.path).display()
+                ));
             }
         }
     }
     notes.extend(remove_stale_temporaries(root));
-    let tables = root.join("tables");
-    if let Ok(entries) = fs::read_dir(&tables) {
-        for t in entries.filter_map(|e| e.ok()) {
-            let Ok(files) = fs::read_dir(t.path()) else {
+    let Some(unknown) = unknown else {
+        return Ok(notes);
+    };
+    let Ok(Some(tables)) = rd.sub("tables") else {
+        return Ok(notes);
+    };
+    for (t, _) in tables.entries().map_err(|e| at(&root.join("tables"), e))? {
+        if t.starts_with('.') {
+            continue;
+        }
+        // Only granular's own table directories (a link out is not followed).
+        let Ok(Some(d)) = layout::open_table_at(&tables, &t) else {
+            continue;
+        };
+        let mut removed = false;
+        for (name, kind) in d.entries().map_err(|e| at(d.path(), e))? {
+            if !name.ends_with(".pending")
+                || kind == Kind::Dir
+                || referenced.contains(&format!("tables/{t}/{name}"))
+            {
                 continue;
-            };
-            for f in files.filter_map(|e| e.ok()) {
-                let p = f.path();
-                let name = f.file_name().to_string_lossy().into_owned();
-                if !name.ends_with(".pending") || referenced.contains(&p) {
-                    continue;
-                }
-                // `.part-<tag>-<seq>.parquet.pending`
-                let tag = name
-                    .trim_start_matches(".part-")
-                    .split('-')
-                    .next()
-                    .unwrap_or("")
-                    .to_string();
-                if live.contains(&tag) {
-                    continue;
-                }
-                fs::remove_file(&p).map_err(|e| format!("{}: {e}", p.display()))?;
-                notes.push(format!("discarded the uncommitted part {}", p.display()));
             }
-            let _ = fsutil::sync_dir(&t.path());
+            // `.part-<tag>-<seq>.parquet.pending`
+            let tag = name
+                .trim_start_matches(".part-")
+                .split('-')
+                .next()
+                .unwrap_or("")
+                .to_string();
+            if live.contains(&tag) || unknown.contains(&tag) {
+                continue;
+            }
+            // A file, or a link itself (never what it points to).
+            d.remove_file(&name)
+                .map_err(|e| at(&d.path().join(&name), e))?;
+            removed = true;
+            notes.push(format!(
+                "discarded the uncommitted part {}",
+                d.path().join(&name).display()
+            ));
+        }
+        if removed {
+            let _ = d.sync();
         }
     }
     Ok(notes)
@@ -529,29 +682,44 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
 /// Delete temporary files (`.NAME.<pid>-<nanos>@<host>.tmp`, see `fsutil::temp_path`) left by
 /// processes of this host that died while writing (a kill during a checkpoint, say). Files of
 /// other hosts are left alone: their processes cannot be checked from here.
+///
+/// Directories are opened without following links (`fsutil::Dir`; a table only through its
+/// generation link): nothing is removed outside the campaign directory.
 fn remove_stale_temporaries(root: &Path) -> Vec<String> {
     let mut notes = Vec::new();
-    let mut dirs = vec![
-        root.to_path_buf(),
-        root.join("checkpoints"),
-        root.join("finals"),
-        root.join("locks"),
-        root.join("tables"),
-        root.join("ledger"),
-    ];
-    for sub in ["tables", "ledger", "sums"] {
-        if let Ok(it) = fs::read_dir(root.join(sub)) {
-            dirs.extend(
-                it.filter_map(|e| e.ok())
-                    .map(|e| e.path())
-                    .filter(|p| p.is_dir()),
-            );
+    let Ok(rd) = Dir::open(root) else {
+        return notes;
+    };
+    let mut dirs: Vec<Dir> = Vec::new();
+    for name in ["checkpoints", "finals", "locks", "tables", "ledger"] {
+        if let Ok(Some(d)) = rd.sub(name) {
+            dirs.push(d);
         }
     }
+    for sub in ["tables", "ledger", "sums"] {
+        let Ok(Some(d)) = rd.sub(sub) else { continue };
+        for (n, k) in d.entries().unwrap_or_default() {
+            let opened = if sub == "tables" && !n.starts_with('.') {
+                layout::open_table_at(&d, &n)
+            } else if k == Kind::Dir {
+                d.sub(&n)
+            } else {
+                continue;
+            };
+            if let Ok(Some(x)) = opened {
+                dirs.push(x);
+            }
+        }
+    }
+    if let Ok(r) = rd.try_clone() {
+        dirs.insert(0, r);
+    }
     for dir in dirs {
-        let Ok(it) = fs::read_dir(&dir) else { continue };
-        for f in it.filter_map(|e| e.ok()) {
-            let name = f.file_name().to_string_lossy().into_owned();
+        let Ok(entries) = dir.entries() else { continue };
+        for (name, kind) in entries {
+            if kind != Kind::File && kind != Kind::Link {
+                continue;
+            }
             let Some(stem) = name.strip_suffix(".tmp") else {
                 continue;
             };
@@ -569,10 +737,10 @@ fn remove_stale_temporaries(root: &Path) -> Vec<String> {
                 .and_then(|(_, tail)| tail.split('-').next())
                 .and_then(|p| p.parse::<u32>().ok());
             if let Some(pid) = pid {
-                if !pid_alive(pid) && fs::remove_file(f.path()).is_ok() {
+                if !pid_alive(pid) && dir.remove_file(&name).unwrap_or(false) {
                     notes.push(format!(
                         "removed the stale temporary file {}",
-                        f.path().display()
+                        dir.path().join(&name).display()
                     ));
                 }
             }
@@ -729,7 +897,7 @@ pub const REMOTE_STALE_AFTER: std::time::Duration = std::time::Duration::from_se
 /// theory; the name is kept from when only compaction took it).
 pub const COMPACT_TAG: &str = "compact";
 
-fn lock_is_live(root: &Path, l: &LockInfo) -> bool {
+fn lock_is_live(locks: &Dir, l: &LockInfo) -> bool {
     if l.host == hostname() {
         // A pid now used by another process (started at another time) holds nothing.
         return pid_alive(l.pid)
@@ -738,13 +906,12 @@ fn lock_is_live(root: &Path, l: &LockInfo) -> bool {
     }
     // Another host's process cannot be checked from here: it is live while its heartbeat (or,
     // before the first heartbeat, its lock file) is recent.
-    let locks = root.join("locks");
     let newest = [
-        locks.join(format!("{}.running.json", l.shard_tag)),
-        locks.join(format!("{}.lock", l.shard_tag)),
+        format!("{}.running.json", l.shard_tag),
+        format!("{}.lock", l.shard_tag),
     ]
     .iter()
-    .filter_map(|p| fs::symlink_metadata(p).ok()?.modified().ok())
+    .filter_map(|n| locks.open_file(n).ok()??.metadata().ok()?.modified().ok())
     .max();
     match newest {
         Some(t) => t.elapsed().map_or(true, |age| age < REMOTE_STALE_AFTER),
@@ -752,26 +919,63 @@ fn lock_is_live(root: &Path, l: &LockInfo) -> bool {
     }
 }
 
-/// The holder recorded in a lock file (None: missing, unreadable, a link, or not a lock).
-fn read_lock(path: &Path) -> Option<LockInfo> {
-    let m = fs::symlink_metadata(path).ok()?;
-    if !m.file_type().is_file() {
-        return None;
-    }
-    serde_json::from_str::<LockInfo>(&fs::read_to_string(path).ok()?).ok()
+/// The holder recorded in the lock file `name` of `locks/` (None: missing, unreadable, a link,
+/// or not a lock).
+fn read_lock(locks: &Dir, name: &str) -> Option<LockInfo> {
+    let bytes = locks.read(name).ok()??;
+    serde_json::from_slice::<LockInfo>(&bytes).ok()
+}
+
+/// `DIR/locks`, opened without following a link; None if there is none (or it is not
+/// granular's own: a link or a file there is set aside by the next lock taken).
+fn locks_dir(root: &Path) -> Option<Dir> {
+    Dir::open(root).ok()?.sub("locks").ok()?
 }
 
 /// Locks of live processes.
 pub fn live_locks(root: &Path) -> Vec<LockInfo> {
-    let Ok(entries) = fs::read_dir(root.join("locks")) else {
+    let Some(locks) = locks_dir(root) else {
+        return Vec::new();
+    };
+    let Ok(entries) = locks.entries() else {
         return Vec::new();
     };
     entries
-        .filter_map(|e| e.ok())
-        .filter(|e| e.file_name().to_string_lossy().ends_with(".lock"))
-        .filter_map(|e| read_lock(&e.path()))
-        .filter(|l| lock_is_live(root, l))
+        .into_iter()
+        .filter(|(n, k)| n.ends_with(".lock") && *k == Kind::File)
+        .filter_map(|(n, _)| read_lock(&locks, &n))
+        .filter(|l| lock_is_live(&locks, l))
         .collect()
+}
+
+/// `DIR/locks` opened (created if missing) without following a link. A link or a file in its
+/// place is not granular's own: it is renamed aside (`locks.moved-<time>-<pid>`, the link
+/// itself, never its target) and a directory made, so that no lock is ever written outside.
+fn own_locks_dir(root: &Path) -> Result<Dir, LockError> {
+    let io = |e: std::io::Error, p: &Path| LockError::Io(format!("{}: {e}", p.display()));
+    let top = Dir::open(root).map_err(|e| io(e, root))?;
+    match top.kind("locks").map_err(|e| io(e, root))? {
+        None | Some(Kind::Dir) => {}
+        Some(k) => {
+            let aside = format!(
+                "locks.moved-{}-{}",
+                std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map(|d| d.as_secs())
+                    .unwrap_or(0),
+                std::process::id()
+            );
+            tracing::warn!(
+                "{} is {}, not granular's own directory of locks: renamed to {aside}",
+                root.join("locks").display(),
+                top.describe("locks", k)
+            );
+            top.rename("locks", &top, &aside)
+                .map_err(|e| io(e, &root.join("locks")))?;
+        }
+    }
+    top.create_dir("locks")
+        .map_err(|e| io(e, &root.join("locks")))
 }
 
 /// A mutual exclusion among the processes of this campaign held for a short while, by
@@ -786,20 +990,20 @@ impl Flock {
     /// Block until `locks/<name>` is ours. A file system without `flock` (some network file
     /// systems) gives `Ok(None)`: the caller goes on without it (its other checks stand).
     fn acquire(root: &Path, name: &str) -> Result<Option<Flock>, LockError> {
-        use std::os::unix::fs::OpenOptionsExt;
         use std::os::unix::io::AsRawFd;
-        let dir = root.join("locks");
-        let io = |e: std::io::Error, p: &Path| LockError::Io(format!("{}: {e}", p.display()));
-        fsutil::create_dir_durable(&dir).map_err(|e| io(e, &dir))?;
-        let path = dir.join(name);
-        let file = fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-            .open(&path)
-            .map_err(|e| io(e, &path))?;
+        let locks = own_locks_dir(root)?;
+        let path = root.join("locks").join(name);
+        let io = |e: std::io::Error| LockError::Io(format!("{}: {e}", path.display()));
+        let file = loop {
+            if let Some(f) = locks.open_file(name).map_err(io)? {
+                break f;
+            }
+            match locks.create_new(name) {
+                Ok(f) => break f,
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+                Err(e) => return Err(io(e)),
+            }
+        };
         loop {
             // SAFETY: flock on a file descriptor we own; no memory is passed.
             let r = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX) };
@@ -810,25 +1014,27 @@ impl Flock {
             match e.raw_os_error() {
                 Some(libc::EINTR) => continue,
                 Some(libc::ENOLCK) | Some(libc::EOPNOTSUPP) => return Ok(None),
-                _ => return Err(io(e, &path)),
+                _ => return Err(io(e)),
             }
         }
     }
 }
 
-/// Create `locks/<tag>.lock` exclusively (O_EXCL, which NFS v3+ honours), replacing a stale
-/// one; `Err(Held)` names the live holder and what it does.
-fn take_lock_file(root: &Path, info: &LockInfo) -> Result<PathBuf, LockError> {
-    let dir = root.join("locks");
-    let io = |e: std::io::Error, p: &Path| LockError::Io(format!("{}: {e}", p.display()));
-    fsutil::create_dir_durable(&dir).map_err(|e| io(e, &dir))?;
-    let path = dir.join(format!("{}.lock", info.shard_tag));
+/// A lock file of this process: `locks/<name>` of the campaign at `root`.
+struct LockFile {
+    root: PathBuf,
+    name: String,
+}
+
+/// Create `locks/<tag>.lock` exclusively (O_EXCL, which NFS v3+ honours; never through a
+/// link), replacing a stale one; `Err(Held)` names the live holder and what it does.
+fn take_lock_file(root: &Path, info: &LockInfo) -> Result<LockFile, LockError> {
+    let locks = own_locks_dir(root)?;
+    let name = format!("{}.lock", info.shard_tag);
+    let path = root.join("locks").join(&name);
+    let io = |e: std::io::Error| LockError::Io(format!("{}: {e}", path.display()));
     for _ in 0..3 {
-        match fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&path)
-        {
+        match locks.create_new(&name) {
             Ok(mut f) => {
                 use std::io::Write;
                 let written = f
@@ -836,14 +1042,17 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<PathBuf, LockError> {
                     .and_then(|_| f.sync_all());
                 if let Err(e) = written {
                     drop(f);
-                    let _ = fs::remove_file(&path);
-                    return Err(io(e, &path));
+                    let _ = locks.remove_file(&name);
+                    return Err(io(e));
                 }
-                let _ = fsutil::sync_dir(&dir);
-                return Ok(path);
+                let _ = locks.sync();
+                return Ok(LockFile {
+                    root: root.to_path_buf(),
+                    name,
+                });
             }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                if let Some(h) = read_lock(&path).filter(|h| lock_is_live(root, h)) {
+                if let Some(h) = read_lock(&locks, &name).filter(|h| lock_is_live(&locks, h)) {
                     return Err(LockError::Held(format!(
                         "{} is in use: {} is being run by {} (lock {})",
                         root.display(),
@@ -856,29 +1065,33 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<PathBuf, LockError> {
                 // by one process at a time, after reading it again under the takeover lock,
                 // so that a lock just taken by another process is never removed.
                 let _guard = Flock::acquire(root, "takeover.flock")?;
-                let seen = fs::symlink_metadata(&path);
-                match read_lock(&path) {
-                    Some(h) if lock_is_live(root, &h) => continue,
+                let seen = locks.open_file(&name).ok().flatten().and_then(|f| f.metadata().ok());
+                match read_lock(&locks, &name) {
+                    Some(h) if lock_is_live(&locks, &h) => continue,
                     Some(_) => {
-                        let _ = fs::remove_file(&path);
+                        let _ = locks.remove_file(&name);
                     }
                     None => {
-                        // Unreadable: a lock being written right now looks the same for a
-                        // moment; only one older than a few seconds is taken to be a crash.
-                        let old = seen
-                            .ok()
-                            .and_then(|m| m.modified().ok())
-                            .and_then(|t| t.elapsed().ok())
-                            .is_some_and(|age| age > std::time::Duration::from_secs(5));
+                        // Unreadable (or a link: removed itself): a lock being written right
+                        // now looks the same for a moment; only one older than a few seconds
+                        // is taken to be a crash.
+                        let old = match locks.kind(&name) {
+                            Ok(Some(Kind::File)) => seen
+                                .and_then(|m| m.modified().ok())
+                                .and_then(|t| t.elapsed().ok())
+                                .is_some_and(|age| age > std::time::Duration::from_secs(5)),
+                            Ok(Some(_)) => true,
+                            _ => false,
+                        };
                         if old {
-                            let _ = fs::remove_file(&path);
+                            let _ = locks.remove_file(&name);
                         } else {
                             std::thread::sleep(std::time::Duration::from_millis(100));
                         }
                     }
                 }
             }
-            Err(e) => return Err(io(e, &path)),
+            Err(e) => return Err(io(e)),
         }
     }
     Err(LockError::Held(format!(
@@ -889,9 +1102,11 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<PathBuf, LockError> {
 
 /// Remove a lock file if it is still ours (a lock taken over as stale by another process,
 /// a remote node's after `REMOTE_STALE_AFTER`, is left to its new holder).
-fn release(path: &Path) {
-    if read_lock(path).is_some_and(|l| l.is_ours()) {
-        let _ = fs::remove_file(path);
+fn release(lock: &LockFile) {
+    if let Some(locks) = locks_dir(&lock.root) {
+        if read_lock(&locks, &lock.name).is_some_and(|l| l.is_ours()) {
+            let _ = locks.remove_file(&lock.name);
+        }
     }
 }
 
@@ -900,15 +1115,15 @@ fn release(path: &Path) {
 /// campaign other than running its runs ([`Purpose`]): the holder then reads `campaign.json`,
 /// the registry and the ledger, and decides on what it read. Released on drop.
 pub struct ExclusiveLock {
-    path: PathBuf,
+    file: LockFile,
 }
 
 impl ExclusiveLock {
     pub fn acquire(root: &Path, purpose: Purpose) -> Result<ExclusiveLock, LockError> {
         let mut info = LockInfo::ours(COMPACT_TAG, COMPACT_TAG, 0);
         info.purpose = Some(purpose);
-        let path = take_lock_file(root, &info)?;
-        let lock = ExclusiveLock { path };
+        let file = take_lock_file(root, &info)?;
+        let lock = ExclusiveLock { file };
         // Take, then check (shards do the same the other way round): of two processes
         // starting at once, at least one sees the other.
         let running: Vec<LockInfo> = live_locks(root)
@@ -931,13 +1146,13 @@ impl ExclusiveLock {
 
 impl Drop for ExclusiveLock {
     fn drop(&mut self) {
-        release(&self.path);
+        release(&self.file);
     }
 }
 
 /// An exclusive claim on one shard of a campaign directory, released on drop.
 pub struct ShardLock {
-    path: PathBuf,
+    file: LockFile,
 }
 
 impl ShardLock {
@@ -969,8 +1184,8 @@ impl ShardLock {
             }
         }
         let info = LockInfo::ours(&shard.to_string(), &shard.tag(), shard.count);
-        let path = take_lock_file(root, &info)?;
-        let lock = ShardLock { path };
+        let file = take_lock_file(root, &info)?;
+        let lock = ShardLock { file };
         if let Some(e) = exclusive(root) {
             return Err(e);
         }
@@ -980,7 +1195,7 @@ impl ShardLock {
 
 impl Drop for ShardLock {
     fn drop(&mut self) {
-        release(&self.path);
+        release(&self.file);
     }
 }
 
@@ -1005,19 +1220,22 @@ impl Upkeep {
 mod tests {
     use super::*;
 
-    /// A lock that cannot be written (here `locks` is a file, as a full disk or a read-only
+    /// A lock that cannot be written (here the directory is gone, as a full disk or a read-only
     /// file system would refuse it) is an I/O error (exit 4), not "in use" (exit 3); a lock held
     /// by a live process is "in use", naming what the holder does and its pid.
     #[test]
     fn lock_errors_are_io_or_held() {
         let d = tempfile::tempdir().unwrap();
-        fs::write(d.path().join("locks"), b"not a directory").unwrap();
-        match ShardLock::acquire(d.path(), Shard::ALL) {
-            Err(LockError::Io(m)) => assert!(m.contains("locks"), "{m}"),
+        let gone = d.path().join("no-such-directory");
+        match ShardLock::acquire(&gone, Shard::ALL) {
+            Err(LockError::Io(m)) => assert!(m.contains("no-such-directory"), "{m}"),
             Err(other) => panic!("expected an I/O error, got {other:?}"),
-            Ok(_) => panic!("took a lock in a file"),
+            Ok(_) => panic!("took a lock in a directory that does not exist"),
         }
-        assert!(ExclusiveLock::acquire(d.path(), Purpose::Growth).is_err());
+        assert!(matches!(
+            ExclusiveLock::acquire(&gone, Purpose::Growth),
+            Err(LockError::Io(_))
+        ));
 
         let d = tempfile::tempdir().unwrap();
         let held = ExclusiveLock::acquire(d.path(), Purpose::Upgrade).unwrap();
@@ -1057,5 +1275,40 @@ mod tests {
         fs::write(&path, serde_json::to_string(&dead).unwrap()).unwrap();
         drop(lock);
         assert!(path.exists(), "a lock that is not ours was removed");
+    }
+}
+
+#[cfg(test)]
+mod closed_world_tests {
+    use super::*;
+
+    /// `locks` as a link out of the campaign (or a file): the link is set aside, never
+    /// followed; no lock is written outside.
+    #[test]
+    fn a_locks_link_is_set_aside_not_followed() {
+        let d = tempfile::tempdir().unwrap();
+        let camp = d.path().join("camp");
+        let outside = d.path().join("outside");
+        fs::create_dir_all(&camp).unwrap();
+        fs::create_dir_all(&outside).unwrap();
+        std::os::unix::fs::symlink(&outside, camp.join("locks")).unwrap();
+        let lock = ShardLock::acquire(&camp, Shard::ALL).unwrap();
+        assert!(fs::read_dir(&outside).unwrap().next().is_none(), "written outside");
+        assert!(fs::symlink_metadata(camp.join("locks")).unwrap().is_dir());
+        let aside: Vec<String> = fs::read_dir(&camp)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("locks.moved-"))
+            .collect();
+        assert_eq!(aside.len(), 1, "{aside:?}");
+        assert!(fs::symlink_metadata(camp.join(&aside[0])).unwrap().file_type().is_symlink());
+        drop(lock);
+        let _ = Upkeep::acquire(&camp).unwrap();
+        assert!(fs::read_dir(&outside).unwrap().next().is_none(), "written outside");
+        // A file in its place: set aside too.
+        fs::remove_dir_all(camp.join("locks")).unwrap();
+        fs::write(camp.join("locks"), b"x").unwrap();
+        let _l = ExclusiveLock::acquire(&camp, Purpose::Compaction).unwrap();
+        assert!(fs::symlink_metadata(camp.join("locks")).unwrap().is_dir());
     }
 }

@@ -101,7 +101,7 @@ impl CampaignInfo {
     /// "not a campaign directory", a corrupt one as such.
     pub fn read(root: &Path) -> Result<CampaignInfo, CampaignError> {
         let info_path = root.join("campaign.json");
-        let text = std::fs::read_to_string(&info_path).map_err(|e| {
+        let text = fsutil::read_inside(root, "campaign.json").map_err(|e| {
             CampaignError::Refused(if e.kind() == std::io::ErrorKind::NotFound {
                 format!(
                     "{}: not a granular campaign directory (no campaign.json in it)",
@@ -109,9 +109,8 @@ impl CampaignInfo {
                 )
             } else {
                 format!(
-                    "{}: not a readable granular campaign directory ({}: {e})",
-                    root.display(),
-                    info_path.display()
+                    "{}: not a readable granular campaign directory ({e})",
+                    root.display()
                 )
             })
         })?;

@@ -2,7 +2,9 @@
 //! rebuilt table its sidecar (a full scrub; `--quick`: sizes only), no part is without a
 //! commit and no run in two (see `integrity`); every table file is readable, of this campaign,
 //! table and format; uncommitted (`.pending`) parts of dead writers are reported; the `runs`
-//! table holds every committed run exactly once (nothing lost, nothing doubled).
+//! table holds every committed run exactly once (nothing lost, nothing doubled). Links where
+//! granular keeps its own files are named (see `integrity`) and never followed: the tables
+//! are read through granular's own generation links only, their regular files only.
 
 use std::collections::BTreeMap;
 
@@ -11,6 +13,7 @@ use arrow_array::types::UInt64Type;
 
 use super::integrity::{self, Depth};
 use super::{ledger, tables, Campaign};
+use crate::fsutil::{Dir, Kind};
 use crate::store::{layout, parquet_io};
 
 #[derive(Debug, Default)]
@@ -44,18 +47,17 @@ pub fn verify(c: &Campaign, depth: Depth) -> Result<VerifyReport, String> {
     }
     let live = !ledger::live_locks(&c.root).is_empty();
     let mut run_counts: BTreeMap<u64, u32> = BTreeMap::new();
+    let rd = Dir::open(&c.root).map_err(|e| format!("{}: {e}", c.root.display()))?;
     for table in layout::table_names(&c.root).map_err(|e| e.to_string())? {
         let dir = c.root.join("tables").join(&table);
         let mut files = 0;
         let mut rows = 0u64;
-        let mut entries: Vec<_> = std::fs::read_dir(&dir)
-            .map_err(|e| format!("{}: {e}", dir.display()))?
-            .filter_map(|e| e.ok())
-            .collect();
-        entries.sort_by_key(|e| e.file_name());
-        for e in entries {
-            let name = e.file_name().to_string_lossy().into_owned();
-            let path = e.path();
+        let Some(d) = layout::open_table(&rd, &table).map_err(|e| e.to_string())? else {
+            continue;
+        };
+        let entries = d.entries().map_err(|e| format!("{}: {e}", dir.display()))?;
+        for (name, kind) in entries {
+            let path = dir.join(&name);
             if name.ends_with(".pending") {
                 if !live {
                     r.problems.push(format!(
@@ -68,14 +70,23 @@ pub fn verify(c: &Campaign, depth: Depth) -> Result<VerifyReport, String> {
             if name.starts_with('.') {
                 continue;
             }
-            if !name.ends_with(".parquet") {
+            if !name.ends_with(".parquet") || kind != Kind::File {
                 continue; // reported by the integrity check
             }
             files += 1;
-            let checked = parquet_io::inspect(&path).and_then(|(info, _)| {
-                parquet_io::check_part(&path, &info, &table, Some(&c.identity))?;
-                Ok(info)
-            });
+            let open = || -> Result<std::fs::File, parquet_io::StoreError> {
+                d.open_file(&name)
+                    .map_err(|e| parquet_io::open_error(&path, e))?
+                    .ok_or_else(|| {
+                        parquet_io::StoreError::io(&path, std::io::ErrorKind::NotFound.into())
+                    })
+            };
+            let checked = open()
+                .and_then(|f| parquet_io::inspect_file(f, &path))
+                .and_then(|(info, _)| {
+                    parquet_io::check_part(&path, &info, &table, Some(&c.identity))?;
+                    Ok(info)
+                });
             match checked {
                 Ok(info) => rows += info.rows,
                 Err(e) => {
@@ -84,7 +95,9 @@ pub fn verify(c: &Campaign, depth: Depth) -> Result<VerifyReport, String> {
                 }
             }
             if table == tables::RUNS {
-                match parquet_io::read_campaign_file(&path, &table, &c.identity) {
+                match open()
+                    .and_then(|f| parquet_io::read_campaign_opened(f, &path, &table, &c.identity))
+                {
                     Ok(batches) => {
                         for b in batches {
                             let Some(col) = b.column_by_name("run_id") else {

@@ -15,6 +15,7 @@ use arrow_schema::DataType;
 
 use super::escape;
 use crate::campaign::Campaign;
+use crate::fsutil::{self, Kind};
 use crate::store::parquet_io;
 
 /// Tables with more rows are named with their row count only.
@@ -22,8 +23,12 @@ pub const MAX_TABLE_ROWS: usize = 200;
 /// Larger figure files are left out (with a note).
 pub const MAX_FIGURE_BYTES: u64 = 8 << 20;
 
-/// The files of `dir` ending in `.ext`, sorted (hidden ones left out).
+/// The regular files of `dir` ending in `.ext`, sorted (hidden ones left out); a link (the
+/// directory or a file) is not followed: not granular's own (`integrity` names it).
 fn files(dir: &Path, ext: &str) -> Vec<PathBuf> {
+    if !is_own(dir, Kind::Dir) {
+        return Vec::new();
+    }
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
         .map(|it| {
             it.filter_map(|e| e.ok())
@@ -31,13 +36,18 @@ fn files(dir: &Path, ext: &str) -> Vec<PathBuf> {
                 .filter(|p| {
                     let n = p.file_name().map(|n| n.to_string_lossy().into_owned());
                     n.is_some_and(|n| !n.starts_with('.') && n.ends_with(&format!(".{ext}")))
-                        && p.is_file()
+                        && is_own(p, Kind::File)
                 })
                 .collect()
         })
         .unwrap_or_default();
     v.sort();
     v
+}
+
+/// Whether `p` is a `kind` itself (not a link to one).
+fn is_own(p: &Path, kind: Kind) -> bool {
+    fsutil::kind(p).ok().flatten() == Some(kind)
 }
 
 /// A cell of a column as text (numbers with 6 significant digits; null: empty).
@@ -128,7 +138,7 @@ pub fn base64(data: &[u8]) -> String {
 /// The section, if the campaign has an analysis directory; returns the figures embedded.
 pub fn section(h: &mut String, c: &Campaign, notes: &mut Vec<String>) -> usize {
     let dir = c.analysis_dir();
-    if !dir.is_dir() {
+    if !is_own(&dir, Kind::Dir) {
         return 0;
     }
     h.push_str("<h2 id=\"analysis\">Analysis</h2>\n");
@@ -170,7 +180,12 @@ pub fn section(h: &mut String, c: &Campaign, notes: &mut Vec<String>) -> usize {
             .unwrap_or_default();
         let bytes = match std::fs::metadata(&path) {
             Ok(m) if m.len() > MAX_FIGURE_BYTES => Err(format!("{} bytes", m.len())),
-            _ => std::fs::read(&path).map_err(|e| e.to_string()),
+            _ => fsutil::open_regular(&path)
+                .and_then(|mut f| {
+                    let mut b = Vec::new();
+                    std::io::Read::read_to_end(&mut f, &mut b).map(|_| b)
+                })
+                .map_err(|e| e.to_string()),
         };
         match bytes {
             Ok(b) => {

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::fsutil;
+use crate::fsutil::{self, Dir, Kind};
 
 /// A file's size and SHA-256, as recorded in a commit or a sidecar.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Eq)]
@@ -70,9 +70,14 @@ fn hex(d: &[u8]) -> String {
     s
 }
 
-/// Size and SHA-256 of the file at `path` (read whole).
+/// Size and SHA-256 of the regular file at `path` (read whole; a link at `path` is refused,
+/// not followed: `fsutil::open_regular`).
 pub fn sum_file(path: &Path) -> io::Result<(u64, String)> {
-    let mut f = File::open(path)?;
+    sum_reader(fsutil::open_regular(path)?)
+}
+
+/// Size and SHA-256 of everything `f` reads.
+pub fn sum_reader(mut f: impl Read) -> io::Result<(u64, String)> {
     let mut h = Sha256::new();
     let mut buf = vec![0u8; 1 << 20];
     let mut bytes = 0u64;
@@ -91,8 +96,14 @@ pub fn sum_file(path: &Path) -> io::Result<(u64, String)> {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Mismatch {
     Missing,
-    Size { found: u64 },
-    Checksum { found: String },
+    Size {
+        found: u64,
+    },
+    Checksum {
+        found: String,
+    },
+    /// Not a regular file of granular's own (a symbolic link, not followed): what is there.
+    NotOwn(String),
 }
 
 impl std::fmt::Display for Mismatch {
@@ -101,24 +112,34 @@ impl std::fmt::Display for Mismatch {
             Mismatch::Missing => write!(f, "missing"),
             Mismatch::Size { found } => write!(f, "{found} bytes"),
             Mismatch::Checksum { found } => write!(f, "SHA-256 {found}"),
+            Mismatch::NotOwn(what) => write!(f, "{what}"),
         }
     }
 }
 
 /// Check the file at `path` against `rec`: its size only (`full` false) or its SHA-256 too.
+/// A link at `path` is not followed: it is a mismatch ([`Mismatch::NotOwn`]).
 pub fn check(path: &Path, rec: &FileSum, full: bool) -> io::Result<Option<Mismatch>> {
-    let len = match std::fs::metadata(path) {
-        Ok(m) => m.len(),
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Some(Mismatch::Missing)),
-        Err(e) => return Err(e),
-    };
+    match fsutil::open_regular(path) {
+        Ok(f) => check_open(f, rec, full),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(Some(Mismatch::Missing)),
+        Err(e) => match fsutil::not_own(&e) {
+            Some(n) => Ok(Some(Mismatch::NotOwn(n.what()))),
+            None => Err(e),
+        },
+    }
+}
+
+/// Check the opened file `f` against `rec` (see [`check`]).
+pub fn check_open(f: File, rec: &FileSum, full: bool) -> io::Result<Option<Mismatch>> {
+    let len = f.metadata()?.len();
     if len != rec.bytes {
         return Ok(Some(Mismatch::Size { found: len }));
     }
     if !full {
         return Ok(None);
     }
-    let (_, sum) = sum_file(path)?;
+    let (_, sum) = sum_reader(f)?;
     Ok((sum != rec.sha256).then_some(Mismatch::Checksum { found: sum }))
 }
 
@@ -142,7 +163,9 @@ struct Sidecar {
     sum: FileSum,
 }
 
-/// Write the sidecar of `tables/<table>/<name>` (atomically).
+/// Write the sidecar of `tables/<table>/<name>` (atomically; `sums/` and its directories
+/// must be directories of granular's own: a link there is refused, nothing written through
+/// it).
 pub fn write_sidecar(
     root: &Path,
     table: &str,
@@ -159,32 +182,59 @@ pub fn write_sidecar(
             sha256: sha256.into(),
         },
     };
-    let p = sidecar_path(root, table, name);
-    fsutil::create_dir_durable(p.parent().expect("parent"))?;
-    fsutil::write_atomic(&p, &serde_json::to_vec(&s).expect("sidecar serialises"))
+    Dir::open(root)?
+        .create_dir("sums")?
+        .create_dir(table)?
+        .write_atomic(
+            &format!("{name}.sum.json"),
+            &serde_json::to_vec(&s).expect("sidecar serialises"),
+        )
+}
+
+/// The directory `sums/<table>` of the campaign directory `root`, if it is granular's own.
+fn sums_dir(root: &Path, table: &str) -> Option<Dir> {
+    Dir::open(root).ok()?.walk(&format!("sums/{table}")).ok()?
 }
 
 /// The record in the sidecar of `tables/<table>/<name>`; `None` if there is none or it is not
-/// readable (a file without a valid sidecar cannot be trusted).
+/// readable (a file without a valid sidecar cannot be trusted; a link is not read).
 pub fn read_sidecar(root: &Path, table: &str, name: &str) -> Option<FileSum> {
-    let text = std::fs::read(sidecar_path(root, table, name)).ok()?;
+    let text = sums_dir(root, table)?
+        .read(&format!("{name}.sum.json"))
+        .ok()??;
     let s: Sidecar = serde_json::from_slice(&text).ok()?;
     (s.kind == SIDECAR_KIND && s.format_version == SIDECAR_FORMAT).then_some(s.sum)
 }
 
-/// The table files that have a sidecar: (table, name).
+/// Remove the sidecar of `tables/<table>/<name>` (a link there is removed itself); false if
+/// there was none.
+pub fn remove_sidecar(root: &Path, table: &str, name: &str) -> io::Result<bool> {
+    match Dir::open(root)?.walk(&format!("sums/{table}"))? {
+        Some(d) => d.remove_file(&format!("{name}.sum.json")),
+        None => Ok(false),
+    }
+}
+
+/// The table files that have a sidecar: (table, name). Links in `sums/` are not followed.
 pub fn sidecars(root: &Path) -> Vec<(String, String)> {
     let mut v = Vec::new();
-    let Ok(tables) = std::fs::read_dir(root.join("sums")) else {
+    let Some(sums) = Dir::open(root)
+        .ok()
+        .and_then(|d| d.sub("sums").ok().flatten())
+    else {
         return v;
     };
-    for t in tables.filter_map(|e| e.ok()) {
-        let table = t.file_name().to_string_lossy().into_owned();
-        let Ok(files) = std::fs::read_dir(t.path()) else {
+    for (table, kind) in sums.entries().unwrap_or_default() {
+        if kind != Kind::Dir {
+            continue;
+        }
+        let Ok(Some(t)) = sums.sub(&table) else {
             continue;
         };
-        for f in files.filter_map(|e| e.ok()) {
-            let n = f.file_name().to_string_lossy().into_owned();
+        for (n, kind) in t.entries().unwrap_or_default() {
+            if kind != Kind::File {
+                continue;
+            }
             if let Some(name) = n.strip_suffix(".sum.json") {
                 if !name.starts_with('.') {
                     v.push((table.clone(), name.to_string()));
@@ -252,5 +302,21 @@ mod tests {
         );
         std::fs::write(sidecar_path(d.path(), "t", "summary.parquet"), b"{not json").unwrap();
         assert_eq!(read_sidecar(d.path(), "t", "summary.parquet"), None);
+        // A sidecar that is a link (to a valid one elsewhere) is not read, nor listed.
+        let e = tempfile::tempdir().unwrap();
+        write_sidecar(e.path(), "t", "x.parquet", 1, "00").unwrap();
+        std::fs::remove_file(sidecar_path(d.path(), "t", "summary.parquet")).unwrap();
+        std::os::unix::fs::symlink(
+            sidecar_path(e.path(), "t", "x.parquet"),
+            sidecar_path(d.path(), "t", "summary.parquet"),
+        )
+        .unwrap();
+        assert_eq!(read_sidecar(d.path(), "t", "summary.parquet"), None);
+        assert!(sidecars(d.path()).is_empty());
+        // `sums` a link: nothing written through it.
+        let f = tempfile::tempdir().unwrap();
+        std::os::unix::fs::symlink(e.path().join("sums"), f.path().join("sums")).unwrap();
+        assert!(write_sidecar(f.path(), "t", "y.parquet", 1, "00").is_err());
+        assert!(!sidecar_path(e.path(), "t", "y.parquet").exists());
     }
 }

@@ -1,7 +1,9 @@
 //! A campaign's tables as the storage sees them: a directory per table under `tables/`
 //! (see [`super::layout`]), each file stamped with the campaign's identity (name, model,
 //! seed) and the manifest it was written under, and read back only if it is this campaign's
-//! and this table's.
+//! and this table's. A table is read only through granular's own generation link, and only
+//! its regular files: a link out of the campaign directory is never followed (an error naming
+//! it; `campaign::integrity` names it as damage and `granular resume` sets it aside).
 
 use std::path::{Path, PathBuf};
 
@@ -10,7 +12,7 @@ use arrow_array::RecordBatch;
 use super::checksum;
 use super::layout;
 use super::parquet_io::{self, Stamp, StoreError};
-use crate::fsutil;
+use crate::fsutil::{self, Dir, Kind};
 
 /// The tables of one campaign directory.
 #[derive(Clone, Debug)]
@@ -84,27 +86,33 @@ impl Dataset {
             .map_err(|e| StoreError::io(&root.join("tables").join(table), e))
     }
 
+    /// The table's directory, opened as [`layout::open_table`] does (`None`: it has none).
+    fn open_dir(&self, table: &str) -> Result<Option<Dir>, StoreError> {
+        let dir = self.dir(table);
+        // `dir` is `<root>/tables/<table>`: the root the table is read from.
+        let root = dir.parent().and_then(|t| t.parent()).unwrap_or(&self.root);
+        let rd = match Dir::open(root) {
+            Ok(d) => d,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(StoreError::io(root, e)),
+        };
+        layout::open_table(&rd, table).map_err(|e| parquet_io::open_error(&dir, e))
+    }
+
     /// The table's visible Parquet files, sorted (hidden and pending files excluded; a
-    /// missing directory has none).
+    /// missing directory has none). Only regular files are listed; a table directory that is
+    /// not granular's own (a link out) is an error naming it.
     pub fn files(&self, table: &str) -> Result<Vec<PathBuf>, StoreError> {
         let dir = self.dir(table);
-        let mut files: Vec<PathBuf> = match std::fs::read_dir(&dir) {
-            Ok(it) => it
-                .filter_map(|e| e.ok())
-                .map(|e| e.path())
-                .filter(|p| {
-                    let n = p
-                        .file_name()
-                        .map(|n| n.to_string_lossy().into_owned())
-                        .unwrap_or_default();
-                    !n.starts_with('.') && n.ends_with(".parquet")
-                })
-                .collect(),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-            Err(e) => return Err(StoreError::io(&dir, e)),
+        let Some(d) = self.open_dir(table)? else {
+            return Ok(Vec::new());
         };
-        files.sort();
-        Ok(files)
+        let entries = d.entries().map_err(|e| StoreError::io(&dir, e))?;
+        Ok(entries
+            .into_iter()
+            .filter(|(n, k)| *k == Kind::File && !n.starts_with('.') && n.ends_with(".parquet"))
+            .map(|(n, _)| dir.join(n))
+            .collect())
     }
 
     /// Every batch of one file of `table`, checked to be this campaign's.
@@ -121,9 +129,10 @@ impl Dataset {
         Ok(out)
     }
 
-    /// Whether `tables/<table>/<name>` exists.
+    /// Whether `tables/<table>/<name>` exists (a regular file of granular's own table
+    /// directory).
     pub fn has(&self, table: &str, name: &str) -> bool {
-        self.dir(table).join(name).exists()
+        matches!(self.open_dir(table), Ok(Some(d)) if d.kind(name).ok().flatten() == Some(Kind::File))
     }
 
     /// Write `tables/<table>/<name>` atomically (write, fsync, its checksum sidecar, rename,

@@ -153,11 +153,29 @@ pub struct PartInfo {
 }
 
 /// Open a table file and read its footer: a truncated file, a file that is not Parquet, or a
-/// Parquet file not written by granular is an error naming the file.
+/// Parquet file not written by granular is an error naming the file. A symbolic link at
+/// `path` is not followed (nor is anything but a regular file opened): an error naming it.
 pub fn inspect(
     path: &Path,
 ) -> Result<(PartInfo, ParquetRecordBatchReaderBuilder<File>), StoreError> {
-    let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let file = crate::fsutil::open_regular(path).map_err(|e| open_error(path, e))?;
+    inspect_file(file, path)
+}
+
+/// The error of a table file that could not be opened: one that is not granular's own (a
+/// link, not followed) says so.
+pub fn open_error(path: &Path, e: std::io::Error) -> StoreError {
+    match crate::fsutil::not_own(&e) {
+        Some(n) => StoreError::Corrupt(n.path.display().to_string(), format!("is {}", n.what())),
+        None => StoreError::io(path, e),
+    }
+}
+
+/// [`inspect`] of a file opened already (`path` names it in errors).
+pub fn inspect_file(
+    file: File,
+    path: &Path,
+) -> Result<(PartInfo, ParquetRecordBatchReaderBuilder<File>), StoreError> {
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| {
         StoreError::Corrupt(
             path.display().to_string(),
@@ -247,12 +265,30 @@ pub fn read_file(path: &Path, table: &str) -> Result<Vec<RecordBatch>, StoreErro
     read_checked(path, table, None)
 }
 
+/// [`read_campaign_file`] of a file opened already (`path` names it in errors).
+pub fn read_campaign_opened(
+    file: File,
+    path: &Path,
+    table: &str,
+    campaign: &str,
+) -> Result<Vec<RecordBatch>, StoreError> {
+    read_opened(inspect_file(file, path)?, path, table, Some(campaign))
+}
+
 fn read_checked(
     path: &Path,
     table: &str,
     campaign: Option<&str>,
 ) -> Result<Vec<RecordBatch>, StoreError> {
-    let (info, builder) = inspect(path)?;
+    read_opened(inspect(path)?, path, table, campaign)
+}
+
+fn read_opened(
+    (info, builder): (PartInfo, ParquetRecordBatchReaderBuilder<File>),
+    path: &Path,
+    table: &str,
+    campaign: Option<&str>,
+) -> Result<Vec<RecordBatch>, StoreError> {
     check_part(path, &info, table, campaign)?;
     let reader = builder
         .build()
