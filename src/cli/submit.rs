@@ -86,7 +86,7 @@ fn submit(a: &Args) -> Result<i32, Stop> {
         tracing::warn!("{n}");
     }
     if plan.indices.is_empty() {
-        println!(
+        outln!(
             "{}: nothing to submit: every shard is finished, queued or running",
             root.display()
         );
@@ -205,22 +205,22 @@ fn options(a: &Args, resubmit: bool, previous: Option<SlurmOptions>) -> Option<S
 /// `--dry-run`: the scripts and the sbatch commands that would run.
 fn print_dry_run(root: &Path, plan: &slurm::Plan) {
     let sub = plan.record.submissions.last().expect("submission");
-    println!(
+    outln!(
         "# {} (would be written to {})",
         sub.script,
         root.join(&sub.script).display()
     );
-    print!("{}", plan.script);
+    out!("{}", plan.script);
     if let (Some(rel), Some(text)) = (&sub.compact_script, &plan.compact_script) {
-        println!("# {rel}");
-        print!("{text}");
+        outln!("# {rel}");
+        out!("{text}");
     }
-    println!(
+    outln!(
         "# would run: sbatch --parsable {}",
         root.join(&sub.script).display()
     );
     if let Some(rel) = &sub.compact_script {
-        println!(
+        outln!(
             "# then: sbatch --parsable --dependency=afterok:<array job id> {}",
             root.join(rel).display()
         );
@@ -229,7 +229,7 @@ fn print_dry_run(root: &Path, plan: &slurm::Plan) {
 
 fn print_submitted(root: &Path, p: &slurm::Plan) {
     let s = p.record.submissions.last().expect("submission");
-    println!(
+    outln!(
         "submitted {} array task(s) ({} shards of about {} runs, array {}) as job {}{}",
         p.indices.len(),
         p.record.shards,
@@ -241,5 +241,5 @@ fn print_submitted(root: &Path, p: &slurm::Plan) {
             .map(|j| format!(", compaction job {j} (afterok)"))
             .unwrap_or_default()
     );
-    println!("script: {}", root.join(&s.script).display());
+    outln!("script: {}", root.join(&s.script).display());
 }
