@@ -358,3 +358,32 @@ fn short(v: &Value) -> String {
         s
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Duplicates at their object's pointer (escaped: `~0`, `~1`), inside arrays, each (object,
+    /// key) once after `ManifestErrors::new`; equal keys in different objects are no duplicate.
+    #[test]
+    fn duplicate_keys_at_their_objects() {
+        let text = r#"{"a": 1, "x/y~z": {"k": [{"q": 1, "q": 2, "q": 3}], "k": 2},
+                       "b": {"a": 1}, "a": [2]}"#;
+        let found = ManifestErrors::new("m", duplicate_keys(text)).errors;
+        let got: Vec<(&str, &str)> = found
+            .iter()
+            .map(|e| (e.path.as_str(), e.message.as_str()))
+            .collect();
+        let msg = |k: &str| format!("duplicate key {k:?} (a key may appear once in an object)");
+        let (q, k, a) = (msg("q"), msg("k"), msg("a"));
+        assert_eq!(
+            got,
+            vec![
+                ("/x~1y~0z/k/0", q.as_str()),
+                ("/x~1y~0z", k.as_str()),
+                ("", a.as_str())
+            ]
+        );
+        assert!(duplicate_keys(r#"{"a": {"a": {"a": [1, {"a": 2}]}}}"#).is_empty());
+    }
+}

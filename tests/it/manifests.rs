@@ -307,8 +307,8 @@ fn a_byte_order_mark_is_accepted() {
 
 /// A key given twice in one object (serde_json keeps the last one silently) is refused by
 /// every command that reads a manifest (validate, plan, run, run --dry-run, theory, submit),
-/// exit 2, every duplicate at its object's JSON path, nothing written (before: accepted, the
-/// last value used).
+/// exit 2, every duplicate at its object's JSON path, nothing written (before: accepted with
+/// the last values, exit 0, and `run` ran the campaign).
 #[test]
 fn duplicate_keys_are_refused_by_every_command() {
     let dir = tempfile::tempdir().unwrap();
@@ -354,7 +354,7 @@ fn duplicate_keys_are_refused_by_every_command() {
             "at /: duplicate key \"seed\"",
             "at /params/species/list/1: duplicate key \"mass\"",
             "at /params/restitution: duplicate key \"constant\"",
-            "at /sweep: duplicate key \"a/b~c\"",
+            "at /sweep: duplicate key \"restitution.constant\"",
         ] {
             assert!(
                 text.contains(want),
