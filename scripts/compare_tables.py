@@ -43,14 +43,20 @@ def quoted(cols: list[str], prefix: str = "") -> str:
     return ", ".join(f'{prefix}"{c}"' for c in cols)
 
 
+def parquet(d, t: str) -> str:
+    """read_parquet of table t of campaign d, the path as an SQL string literal (' doubled)."""
+    glob = f"{d}/tables/{t}/*.parquet".replace("'", "''")
+    return f"read_parquet('{glob}')"
+
+
 def current(d: Path, t: str, keep: list[str], src) -> str:
     """The rows of table t of the runs and points the latest manifest asks for, keyed by
     params and replica (the run's replica in the latest manifest, from `registered_runs`)
     instead of point_id and run_id."""
-    points = f"read_parquet('{d}/tables/points/*.parquet')"
-    runs = f"read_parquet('{d}/tables/runs/*.parquet')"
+    points = parquet(d, "points")
+    runs = parquet(d, "runs")
     has_reg = any((d / "tables" / "registered_runs").glob("*.parquet"))
-    reg = f"read_parquet('{d}/tables/registered_runs/*.parquet')"
+    reg = parquet(d, "registered_runs")
     cols = [c for c in keep if c not in ("run_id", "point_id")]
     if t == "points":
         return f"SELECT {quoted(cols)} FROM {points} WHERE in_manifest"
@@ -127,7 +133,7 @@ def main() -> int:
     bad = 0
     approx = 0
     for t in ta:
-        src = lambda d, t=t: f"read_parquet('{d}/tables/{t}/*.parquet')"
+        src = lambda d, t=t: parquet(d, t)
         cols = [r[0] for r in con.execute(f"DESCRIBE SELECT * FROM {src(args.a)}").fetchall()]
         cols_b = [r[0] for r in con.execute(f"DESCRIBE SELECT * FROM {src(args.b)}").fetchall()]
         only_a = [c for c in cols if c not in cols_b]

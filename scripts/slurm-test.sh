@@ -3,7 +3,8 @@
 # submitted as a job array with `granular submit --slurm`, one array task is cancelled while it
 # runs, `granular submit --missing` resubmits the unfinished shard, the chained compaction job
 # merges the parts, and the final tables must equal those of a single-machine `granular run`
-# of the same manifest (scripts/compare_tables.py; only runs.wall_seconds differs). Stops the
+# of the same manifest (scripts/compare_tables.py; only runs.wall_seconds differs); the campaign
+# directory's name holds spaces, quotes, $(), backticks, ;, # and % (quoting). Stops the
 # daemons it started. Needs target/release/granular and .venv (scripts/setup.sh).
 # ~1-2 min on 2 cores.
 set -euo pipefail
@@ -43,7 +44,10 @@ cat > "$work/m.json" <<'JSON'
   "sweep": {"restitution.constant": [0.5, 0.9]}
 }
 JSON
-out=$work/slurm-run
+# An awkward campaign directory (spaces, quotes, $(), backticks, ;, #, %): sbatch must read the
+# scripts' #SBATCH lines into single arguments, SLURM must write the task logs into it, and
+# nothing in its name may run (granular quotes it for bash and for sbatch).
+out=$work/'slurm run '\''q'\'' "dq" $(touch PWNED) `touch PWNED`; #1 %A 100%'
 
 echo "== submit --dry-run writes nothing"
 "$bin" submit "$work/m.json" --out "$out" --slurm --tasks 2 --per-task-runs 2 --time 00:10:00 --dry-run > "$work/dry.txt"
@@ -99,4 +103,7 @@ cat "$out/slurm/logs/compact-${compact_job}.out"
 echo "== single-machine reference"
 "$bin" run "$work/m.json" --out "$work/reference" --threads 2 --quiet
 "$py" scripts/compare_tables.py "$work/reference" "$out"
+if find "$work" "$root" -maxdepth 3 -name PWNED | grep -q .; then
+    echo "FAIL: a command injected through the directory name ran"; exit 1
+fi
 echo "slurm-test: passed"

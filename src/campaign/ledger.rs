@@ -1160,7 +1160,7 @@ impl ShardLock {
         let exclusive = |root: &Path| {
             live_locks(root)
                 .into_iter()
-                .find(|l| l.is_exclusive() && !l.is_ours())
+                .find(|l| l.is_exclusive())
                 .map(|l| {
                     LockError::Held(format!(
                         "{} is in use: {} is being made by {}; run or resume when it has finished",

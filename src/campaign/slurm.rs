@@ -13,6 +13,14 @@
 //! ```
 //! The commands `sbatch`, `squeue` and `scontrol` can be replaced through the environment
 //! variables `GRANULAR_SBATCH`, `GRANULAR_SQUEUE` and `GRANULAR_SCONTROL` (tests, wrappers).
+//!
+//! No data becomes shell text: every path or value a script holds is quoted for whoever reads
+//! that line, bash ([`shell_quote`]: POSIX single quotes) or sbatch ([`sbatch_arg`]: sbatch's
+//! own quoting of `#SBATCH` lines), and one that no quoting can carry is refused
+//! ([`check_dir`], [`check_value`]): a line break or NUL anywhere, and on `#SBATCH` lines the
+//! separator of a heterogeneous job (`hetjob`, `packjob`); in the directory also a
+//! backslash, which makes SLURM strip every backslash from the log path and expand none of its
+//! `%` patterns. A `%` of the directory is written `%%` in `--output` (SLURM's escape).
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -207,14 +215,122 @@ pub fn max_array_size() -> (u64, Option<String>) {
     }
 }
 
-fn quote(s: &str) -> String {
+/// `s` as one word for a POSIX shell: in single quotes, each `'` written `'\''`. Every string
+/// is safe so (a line break inside the quotes is part of the word; [`check_value`] refuses
+/// them anyway).
+pub fn shell_quote(s: &str) -> String {
     format!("'{}'", s.replace('\'', "'\\''"))
 }
 
-fn job_name(c: &Campaign) -> String {
-    let n: String = c
-        .manifest
-        .name
+/// `s` as one argument of an `#SBATCH` line, as sbatch reads those (`_get_argument` in SLURM's
+/// `src/sbatch/opt.c`): an unquoted argument ends at white space, an unquoted `#` starts a
+/// comment, `'` and `"` quote, a backslash escapes the next character inside quotes too, and a
+/// leading `:` is fatal. So a word of safe characters stays bare, any other is put in double
+/// quotes with `\`, `"` and `#` escaped by a backslash (older sbatch versions knew only double
+/// quotes and ended an argument at `#` even inside them; they read this the same).
+/// `s` must have passed [`check_value`] (no line break or NUL).
+pub fn sbatch_arg(s: &str) -> String {
+    let safe = |b: u8| b.is_ascii_alphanumeric() || b"-_.,:=/+@%".contains(&b);
+    if !s.is_empty() && !s.starts_with(':') && s.bytes().all(safe) {
+        return s.to_string();
+    }
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for ch in s.chars() {
+        if matches!(ch, '\\' | '"' | '#') {
+            out.push('\\');
+        }
+        out.push(ch);
+    }
+    out.push('"');
+    out
+}
+
+/// What cannot be said on any line of a script: a line break ends the line (an `#SBATCH`
+/// directive or a comment, whatever the quoting) and NUL ends the text for sbatch.
+fn line_breaks(s: &str) -> Option<&'static str> {
+    if s.contains('\n') {
+        Some("a line break (\\n)")
+    } else if s.contains('\r') {
+        Some("a carriage return (\\r)")
+    } else if s.contains('\0') {
+        Some("a NUL character")
+    } else {
+        None
+    }
+}
+
+/// The separator of a heterogeneous job's components on `#SBATCH` lines: an argument `hetjob`
+/// (or its old name `packjob`) for sbatch 22.05 (checked); older versions took any line that
+/// contains `packjob`, in any case and quoted or not, for one (`strcasestr(line, "packjob")`
+/// in their `_opt_batch_script`).
+/// Refused wherever they stand in a value, in either spelling.
+fn hetjob_word(s: &str) -> Option<&'static str> {
+    let lower = s.to_ascii_lowercase();
+    ["hetjob", "packjob"]
+        .into_iter()
+        .find(|w| lower.contains(w))
+}
+
+/// Why `value` (named `what` in the messages: a flag and its value) cannot be written into a
+/// SLURM script, if it cannot; `directive`: on an `#SBATCH` line.
+pub fn check_value(what: &str, value: &str, directive: bool) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Some(c) = line_breaks(value) {
+        out.push(format!(
+            "{what} {value:?}: contains {c}, which no line of the SLURM scripts can hold"
+        ));
+    }
+    if directive {
+        if let Some(w) = hetjob_word(value) {
+            out.push(format!(
+                "{what} {value:?}: contains {w:?}, which sbatch may take on an #SBATCH line for the separator of a heterogeneous job's components"
+            ));
+        }
+    }
+    out
+}
+
+/// The campaign directory as the scripts name it (the logs' `#SBATCH --output`, the commands
+/// they run), or every reason it cannot be named there (`what`: how the user gave it, e.g.
+/// `--out`): not UTF-8, a line break or NUL, a backslash (SLURM strips the backslashes of an
+/// output path and then expands none of its `%` patterns), `hetjob`/`packjob`.
+pub fn check_dir<'a>(what: &str, root: &'a Path) -> Result<&'a str, Vec<String>> {
+    let Some(text) = root.to_str() else {
+        return Err(vec![format!(
+            "{what} {root:?}: not UTF-8; the SLURM scripts name the campaign directory in UTF-8 text"
+        )]);
+    };
+    let mut out = check_value(what, text, true);
+    if text.contains('\\') {
+        out.push(format!(
+            "{what} {text:?}: contains a backslash; SLURM would strip it from the task logs' path (#SBATCH --output) and then expand none of %A, %a, %j there"
+        ));
+    }
+    if out.is_empty() {
+        Ok(text)
+    } else {
+        Err(out)
+    }
+}
+
+/// Every value of `o` that cannot be written into the scripts (their `#SBATCH` lines).
+pub fn check_options(o: &SlurmOptions) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Some(p) = &o.partition {
+        out.extend(check_value("--partition", p, true));
+    }
+    for a in &o.sbatch_args {
+        out.extend(check_value("--sbatch-arg", a, true));
+    }
+    out
+}
+
+/// `granular-<name>`: the campaign name with every character but ASCII letters, digits, `-`
+/// and `_` made `_` (names are so already: the manifest's schema), at most 40 of them, and
+/// `hetjob`/`packjob` broken by a `_` ([`hetjob_word`]).
+fn job_name(name: &str) -> String {
+    let n: String = name
         .chars()
         .map(|ch| {
             if ch.is_ascii_alphanumeric() || ch == '-' || ch == '_' {
@@ -225,13 +341,55 @@ fn job_name(c: &Campaign) -> String {
         })
         .take(40)
         .collect();
-    format!("granular-{n}")
+    let mut out = String::from("granular-");
+    let mut rest = n.as_str();
+    while !rest.is_empty() {
+        let lower = rest.to_ascii_lowercase();
+        if lower.starts_with("hetjob") || lower.starts_with("packjob") {
+            let cut = if lower.starts_with("het") { 3 } else { 4 };
+            out.push_str(&rest[..cut]);
+            out.push('_');
+            rest = &rest[cut..];
+        } else {
+            out.push_str(&rest[..1]);
+            rest = &rest[1..];
+        }
+    }
+    out
 }
 
-/// The array script of submission `number`.
-pub fn array_script(
+/// `#SBATCH --output=<dir>/slurm/logs/<pattern>`: the directory's `%` written `%%`, so that
+/// SLURM expands only `pattern`.
+fn output_directive(dir: &str, pattern: &str) -> String {
+    format!(
+        "#SBATCH {}\n",
+        sbatch_arg(&format!(
+            "--output={}/slurm/logs/{pattern}",
+            dir.replace('%', "%%")
+        ))
+    )
+}
+
+/// The `#SBATCH` lines of the user's options (partition, extra arguments: one argument each).
+fn option_directives(o: &SlurmOptions) -> String {
+    let mut s = String::new();
+    if let Some(p) = &o.partition {
+        s.push_str(&format!(
+            "#SBATCH {}\n",
+            sbatch_arg(&format!("--partition={p}"))
+        ));
+    }
+    for a in &o.sbatch_args {
+        s.push_str(&format!("#SBATCH {}\n", sbatch_arg(a)));
+    }
+    s
+}
+
+/// The array script of submission `number`; `root` and the options have passed
+/// [`check_dir`], [`check_value`] and [`check_options`] (see [`plan`]).
+fn array_script(
     c: &Campaign,
-    root: &Path,
+    root: &str,
     rec: &SubmissionRecord,
     array: &str,
     number: u32,
@@ -251,29 +409,24 @@ pub fn array_script(
         "# Submission {number}, written by `granular submit`. Resubmitting this script is safe:\n\
          # finished runs are skipped and running ones resume from their checkpoints.\n\
          # Unfinished work only: granular submit --missing {}\n",
-        root.display()
+        shell_quote(root)
     ));
-    s.push_str(&format!("#SBATCH --job-name={}\n", job_name(c)));
+    s.push_str(&format!(
+        "#SBATCH --job-name={}\n",
+        job_name(&c.manifest.name)
+    ));
     s.push_str(&format!("#SBATCH --array={array}\n"));
-    s.push_str(&format!("#SBATCH --time={}\n", o.time));
+    s.push_str(&format!("#SBATCH --time={}\n", sbatch_arg(&o.time)));
     s.push_str(&format!("#SBATCH --cpus-per-task={}\n", o.cpus_per_task));
     s.push_str("#SBATCH --ntasks=1\n");
-    s.push_str(&format!(
-        "#SBATCH --output={}/slurm/logs/%A_%a.out\n",
-        root.display()
-    ));
+    s.push_str(&output_directive(root, "%A_%a.out"));
     s.push_str("#SBATCH --open-mode=append\n");
-    if let Some(p) = &o.partition {
-        s.push_str(&format!("#SBATCH --partition={p}\n"));
-    }
-    for a in &o.sbatch_args {
-        s.push_str(&format!("#SBATCH {a}\n"));
-    }
+    s.push_str(&option_directives(o));
     s.push_str("set -u\n");
     s.push_str(&format!(
         "exec {} slurm-task {} --shards {} --threads \"${{SLURM_CPUS_PER_TASK:-{}}}\" --checkpoint-every {}\n",
-        quote(&rec.binary),
-        quote(&root.display().to_string()),
+        shell_quote(&rec.binary),
+        shell_quote(root),
         rec.shards,
         o.cpus_per_task,
         o.checkpoint_every
@@ -281,7 +434,7 @@ pub fn array_script(
     s
 }
 
-fn compact_script(c: &Campaign, root: &Path, rec: &SubmissionRecord) -> String {
+fn compact_script(c: &Campaign, root: &str, rec: &SubmissionRecord) -> String {
     let o = &rec.options;
     let mut s = String::new();
     s.push_str("#!/bin/bash\n");
@@ -289,25 +442,20 @@ fn compact_script(c: &Campaign, root: &Path, rec: &SubmissionRecord) -> String {
         "# granular campaign {:?}: merge the table parts after the array (afterok).\n",
         c.manifest.name
     ));
-    s.push_str(&format!("#SBATCH --job-name={}-compact\n", job_name(c)));
+    s.push_str(&format!(
+        "#SBATCH --job-name={}-compact\n",
+        job_name(&c.manifest.name)
+    ));
     // Removed by SLURM when a task of the array fails (then `submit --missing` chains a new one).
     s.push_str("#SBATCH --kill-on-invalid-dep=yes\n");
-    s.push_str(&format!("#SBATCH --time={}\n", o.time));
+    s.push_str(&format!("#SBATCH --time={}\n", sbatch_arg(&o.time)));
     s.push_str("#SBATCH --ntasks=1\n");
-    s.push_str(&format!(
-        "#SBATCH --output={}/slurm/logs/compact-%j.out\n",
-        root.display()
-    ));
-    if let Some(p) = &o.partition {
-        s.push_str(&format!("#SBATCH --partition={p}\n"));
-    }
-    for a in &o.sbatch_args {
-        s.push_str(&format!("#SBATCH {a}\n"));
-    }
+    s.push_str(&output_directive(root, "compact-%j.out"));
+    s.push_str(&option_directives(o));
     s.push_str(&format!(
         "exec {} compact {}\n",
-        quote(&rec.binary),
-        quote(&root.display().to_string())
+        shell_quote(&rec.binary),
+        shell_quote(root)
     ));
     s
 }
@@ -511,6 +659,23 @@ pub fn plan(
         }
     };
     check_time(&rec.options.time).map_err(CampaignError::Refused)?;
+    // What the scripts would hold (the CLI refuses bad flags before this; here the options of
+    // an earlier submission read back from its record, and the directory it was given).
+    let (dir, mut refused) = match check_dir("the campaign directory", root) {
+        Ok(d) => (Some(d), Vec::new()),
+        Err(e) => (None, e),
+    };
+    refused.extend(check_value("the granular binary", &rec.binary, false));
+    refused.extend(check_options(&rec.options));
+    let dir = match dir {
+        Some(d) if refused.is_empty() => d,
+        _ => {
+            return Err(CampaignError::Refused(format!(
+                "cannot write the SLURM scripts: {}",
+                refused.join("; ")
+            )))
+        }
+    };
     let n = rec.shards;
     let mut still_queued_arrays = Vec::new();
     let indices: Vec<u64> = if !missing {
@@ -566,8 +731,8 @@ pub fn plan(
     };
     let number = rec.submissions.len() as u32 + 1;
     let array = format!("{}%{}", ranges(&indices), rec.options.throttle.max(1));
-    let script = array_script(c, root, &rec, &array, number);
-    let compact = rec.options.compact.then(|| compact_script(c, root, &rec));
+    let script = array_script(c, dir, &rec, &array, number);
+    let compact = rec.options.compact.then(|| compact_script(c, dir, &rec));
     rec.submissions.push(Submission {
         number,
         script: format!("slurm/array-{number:03}.sh"),
@@ -670,6 +835,88 @@ mod tests {
         assert_eq!(layout(100_001, 20, 1001), (1001, 100));
         assert_eq!(layout(3, 20, 1001), (1, 20));
         assert!(layout(100_001, 20, 1001).0 <= 1001);
+    }
+
+    /// sbatch's reading of an `#SBATCH` argument (`_get_argument`, SLURM 17.11 on): quotes,
+    /// backslash escapes (inside quotes too), white space and `#` ending an unquoted argument.
+    fn sbatch_reads(line: &str) -> Vec<String> {
+        let mut args = Vec::new();
+        let mut chars = line.chars().peekable();
+        loop {
+            while chars.peek().is_some_and(|c| c.is_whitespace()) {
+                chars.next();
+            }
+            if chars.peek().is_none_or(|&c| c == '#') {
+                return args;
+            }
+            let (mut arg, mut quote, mut escape) = (String::new(), None, false);
+            while let Some(&c) = chars.peek() {
+                if quote.is_none() && c.is_whitespace() {
+                    break;
+                }
+                chars.next();
+                if escape {
+                    escape = false;
+                } else if c == '\\' {
+                    escape = true;
+                    continue;
+                } else if let Some(q) = quote {
+                    if c == q {
+                        quote = None;
+                        continue;
+                    }
+                } else if c == '"' || c == '\'' {
+                    quote = Some(c);
+                    continue;
+                } else if c == '#' {
+                    break;
+                }
+                arg.push(c);
+            }
+            assert!(quote.is_none(), "unmatched quote in {line:?}");
+            args.push(arg);
+        }
+    }
+
+    #[test]
+    fn sbatch_arguments_are_read_back_unchanged() {
+        for s in [
+            "--partition=short",
+            "--account=a b",
+            "--comment=it's \"quoted\" # not a comment",
+            "--output=/x/a\\b $(id) `id`; %A",
+            ":colon",
+            "\ttab",
+        ] {
+            let line = sbatch_arg(s);
+            assert_eq!(sbatch_reads(&line), vec![s.to_string()], "{s:?} as {line}");
+        }
+        assert_eq!(sbatch_arg("--time=02:00:00"), "--time=02:00:00");
+    }
+
+    #[test]
+    fn unscriptable_values_are_named() {
+        let e = check_value("--partition", "a\nb", true);
+        assert!(e.len() == 1 && e[0].contains("--partition \"a\\nb\": contains a line break"));
+        assert_eq!(check_value("--sbatch-arg", "x\r", false).len(), 1);
+        assert_eq!(check_value("--sbatch-arg", "x\0", false).len(), 1);
+        assert!(check_value("--sbatch-arg", "--x=HetJob", true)[0].contains("\"hetjob\""));
+        assert!(check_value("the granular binary", "/hetjob/granular", false).is_empty());
+        assert!(check_value("--partition", "a b'\"$(x)", true).is_empty());
+        let ok = Path::new("/a b/'q'/\"dq\"/$(x)/`y`/;/#/%A");
+        assert_eq!(check_dir("--out", ok), Ok(ok.to_str().unwrap()));
+        let bad = check_dir("--out", Path::new("/a\\b/PackJob\n")).unwrap_err();
+        assert_eq!(bad.len(), 3, "{bad:?}");
+        use std::os::unix::ffi::OsStrExt;
+        let latin1 = Path::new(std::ffi::OsStr::from_bytes(b"/caf\xe9"));
+        assert!(check_dir("DIR", latin1).unwrap_err()[0].contains("not UTF-8"));
+    }
+
+    #[test]
+    fn job_names_are_plain_words() {
+        assert_eq!(job_name("x.y-z_1"), "granular-x_y-z_1");
+        assert_eq!(job_name("HetJob-packjobs"), "granular-Het_Job-pack_jobs");
+        assert!(check_value("", &job_name("hetjobhetjob"), true).is_empty());
     }
 
     #[test]

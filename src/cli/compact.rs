@@ -32,7 +32,7 @@ pub fn run(a: Args) -> i32 {
         tracing::warn!("{n}");
     }
     for t in &r.tables {
-        println!(
+        outln!(
             "{:<34} {:>6} -> {:>4} files  {:>10} rows  {:>12} -> {:>12} bytes  generation {}",
             t.table,
             t.files_before,
@@ -43,7 +43,7 @@ pub fn run(a: Args) -> i32 {
             t.generation
         );
     }
-    println!(
+    outln!(
         "ledger: {} commit record(s) folded into ledger/index.json",
         r.commits_folded
     );

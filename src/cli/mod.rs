@@ -5,7 +5,23 @@
 //! `run(args) -> i32` that returns the exit code; `flags` holds the flags several commands
 //! share and the parsers that validate every numeric flag at parse time; `reporter` the
 //! progress bar; `signals` the Ctrl-C/SIGTERM handler. This file holds the parser, the
-//! dispatch, the tracing set-up and the mapping of library errors to exit codes.
+//! dispatch, the tracing set-up, the mapping of library errors to exit codes and the printing
+//! of results (`outln!`, `out!`: a closed standard output ends printing quietly).
+
+/// `println!` for a command's results on standard output, through [`print_out`]: no panic on
+/// a closed pipe (`granular plan M --json | head -1`).
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::cli::print_out(format_args!($($arg)*), true)
+    };
+}
+
+/// `print!` for a command's results on standard output, through [`print_out`].
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::cli::print_out(format_args!($($arg)*), false)
+    };
+}
 
 mod analyze;
 mod compact;
@@ -25,6 +41,9 @@ mod theory;
 mod upgrade;
 mod validate;
 mod verify;
+
+use std::io::Write;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::{Parser, Subcommand, ValueEnum};
 
@@ -115,7 +134,7 @@ pub fn main() -> i32 {
     };
     init_tracing(cli.log_format);
     signals::install();
-    match cli.command {
+    let code = match cli.command {
         Command::Validate(a) => validate::run(a),
         Command::Run(a) => run::run(a),
         Command::Plan(a) => plan::run(a),
@@ -132,6 +151,81 @@ pub fn main() -> i32 {
         Command::Report(a) => report::run(a),
         Command::Serve(a) => serve::run(a),
         Command::Analyze(a) => analyze::run(a),
+    };
+    flush_out();
+    if STDOUT_FAILED.load(Ordering::Relaxed) && code == exit_codes::OK {
+        exit_codes::IO_ERROR
+    } else {
+        code
+    }
+}
+
+/// Standard output stopped taking what the command prints (a closed pipe or a write error):
+/// nothing more is written to it.
+static STDOUT_GONE: AtomicBool = AtomicBool::new(false);
+/// ... and not because its reader went away: the command's success becomes exit 4.
+static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
+
+/// Print a command's results on standard output (`outln!`, `out!`). A reader that went away
+/// (`granular plan M --json | head -1`: EPIPE; Rust ignores SIGPIPE, so the process is not
+/// killed, which `serve`'s sockets need) is no error: printing stops quietly and the command
+/// ends as it would have, with its own exit code (0 when all went well). Any other write error
+/// (a full disk) is reported once on stderr and turns exit 0 into 4 (`main`).
+pub(crate) fn print_out(args: std::fmt::Arguments<'_>, newline: bool) {
+    if STDOUT_GONE.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut o = std::io::stdout().lock();
+    let mut r = o.write_fmt(args);
+    if newline && r.is_ok() {
+        r = o.write_all(b"\n");
+    }
+    if let Err(e) = r {
+        stdout_failed(e);
+    }
+}
+
+/// What is still buffered for standard output, written before the exit code is decided.
+fn flush_out() {
+    if !STDOUT_GONE.load(Ordering::Relaxed) {
+        if let Err(e) = std::io::stdout().flush() {
+            stdout_failed(e);
+        }
+    }
+}
+
+fn stdout_failed(e: std::io::Error) {
+    STDOUT_GONE.store(true, Ordering::Relaxed);
+    if e.kind() != std::io::ErrorKind::BrokenPipe {
+        STDOUT_FAILED.store(true, Ordering::Relaxed);
+        let _ = writeln!(
+            std::io::stderr(),
+            "error: cannot write to standard output: {e}"
+        );
+    }
+}
+
+/// Standard output as an `io::Write` for code that writes in pieces (`status`): every write
+/// goes through [`print_out`] and so never fails.
+pub(crate) struct Stdout;
+
+impl Write for Stdout {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.write_all(buf)?;
+        Ok(buf.len())
+    }
+
+    fn write_all(&mut self, buf: &[u8]) -> std::io::Result<()> {
+        if !STDOUT_GONE.load(Ordering::Relaxed) {
+            if let Err(e) = std::io::stdout().lock().write_all(buf) {
+                stdout_failed(e);
+            }
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
     }
 }
 

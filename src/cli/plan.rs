@@ -36,12 +36,12 @@ pub(super) fn show(manifest: &Path, out: &Path, json: bool) -> i32 {
         Err(e) => return report_error(e),
     };
     if json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&p).expect("preview serialises")
         );
     } else {
-        print!("{}", text(&c, out, &p));
+        out!("{}", text(&c, out, &p));
     }
     exit_codes::OK
 }

@@ -42,7 +42,7 @@ pub fn run(a: Args) -> i32 {
             for f in failed {
                 tracing::warn!("{f}");
             }
-            println!("wrote {} files to {}", files.len(), out.display());
+            outln!("wrote {} files to {}", files.len(), out.display());
             exit_codes::OK
         }
         Err(e) => fail(exit_codes::IO_ERROR, e),

@@ -37,7 +37,7 @@ pub fn run(a: Args) -> i32 {
     } else {
         String::new()
     };
-    println!(
+    outln!(
         "wrote {} ({} figures{analysis}, {} bytes)",
         out.display(),
         r.figures,

@@ -6,7 +6,7 @@ use crate::exit_codes;
 pub struct Args {}
 
 pub fn run(_: Args) -> i32 {
-    println!(
+    outln!(
         "{}",
         serde_json::to_string_pretty(&crate::manifest::json_schema()).expect("schema")
     );

@@ -26,8 +26,8 @@ pub fn run(a: Args) -> i32 {
         Ok(s) => s,
         Err(e) => return fail(exit_codes::DIRECTORY_REFUSED, e),
     };
-    // Write errors (a closed pipe, `| head`) are not worth a panic.
-    let mut out = std::io::stdout().lock();
+    // A closed pipe (`| head`) ends the printing quietly (super::print_out).
+    let mut out = super::Stdout;
     let _ = if a.json {
         writeln!(out, "{}", campaign::status::to_json(&s))
     } else {

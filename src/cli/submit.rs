@@ -64,6 +64,7 @@ pub fn run(a: Args) -> i32 {
 
 fn submit(a: &Args) -> Result<i32, Stop> {
     let binary = binary()?;
+    refuse_unscriptable(a, &binary)?;
     // The campaign (created unless --dry-run) and its absolute directory.
     // A grown manifest of a submitted campaign resubmits its new and longer runs (as
     // `--missing` does the unfinished ones).
@@ -86,7 +87,7 @@ fn submit(a: &Args) -> Result<i32, Stop> {
         tracing::warn!("{n}");
     }
     if plan.indices.is_empty() {
-        println!(
+        outln!(
             "{}: nothing to submit: every shard is finished, queued or running",
             root.display()
         );
@@ -110,6 +111,62 @@ fn binary() -> Result<String, Stop> {
                 format!("cannot locate the granular binary: {e}"),
             )
         })
+}
+
+/// Every path and value the scripts would hold that no quoting can carry (see
+/// `campaign::slurm`: a line break, NUL, a backslash in the directory, `hetjob`/`packjob` on an
+/// `#SBATCH` line), refused at once with exit 2 before anything is created or written. The
+/// options of an earlier submission that are not given again are checked by `slurm::plan`.
+fn refuse_unscriptable(a: &Args, binary: &str) -> Result<(), Stop> {
+    let dir = if a.missing {
+        Some(("DIR", &a.target))
+    } else {
+        a.out.as_ref().map(|o| ("--out", o))
+    };
+    let mut problems = Vec::new();
+    if let Some((what, dir)) = dir {
+        if let Err(e) = slurm::check_dir(what, &script_root(dir)) {
+            problems.extend(e);
+        }
+    }
+    problems.extend(slurm::check_value("the granular binary", binary, false));
+    if let Some(p) = &a.partition {
+        problems.extend(slurm::check_value("--partition", p, true));
+    }
+    for arg in &a.sbatch_arg {
+        problems.extend(slurm::check_value("--sbatch-arg", arg, true));
+    }
+    if problems.is_empty() {
+        return Ok(());
+    }
+    for p in &problems[..problems.len() - 1] {
+        fail(exit_codes::INVALID_INPUT, p);
+    }
+    Err(fail(
+        exit_codes::INVALID_INPUT,
+        &problems[problems.len() - 1],
+    ))
+}
+
+/// The campaign directory `dir` as the scripts will name it, before it exists: canonical (as
+/// `submit` makes it once created) where it exists, else its deepest existing ancestor's
+/// canonical path with the rest appended.
+fn script_root(dir: &Path) -> PathBuf {
+    let abs = std::path::absolute(dir).unwrap_or_else(|_| dir.to_path_buf());
+    let mut base = abs.as_path();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(c) = base.canonicalize() {
+            return rest.iter().rev().fold(c, |p, name| p.join(name));
+        }
+        match (base.parent(), base.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name);
+                base = parent;
+            }
+            _ => return abs,
+        }
+    }
 }
 
 /// `--missing DIR`: the campaign in `target`.
@@ -153,7 +210,7 @@ fn new_campaign(a: &Args) -> Result<(Campaign, PathBuf, bool), Stop> {
     let existed = out.join("campaign.json").exists();
     let (c, growth) = Campaign::prepare(&a.target, &out, !a.dry_run).map_err(report_error)?;
     let root = if a.dry_run {
-        std::path::absolute(&out).unwrap_or(out)
+        script_root(&out)
     } else {
         out.canonicalize().unwrap_or(out)
     };
@@ -202,34 +259,33 @@ fn options(a: &Args, resubmit: bool, previous: Option<SlurmOptions>) -> Option<S
     })
 }
 
-/// `--dry-run`: the scripts and the sbatch commands that would run.
+/// `--dry-run`: the scripts and the sbatch commands that would run (their paths quoted for the
+/// shell, as the scripts quote them).
 fn print_dry_run(root: &Path, plan: &slurm::Plan) {
     let sub = plan.record.submissions.last().expect("submission");
-    println!(
+    let path = |rel: &str| slurm::shell_quote(&root.join(rel).to_string_lossy());
+    outln!(
         "# {} (would be written to {})",
         sub.script,
-        root.join(&sub.script).display()
+        path(&sub.script)
     );
-    print!("{}", plan.script);
+    out!("{}", plan.script);
     if let (Some(rel), Some(text)) = (&sub.compact_script, &plan.compact_script) {
-        println!("# {rel}");
-        print!("{text}");
+        outln!("# {rel}");
+        out!("{text}");
     }
-    println!(
-        "# would run: sbatch --parsable {}",
-        root.join(&sub.script).display()
-    );
+    outln!("# would run: sbatch --parsable {}", path(&sub.script));
     if let Some(rel) = &sub.compact_script {
-        println!(
+        outln!(
             "# then: sbatch --parsable --dependency=afterok:<array job id> {}",
-            root.join(rel).display()
+            path(rel)
         );
     }
 }
 
 fn print_submitted(root: &Path, p: &slurm::Plan) {
     let s = p.record.submissions.last().expect("submission");
-    println!(
+    outln!(
         "submitted {} array task(s) ({} shards of about {} runs, array {}) as job {}{}",
         p.indices.len(),
         p.record.shards,
@@ -241,5 +297,5 @@ fn print_submitted(root: &Path, p: &slurm::Plan) {
             .map(|j| format!(", compaction job {j} (afterok)"))
             .unwrap_or_default()
     );
-    println!("script: {}", root.join(&s.script).display());
+    outln!("script: {}", root.join(&s.script).display());
 }

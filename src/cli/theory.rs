@@ -46,7 +46,7 @@ pub fn run(a: Args) -> i32 {
     };
     match c.write_theory() {
         Ok(()) => {
-            println!(
+            outln!(
                 "wrote {}/tables/{} ({} points)",
                 a.out.display(),
                 c.theory_tables().join(", "),

@@ -14,18 +14,18 @@ pub struct Args {
 pub fn run(a: Args) -> i32 {
     match upgrade(&a.dir) {
         Ok(r) if r.from == r.to => {
-            println!("{}: already of format {}", a.dir.display(), r.to);
+            outln!("{}: already of format {}", a.dir.display(), r.to);
             exit_codes::OK
         }
         Ok(r) => {
-            println!(
+            outln!(
                 "{}: upgraded from format {} to {} (logged in upgrade.log)",
                 a.dir.display(),
                 r.from,
                 r.to
             );
             for s in &r.steps {
-                println!("  {s}");
+                outln!("  {s}");
             }
             exit_codes::OK
         }

@@ -13,7 +13,7 @@ pub struct Args {
 pub fn run(a: Args) -> i32 {
     match crate::campaign::plan::load(&a.manifest) {
         Ok((m, plan)) => {
-            println!(
+            outln!(
                 "{}: valid: campaign {:?}, model {}, {} points x {} = {} runs",
                 a.manifest.display(),
                 m.name,

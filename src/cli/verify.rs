@@ -32,13 +32,13 @@ pub fn run(a: Args) -> i32 {
         Err(e) => return fail(exit_codes::DIRECTORY_REFUSED, e),
     };
     for (t, files, rows) in &r.tables {
-        println!("{t:<34} {files:>6} files {rows:>12} rows");
+        outln!("{t:<34} {files:>6} files {rows:>12} rows");
     }
     for p in &r.problems {
         eprintln!("error: {p}");
     }
     if r.problems.is_empty() {
-        println!(
+        outln!(
             "{}: all table files check out ({} committed files, {} bytes, {} in {:.2} s); {} committed runs{}",
             a.dir.display(),
             r.files_checked,

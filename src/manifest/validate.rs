@@ -1,6 +1,7 @@
 //! Loading a manifest with every error reported at once, each with its JSON path.
 //!
-//! Three stages: (1) JSON syntax; (2) the generated JSON Schema (unknown keys, types, ranges),
+//! Three stages: (1) JSON syntax (a key given twice in one object is an error there: serde_json
+//! would keep the last one silently); (2) the generated JSON Schema (unknown keys, types, ranges),
 //! where a failed `oneOf` is narrowed to the variant the user evidently meant; (3) checks the
 //! schema cannot express (cross-field rules, sweep paths, duplicate points), run on the base
 //! parameters, on every sweep value and on every point of the sweep.
@@ -113,6 +114,10 @@ pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
             ),
         }])
     })?;
+    let duplicates = duplicate_keys(text);
+    if !duplicates.is_empty() {
+        return Err(fail(duplicates));
+    }
     let mut errors = schema_errors(&json_schema(), &value, "");
     if !errors.is_empty() {
         if let (Some(params), Some(sweep)) = (
@@ -130,6 +135,104 @@ pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
     // The schema takes 42.0 for an integer (JSON Schema does); serde does not: say where.
     crate::models::from_value_at(value, "")
         .map_err(|(path, message)| fail(vec![ManifestError { path, message }]))
+}
+
+/// Every key given more than once in one object of `text` (valid JSON), as an error at the
+/// object's JSON pointer (`at /params/restitution: duplicate key "constant"`), in document
+/// order (each (object, key) once: [`ManifestErrors::new`]). A second pass over the text with serde_json's streaming
+/// deserializer (its recursion limit included) that keeps only the keys of the objects open.
+fn duplicate_keys(text: &str) -> Vec<ManifestError> {
+    let mut scan = KeyScan {
+        path: String::new(),
+        found: Vec::new(),
+    };
+    let mut de = serde_json::Deserializer::from_str(text);
+    // The text parsed as a `Value` already: this pass cannot fail on its syntax.
+    if serde::de::DeserializeSeed::deserialize(&mut scan, &mut de).is_err() {
+        return Vec::new();
+    }
+    scan.found
+}
+
+/// The state of [`duplicate_keys`]: the JSON pointer of the value being read, what was found.
+struct KeyScan {
+    path: String,
+    found: Vec<ManifestError>,
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for &mut KeyScan {
+    type Value = ();
+
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for &mut KeyScan {
+    type Value = ();
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("any JSON value")
+    }
+
+    fn visit_bool<E>(self, _: bool) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_i64<E>(self, _: i64) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_u64<E>(self, _: u64) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_f64<E>(self, _: f64) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_str<E>(self, _: &str) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_unit<E>(self) -> Result<(), E> {
+        Ok(())
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        let len = self.path.len();
+        let mut i = 0usize;
+        loop {
+            use std::fmt::Write;
+            let _ = write!(self.path, "/{i}");
+            let more = seq.next_element_seed(&mut *self)?.is_some();
+            self.path.truncate(len);
+            if !more {
+                return Ok(());
+            }
+            i += 1;
+        }
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        let len = self.path.len();
+        let mut keys = std::collections::HashSet::new();
+        while let Some(key) = map.next_key::<String>()? {
+            self.path.push('/');
+            self.path.push_str(&super::sweep::pointer_escape(&key));
+            map.next_value_seed(&mut *self)?;
+            self.path.truncate(len);
+            if keys.contains(&key) {
+                self.found.push(ManifestError {
+                    path: self.path.clone(),
+                    message: format!("duplicate key {key:?} (a key may appear once in an object)"),
+                });
+            } else {
+                keys.insert(key);
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Validate a model's params object (after sweep substitution) against its schema; paths are
@@ -253,5 +356,34 @@ fn short(v: &Value) -> String {
         format!("{}...", &s[..77])
     } else {
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Duplicates at their object's pointer (escaped: `~0`, `~1`), inside arrays, each (object,
+    /// key) once after `ManifestErrors::new`; equal keys in different objects are no duplicate.
+    #[test]
+    fn duplicate_keys_at_their_objects() {
+        let text = r#"{"a": 1, "x/y~z": {"k": [{"q": 1, "q": 2, "q": 3}], "k": 2},
+                       "b": {"a": 1}, "a": [2]}"#;
+        let found = ManifestErrors::new("m", duplicate_keys(text)).errors;
+        let got: Vec<(&str, &str)> = found
+            .iter()
+            .map(|e| (e.path.as_str(), e.message.as_str()))
+            .collect();
+        let msg = |k: &str| format!("duplicate key {k:?} (a key may appear once in an object)");
+        let (q, k, a) = (msg("q"), msg("k"), msg("a"));
+        assert_eq!(
+            got,
+            vec![
+                ("/x~1y~0z/k/0", q.as_str()),
+                ("/x~1y~0z", k.as_str()),
+                ("", a.as_str())
+            ]
+        );
+        assert!(duplicate_keys(r#"{"a": {"a": {"a": [1, {"a": 2}]}}}"#).is_empty());
     }
 }

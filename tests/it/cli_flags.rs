@@ -9,6 +9,8 @@ use std::fs;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
+use serde_json::json;
+
 use super::util::{bin, heavy, repo_root, snapshot, write_json};
 
 /// Values that no numeric flag accepts.
@@ -542,5 +544,119 @@ fn a_signal_before_any_run_started_exits_130() {
             err.contains("interrupted before any simulation started"),
             "{err}"
         );
+    }
+}
+
+/// Every command that prints ends quietly when its reader has gone (`granular plan M --json |
+/// head -1`): stdout is a pipe whose read end is closed before the command starts, so its
+/// first write fails with EPIPE; the command ends with its usual exit code (0 here), no panic,
+/// no backtrace, no error message (before: `println!` panicked, exit 101). A stdout that fails
+/// otherwise (`/dev/full`) is an error: exit 4, said once.
+#[test]
+fn a_closed_stdout_ends_printing_quietly() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    // 2 short runs; a sweep of 300 points for `plan`.
+    let m = json!({
+        "name": "closed-stdout",
+        "model": "dsmc",
+        "seed": 5,
+        "replicas": 2,
+        "params": {
+            "method": "low_rank",
+            "species": {"power_law": {"n1": 0.1, "N1": 2000, "theta": 3}},
+            "restitution": {"constant": 0.7},
+            "t_end": 5.0,
+            "output_times": {"list": [1.0, 5.0]},
+            "observables": ["temperature"]
+        }
+    });
+    write_json(&d.join("m.json"), &m);
+    let mut big = m.clone();
+    big["sweep"] =
+        json!({"restitution.constant": (1..=300).map(|i| i as f64 / 301.0).collect::<Vec<_>>()});
+    write_json(&d.join("big.json"), &big);
+    let o = granular(
+        d,
+        &["run", "m.json", "--out", "c", "--quiet", "--threads", "1"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let commands: &[&[&str]] = &[
+        &["--help"],
+        &["schema"],
+        &["validate", "big.json"],
+        &["plan", "big.json", "--out", "new"],
+        &["plan", "big.json", "--out", "new", "--json"],
+        &["run", "big.json", "--out", "new", "--dry-run"],
+        &["status", "c"],
+        &["status", "c", "--json"],
+        &["verify", "c"],
+        &["verify", "c", "--quick"],
+        &["plot", "c", "--out", "figs"],
+        &["report", "c", "--out", "r.html"],
+        &["theory", "m.json", "--out", "t"],
+        &["upgrade", "c"],
+        &["compact", "c"],
+        &[
+            "submit",
+            "big.json",
+            "--out",
+            "s",
+            "--slurm",
+            "--tasks",
+            "1",
+            "--per-task-runs",
+            "1",
+            "--time",
+            "5",
+            "--dry-run",
+        ],
+    ];
+    for args in commands {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = Command::new(bin())
+            .args(*args)
+            .current_dir(d)
+            .env("GRANULAR_SCONTROL", "/nonexistent/scontrol")
+            .env_remove("RUST_BACKTRACE")
+            .stdin(Stdio::null())
+            .stdout(writer)
+            .stderr(Stdio::piped())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {:?}\n{err}", o.status);
+        for bad in ["panicked", "backtrace", "Broken pipe", "standard output"] {
+            assert!(!err.contains(bad), "{args:?}: stderr says {bad:?}:\n{err}");
+        }
+    }
+
+    if Path::new("/dev/full").exists() {
+        for args in [&["schema"][..], &["status", "c"]] {
+            let full = fs::OpenOptions::new()
+                .write(true)
+                .open("/dev/full")
+                .unwrap();
+            let o = Command::new(bin())
+                .args(args)
+                .current_dir(d)
+                .stdin(Stdio::null())
+                .stdout(full)
+                .stderr(Stdio::piped())
+                .output()
+                .unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(4), "{args:?}: {:?}\n{err}", o.status);
+            assert_eq!(
+                err.matches("error: cannot write to standard output")
+                    .count(),
+                1,
+                "{args:?}:\n{err}"
+            );
+            assert!(!err.contains("panicked"), "{args:?}:\n{err}");
+        }
     }
 }

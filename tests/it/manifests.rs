@@ -304,3 +304,63 @@ fn a_byte_order_mark_is_accepted() {
     let (m, _) = load_manifest(&bom).expect("the library accepts it too");
     assert_eq!(m.name, "good-power-law-sweep");
 }
+
+/// A key given twice in one object (serde_json keeps the last one silently) is refused by
+/// every command that reads a manifest (validate, plan, run, run --dry-run, theory, submit),
+/// exit 2, every duplicate at its object's JSON path, nothing written (before: accepted with
+/// the last values, exit 0, and `run` ran the campaign).
+#[test]
+fn duplicate_keys_are_refused_by_every_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let f = repo_root().join("tests/manifests/bad/duplicate_keys.json");
+    let f = f.to_str().unwrap();
+    let out = dir.path().join("out");
+    let o = out.to_str().unwrap();
+    let submit = [
+        "submit",
+        f,
+        "--out",
+        o,
+        "--slurm",
+        "--tasks",
+        "1",
+        "--per-task-runs",
+        "1",
+        "--time",
+        "5",
+    ];
+    let commands: Vec<Vec<&str>> = vec![
+        vec!["validate", f],
+        vec!["plan", f, "--out", o],
+        vec!["plan", f, "--out", o, "--json"],
+        vec!["run", f, "--out", o, "--quiet"],
+        vec!["run", f, "--out", o, "--dry-run"],
+        vec!["theory", f, "--out", o],
+        submit.to_vec(),
+        [&submit[..], &["--dry-run"]].concat(),
+    ];
+    for args in commands {
+        let _ = fs::remove_file(&log);
+        let (code, stdout) = util::run_capture(&args, &log);
+        let text = util::log_text(&log);
+        assert_eq!(
+            code,
+            Some(2),
+            "{args:?}: stdout:\n{stdout}\nstderr:\n{text}"
+        );
+        for want in [
+            "invalid manifest (4 errors)",
+            "at /: duplicate key \"seed\"",
+            "at /params/species/list/1: duplicate key \"mass\"",
+            "at /params/restitution: duplicate key \"constant\"",
+            "at /sweep: duplicate key \"restitution.constant\"",
+        ] {
+            assert!(
+                text.contains(want),
+                "{args:?}: stderr lacks {want:?}:\n{text}"
+            );
+        }
+        assert!(!out.exists(), "{args:?} created {}", out.display());
+    }
+}

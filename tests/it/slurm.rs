@@ -265,3 +265,356 @@ fn submit_packs_chains_and_resubmits_missing_shards() {
     );
     util::assert_same_current(&c, &rg, "grown SLURM campaign vs one run");
 }
+
+/// One short run (1 point, 1 replica).
+fn tiny_manifest(name: &str) -> Value {
+    let mut m = manifest();
+    m["name"] = json!(name);
+    m["replicas"] = json!(1);
+    m.as_object_mut().unwrap().remove("sweep");
+    m
+}
+
+/// A path or value that no line of a script can carry is refused with exit 2, every one at
+/// once, before anything is written (no directory, no script, no sbatch call): a line break in
+/// `--out` (before: `--dry-run` printed a script whose `#SBATCH --output=` line ended there and
+/// whose next line, `touch PWNED`, bash would have run), a backslash in it (SLURM strips it
+/// from `--output` and then expands no `%A_%a`), line breaks and `hetjob` in `--partition` and
+/// `--sbatch-arg`.
+#[test]
+fn submit_refuses_what_no_script_line_can_hold() {
+    let logs = tempfile::tempdir().unwrap();
+    let log = logs.path().join("log");
+    let dir = tempfile::tempdir().unwrap();
+    let t = dir.path();
+    fake_tools(t);
+    let m = t.join("m.json");
+    write_json(&m, &tiny_manifest("slurm-refuse"));
+    let before = util::snapshot(t);
+    let first = |out: &str| -> Vec<String> {
+        [
+            s(&m),
+            "--out",
+            out,
+            "--slurm",
+            "--tasks",
+            "1",
+            "--per-task-runs",
+            "1",
+            "--time",
+            "5",
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .collect()
+    };
+    let injected = format!("{}/x\ntouch PWNED\n#", t.display());
+    let backslash = format!("{}/back\\slash", t.display());
+    let plain = t.join("C").display().to_string();
+    let cases: Vec<(Vec<String>, Vec<&str>)> = vec![
+        (
+            [first(&injected), vec!["--dry-run".into()]].concat(),
+            vec![
+                "error: --out \"",
+                "x\\ntouch PWNED\\n#\": contains a line break",
+            ],
+        ),
+        (
+            first(&injected),
+            vec!["x\\ntouch PWNED\\n#\": contains a line break"],
+        ),
+        (
+            first(&backslash),
+            vec!["back\\\\slash\": contains a backslash"],
+        ),
+        (
+            [
+                first(&plain),
+                vec![
+                    "--partition".into(),
+                    "short\nrm -rf /".into(),
+                    "--sbatch-arg=--comment=a\rb".into(),
+                    "--sbatch-arg=--comment=HetJob".into(),
+                    "--dry-run".into(),
+                ],
+            ]
+            .concat(),
+            vec![
+                "--partition \"short\\nrm -rf /\": contains a line break",
+                "--sbatch-arg \"--comment=a\\rb\": contains a carriage return",
+                "--sbatch-arg \"--comment=HetJob\": contains \"hetjob\"",
+            ],
+        ),
+    ];
+    for (args, wanted) in cases {
+        let _ = fs::remove_file(&log);
+        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (code, out) = submit(t, &argv, &log);
+        let text = log_text(&log);
+        assert_eq!(code, Some(2), "{args:?}: stdout:\n{out}\nstderr:\n{text}");
+        assert!(out.is_empty(), "{args:?} printed:\n{out}");
+        for w in wanted {
+            assert!(text.contains(w), "{args:?}: stderr lacks {w:?}:\n{text}");
+        }
+        assert!(!text.contains("panicked"), "{text}");
+        assert_eq!(
+            util::snapshot(t),
+            before,
+            "{args:?} wrote into the working directory"
+        );
+    }
+}
+
+/// `s` in POSIX single quotes (as the test's own reference, independent of the crate's).
+fn sh_quote(s: &str) -> String {
+    format!("'{}'", s.replace('\'', "'\\''"))
+}
+
+/// The arguments of a script's `#SBATCH` lines as sbatch reads them (`_get_argument` in
+/// SLURM's src/sbatch/opt.c, 17.11 on: white space ends an unquoted argument, `'` and `"`
+/// quote, a backslash escapes the next character (inside quotes too), an unquoted `#` ends the
+/// line; the lines before the first command). Lines holding `hetjob`/`packjob` fail the test.
+fn sbatch_directives(script: &str) -> Vec<String> {
+    let mut args = Vec::new();
+    for line in script.lines().skip(1) {
+        let Some(rest) = line.strip_prefix("#SBATCH") else {
+            if line.trim_start().starts_with('#') || line.trim().is_empty() {
+                continue;
+            }
+            break;
+        };
+        let lower = line.to_ascii_lowercase();
+        assert!(
+            !lower.contains("hetjob") && !lower.contains("packjob"),
+            "{line}"
+        );
+        let mut chars = rest.chars().peekable();
+        loop {
+            while chars.peek().is_some_and(|c| c.is_whitespace()) {
+                chars.next();
+            }
+            if chars.peek().is_none_or(|&c| c == '#') {
+                break;
+            }
+            assert_ne!(chars.peek(), Some(&':'), "sbatch: Unexpected `:` in {line}");
+            let (mut arg, mut quote, mut escape) = (String::new(), None, false);
+            while let Some(&c) = chars.peek() {
+                if quote.is_none() && c.is_whitespace() {
+                    break;
+                }
+                chars.next();
+                if escape {
+                    escape = false;
+                } else if c == '\\' {
+                    escape = true;
+                    continue;
+                } else if let Some(q) = quote {
+                    if c == q {
+                        quote = None;
+                        continue;
+                    }
+                } else if c == '"' || c == '\'' {
+                    quote = Some(c);
+                    continue;
+                } else if c == '#' {
+                    break;
+                }
+                arg.push(c);
+            }
+            assert!(quote.is_none(), "sbatch: unmatched quote in {line}");
+            args.push(arg);
+        }
+    }
+    args
+}
+
+/// SLURM's expansion of a batch job's output file name (slurmstepd `fname_create`): `%%` is
+/// `%`, `%A`/`%a`/`%j` the array job, task and job id; a backslash anywhere turns every
+/// expansion off (and is dropped).
+fn slurm_file_name(pattern: &str, array_job: u32, task: u32, job: u32) -> String {
+    if pattern.contains('\\') {
+        return pattern.replace('\\', "");
+    }
+    let mut out = String::new();
+    let mut chars = pattern.chars();
+    while let Some(c) = chars.next() {
+        if c != '%' {
+            out.push(c);
+            continue;
+        }
+        match chars.next() {
+            Some('%') => out.push('%'),
+            Some('A') => out.push_str(&array_job.to_string()),
+            Some('a') => out.push_str(&task.to_string()),
+            Some('j') => out.push_str(&job.to_string()),
+            Some(other) => {
+                out.push('%');
+                out.push(other);
+            }
+            None => out.push('%'),
+        }
+    }
+    out
+}
+
+/// A campaign directory (and a partition, an extra sbatch argument) with spaces, quotes,
+/// `$()`, backticks, `;`, `&`, `#` and `%`: the scripts pass `bash -n`; sbatch reads their
+/// `#SBATCH` lines into single arguments with the log paths SLURM expands into the campaign's
+/// `slurm/logs/`; run by bash with a stub in place of granular, the commands get the directory
+/// unchanged, and nothing injected runs; run for real, the array task runs the campaign and
+/// the compaction job compacts it. (Before: `#SBATCH --output=` held the path unquoted,
+/// which sbatch splits at the first space and cuts at `#`; the partition and extra arguments
+/// were written verbatim.)
+#[test]
+fn scripts_carry_odd_paths_unchanged() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let t = &tmp.path().canonicalize().unwrap();
+    fake_tools(t);
+    let m = t.join("m.json");
+    write_json(&m, &tiny_manifest("slurm-odd"));
+    let log = t.join("log");
+    let odd = t
+        .join("sub dir")
+        .join("odd 'q' \"dq\" $(touch PWNED1) `touch PWNED2`; touch PWNED3 & #c %A 100%");
+    let dir = s(&odd);
+    let args = [
+        s(&m),
+        "--out",
+        dir,
+        "--slurm",
+        "--tasks",
+        "1",
+        "--per-task-runs",
+        "1",
+        "--time",
+        "00:05:00",
+        "--partition",
+        "short queue #1",
+        "--sbatch-arg=--comment=it's \"ok\"; $(touch PWNED4)",
+    ];
+    let (code, out) = submit(t, &args, &log);
+    assert_eq!(code, Some(0), "stdout:\n{out}\nlog:\n{}", log_text(&log));
+    let array = fs::read_to_string(odd.join("slurm/array-001.sh")).unwrap();
+    let compact = fs::read_to_string(odd.join("slurm/compact-001.sh")).unwrap();
+
+    // bash parses both scripts.
+    for (name, text) in [("array", &array), ("compact", &compact)] {
+        let st = Command::new("bash")
+            .args(["-n", "-c", text])
+            .status()
+            .unwrap();
+        assert!(st.success(), "bash -n {name} script:\n{text}");
+    }
+
+    // sbatch reads every directive as one argument, the log paths inside the campaign.
+    let logs = format!("{dir}/slurm/logs/");
+    for (name, text, want_log) in [
+        ("array", &array, format!("{logs}101_0.out")),
+        ("compact", &compact, format!("{logs}compact-102.out")),
+    ] {
+        let d = sbatch_directives(text);
+        let output: Vec<&String> = d.iter().filter(|a| a.starts_with("--output=")).collect();
+        assert_eq!(output.len(), 1, "{name}: {d:?}\n{text}");
+        let file = slurm_file_name(&output[0]["--output=".len()..], 101, 0, 102);
+        assert_eq!(file, want_log, "{name}: {d:?}\n{text}");
+        for want in [
+            "--partition=short queue #1",
+            "--comment=it's \"ok\"; $(touch PWNED4)",
+            "--time=00:05:00",
+            "--ntasks=1",
+        ] {
+            assert!(
+                d.iter().any(|a| a == want),
+                "{name} lacks {want:?}: {d:?}\n{text}"
+            );
+        }
+        assert!(
+            d.iter().all(|a| a.starts_with("--")),
+            "{name}: an argument split apart: {d:?}\n{text}"
+        );
+    }
+
+    // bash runs the scripts' commands with the directory unchanged: granular replaced by a
+    // stub on PATH that records its arguments.
+    let stubs = t.join("stubs");
+    fs::create_dir(&stubs).unwrap();
+    let stub = stubs.join("granular");
+    fs::write(&stub, "#!/bin/sh\nprintf '%s\\0' \"$@\" > \"$STUB_OUT\"\n").unwrap();
+    fs::set_permissions(&stub, fs::Permissions::from_mode(0o755)).unwrap();
+    let exe = sh_quote(s(&fs::canonicalize(bin()).unwrap()));
+    let path = format!(
+        "{}:{}",
+        stubs.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    for (name, text, want) in [
+        (
+            "array",
+            &array,
+            vec![
+                "slurm-task",
+                dir,
+                "--shards",
+                "1",
+                "--threads",
+                "1",
+                "--checkpoint-every",
+                "300",
+            ],
+        ),
+        ("compact", &compact, vec!["compact", dir]),
+    ] {
+        assert_eq!(text.matches(&exe).count(), 1, "{name}:\n{text}");
+        let stubbed = text.replace(&exe, "granular");
+        let recorded = t.join(format!("{name}.args"));
+        let out = Command::new("bash")
+            .args(["-c", &stubbed])
+            .current_dir(t)
+            .env("PATH", &path)
+            .env("STUB_OUT", &recorded)
+            .env("SLURM_ARRAY_TASK_ID", "0")
+            .env_remove("SLURM_CPUS_PER_TASK")
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{name}: {out:?}\n{stubbed}");
+        let got = fs::read(&recorded).unwrap();
+        let got: Vec<String> = got
+            .split(|&b| b == 0)
+            .filter(|a| !a.is_empty())
+            .map(|a| String::from_utf8(a.to_vec()).unwrap())
+            .collect();
+        assert_eq!(got, want, "{name}:\n{stubbed}");
+    }
+
+    // Run for real by bash: the task runs the campaign, the compaction job compacts it.
+    for (name, text) in [("array", &array), ("compact", &compact)] {
+        let out = Command::new("bash")
+            .args(["-c", text])
+            .current_dir(t)
+            .env("SLURM_ARRAY_TASK_ID", "0")
+            .env_remove("SLURM_CPUS_PER_TASK")
+            .stdin(Stdio::null())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{name} script: {}\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            text
+        );
+    }
+    let st = util::status_json(&odd, &log);
+    assert_eq!(st["done"], json!(1), "{st}");
+    assert!(odd.join("ledger/index.json").exists(), "not compacted");
+
+    // Nothing injected ran anywhere.
+    let pwned: Vec<_> = util::snapshot(t)
+        .into_keys()
+        .filter(|p| {
+            p.file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with("PWNED"))
+        })
+        .collect();
+    assert!(pwned.is_empty(), "injected commands ran: {pwned:?}");
+}
