@@ -650,8 +650,8 @@ fn section_figures(
     // tables are missing (or of fewer runs): the figures are of the runs finished so far,
     // their summaries computed for this page only.
     let unfinished = st.current.done + st.current.failed < st.current_runs;
-    let outside = (st.counts.done + st.counts.failed)
-        .saturating_sub(st.current.done + st.current.failed);
+    let outside =
+        (st.counts.done + st.counts.failed).saturating_sub(st.current.done + st.current.failed);
     if outside > 0 {
         let _ = writeln!(
             h,

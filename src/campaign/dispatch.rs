@@ -177,8 +177,7 @@ pub fn run(
             // The summaries of the ledger as it is now (read under the upkeep lock, after the
             // scrub), checked again after they are written.
             let finished = finished_runs(c)?;
-            if c
-                .plan
+            if c.plan
                 .current_runs()
                 .all(|r| finished.contains_key(&r.run_id))
             {

@@ -799,7 +799,10 @@ impl LockInfo {
         if self.is_exclusive() {
             self.purpose.unwrap_or(Purpose::Compaction).doing().into()
         } else {
-            format!("shard {} (`granular run`, `resume` or a SLURM task)", self.shard)
+            format!(
+                "shard {} (`granular run`, `resume` or a SLURM task)",
+                self.shard
+            )
         }
     }
 
@@ -1065,7 +1068,11 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<LockFile, LockError> {
                 // by one process at a time, after reading it again under the takeover lock,
                 // so that a lock just taken by another process is never removed.
                 let _guard = Flock::acquire(root, "takeover.flock")?;
-                let seen = locks.open_file(&name).ok().flatten().and_then(|f| f.metadata().ok());
+                let seen = locks
+                    .open_file(&name)
+                    .ok()
+                    .flatten()
+                    .and_then(|f| f.metadata().ok());
                 match read_lock(&locks, &name) {
                     Some(h) if lock_is_live(&locks, &h) => continue,
                     Some(_) => {
@@ -1242,13 +1249,19 @@ mod tests {
         match ShardLock::acquire(d.path(), Shard::ALL) {
             Err(LockError::Held(m)) => {
                 assert!(m.contains("an upgrade"), "{m}");
-                assert!(m.contains(&format!("process {}", std::process::id())), "{m}");
+                assert!(
+                    m.contains(&format!("process {}", std::process::id())),
+                    "{m}"
+                );
             }
             Err(other) => panic!("expected held, got {other:?}"),
             Ok(_) => panic!("a shard started while an upgrade held the campaign"),
         }
         drop(held);
-        assert!(!d.path().join("locks/compact.lock").exists(), "released on drop");
+        assert!(
+            !d.path().join("locks/compact.lock").exists(),
+            "released on drop"
+        );
         let shard = ShardLock::acquire(d.path(), Shard::ALL).unwrap();
         match ExclusiveLock::acquire(d.path(), Purpose::Compaction) {
             Err(LockError::Held(m)) => assert!(m.contains("shard 1/1"), "{m}"),
@@ -1293,7 +1306,10 @@ mod closed_world_tests {
         fs::create_dir_all(&outside).unwrap();
         std::os::unix::fs::symlink(&outside, camp.join("locks")).unwrap();
         let lock = ShardLock::acquire(&camp, Shard::ALL).unwrap();
-        assert!(fs::read_dir(&outside).unwrap().next().is_none(), "written outside");
+        assert!(
+            fs::read_dir(&outside).unwrap().next().is_none(),
+            "written outside"
+        );
         assert!(fs::symlink_metadata(camp.join("locks")).unwrap().is_dir());
         let aside: Vec<String> = fs::read_dir(&camp)
             .unwrap()
@@ -1301,10 +1317,16 @@ mod closed_world_tests {
             .filter(|n| n.starts_with("locks.moved-"))
             .collect();
         assert_eq!(aside.len(), 1, "{aside:?}");
-        assert!(fs::symlink_metadata(camp.join(&aside[0])).unwrap().file_type().is_symlink());
+        assert!(fs::symlink_metadata(camp.join(&aside[0]))
+            .unwrap()
+            .file_type()
+            .is_symlink());
         drop(lock);
         let _ = Upkeep::acquire(&camp).unwrap();
-        assert!(fs::read_dir(&outside).unwrap().next().is_none(), "written outside");
+        assert!(
+            fs::read_dir(&outside).unwrap().next().is_none(),
+            "written outside"
+        );
         // A file in its place: set aside too.
         fs::remove_dir_all(camp.join("locks")).unwrap();
         fs::write(camp.join("locks"), b"x").unwrap();

@@ -51,8 +51,8 @@ use crate::store::parquet_io::Stamp;
 use crate::store::FORMAT_VERSION;
 use crate::CODE_VERSION;
 use ledger::RunStatus;
-use plan::{canonical, Plan, Shard};
 use ledger::{ExclusiveLock, LockError, Purpose};
+use plan::{canonical, Plan, Shard};
 use registry::{Asked, Growth, Registry};
 
 #[derive(Debug, thiserror::Error)]
@@ -587,7 +587,9 @@ impl Campaign {
     pub fn write_theory(&self) -> Result<(), crate::store::parquet_io::StoreError> {
         let data = self.data();
         let none = BTreeMap::new();
-        self.plan.model.write_theory(&self.view_of(&data, &none, false))
+        self.plan
+            .model
+            .write_theory(&self.view_of(&data, &none, false))
     }
 
     /// The model's standard figures from the summary tables (and, for figures drawn from raw

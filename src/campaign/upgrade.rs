@@ -66,8 +66,8 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
         });
     }
     // Decided under the lock on what is read under it (a shard running, another upgrade).
-    let _lock = ExclusiveLock::acquire(root, Purpose::Upgrade)
-        .map_err(|e| e.context("cannot upgrade"))?;
+    let _lock =
+        ExclusiveLock::acquire(root, Purpose::Upgrade).map_err(|e| e.context("cannot upgrade"))?;
     let info = CampaignInfo::read(root)?;
     let mut report = UpgradeReport {
         from: info.format_version,

@@ -73,7 +73,11 @@ impl<'c> Writer<'c> {
                         && info.rows == rows
                 })
         };
-        if !current(tables::POINTS, "points.parquet", self.c.plan.points.len() as u64) {
+        if !current(
+            tables::POINTS,
+            "points.parquet",
+            self.c.plan.points.len() as u64,
+        ) {
             data.write_whole(
                 tables::POINTS,
                 "points.parquet",

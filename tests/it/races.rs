@@ -18,8 +18,8 @@ use std::time::{Duration, Instant};
 use serde_json::{json, Value};
 
 use super::util::{
-    self, assert_same_current, granular, heavy, log_text, read_table, run_granular,
-    wait_limited, Cell,
+    self, assert_same_current, granular, heavy, log_text, read_table, run_granular, wait_limited,
+    Cell,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -62,7 +62,17 @@ fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
 }
 
 fn run_args<'a>(m: &'a Path, out: &'a Path) -> Vec<&'a str> {
-    vec!["run", s(m), "--out", s(out), "--threads", "2", "--quiet", "--flush-every", "0"]
+    vec![
+        "run",
+        s(m),
+        "--out",
+        s(out),
+        "--threads",
+        "2",
+        "--quiet",
+        "--flush-every",
+        "0",
+    ]
 }
 
 fn run_ok(m: &Path, out: &Path, log: &Path) {
@@ -128,7 +138,11 @@ fn temperatures_of(dir: &Path, eps: f64) -> Vec<(u64, String, u64, u64)> {
     let ids: Vec<u64> = points.iter().filter(|p| p.1 == eps).map(|p| p.0).collect();
     assert_eq!(ids.len(), 1, "one point with restitution {eps}: {points:?}");
     let runs = read_table(dir, "runs");
-    let (rid, rpoint, rrep) = (runs.col("run_id"), runs.col("point_id"), runs.col("replica"));
+    let (rid, rpoint, rrep) = (
+        runs.col("run_id"),
+        runs.col("point_id"),
+        runs.col("replica"),
+    );
     let replica: std::collections::BTreeMap<u64, u64> = runs
         .rows
         .iter()
@@ -136,13 +150,23 @@ fn temperatures_of(dir: &Path, eps: f64) -> Vec<(u64, String, u64, u64)> {
         .map(|r| (r[rid].as_u64(), r[rrep].as_u64()))
         .collect();
     let t = read_table(dir, "dsmc_species");
-    let (run, time, sp, temp) = (t.col("run_id"), t.col("t"), t.col("species"), t.col("temperature"));
+    let (run, time, sp, temp) = (
+        t.col("run_id"),
+        t.col("t"),
+        t.col("species"),
+        t.col("temperature"),
+    );
     let mut v: Vec<(u64, String, u64, u64)> = t
         .rows
         .iter()
         .filter_map(|r| {
             let rep = *replica.get(&r[run].as_u64())?;
-            Some((rep, r[time].to_string(), r[sp].as_u64(), cell_bits(&r[temp])))
+            Some((
+                rep,
+                r[time].to_string(),
+                r[sp].as_u64(),
+                cell_bits(&r[temp]),
+            ))
         })
         .collect();
     v.sort();
@@ -228,7 +252,8 @@ fn growth_refused_while_another_growth_holds_the_lock() {
     let text = log_text(&blog);
     assert_eq!(code, Some(3), "B while A holds the lock:\n{text}");
     assert!(
-        text.contains("change of the campaign's manifest") && text.contains(&format!("process {pid}")),
+        text.contains("change of the campaign's manifest")
+            && text.contains(&format!("process {pid}")),
         "the refusal names the growth and its process {pid}:\n{text}"
     );
     assert!(!text.contains("compaction"), "not a compaction:\n{text}");
@@ -265,9 +290,16 @@ fn a_stale_resume_runs_the_grown_campaign() {
     let outcome = dispatch::run(&stale, &opts, &mut Silent).unwrap();
     assert!(outcome.complete, "{outcome:?}");
     let summary = read_table(&camp, "dsmc_species_summary");
-    let ids: std::collections::BTreeSet<u64> =
-        summary.column("point_id").iter().map(|c| c.as_u64()).collect();
-    assert_eq!(ids.len(), 3, "the summary covers the 3 points of the latest manifest");
+    let ids: std::collections::BTreeSet<u64> = summary
+        .column("point_id")
+        .iter()
+        .map(|c| c.as_u64())
+        .collect();
+    assert_eq!(
+        ids.len(),
+        3,
+        "the summary covers the 3 points of the latest manifest"
+    );
     let direct = dir.path().join("direct");
     run_ok(&ma, &direct, &log);
     assert_same_current(&camp, &direct, "after a stale resume");
@@ -275,7 +307,12 @@ fn a_stale_resume_runs_the_grown_campaign() {
     // The same through the command line: a resume paused after opening the campaign.
     let mb = write(dir.path(), "b.json", &with_value(0.6));
     let flag = dir.path().join("resume.paused");
-    let r = paused(&["resume", s(&camp), "--quiet"], "resume-opened", &flag, &log);
+    let r = paused(
+        &["resume", s(&camp), "--quiet"],
+        "resume-opened",
+        &flag,
+        &log,
+    );
     run_ok(&mb, &camp, &log);
     assert_eq!(release(r, &flag, &log), Some(0), "{}", log_text(&log));
     let direct_b = dir.path().join("direct-b");
@@ -300,8 +337,15 @@ fn summaries_describe_the_latest_manifest() {
     let m1 = write(dir.path(), "m1.json", &one);
     run_ok(&m1, &camp, &log);
     let summary = read_table(&camp, "dsmc_species_summary");
-    let n: Vec<u64> = summary.column("n_replicas").iter().map(|c| c.as_u64()).collect();
-    assert!(!n.is_empty() && n.iter().all(|&x| x == 1), "n_replicas {n:?}");
+    let n: Vec<u64> = summary
+        .column("n_replicas")
+        .iter()
+        .map(|c| c.as_u64())
+        .collect();
+    assert!(
+        !n.is_empty() && n.iter().all(|&x| x == 1),
+        "n_replicas {n:?}"
+    );
     let direct1 = dir.path().join("direct1");
     run_ok(&m1, &direct1, &log);
     assert_same_current(&camp, &direct1, "replicas 2 -> 1");
@@ -317,8 +361,15 @@ fn summaries_describe_the_latest_manifest() {
     let m2 = write(dir.path(), "m2.json", &seeds);
     run_ok(&m2, &camp, &log);
     let summary = read_table(&camp, "dsmc_species_summary");
-    let n: Vec<u64> = summary.column("n_replicas").iter().map(|c| c.as_u64()).collect();
-    assert!(!n.is_empty() && n.iter().all(|&x| x == 3), "n_replicas {n:?}");
+    let n: Vec<u64> = summary
+        .column("n_replicas")
+        .iter()
+        .map(|c| c.as_u64())
+        .collect();
+    assert!(
+        !n.is_empty() && n.iter().all(|&x| x == 3),
+        "n_replicas {n:?}"
+    );
     let direct2 = dir.path().join("direct2");
     run_ok(&m2, &direct2, &log);
     assert_same_current(&camp, &direct2, "switched to seeds");
@@ -376,12 +427,20 @@ fn upgrade_is_refused_while_a_shard_runs() {
     let m0 = write(dir.path(), "m0.json", &base());
     run_ok(&m0, &camp, &log);
     let flag = dir.path().join("shard.paused");
-    let r = paused(&["resume", s(&camp), "--quiet"], "shard-locked", &flag, &log);
+    let r = paused(
+        &["resume", s(&camp), "--quiet"],
+        "shard-locked",
+        &flag,
+        &log,
+    );
     let ulog = dir.path().join("upgrade.log");
     let code = run_granular(&["upgrade", s(&camp)], &ulog, LIMIT);
     let text = log_text(&ulog);
     assert_eq!(code, Some(3), "upgrade while a shard runs:\n{text}");
-    assert!(text.contains("shard 1/1") && text.contains(&format!("process {}", r.id())), "{text}");
+    assert!(
+        text.contains("shard 1/1") && text.contains(&format!("process {}", r.id())),
+        "{text}"
+    );
     assert_eq!(release(r, &flag, &log), Some(0), "{}", log_text(&log));
     assert_eq!(run_granular(&["upgrade", s(&camp)], &ulog, LIMIT), Some(0));
 }
@@ -393,7 +452,9 @@ fn a_non_campaign_directory_is_named_as_such() {
     let log = dir.path().join("log");
     let empty = dir.path().join("empty");
     fs::create_dir(&empty).unwrap();
-    for cmd in ["upgrade", "report", "status", "verify", "resume", "compact", "plot", "serve"] {
+    for cmd in [
+        "upgrade", "report", "status", "verify", "resume", "compact", "plot", "serve",
+    ] {
         let clog = dir.path().join(format!("{cmd}.log"));
         let code = run_granular(&[cmd, s(&empty)], &clog, LIMIT);
         let text = log_text(&clog);
@@ -433,9 +494,15 @@ fn a_reread_campaign_keeps_every_point() {
     assert_eq!(st["current_runs"], json!(3), "{st:#}");
     assert_eq!(st["current"]["done"], json!(3), "{st:#}");
     let points = st["points"].as_array().unwrap();
-    assert!(points.iter().all(|p| p["in_manifest"] == json!(true)), "{st:#}");
+    assert!(
+        points.iter().all(|p| p["in_manifest"] == json!(true)),
+        "{st:#}"
+    );
     let summary = read_table(&camp, "rfm_timeseries_summary");
-    let ids: std::collections::BTreeSet<u64> =
-        summary.column("point_id").iter().map(|c| c.as_u64()).collect();
+    let ids: std::collections::BTreeSet<u64> = summary
+        .column("point_id")
+        .iter()
+        .map(|c| c.as_u64())
+        .collect();
     assert_eq!(ids.len(), 3, "every point summarised");
 }
