@@ -51,7 +51,7 @@ def manifest(rng: random.Random, t_end: float) -> dict:
         "seed": 2026,
         "params": {
             "method": "low_rank",
-            "species": {"power_law": {"n1": 0.1, "N1": 800, "theta": 3}},
+            "species": {"power_law": {"n1": 0.1, "N1": 2000, "theta": 3}},
             "restitution": {"constant": 0.5},
             "t_end": t_end,
             "output_times": {"list": [1.0, 5.0]},
@@ -84,7 +84,7 @@ class Drill:
         self.dir = self.work / "campaign"
         self.outside = self.work / "outside"
         self.args = args
-        self.lock = threading.Lock()
+        self.lock = threading.RLock()
         self.ops = Counter()
         self.codes = Counter()
         self.kills = 0
@@ -144,7 +144,7 @@ class Drill:
         rng = random.Random(self.args.seed * 1000 + wid)
         while time.monotonic() < self.deadline and not self.failures:
             name, argv = self.command(rng, wid)
-            kill_after = rng.uniform(0.0, 1.5) if rng.random() < self.args.kill else None
+            kill_after = rng.uniform(0.0, 0.6) if rng.random() < self.args.kill else None
             logf = self.work / "logs" / f"w{wid}.log"
             with open(logf, "a") as lf:
                 lf.write(f"\n$ granular {' '.join(argv)}\n")

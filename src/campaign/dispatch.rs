@@ -90,8 +90,13 @@ pub fn run(
             pending: pending.len() as u64,
         });
         let writer = writer::Writer::new(c, &tag).map_err(io)?;
-        writer.ensure_points().map_err(io)?;
-        writer.ensure_theory().map_err(io)?;
+        {
+            // The tables written whole (points, registered runs, theory) are rewritten by one
+            // shard process at a time, never while another heals.
+            let _upkeep = Upkeep::acquire(&c.root)?;
+            writer.ensure_points().map_err(io)?;
+            writer.ensure_theory().map_err(io)?;
+        }
         let mut d = Dispatcher {
             c,
             opts,

@@ -162,13 +162,20 @@ impl Check {
 /// writers are judged only once their parts are visible; with a compaction running nothing is
 /// checked.
 pub fn check(c: &Campaign, depth: Depth) -> Result<Check, String> {
-    let first = check_once(&c.root, depth)?;
-    if first.clean() || first.live.is_empty() {
-        return Ok(first);
+    let mut found = check_once(&c.root, depth)?;
+    // A live writer may have committed, or rewritten a table (its sidecar first, then the
+    // file), while we looked: look again, a little later each time (a busy machine can take
+    // a second between the two), before calling it damage.
+    let mut wait = std::time::Duration::from_millis(200);
+    for _ in 0..4 {
+        if found.clean() || found.live.is_empty() {
+            break;
+        }
+        std::thread::sleep(wait);
+        wait *= 2;
+        found = check_once(&c.root, depth)?;
     }
-    // A writer may have committed, or rewritten a table, while we looked: look once more.
-    std::thread::sleep(std::time::Duration::from_millis(200));
-    check_once(&c.root, depth)
+    Ok(found)
 }
 
 fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {

@@ -199,6 +199,23 @@ impl Registry {
                 refused.extend(shorter_than_before(&same, asked.model, params));
                 shorter = self.shorter_point(&same, asked.model, params, &mut growth);
             }
+            if let RunsPerPoint::Replicas(r) = asked.runs {
+                let mut given: Vec<u32> = Vec::new();
+                for p in [(!is_new).then_some(id), shorter].into_iter().flatten() {
+                    given.extend(self.given_below(p, *r));
+                }
+                if !given.is_empty() {
+                    given.sort_unstable();
+                    given.dedup();
+                    refused.push(format!(
+                        "point {id} holds runs of given seeds at replica place(s) {given:?}: with \
+                         `replicas` they would count as its replicas, which a campaign started \
+                         from this manifest would not have (its seeds derive from the campaign \
+                         seed); keep `seeds` for this campaign, or use another --out"
+                    ));
+                    continue;
+                }
+            }
             self.grow_point(id, is_new, asked.runs, shorter, seed_of, &mut growth);
         }
         if !refused.is_empty() {
@@ -359,6 +376,15 @@ impl Registry {
                 }
             }
         }
+    }
+
+    /// The replica places below `r` of `point` that hold runs of given seeds.
+    fn given_below(&self, point: u32, r: u32) -> Vec<u32> {
+        self.blocks_of(point)
+            .filter(|b| matches!(b.seeds, SeedSource::Given(_)))
+            .flat_map(|b| b.first_replica..b.first_replica + b.count)
+            .filter(|x| *x < r)
+            .collect()
     }
 
     /// The run of `point` with replica `replica`.

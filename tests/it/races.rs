@@ -506,3 +506,38 @@ fn a_reread_campaign_keeps_every_point() {
         .collect();
     assert_eq!(ids.len(), 3, "every point summarised");
 }
+
+/// A campaign that ran given `seeds` and is then asked for `replicas`: its given-seed runs
+/// would count as replicas that a campaign started from the manifest would not have (their
+/// seeds derive from the campaign seed), so the summaries could not equal a direct campaign's.
+/// Refused (exit 3) before anything is written, naming the point. (Found by the race drill.)
+#[test]
+fn replicas_after_given_seeds_are_refused() {
+    let _g = heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let camp = dir.path().join("camp");
+    let mut seeds = base();
+    seeds.as_object_mut().unwrap().remove("replicas");
+    seeds["seeds"] = json!([3, 5]);
+    let ms = write(dir.path(), "seeds.json", &seeds);
+    run_ok(&ms, &camp, &log);
+    let mr = write(dir.path(), "replicas.json", &base());
+    let before = util::snapshot(&camp);
+    let rlog = dir.path().join("r.log");
+    let code = run_granular(&run_args(&mr, &camp), &rlog, LIMIT);
+    let text = log_text(&rlog);
+    assert_eq!(code, Some(3), "{text}");
+    assert!(
+        text.contains("given seeds at replica place(s) [0, 1]"),
+        "{text}"
+    );
+    assert!(
+        util::snapshot(&camp) == before,
+        "a refused growth changed the directory"
+    );
+    // More seeds still grow it.
+    seeds["seeds"] = json!([3, 5, 8]);
+    let ms2 = write(dir.path(), "seeds2.json", &seeds);
+    run_ok(&ms2, &camp, &log);
+}
