@@ -180,11 +180,12 @@ fn main() {
                 let r = theory_restitution(&sys.restitution, &sys.species);
                 let t0: Vec<f64> = sys.species.iter().map(|s| s.initial_temperature).collect();
                 let t_end = sys.t_end;
-                let th = evolve_temperatures(&species, &r, &t0, &[0.0, t_end]);
+                let th = evolve_temperatures(&species, &r, &t0, &[0.0, t_end]).ok();
                 rows.iter()
                     .rev()
                     .find(|r| r.species == 1 && r.t == t_end)
-                    .map(|r| r.temperature / th[1][0] - 1.0)
+                    .zip(th)
+                    .map(|(r, th)| r.temperature / th[1][0] - 1.0)
             } else {
                 None
             };

@@ -373,7 +373,8 @@ impl Campaign {
         let mut lacking: BTreeMap<(&str, &str), Vec<u32>> = BTreeMap::new();
         let mut schemas = BTreeMap::new();
         for &id in &growth.new_points {
-            let Some(point) = plan.points.iter().find(|p| p.point_id == id) else {
+            // `plan.points` is indexed by point_id.
+            let Some(point) = plan.points.get(id as usize).filter(|p| p.point_id == id) else {
                 continue;
             };
             for (table, column) in point.params.valued_columns() {

@@ -2,11 +2,12 @@
 //! `run --dry-run`): the points and runs it adds, the runs it continues to a longer horizon,
 //! what is kept, and an estimate of the cost from the wall time of the runs already done.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use serde::Serialize;
 
 use super::ledger::{self, RunStatus};
+use super::plan::Plan;
 use super::registry::Growth;
 use super::tables::RUNS;
 use super::{Campaign, CampaignError};
@@ -33,6 +34,9 @@ pub struct Preview {
     pub to_run: u64,
     /// Registered points the manifest no longer lists (kept, with their finished runs).
     pub retired_points: Vec<u32>,
+    /// The kinetic theory of the new points (computed before the runs), as the model
+    /// estimates it from their params.
+    pub theory: TheoryWork,
     /// Estimated CPU seconds of the runs to run (None without a finished run to go by).
     pub estimate_seconds: Option<f64>,
     /// How the estimate was made.
@@ -40,6 +44,87 @@ pub struct Preview {
     pub notes: Vec<String>,
     /// The runs to run, in run order.
     pub runs: Vec<PlannedRun>,
+}
+
+/// The kinetic-theory step of some points, as their model estimates it
+/// (`ModelParams::theory_estimate`; none for models without theory).
+#[derive(Serialize, Clone, Debug, Default, PartialEq)]
+pub struct TheoryWork {
+    /// Points with a theory to compute.
+    pub points: u64,
+    /// Estimated CPU seconds in all.
+    pub seconds: f64,
+    /// The point of the largest estimate: id, CPU seconds, peak bytes.
+    pub largest: Option<(u32, f64, f64)>,
+}
+
+/// The kinetic theory of more CPU seconds than this, or of a point of more bytes than
+/// [`THEORY_WARN_BYTES`], is worth a warning (`validate`, `plan`, `run`).
+pub const THEORY_WARN_SECONDS: f64 = 60.0;
+/// See [`THEORY_WARN_SECONDS`].
+pub const THEORY_WARN_BYTES: f64 = 2e9;
+
+/// The estimated kinetic theory of `points` of `plan`.
+pub fn theory_work(plan: &Plan, points: impl IntoIterator<Item = u32>) -> TheoryWork {
+    let mut w = TheoryWork::default();
+    for id in points {
+        let Some(p) = plan.points.get(id as usize) else {
+            continue;
+        };
+        let e = p.params.theory_estimate();
+        if e.seconds <= 0.0 {
+            continue;
+        }
+        w.points += 1;
+        w.seconds += e.seconds;
+        if w.largest.is_none_or(|(_, s, _)| e.seconds > s) {
+            w.largest = Some((id, e.seconds, e.bytes));
+        }
+    }
+    w
+}
+
+impl TheoryWork {
+    /// `~12 CPU s for 3 point(s) (largest: point 2, ~10 CPU s, ~1.2 GB)`.
+    pub fn text(&self) -> String {
+        let gb = |b: f64| crate::models::bytes_text(b.min(u64::MAX as f64) as u64);
+        let mut s = format!(
+            "~{} CPU s for {} point(s)",
+            seconds_text(self.seconds),
+            self.points
+        );
+        match self.largest {
+            Some((id, secs, bytes)) if self.points > 1 => s.push_str(&format!(
+                " (largest: point {id}, ~{} CPU s, ~{})",
+                seconds_text(secs),
+                gb(bytes)
+            )),
+            Some((_, _, bytes)) => s.push_str(&format!(" (~{})", gb(bytes))),
+            None => {}
+        }
+        s
+    }
+
+    /// A warning when the theory is long or large (see [`THEORY_WARN_SECONDS`]).
+    pub fn warning(&self) -> Option<String> {
+        let bytes = self.largest.map_or(0.0, |(_, _, b)| b);
+        (self.seconds > THEORY_WARN_SECONDS || bytes > THEORY_WARN_BYTES).then(|| {
+            format!(
+                "the kinetic theory, computed before the runs, is estimated at {}",
+                self.text()
+            )
+        })
+    }
+}
+
+fn seconds_text(s: f64) -> String {
+    if s >= 100.0 {
+        format!("{s:.0}")
+    } else if s >= 1.0 {
+        format!("{s:.1}")
+    } else {
+        format!("{s:.2}")
+    }
 }
 
 /// A point a manifest adds.
@@ -87,13 +172,29 @@ pub fn preview(
         .filter(|r| finished.contains_key(&r.run_id))
         .count() as u64;
     let new: std::collections::BTreeSet<u32> = growth.new_points.iter().copied().collect();
+    // The point each new point continues (the first continued run of it names it).
+    let mut continues: HashMap<u32, u32> = HashMap::new();
+    for (run, old) in &growth.continued {
+        continues
+            .entry(c.plan.run(*run).point_id)
+            .or_insert_with(|| c.plan.run(*old).point_id);
+    }
+    let nearest = Nearest::new(
+        c.plan
+            .registry
+            .points
+            .iter()
+            .filter(|p| !new.contains(&p.id))
+            .take(NEAREST_SEARCH)
+            .map(|p| (p.id, flatten(&p.params))),
+    );
     let mut p = Preview {
         new_campaign,
         new_points: growth.new_points.clone(),
         points: growth
             .new_points
             .iter()
-            .map(|&id| describe(c, id, &new, growth))
+            .map(|&id| describe(c, id, continues.get(&id).copied(), &nearest))
             .collect(),
         new_runs: growth.new_runs.len() as u64,
         new_replicas: growth
@@ -105,6 +206,7 @@ pub fn preview(
         kept_runs: kept,
         to_run: current.len() as u64 - kept,
         retired_points: growth.retired_points.clone(),
+        theory: theory_work(&c.plan, growth.new_points.iter().copied()),
         notes: growth.notes.clone(),
         ..Preview::default()
     };
@@ -132,22 +234,12 @@ pub fn preview(
 
 /// A new point: the registered point it continues or is closest to (fewest differing params,
 /// the first among equals), and the differences.
-fn describe(
-    c: &Campaign,
-    id: u32,
-    new: &std::collections::BTreeSet<u32>,
-    growth: &Growth,
-) -> NewPoint {
+fn describe(c: &Campaign, id: u32, continues: Option<u32>, nearest: &Nearest) -> NewPoint {
     let reg = &c.plan.registry.points;
-    let continues = growth
-        .continued
-        .iter()
-        .find(|(run, _)| c.plan.run(*run).point_id == id)
-        .map(|(_, old)| c.plan.run(*old).point_id);
     let mine = flatten(&reg[id as usize].params);
     let differs_from = |other: u32| -> Vec<String> {
         let theirs = flatten(&reg[other as usize].params);
-        let keys: std::collections::BTreeSet<&String> = mine.keys().chain(theirs.keys()).collect();
+        let keys: BTreeSet<&String> = mine.keys().chain(theirs.keys()).collect();
         keys.into_iter()
             .filter(|k| mine.get(*k) != theirs.get(*k))
             .map(|k| {
@@ -156,20 +248,140 @@ fn describe(
             })
             .collect()
     };
-    let nearest = continues.or_else(|| {
-        reg.iter()
-            .filter(|p| !new.contains(&p.id))
-            .take(NEAREST_SEARCH)
-            .map(|p| (differs_from(p.id).len(), p.id))
-            .min()
-            .map(|(_, id)| id)
-    });
+    let nearest = continues.or_else(|| nearest.find(&mine));
     NewPoint {
         point_id: id,
         label: c.plan.label(id),
         nearest,
         differs: nearest.map(differs_from).unwrap_or_default(),
         continues,
+    }
+}
+
+/// The search for a new point's nearest registered point (the fewest differing flattened
+/// params, the smallest id among equals) over the candidates (the first [`NEAREST_SEARCH`]
+/// registered points that are not new), built once per preview so that a plan of many new
+/// points stays linear in them. Each candidate's values are interned per key; only the keys
+/// whose values vary among the candidates can tell them apart, and a point at distance 0 or 1
+/// of a candidate on those keys is found by hashing (the usual case: a sweep grown by a value
+/// or a key); otherwise the candidates are scanned, stopping at the first at distance 2.
+struct Nearest {
+    ids: Vec<u32>,
+    /// Every key of a candidate, and per key its values' numbers (0: no value).
+    keys: HashMap<String, (usize, HashMap<String, u32>)>,
+    /// Per candidate, the value numbers of the varying keys (in `varying` order).
+    rows: Vec<Vec<u32>>,
+    /// The keys whose values vary among the candidates (indices into the key numbering).
+    varying: Vec<usize>,
+    /// The smallest candidate index per exact row, and per (masked key, row with that key's
+    /// value replaced by `MASKED`).
+    exact: HashMap<Vec<u32>, usize>,
+    masked: HashMap<(usize, Vec<u32>), usize>,
+}
+
+const MASKED: u32 = u32::MAX - 1;
+const UNSEEN: u32 = u32::MAX;
+
+impl Nearest {
+    fn new(candidates: impl Iterator<Item = (u32, BTreeMap<String, String>)>) -> Nearest {
+        let mut keys: HashMap<String, (usize, HashMap<String, u32>)> = HashMap::new();
+        let mut ids = Vec::new();
+        let mut full: Vec<Vec<(usize, u32)>> = Vec::new();
+        for (id, flat) in candidates {
+            ids.push(id);
+            let mut row = Vec::with_capacity(flat.len());
+            for (k, v) in flat {
+                let n = keys.len();
+                let (ki, values) = keys.entry(k).or_insert_with(|| (n, HashMap::new()));
+                let next = values.len() as u32 + 1;
+                let vi = *values.entry(v).or_insert(next);
+                row.push((*ki, vi));
+            }
+            full.push(row);
+        }
+        let n_keys = keys.len();
+        let dense: Vec<Vec<u32>> = full
+            .iter()
+            .map(|row| {
+                let mut d = vec![0u32; n_keys];
+                for &(k, v) in row {
+                    d[k] = v;
+                }
+                d
+            })
+            .collect();
+        // Keys that every candidate has alike add the same to every distance: the ranking
+        // depends on the varying keys only.
+        let varying: Vec<usize> = (0..n_keys)
+            .filter(|&k| {
+                let first = dense.first().map_or(0, |d| d[k]);
+                dense.iter().any(|d| d[k] != first)
+            })
+            .collect();
+        let rows: Vec<Vec<u32>> = dense
+            .iter()
+            .map(|d| varying.iter().map(|&k| d[k]).collect())
+            .collect();
+        let mut exact = HashMap::new();
+        let mut masked = HashMap::new();
+        for (c, row) in rows.iter().enumerate() {
+            exact.entry(row.clone()).or_insert(c);
+            for j in 0..row.len() {
+                let mut m = row.clone();
+                m[j] = MASKED;
+                masked.entry((j, m)).or_insert(c);
+            }
+        }
+        Nearest {
+            ids,
+            keys,
+            rows,
+            varying,
+            exact,
+            masked,
+        }
+    }
+
+    /// The nearest candidate to a point with flattened params `flat` (None without
+    /// candidates).
+    fn find(&self, flat: &BTreeMap<String, String>) -> Option<u32> {
+        if self.ids.is_empty() {
+            return None;
+        }
+        // The point's value number per key (UNSEEN: a value no candidate has there).
+        let mut mine = vec![0u32; self.keys.len()];
+        for (k, v) in flat {
+            if let Some((ki, values)) = self.keys.get(k) {
+                mine[*ki] = values.get(v).copied().unwrap_or(UNSEEN);
+            }
+        }
+        let row: Vec<u32> = self.varying.iter().map(|&k| mine[k]).collect();
+        if let Some(&c) = self.exact.get(&row) {
+            return Some(self.ids[c]);
+        }
+        let mut best: Option<usize> = None;
+        for j in 0..row.len() {
+            let mut m = row.clone();
+            m[j] = MASKED;
+            if let Some(&c) = self.masked.get(&(j, m)) {
+                best = Some(best.map_or(c, |b| b.min(c)));
+            }
+        }
+        if let Some(c) = best {
+            return Some(self.ids[c]);
+        }
+        // Every candidate is at distance >= 2: the first at exactly 2, else the smallest.
+        let mut best = (usize::MAX, 0usize);
+        for (c, r) in self.rows.iter().enumerate() {
+            let d = r.iter().zip(&row).filter(|(a, b)| a != b).count();
+            if d < best.0 {
+                best = (d, c);
+                if d <= 2 {
+                    break;
+                }
+            }
+        }
+        Some(self.ids[best.1])
     }
 }
 
@@ -251,4 +463,62 @@ fn estimate(
             walls.len()
         ),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The search by index finds the point the scan of every candidate finds (the fewest
+    /// differing keys, the smallest id among equals), for points at distance 0, 1, 2 and more
+    /// on the varying keys, with keys missing on either side.
+    #[test]
+    fn nearest_is_that_of_the_scan() {
+        let mut seed = 7u64;
+        let mut next = |n: u64| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) % n
+        };
+        let mut point = |i: u64| -> BTreeMap<String, String> {
+            let mut m = BTreeMap::new();
+            m.insert("model".into(), "\"dsmc\"".into());
+            for k in 0..5 {
+                let v = next(3);
+                if v < 2 || k == 0 {
+                    m.insert(format!("k{k}"), format!("{}", next(4)));
+                }
+            }
+            if i % 7 == 0 {
+                m.insert("extra".into(), "1".into());
+            }
+            m
+        };
+        let candidates: Vec<(u32, BTreeMap<String, String>)> =
+            (0..60).map(|i| (i as u32, point(i))).collect();
+        let index = Nearest::new(candidates.clone().into_iter());
+        let scan = |mine: &BTreeMap<String, String>| {
+            candidates
+                .iter()
+                .map(|(id, theirs)| {
+                    let keys: BTreeSet<&String> = mine.keys().chain(theirs.keys()).collect();
+                    let d = keys
+                        .into_iter()
+                        .filter(|k| mine.get(*k) != theirs.get(*k))
+                        .count();
+                    (d, *id)
+                })
+                .min()
+                .map(|(_, id)| id)
+        };
+        for i in 0..400 {
+            let p = point(1000 + i);
+            assert_eq!(index.find(&p), scan(&p), "{p:?}");
+        }
+        for (_, c) in &candidates {
+            assert_eq!(index.find(c), scan(c));
+        }
+        assert_eq!(Nearest::new(std::iter::empty()).find(&point(0)), None);
+    }
 }

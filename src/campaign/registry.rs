@@ -19,7 +19,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::manifest::sweep::canonical;
+use crate::manifest::sweep::{canonical, canonical_without};
 use crate::manifest::RunsPerPoint;
 use crate::models::{CarryOver, ModelKind, ModelParams};
 
@@ -97,13 +97,11 @@ impl Growth {
 
 /// The identity of a point's runs: its model and params without the horizon keys.
 pub fn run_identity(model: ModelKind, params: &Value) -> String {
-    let mut p = params.clone();
-    if let Some(o) = p.as_object_mut() {
-        for k in model.horizon() {
-            o.remove(*k);
-        }
-    }
-    format!("{}\u{1f}{}", model.as_str(), canonical(&p))
+    format!(
+        "{}\u{1f}{}",
+        model.as_str(),
+        canonical_without(params, model.horizon())
+    )
 }
 
 impl Registry {
@@ -148,7 +146,13 @@ impl Registry {
     /// Register what `asked` adds: new points, and per point the runs it asks for that do not
     /// exist. `seed_of` gives a registered run's seed (to match given seeds).
     /// A point whose horizon is shorter than a registered point's of the same run identity is
-    /// refused (every error is returned).
+    /// refused, and so are more than [`MAX_HORIZON_VARIANTS`] points of one run identity
+    /// (every error is returned).
+    ///
+    /// Linear in the points (and runs) of the registry and the manifest: the points are found
+    /// by their canonical params, the blocks by their point, and a new point is compared (by
+    /// the model's `carry_over`) only with the registered points of its run identity, at most
+    /// [`MAX_HORIZON_VARIANTS`], each parsed once.
     pub fn grow(
         &mut self,
         asked: &Asked,
@@ -157,20 +161,26 @@ impl Registry {
         let mut growth = Growth::default();
         let mut refused = Vec::new();
         let mut asked_ids = BTreeSet::new();
-        let before: Vec<RegPoint> = self.points.clone();
-        // Indices, so that a manifest of many points registers in O(n log n): the points by
-        // their canonical params, those registered before by their run identity.
+        let n_before = self.points.len();
         let mut index: HashMap<String, u32> = self
             .points
             .iter()
             .map(|p| (canonical(&p.params), p.id))
             .collect();
+        // The points registered before, by run identity (their typed params parsed when first
+        // needed), and the identity of every point the manifest adds.
         let mut by_identity: HashMap<String, Vec<usize>> = HashMap::new();
-        for (i, p) in before.iter().enumerate() {
+        for (i, p) in self.points.iter().enumerate() {
             by_identity
                 .entry(run_identity(asked.model, &p.params))
                 .or_default()
                 .push(i);
+        }
+        let mut typed_before: Vec<Option<Option<ModelParams>>> = vec![None; n_before];
+        let mut added_per_identity: HashMap<String, u32> = HashMap::new();
+        let mut blocks_of: HashMap<u32, Vec<usize>> = HashMap::new();
+        for (i, b) in self.blocks.iter().enumerate() {
+            blocks_of.entry(b.point).or_default().push(i);
         }
         for params in asked.points {
             let value = params.to_value();
@@ -192,17 +202,56 @@ impl Registry {
             // A longer run of a point registered before: its runs continue (or rerun) those.
             let mut shorter = None;
             if is_new {
-                let same: Vec<RegPoint> = by_identity
-                    .get(&run_identity(asked.model, &value))
-                    .map(|ids| ids.iter().map(|&i| before[i].clone()).collect())
-                    .unwrap_or_default();
-                refused.extend(shorter_than_before(&same, asked.model, params));
-                shorter = self.shorter_point(&same, asked.model, params, &mut growth);
+                let identity = run_identity(asked.model, &value);
+                let same: &[usize] = by_identity.get(&identity).map_or(&[], |v| v.as_slice());
+                let added = added_per_identity.entry(identity).or_default();
+                *added += 1;
+                let variants = same.len() as u64 + *added as u64;
+                if variants > MAX_HORIZON_VARIANTS as u64 {
+                    // Reported once per identity, when the limit is first passed.
+                    if variants == MAX_HORIZON_VARIANTS as u64 + 1 {
+                        refused.push(format!(
+                            "more than {MAX_HORIZON_VARIANTS} points differ only in {} (the first new one is point {id}), the limit: they are one trajectory cut at different ends (the same seeds); ask for more output times of fewer points instead",
+                            horizon_text(asked.model)
+                        ));
+                    }
+                    self.grow_point(
+                        id,
+                        true,
+                        asked.runs,
+                        None,
+                        seed_of,
+                        &mut growth,
+                        &mut blocks_of,
+                    );
+                    continue;
+                }
+                for &i in same {
+                    if typed_before[i].is_none() {
+                        let mut errs = Vec::new();
+                        typed_before[i] = Some(asked.model.params_from(
+                            &self.points[i].params,
+                            "",
+                            &mut errs,
+                        ));
+                    }
+                }
+                let olds: Vec<(u32, &ModelParams)> = same
+                    .iter()
+                    .filter_map(|&i| {
+                        typed_before[i]
+                            .as_ref()
+                            .and_then(|t| t.as_ref())
+                            .map(|t| (self.points[i].id, t))
+                    })
+                    .collect();
+                refused.extend(shorter_than_before(&olds, params));
+                shorter = shorter_point(&olds, params, &mut growth);
             }
             if let RunsPerPoint::Replicas(r) = asked.runs {
                 let mut given: Vec<u32> = Vec::new();
                 for p in [(!is_new).then_some(id), shorter].into_iter().flatten() {
-                    given.extend(self.given_below(p, *r));
+                    given.extend(self.given_below(p, *r, &blocks_of));
                 }
                 if !given.is_empty() {
                     given.sort_unstable();
@@ -216,7 +265,15 @@ impl Registry {
                     continue;
                 }
             }
-            self.grow_point(id, is_new, asked.runs, shorter, seed_of, &mut growth);
+            self.grow_point(
+                id,
+                is_new,
+                asked.runs,
+                shorter,
+                seed_of,
+                &mut growth,
+                &mut blocks_of,
+            );
         }
         if !refused.is_empty() {
             return Err(refused);
@@ -230,51 +287,10 @@ impl Registry {
         Ok(growth)
     }
 
-    /// A registered point with the same run identity as `params` (differing only in the
-    /// horizon) whose runs carry over; notes a rerun.
-    fn shorter_point(
-        &self,
-        before: &[RegPoint],
-        model: ModelKind,
-        params: &ModelParams,
-        growth: &mut Growth,
-    ) -> Option<u32> {
-        let identity = run_identity(model, &params.to_value());
-        let mut candidates: Vec<(u32, ModelParams)> = before
-            .iter()
-            .filter(|p| run_identity(model, &p.params) == identity)
-            .filter_map(|p| {
-                let mut errs = Vec::new();
-                model
-                    .params_from(&p.params, "", &mut errs)
-                    .map(|typed| (p.id, typed))
-            })
-            .filter(|(_, old)| old.carry_over(params) == CarryOver::Continue)
-            .collect();
-        // The longest of them (the last registered among equals).
-        candidates.sort_by_key(|c| c.0);
-        if let Some((id, _)) = candidates.pop() {
-            return Some(id);
-        }
-        for p in before
-            .iter()
-            .filter(|p| run_identity(model, &p.params) == identity)
-        {
-            let mut errs = Vec::new();
-            if let Some(old) = model.params_from(&p.params, "", &mut errs) {
-                if let CarryOver::Rerun(why) = old.carry_over(params) {
-                    growth.notes.push(format!(
-                        "point {} is run again from the start for the new horizon: {why}",
-                        p.id
-                    ));
-                }
-            }
-        }
-        None
-    }
-
     /// Register the runs point `id` is asked for and does not have. A point that continues a
     /// shorter one takes, for each replica (or given seed) the shorter has, that run's seed.
+    /// `blocks_of` indexes the blocks by point (kept up to date).
+    #[allow(clippy::too_many_arguments)]
     fn grow_point(
         &mut self,
         id: u32,
@@ -283,26 +299,36 @@ impl Registry {
         continues: Option<u32>,
         seed_of: &dyn Fn(&RunBlock, u32) -> u64,
         growth: &mut Growth,
+        blocks_of: &mut HashMap<u32, Vec<usize>>,
     ) {
+        let blocks = &self.blocks;
+        let of = |point: u32| -> Vec<&RunBlock> {
+            blocks_of
+                .get(&point)
+                .map(|v| v.iter().map(|&i| &blocks[i]).collect())
+                .unwrap_or_default()
+        };
         let replicas_of = |point: u32| -> BTreeMap<u32, u64> {
-            self.blocks_of(point)
+            of(point)
+                .into_iter()
                 .flat_map(|b| {
                     (0..b.count)
                         .map(move |i| (b.first_replica + i, seed_of(b, b.first_replica + i)))
                 })
                 .collect()
         };
-        // A point registered now has no runs yet (no need to look through every block).
+        // A point registered now has no runs yet.
         let have = if is_new {
             BTreeMap::new()
         } else {
             replicas_of(id)
         };
         let old = continues.map(replicas_of).unwrap_or_default();
+        let old_blocks: Vec<&RunBlock> = continues.map(of).unwrap_or_default();
         // The old run's seed source, for a replica the shorter point has.
         let inherited = |replica: u32| -> Option<SeedSource> {
-            let b = self
-                .blocks_of(continues?)
+            let b = old_blocks
+                .iter()
                 .find(|b| replica >= b.first_replica && replica < b.first_replica + b.count)?;
             Some(match &b.seeds {
                 SeedSource::Given(s) => {
@@ -326,10 +352,18 @@ impl Registry {
                 let known: BTreeSet<u64> = have.values().copied().collect();
                 let mut taken: BTreeSet<u32> = have.keys().copied().collect();
                 taken.extend(old.keys());
+                // The first replica with each seed, as a search in replica order finds it.
+                let mut by_seed: HashMap<u64, u32> = HashMap::new();
+                for (&r, &seed) in &old {
+                    by_seed.entry(seed).or_insert(r);
+                }
                 let mut next = taken.iter().next_back().map_or(0, |r| r + 1);
                 for s in seeds.iter().filter(|s| !known.contains(s)) {
-                    match old.iter().find(|(_, seed)| *seed == s) {
-                        Some((&r, _)) => wanted.push((r, inherited(r).expect("old run"), true)),
+                    match by_seed
+                        .get(s)
+                        .and_then(|&r| inherited(r).map(|src| (r, src)))
+                    {
+                        Some((r, src)) => wanted.push((r, src, true)),
                         None => {
                             wanted.push((next, SeedSource::Given(vec![*s]), false));
                             next += 1;
@@ -340,10 +374,10 @@ impl Registry {
             }
         }
         // Consecutive replicas of one kind form one block.
-        let mut blocks: Vec<RunBlock> = Vec::new();
+        let mut new_blocks: Vec<RunBlock> = Vec::new();
         for (replica, seeds, cont) in wanted {
             let cont = cont.then_some(continues).flatten();
-            match blocks.last_mut() {
+            match new_blocks.last_mut() {
                 Some(b)
                     if b.first_replica + b.count == replica
                         && b.continues == cont
@@ -354,7 +388,7 @@ impl Registry {
                     }
                     b.count += 1;
                 }
-                _ => blocks.push(RunBlock {
+                _ => new_blocks.push(RunBlock {
                     point: id,
                     first_run: 0,
                     first_replica: replica,
@@ -364,23 +398,46 @@ impl Registry {
                 }),
             }
         }
-        for b in blocks {
-            let (first_replica, count, cont) = (b.first_replica, b.count, b.continues);
-            let first = self.n_runs();
-            self.push_block(b, growth);
-            if let Some(old) = cont {
-                for i in 0..count {
-                    if let Some(old_run) = self.run_of(old, first_replica + i) {
-                        growth.continued.push((first + i as u64, old_run));
+        let old_runs: Vec<(u32, u32, u64)> = continues
+            .map(|o| {
+                of(o)
+                    .into_iter()
+                    .map(|b| (b.first_replica, b.count, b.first_run))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let old_run = |replica: u32| {
+            old_runs
+                .iter()
+                .find(|(first, count, _)| replica >= *first && replica < first + count)
+                .map(|(first, _, run)| run + (replica - first) as u64)
+        };
+        let mut continued = Vec::new();
+        let mut first = self.n_runs();
+        for b in &new_blocks {
+            if b.continues.is_some() {
+                for i in 0..b.count {
+                    if let Some(r) = old_run(b.first_replica + i) {
+                        continued.push((first + i as u64, r));
                     }
                 }
             }
+            first += b.count as u64;
         }
+        for b in new_blocks {
+            blocks_of.entry(id).or_default().push(self.blocks.len());
+            self.push_block(b, growth);
+        }
+        growth.continued.extend(continued);
     }
 
     /// The replica places below `r` of `point` that hold runs of given seeds.
-    fn given_below(&self, point: u32, r: u32) -> Vec<u32> {
-        self.blocks_of(point)
+    fn given_below(&self, point: u32, r: u32, blocks_of: &HashMap<u32, Vec<usize>>) -> Vec<u32> {
+        blocks_of
+            .get(&point)
+            .into_iter()
+            .flatten()
+            .map(|&i| &self.blocks[i])
             .filter(|b| matches!(b.seeds, SeedSource::Given(_)))
             .flat_map(|b| b.first_replica..b.first_replica + b.count)
             .filter(|x| *x < r)
@@ -395,26 +452,66 @@ impl Registry {
     }
 }
 
-/// Why `params` is refused: a registered point of the same run identity ran longer.
-fn shorter_than_before(before: &[RegPoint], model: ModelKind, params: &ModelParams) -> Vec<String> {
-    let identity = run_identity(model, &params.to_value());
-    before
-        .iter()
-        .filter(|p| run_identity(model, &p.params) == identity)
-        .filter_map(|p| {
-            let mut errs = Vec::new();
-            let old = model.params_from(&p.params, "", &mut errs)?;
-            match old.carry_over(params) {
-                CarryOver::Shorter(why) => Some(format!(
-                    "point {} has been run further: {why} (a campaign never shortens its runs; \
-                     use another --out for shorter ones)",
-                    p.id
-                )),
-                _ => None,
-            }
+/// Why `params` is refused: a registered point of the same run identity (`olds`: id and
+/// typed params) ran longer.
+fn shorter_than_before(olds: &[(u32, &ModelParams)], params: &ModelParams) -> Vec<String> {
+    olds.iter()
+        .filter_map(|(id, old)| match old.carry_over(params) {
+            CarryOver::Shorter(why) => Some(format!(
+                "point {id} has been run further: {why} (a campaign never shortens its runs; \
+                 use another --out for shorter ones)"
+            )),
+            _ => None,
         })
         .collect()
 }
+
+/// Of the registered points of the same run identity as `params` (`olds`, differing only in
+/// the horizon), the one whose runs carry over (the last registered among several); notes a
+/// rerun of each that cannot be continued when none can.
+fn shorter_point(
+    olds: &[(u32, &ModelParams)],
+    params: &ModelParams,
+    growth: &mut Growth,
+) -> Option<u32> {
+    let verdicts: Vec<(u32, CarryOver)> = olds
+        .iter()
+        .map(|(id, old)| (*id, old.carry_over(params)))
+        .collect();
+    if let Some(id) = verdicts
+        .iter()
+        .filter(|(_, v)| *v == CarryOver::Continue)
+        .map(|(id, _)| *id)
+        .max()
+    {
+        return Some(id);
+    }
+    for (id, v) in verdicts {
+        if let CarryOver::Rerun(why) = v {
+            growth.notes.push(format!(
+                "point {id} is run again from the start for the new horizon: {why}"
+            ));
+        }
+    }
+    None
+}
+
+/// The horizon keys of a model, in words (`t_end` and `output_times`).
+fn horizon_text(model: ModelKind) -> String {
+    let keys: Vec<String> = model.horizon().iter().map(|k| format!("`{k}`")).collect();
+    match keys.len() {
+        0 => "nothing".into(),
+        1 => keys[0].clone(),
+        n => format!("{} and {}", keys[..n - 1].join(", "), keys[n - 1]),
+    }
+}
+
+/// Most points of a campaign that differ only in the model's horizon keys (`t_end`,
+/// `output_times`, `duration`): each new one is compared with every registered one (does it
+/// continue it, is it shorter?), so this bounds the work of growth per point; such points
+/// are one trajectory cut at different ends (the same seeds), which more output times of one
+/// point give at once.
+pub const MAX_HORIZON_VARIANTS: u32 = 100;
 
 /// Whether a run of `b` can join a block of `a`.
 fn mergeable(a: &SeedSource, b: &SeedSource) -> bool {
@@ -483,6 +580,47 @@ mod tests {
         assert_eq!(g.retired_points, vec![0]);
         assert_eq!(reg.n_runs(), 9);
         assert_eq!(reg.find(&b.to_value()), Some(1));
+    }
+
+    /// More than MAX_HORIZON_VARIANTS points of one run identity (a sweep of t_end) are
+    /// refused, in a fresh registry and by growth (before: accepted, and growth compared every
+    /// new point with every registered one: quadratic); as many with other identities are not.
+    #[test]
+    fn horizon_variants_are_bounded() {
+        let n = MAX_HORIZON_VARIANTS as usize;
+        let ends: Vec<ModelParams> = (0..=n)
+            .map(|i| point(0.5, 10.0 + i as f64, &[1.0]))
+            .collect();
+        let asked = |points: &[ModelParams]| {
+            let mut reg = Registry::default();
+            let runs = RunsPerPoint::Replicas(1);
+            let a = Asked {
+                model: ModelKind::Dsmc,
+                points,
+                runs: &runs,
+            };
+            reg.grow(&a, &seed_of)
+        };
+        let err = asked(&ends).unwrap_err();
+        assert!(
+            err.len() == 1
+                && err[0]
+                    .contains("more than 100 points differ only in `t_end` and `output_times`"),
+            "{err:?}"
+        );
+        assert!(asked(&ends[..n]).is_ok());
+        let mut reg = Registry::default();
+        grow(&mut reg, &ends[..n], RunsPerPoint::Replicas(1));
+        let asked_more = Asked {
+            model: ModelKind::Dsmc,
+            points: &ends[n..],
+            runs: &RunsPerPoint::Replicas(1),
+        };
+        assert!(reg.clone().grow(&asked_more, &seed_of).is_err());
+        let eps: Vec<ModelParams> = (0..=n)
+            .map(|i| point(0.1 + 0.001 * i as f64, 10.0, &[1.0]))
+            .collect();
+        assert!(asked(&eps).is_ok());
     }
 
     /// Given seeds: a run is its point and seed; new seeds get the next replica numbers, the

@@ -100,10 +100,12 @@ pub fn threads_within(plan: &Plan, threads: usize, mem: Memory) -> (usize, Optio
 mod tests {
     use super::*;
 
+    // Short runs: memory, not work (`MAX_RUN_WORK`), is what refuses the largest.
     fn plan(n: u64) -> Plan {
         let m = format!(
             r#"{{"name": "m", "model": "rfm", "seed": 1,
-                "params": {{"dim": 2, "n_particles": {n}, "packing_fraction": 0.3}}}}"#
+                "params": {{"dim": 2, "n_particles": {n}, "packing_fraction": 0.3,
+                            "warmup": 0.001, "duration": 0.1}}}}"#
         );
         crate::campaign::plan::parse(&m, "m").unwrap().1
     }

@@ -35,6 +35,9 @@ pub(super) fn show(manifest: &Path, out: &Path, json: bool) -> i32 {
         Ok(p) => p,
         Err(e) => return report_error(e),
     };
+    if let Some(w) = p.theory.warning() {
+        tracing::warn!("{w}");
+    }
     if json {
         outln!(
             "{}",
@@ -102,6 +105,12 @@ fn text(c: &Campaign, out: &Path, p: &Preview) -> String {
             "  {} point(s) no longer in the manifest (kept, with their finished runs): {:?}\n",
             p.retired_points.len(),
             p.retired_points
+        ));
+    }
+    if p.theory.points > 0 {
+        s.push_str(&format!(
+            "  kinetic theory of the new points (before the runs): {}\n",
+            p.theory.text()
         ));
     }
     match p.estimate_seconds {

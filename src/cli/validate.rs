@@ -22,6 +22,13 @@ pub fn run(a: Args) -> i32 {
                 plan.runs_per_point_text(),
                 plan.n_runs()
             );
+            let theory = crate::campaign::preview::theory_work(
+                &plan,
+                plan.points.iter().map(|p| p.point_id),
+            );
+            if let Some(w) = theory.warning() {
+                tracing::warn!("{w}");
+            }
             // Valid anywhere, but say so if this machine cannot run it (`run` refuses it).
             if let Some(mem) = resources::Memory::of_this_machine() {
                 if let Err(why) = resources::check(&plan, mem) {

@@ -3,7 +3,7 @@
 //! theory share the pair scaling of the restitution (`system::theory_restitution`).
 
 use super::system::{theory_restitution, DsmcSystem};
-use crate::theory::{diffusion, msd, sonine, tamsd, temperature, Species};
+use crate::theory::{diffusion, msd, sonine, tamsd, temperature, Species, TheoryError};
 
 /// One row of `dsmc_theory`.
 #[derive(Clone, Debug, PartialEq)]
@@ -45,6 +45,8 @@ pub struct Prediction {
     pub rows: Vec<TheoryRow>,
     /// The TAMSD (27) per species and lag (empty unless `tamsd` is observed).
     pub tamsd: Vec<TamsdTheoryRow>,
+    /// Why optional columns are null (the Sonine ones where that theory fails).
+    pub notes: Vec<String>,
 }
 
 pub fn theory_species(sys: &DsmcSystem) -> Vec<Species> {
@@ -57,30 +59,55 @@ pub fn theory_species(sys: &DsmcSystem) -> Vec<Species> {
 /// The most species for which the Sonine columns are computed (null beyond).
 pub const SONINE_MAX_SPECIES: usize = 4;
 
-/// Predict T_k(t), <R_k^2(t)> and tau_v,k(t) at the system's output times.
-pub fn predict(sys: &DsmcSystem) -> Prediction {
+/// Predict T_k(t), <R_k^2(t)> and tau_v,k(t) at the system's output times; an error (never a
+/// panic) where the theory cannot be computed for this system.
+pub fn predict(sys: &DsmcSystem) -> Result<Prediction, TheoryError> {
     let species = theory_species(sys);
     let r = theory_restitution(&sys.restitution, &sys.species);
     let t0: Vec<f64> = sys.species.iter().map(|s| s.initial_temperature).collect();
     let times = &sys.output_times;
-    let temps = temperature::evolve_temperatures(&species, &r, &t0, times);
+    let temps = temperature::evolve_temperatures(&species, &r, &t0, times)?;
     // The Sonine theory costs O(M^3) collision-moment quadratures per ODE step: given for
     // up to SONINE_MAX_SPECIES species only.
+    // They are columns beyond the paper: where they cannot be computed (e.g. a mixture
+    // without a homogeneous cooling state, which exists only up to a critical mass ratio),
+    // they are null and the reason is noted, while the Maxwellian theory stands.
     let small = species.len() <= SONINE_MAX_SPECIES;
-    let a2 = small
-        .then(|| sonine::hcs_temperatures_sonine(&species, &r, 1.0).map(|(_, a2)| a2))
-        .flatten();
-    let sonine_temps = small
-        .then(|| sonine::evolve_temperatures_sonine(&species, &r, &t0, times))
-        .flatten();
-    let msds = if sys.msd {
-        Some(msd::msd_numeric(&species, &r, &t0, times))
+    let mut notes = Vec::new();
+    let mut sonine_or_note = |what: &str, r: Result<Option<Vec<Vec<f64>>>, TheoryError>| match r {
+        Ok(v) => v,
+        Err(e) => {
+            notes.push(format!("the Sonine {what} is not given: {e}"));
+            None
+        }
+    };
+    let a2 = if small {
+        sonine_or_note(
+            "a2",
+            sonine::hcs_temperatures_sonine(&species, &r, 1.0).map(|x| x.map(|(_, a2)| vec![a2])),
+        )
+        .and_then(|mut v| v.pop())
     } else {
         None
     };
-    let msds_sonine = (small && sys.msd)
-        .then(|| sonine::msd_sonine(&species, &r, &t0, times))
-        .flatten();
+    let sonine_temps = if small {
+        sonine_or_note(
+            "temperature",
+            sonine::evolve_temperatures_sonine(&species, &r, &t0, times),
+        )
+    } else {
+        None
+    };
+    let msds_sonine = if small && sys.msd {
+        sonine_or_note("MSD", sonine::msd_sonine(&species, &r, &t0, times))
+    } else {
+        None
+    };
+    let msds = if sys.msd {
+        Some(msd::msd_numeric(&species, &r, &t0, times)?)
+    } else {
+        None
+    };
     let mut rows = Vec::with_capacity(times.len() * species.len());
     for (j, &t) in times.iter().enumerate() {
         let tv = diffusion::tau_v(&species, &temps[j], &r);
@@ -101,12 +128,25 @@ pub fn predict(sys: &DsmcSystem) -> Prediction {
         Some(plan) => predict_tamsd(&species, &r, &t0, sys.t_end, &plan.lags),
         None => Vec::new(),
     };
-    Prediction {
-        tau0: temperature::tau0_with(&species, &t0, &r),
+    let tau0 = temperature::tau0_with(&species, &t0, &r);
+    let finite = |v: f64| !v.is_nan();
+    if !(finite(tau0)
+        && rows
+            .iter()
+            .all(|r| finite(r.temperature) && finite(r.tau_v))
+        && tamsd.iter().all(|r| finite(r.tamsd)))
+    {
+        return Err(TheoryError::new(
+            "the predictions are not numbers (NaN): the system is beyond what the theory can compute",
+        ));
+    }
+    Ok(Prediction {
+        tau0,
         initial_temperatures: t0,
         rows,
         tamsd,
-    }
+        notes,
+    })
 }
 
 /// The TAMSD (27) of every species at the lags `lags`, measured over [0, t_end].
@@ -144,6 +184,53 @@ pub fn predict_tamsd(
 mod tests {
     use super::*;
     use crate::theory::PairRestitution;
+
+    fn system(species: &[(f64, f64, u64)], volume: f64) -> DsmcSystem {
+        DsmcSystem {
+            method: crate::dsmc::system::Method::LowRank,
+            species: species
+                .iter()
+                .map(
+                    |&(mass, diameter, count)| crate::dsmc::system::SpeciesInfo {
+                        mass,
+                        diameter,
+                        count,
+                        initial_temperature: 1.0,
+                    },
+                )
+                .collect(),
+            volume,
+            restitution: crate::dsmc::system::RestitutionModel::Constant(0.7),
+            t_end: 10.0,
+            output_times: vec![0.0, 1.0, 10.0],
+            msd: true,
+            tamsd: None,
+            vdist: None,
+            refresh_every: 1.0,
+            rate_scale: std::f64::consts::PI / (4.0 * volume),
+        }
+    }
+
+    /// The theory of a system it cannot compute is an error (before: a panic in the
+    /// temperature ODE, "step size underflow", for a density of 1e308), and where only the
+    /// Sonine columns fail (a mass ratio of 1000 at equal diameters: no homogeneous cooling
+    /// state) those are null with a note (before: a panic, "HCS iteration did not converge").
+    #[test]
+    fn failures_are_errors_and_the_sonine_columns_optional() {
+        let e = predict(&system(&[(1.0, 1.0, 100)], 1e-306)).unwrap_err();
+        assert!(e.to_string().contains("collision frequency"), "{e}");
+        let p = predict(&system(&[(1.0, 1.0, 100), (1000.0, 1.0, 100)], 2000.0)).unwrap();
+        assert!(p.rows.iter().all(|r| r.a2.is_none()), "{:?}", p.rows[0]);
+        assert!(p.rows.iter().all(|r| r.temperature.is_finite()));
+        assert!(p.rows.iter().all(|r| r.msd.is_some_and(f64::is_finite)));
+        assert!(
+            p.notes.iter().any(|n| n.contains("Sonine a2")),
+            "{:?}",
+            p.notes
+        );
+        let fine = predict(&system(&[(1.0, 1.0, 100), (2.0, 1.2, 100)], 2000.0)).unwrap();
+        assert!(fine.notes.is_empty() && fine.rows.iter().all(|r| r.a2.is_some()));
+    }
 
     /// `predict_tamsd` is `tamsd_hcs_species` for every species (k 0-based there), bit for bit.
     #[test]

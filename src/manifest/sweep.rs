@@ -4,24 +4,53 @@
 
 use serde_json::{Map, Value};
 
-/// Recursively sorted-key JSON, the canonical form used for identities and comparisons.
+/// Recursively sorted-key JSON, the canonical form used for identities and comparisons
+/// (compact, as `serde_json` writes it: run seeds hash this text, so it never changes).
 pub fn canonical(v: &Value) -> String {
-    fn sort(v: &Value) -> Value {
+    canonical_without(v, &[])
+}
+
+/// [`canonical`] of `v` without the top-level keys `skip` (when `v` is an object), written
+/// straight into one string: no sorted copy of the value is made, so a point of 10^5 species
+/// costs one pass over its text.
+pub fn canonical_without(v: &Value, skip: &[&str]) -> String {
+    fn write(v: &Value, skip: &[&str], out: &mut Vec<u8>) {
         match v {
             Value::Object(m) => {
-                let mut keys: Vec<_> = m.keys().collect();
+                let mut keys: Vec<&String> =
+                    m.keys().filter(|k| !skip.contains(&k.as_str())).collect();
                 keys.sort();
-                let mut out = Map::new();
-                for k in keys {
-                    out.insert(k.clone(), sort(&m[k]));
+                out.push(b'{');
+                for (i, k) in keys.into_iter().enumerate() {
+                    if i > 0 {
+                        out.push(b',');
+                    }
+                    leaf(k, out);
+                    out.push(b':');
+                    write(&m[k], &[], out);
                 }
-                Value::Object(out)
+                out.push(b'}');
             }
-            Value::Array(a) => Value::Array(a.iter().map(sort).collect()),
-            other => other.clone(),
+            Value::Array(a) => {
+                out.push(b'[');
+                for (i, x) in a.iter().enumerate() {
+                    if i > 0 {
+                        out.push(b',');
+                    }
+                    write(x, &[], out);
+                }
+                out.push(b']');
+            }
+            other => leaf(other, out),
         }
     }
-    sort(v).to_string()
+    // serde_json's compact writer, as `Value::to_string` uses it.
+    fn leaf<T: serde::Serialize + ?Sized>(x: &T, out: &mut Vec<u8>) {
+        serde_json::to_writer(out, x).expect("a JSON string or scalar serialises");
+    }
+    let mut out = Vec::new();
+    write(v, skip, &mut out);
+    String::from_utf8(out).expect("serde_json writes UTF-8")
 }
 
 /// A key as one JSON-pointer token (`~` -> `~0`, `/` -> `~1`).
@@ -114,4 +143,55 @@ pub fn sweep_key_errors(params: &Value, sweep: &Map<String, Value>) -> Vec<(Stri
         }
     }
     errors
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The text of the implementation before `canonical_without` (a sorted copy of the value,
+    /// then `to_string`): seeds hash the canonical text, so it must not change by a byte.
+    fn canonical_by_copy(v: &Value) -> String {
+        fn sort(v: &Value) -> Value {
+            match v {
+                Value::Object(m) => {
+                    let mut keys: Vec<_> = m.keys().collect();
+                    keys.sort();
+                    let mut out = Map::new();
+                    for k in keys {
+                        out.insert(k.clone(), sort(&m[k]));
+                    }
+                    Value::Object(out)
+                }
+                Value::Array(a) => Value::Array(a.iter().map(sort).collect()),
+                other => other.clone(),
+            }
+        }
+        sort(v).to_string()
+    }
+
+    #[test]
+    fn canonical_text_is_that_of_a_sorted_copy() {
+        let v: Value = serde_json::from_str(
+            r#"{"z": 1, "a": {"y": [3, {"q": null, "b": true}], "x": "t\"e\\x\u00e9\n/"},
+                "m": -0.0, "big": 18446744073709551615, "neg": -9223372036854775808,
+                "f": 1e308, "g": 5e-324, "h": 0.1, "e": [], "o": {}, "\u0001k": "\u001f"}"#,
+        )
+        .unwrap();
+        assert_eq!(canonical(&v), canonical_by_copy(&v));
+        let mut without = v.clone();
+        without.as_object_mut().unwrap().remove("a");
+        without.as_object_mut().unwrap().remove("z");
+        assert_eq!(
+            canonical_without(&v, &["a", "z"]),
+            canonical_by_copy(&without)
+        );
+        // Only the top level is filtered.
+        let nested: Value = serde_json::from_str(r#"{"a": {"a": 1}, "b": 2}"#).unwrap();
+        assert_eq!(canonical_without(&nested, &["b"]), r#"{"a":{"a":1}}"#);
+        for s in ["1", "\"x\"", "[1,2]", "null", "true"] {
+            let v: Value = serde_json::from_str(s).unwrap();
+            assert_eq!(canonical(&v), canonical_by_copy(&v));
+        }
+    }
 }

@@ -53,6 +53,24 @@ pub fn check_velocity_range(range: [f64; 2], at: String, errors: &mut ParamError
 /// refuses a run that does not fit in this machine's memory (`campaign::resources`).
 pub const MAX_RUN_MEMORY: u64 = 1 << 40;
 
+/// The window of every dimensional input of a model (masses, diameters, temperatures,
+/// number densities, lengths, forces): 30 orders of magnitude either side of 1. Any physical
+/// system in sensible units lies well inside (SI grains of nanometres to metres, reduced
+/// units ~1); within it every product the engines and the theory form (n sigma^2 sqrt(T/m) t,
+/// the energy of 2^32 particles, a temperature cooled by 1e-60 over 1e30 collision times, v^4
+/// for a2, a spring force over a mass) stays far inside a double's range (1e+-308). Beyond
+/// it, e.g. a DSMC `n1` of 1e308, the collision rate overflows.
+pub const SCALE_MIN: f64 = 1e-30;
+/// See [`SCALE_MIN`].
+pub const SCALE_MAX: f64 = 1e30;
+
+/// The most work one run may do, in its model's work units (the `runs` table's `trials`:
+/// RFM particle steps, bisection and cascade grid cells, SPM walk steps, ...), as its
+/// model's `check` counts it from the parameters: 10^15, about 10^7 CPU seconds (four months)
+/// at the ~10^8 units per second of a `WORK_CHUNK` in ~10 ms. A run of more would never end
+/// (`realisations` 1.8e19 was accepted and ran for ever).
+pub const MAX_RUN_WORK: f64 = 1e15;
+
 /// `value` deserialised as `T`; an error names the JSON pointer of the offending value (below
 /// `path`), e.g. `/seed` for `"seed": 42.0`, which the schema takes for an integer.
 pub fn from_value_at<T: DeserializeOwned>(value: Value, path: &str) -> Result<T, (String, String)> {
@@ -96,6 +114,13 @@ pub fn bytes_text(b: u64) -> String {
 /// The params of model `M` among `points`.
 fn typed<'p, M: Registered>(points: &[&'p ModelParams]) -> Vec<&'p M::Params> {
     points.iter().filter_map(|p| M::params(p)).collect()
+}
+
+/// The estimated cost of one point's kinetic-theory step: CPU seconds and peak bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TheoryEstimate {
+    pub seconds: f64,
+    pub bytes: f64,
 }
 
 /// Everything granular needs of a model.
@@ -164,6 +189,11 @@ pub trait Model {
     /// The model's kinetic-theory tables (they depend only on the manifest); none by default.
     fn theory_tables(_points: &[&Self::Params]) -> Vec<&'static str> {
         Vec::new()
+    }
+    /// An estimate of the kinetic-theory step of one point of these params (what
+    /// `write_theory` computes for it); zero for a model without theory.
+    fn theory_estimate(_p: &Self::Params) -> TheoryEstimate {
+        TheoryEstimate::default()
     }
     /// Write those of the theory tables that do not exist yet.
     fn write_theory(_c: &CampaignView<'_, Self::Params>) -> Result<(), StoreError> {
@@ -669,6 +699,13 @@ macro_rules! models {
             pub fn memory(&self) -> u64 {
                 match self {
                     $(ModelParams::$variant(p) => <$model as Model>::memory(p),)+
+                }
+            }
+
+            /// See [`Model::theory_estimate`].
+            pub fn theory_estimate(&self) -> TheoryEstimate {
+                match self {
+                    $(ModelParams::$variant(p) => <$model as Model>::theory_estimate(p),)+
                 }
             }
 

@@ -86,7 +86,7 @@ mod tests {
             })
             .collect();
         let r = PairRestitution::Constant(0.5);
-        let t = hcs_temperatures(&s, &r, 1.0);
+        let t = hcs_temperatures(&s, &r, 1.0).unwrap();
         let a = tau_v(&s, &t, &r);
         let b = tau_v_24(&s, &t, &r);
         for k in 0..3 {

@@ -20,7 +20,8 @@
 
 use super::restitution::{pair_rates, PairRestitution};
 use super::species::Species;
-use super::temperature::{check_input, cooling_rates_with, time_scale};
+use super::temperature::{check_input, checked_time_scale, cooling_rates_with};
+use super::{ensure, TheoryError};
 use crate::math::ode::Lu;
 use std::f64::consts::PI;
 
@@ -54,17 +55,23 @@ fn rates_and_jacobian(species: &[Species], t: &[f64], r: &PairRestitution) -> (V
 /// Converged to |xi_k - xi_bar| t_s < 1e-14 (t_s the shortest collision time), or until
 /// Newton steps are below 1e-13 in ln T (round-off or quadrature noise).
 ///
-/// # Panics
-/// On invalid species, mean <= 0, or if the iteration does not converge.
-pub fn hcs_temperatures(species: &[Species], restitution: &PairRestitution, mean: f64) -> Vec<f64> {
-    assert!(
-        mean > 0.0 && mean.is_finite(),
-        "mean temperature must be positive"
-    );
+/// # Errors
+/// On invalid species, mean <= 0, a zero total density, rates that are not finite, a singular
+/// Jacobian, or if the iteration does not converge.
+pub fn hcs_temperatures(
+    species: &[Species],
+    restitution: &PairRestitution,
+    mean: f64,
+) -> Result<Vec<f64>, TheoryError> {
+    ensure(mean > 0.0 && mean.is_finite(), || {
+        format!("mean temperature {mean:e} (a finite temperature > 0 expected)")
+    })?;
     let m = species.len();
-    check_input(species, &vec![mean; m]);
+    check_input(species, &vec![mean; m])?;
     let n: f64 = species.iter().map(|s| s.density).sum();
-    assert!(n > 0.0, "total density must be positive");
+    ensure(n > 0.0 && n.is_finite(), || {
+        format!("total density {n:e} (a finite density > 0 expected)")
+    })?;
     let nn: Vec<f64> = species.iter().map(|s| s.density).collect();
     let mut z = vec![mean.ln(); m];
     let mut dtau: f64 = 1.0;
@@ -74,8 +81,11 @@ pub fn hcs_temperatures(species: &[Species], restitution: &PairRestitution, mean
     let mut small_steps = 0;
     for _ in 0..3000 {
         let t: Vec<f64> = z.iter().map(|v| v.exp()).collect();
-        let t_s = time_scale(species, &t);
+        let t_s = checked_time_scale(species, &t)?;
         let (xi, dxi) = rates_and_jacobian(species, &t, restitution);
+        ensure(xi.iter().chain(&dxi).all(|v| v.is_finite()), || {
+            "the cooling rates of the HCS iteration are not finite numbers".into()
+        })?;
         let e: f64 = (0..m).map(|k| nn[k] * t[k]).sum();
         let xibar: f64 = (0..m).map(|k| nn[k] * t[k] * xi[k]).sum::<f64>() / e;
         let f: Vec<f64> = (0..m).map(|k| t_s * (xi[k] - xibar)).collect();
@@ -85,7 +95,7 @@ pub fn hcs_temperatures(species: &[Species], restitution: &PairRestitution, mean
             best_t = t.clone();
         }
         if res < 1e-14 || small_steps >= 2 {
-            return best_t;
+            return Ok(best_t);
         }
         // d xibar / d z_j.
         let dbar: Vec<f64> = (0..m)
@@ -97,7 +107,7 @@ pub fn hcs_temperatures(species: &[Species], restitution: &PairRestitution, mean
             .collect();
         let kstar = (0..m)
             .max_by(|&a, &b| (nn[a] * t[a]).total_cmp(&(nn[b] * t[b])))
-            .unwrap();
+            .unwrap_or(0);
         if res < res_prev {
             dtau *= 4.0;
         } else {
@@ -121,7 +131,8 @@ pub fn hcs_temperatures(species: &[Species], restitution: &PairRestitution, mean
                 b[k] = -f[k];
             }
         }
-        let lu = Lu::new(m, a).expect("singular HCS Jacobian");
+        let lu = Lu::new(m, a)
+            .ok_or_else(|| TheoryError::new("the HCS Jacobian is singular (or not finite)"))?;
         lu.solve(&mut b);
         let big = b.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         // Newton steps at round-off level (e.g. quadrature noise for velocity-dependent eps).
@@ -139,24 +150,30 @@ pub fn hcs_temperatures(species: &[Species], restitution: &PairRestitution, mean
             *v += shift;
         }
     }
-    assert!(
-        best < 1e-10,
-        "HCS iteration did not converge (best residual {best:e})"
-    );
-    best_t
+    ensure(best < 1e-10, || {
+        format!("the HCS iteration did not converge (best residual {best:e})")
+    })?;
+    Ok(best_t)
 }
 
 /// HCS temperature ratios T_k / T_1 (T_1 = species 0). For velocity-dependent restitution the
 /// ratios depend on the temperature: those of [`hcs_temperatures`] at mean 1 are returned.
-pub fn hcs_ratios(species: &[Species], restitution: &PairRestitution) -> Vec<f64> {
-    let t = hcs_temperatures(species, restitution, 1.0);
-    t.iter().map(|v| v / t[0]).collect()
+pub fn hcs_ratios(
+    species: &[Species],
+    restitution: &PairRestitution,
+) -> Result<Vec<f64>, TheoryError> {
+    let t = hcs_temperatures(species, restitution, 1.0)?;
+    Ok(t.iter().map(|v| v / t[0]).collect())
 }
 
 /// tau_0 (21) of the HCS with mean temperature `mean`: 2 / xi_k(0).
-pub fn hcs_tau0(species: &[Species], restitution: &PairRestitution, mean: f64) -> f64 {
-    let t = hcs_temperatures(species, restitution, mean);
-    super::temperature::tau0_with(species, &t, restitution)
+pub fn hcs_tau0(
+    species: &[Species],
+    restitution: &PairRestitution,
+    mean: f64,
+) -> Result<f64, TheoryError> {
+    let t = hcs_temperatures(species, restitution, mean)?;
+    Ok(super::temperature::tau0_with(species, &t, restitution))
 }
 
 /// The coefficients xi_hat_ki of (20) (constant eps_ki), literally transcribed:
@@ -229,7 +246,7 @@ mod tests {
     fn fig2_hcs() {
         let s = same_material(&[1.0, 100.0], &[0.1, 0.001]);
         let r = PairRestitution::Constant(0.5);
-        let t = hcs_temperatures(&s, &r, 1.0);
+        let t = hcs_temperatures(&s, &r, 1.0).unwrap();
         let tau = tau0_with(&s, &t, &r);
         let ratio = t[1] / t[0];
         eprintln!("fig2: T = {t:?}, ratio {ratio:.5}, tau0 {tau:.5}");
@@ -257,10 +274,10 @@ mod tests {
     fn fig3_hcs() {
         let s = same_material(&[1.0, 100.0, 500.0], &[0.1, 0.1, 0.1]);
         let r = PairRestitution::Constant(0.5);
-        let t = hcs_temperatures(&s, &r, 1.0);
+        let t = hcs_temperatures(&s, &r, 1.0).unwrap();
         let tau = tau0_with(&s, &t, &r);
         let printed = [0.048, 1.1, 1.845];
-        let tp = hcs_temperatures(&s, &r, printed.iter().sum::<f64>() / 3.0);
+        let tp = hcs_temperatures(&s, &r, printed.iter().sum::<f64>() / 3.0).unwrap();
         let taup = tau0_with(&s, &tp, &r);
         eprintln!(
             "fig3: mean 1: T = {t:?}, tau0 {tau:.5}; mean {:.4}: T = {tp:?}, tau0 {taup:.5}",
@@ -284,7 +301,7 @@ mod tests {
         for n2 in [1e-12, 0.0] {
             let s = same_material(&[1.0, 100.0], &[0.1, n2]);
             let r = PairRestitution::Constant(0.5);
-            let t = hcs_temperatures(&s, &r, 1.0);
+            let t = hcs_temperatures(&s, &r, 1.0).unwrap();
             let g = t[1] / t[0];
             eprintln!(
                 "fig5 general HCS n2 = {n2:e}: T_2/T_1 = {g:.4} ({:+.2e} vs 412.93)",
@@ -299,7 +316,7 @@ mod tests {
     fn xi_hat_20_matches() {
         let s = same_material(&[1.0, 100.0, 500.0], &[0.1, 0.1, 0.1]);
         let r = PairRestitution::Constant(0.5);
-        let t = hcs_temperatures(&s, &r, 1.0);
+        let t = hcs_temperatures(&s, &r, 1.0).unwrap();
         let xh = xi_hat(&s, &t, &r);
         let xi = cooling_rates_with(&s, &t, &r);
         for k in 0..3 {
@@ -322,10 +339,10 @@ mod tests {
         ] {
             let s = same_material(&masses, &dens);
             let r = PairRestitution::Constant(0.5);
-            let t0 = hcs_temperatures(&s, &r, 1.0);
+            let t0 = hcs_temperatures(&s, &r, 1.0).unwrap();
             let tau = tau0_with(&s, &t0, &r);
             let times = [0.0, 1e-3 * tau, tau, 1e3 * tau, 1e9];
-            let ts = evolve_temperatures(&s, &r, &t0, &times);
+            let ts = evolve_temperatures(&s, &r, &t0, &times).unwrap();
             let mut worst: f64 = 0.0;
             for (t, tk) in times.iter().zip(&ts) {
                 for k in 0..s.len() {
@@ -344,7 +361,7 @@ mod tests {
         let s = same_material(&[1.0, 100.0], &[0.1, 0.1]);
         let r = PairRestitution::viscoelastic(&s, 0.09, |b| 1.0 - 1.15344 * b + 0.79826 * b * b);
         for mean in [1.0, 1e-4] {
-            let t = hcs_temperatures(&s, &r, mean);
+            let t = hcs_temperatures(&s, &r, mean).unwrap();
             let xi = cooling_rates_with(&s, &t, &r);
             let got_mean = (0.1 * t[0] + 0.1 * t[1]) / 0.2;
             assert!((got_mean / mean - 1.0).abs() < 1e-13);
@@ -355,8 +372,8 @@ mod tests {
             );
         }
         let near = PairRestitution::velocity_dependent(|_, _, g: f64| 0.5 + 1e-9 * g);
-        let t = hcs_temperatures(&s, &near, 1.0);
-        let t0 = hcs_temperatures(&s, &PairRestitution::Constant(0.5), 1.0);
+        let t = hcs_temperatures(&s, &near, 1.0).unwrap();
+        let t0 = hcs_temperatures(&s, &PairRestitution::Constant(0.5), 1.0).unwrap();
         assert!((t[1] / t0[1] - 1.0).abs() < 1e-7);
     }
 }

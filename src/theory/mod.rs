@@ -24,13 +24,13 @@
 //! - `xi_pair(k, T_k, i, T_i, eps)` (15), `cooling_rates(species, T, eps)` (14),
 //!   `cooling_rates_with(species, T, &r)`, `tau0(species, T0, eps)` / `tau0_with(.., &r)` (21),
 //!   `haff(t, tau0)` (17), `collision_frequencies`, `time_scale`.
-//! - `evolve_temperatures(species, &r, T0, times) -> Vec<Vec<f64>>` (13)-(15) for any number of
-//!   species from any start, t up to 1e9 and beyond (implicit Radau IIA in log time);
-//!   `evolve(.., with_reduced_time, tol) -> Vec<TemperatureState>` also gives the reduced
-//!   times (6).
+//! - `evolve_temperatures(species, &r, T0, times) -> Result<Vec<Vec<f64>>>` (13)-(15) for
+//!   any number of species from any start, t up to 1e9 and beyond (implicit Radau IIA in log
+//!   time); `evolve(.., with_reduced_time, tol) -> Result<Vec<TemperatureState>>` also gives
+//!   the reduced times (6).
 //!
 //! Homogeneous cooling state ([`hcs`])
-//! - `hcs_temperatures(species, &r, mean) -> Vec<f64>` (equal xi_k, number-weighted mean (25);
+//! - `hcs_temperatures(species, &r, mean) -> Result<Vec<f64>>` (equal xi_k, number-weighted mean (25);
 //!   for velocity-dependent eps: the instantaneous equal-cooling-rate state),
 //!   `hcs_ratios(species, &r)` (T_k/T_1), `hcs_tau0(species, &r, mean)` (21),
 //!   `xi_hat(species, T0, &r)` (20), `hcs_residual`.
@@ -42,7 +42,7 @@
 //! MSD ([`msd`])
 //! - `msd_hcs(D0, tau_v0, tau0, t)` (22) (stable; tau0 = inf: elastic), `msd_hcs_literal`,
 //!   `msd_hcs_long(D0, tau0, t)` (23), `msd_hcs_species(species, &r, T0, times)`,
-//!   `msd_numeric(species, &r, T0, times) -> Vec<Vec<f64>>` ((4)-(6) for any temperature
+//!   `msd_numeric(species, &r, T0, times) -> Result<Vec<Vec<f64>>>` ((4)-(6) for any temperature
 //!   history, any restitution), `msd_total(species, partial)` (3);
 //!   `msd_from_history(species, T0, times, history)` ((4)-(6) for a given history of T_k,
 //!   reduced times and tau_v,k: `HistoryPoint`).
@@ -62,6 +62,14 @@
 //! - `tamsd_hcs(D0, tau_v0, tau0, t, Delta)` (27) = `tamsd_first_term` + `xi_term` (Xi by
 //!   quadrature), `tamsd_first_term_literal`, `tamsd_asymptotic` (28), `tamsd_hcs_species`.
 //!
+//! Cost ([`cost`])
+//! - `estimate(&Workload) -> Cost { seconds, bytes }`: the CPU time and memory of one system's
+//!   theory from its size (species, output times, span in collision times, msd, restitution),
+//!   without solving anything.
+//!
+//! Errors: every solver returns [`TheoryError`] (invalid input, an ODE or iteration that fails)
+//! instead of panicking.
+//!
 //! Numerics ([`quad`]): Gauss-Legendre rules, adaptive Gauss-Legendre, graded composite rules,
 //! Gamma(x). The stiff ODE integrator and LU live in the private `ode` module.
 //!
@@ -78,6 +86,7 @@
 //! - (28) is the asymptote of the first term of (27) only: Xi cancels its logarithm.
 //! - (11) equals the velocity-relaxation rate of a tagged particle minus half the cooling rate.
 
+pub mod cost;
 pub mod diffusion;
 pub mod hcs;
 pub mod msd;
@@ -90,3 +99,27 @@ pub mod tracer;
 
 pub use restitution::{PairEps, PairRates, PairRestitution, ScaledEps};
 pub use species::Species;
+
+/// Why a prediction could not be made: input the theory cannot take (no species, a
+/// non-positive or non-finite mass, diameter, density, temperature or time) or numerics that
+/// failed (an ODE whose step size underflows, a singular linear system, an iteration that does
+/// not converge, a rate that overflows). Every function of this module that solves something
+/// returns it instead of panicking, so a caller can name the point it failed for.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct TheoryError(pub String);
+
+impl TheoryError {
+    pub fn new(message: impl Into<String>) -> Self {
+        TheoryError(message.into())
+    }
+}
+
+/// `Ok(())` when `ok`, else the error `message()`.
+pub(crate) fn ensure(ok: bool, message: impl FnOnce() -> String) -> Result<(), TheoryError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(TheoryError(message()))
+    }
+}

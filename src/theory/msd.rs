@@ -17,7 +17,8 @@
 use super::diffusion::{diffusion_coefficients, tau_v};
 use super::restitution::{PairRestitution, PairTable};
 use super::species::Species;
-use super::temperature::{evolve, tau0_with, time_scale};
+use super::temperature::{check_input, check_times, checked_time_scale, evolve, tau0_with};
+use super::{ensure, TheoryError};
 use crate::math::quad::{composite_nodes, phi, tau_ln1p};
 
 /// (22): 6 D_k(0) tau_0 ln(1 + t/tau_0) + 6 D_k(0) tau_v,k(0) ((1 + t/tau_0)^-beta_k - 1),
@@ -76,17 +77,17 @@ pub fn msd_total(species: &[Species], partial: &[f64]) -> f64 {
 /// follow (13)-(15) (or their velocity-dependent form), `result[j][k]` = `<R_k^2(times[j])>`.
 /// `times` sorted, >= 0, any range (e.g. up to 1e9). See the module docs for the method.
 ///
-/// # Panics
+/// # Errors
 /// See [`super::temperature::evolve`].
 pub fn msd_numeric(
     species: &[Species],
     restitution: &PairRestitution,
     t0: &[f64],
     times: &[f64],
-) -> Vec<Vec<f64>> {
+) -> Result<Vec<Vec<f64>>, TheoryError> {
     let table = PairTable::new(species, restitution);
     msd_from_history(species, t0, times, |ts: &[f64], nodes: bool| {
-        evolve(species, restitution, t0, ts, nodes, 1e-11)
+        Ok(evolve(species, restitution, t0, ts, nodes, 1e-11)?
             .into_iter()
             .map(|st| {
                 let tv = if nodes {
@@ -100,7 +101,7 @@ pub fn msd_numeric(
                     tau_v: tv,
                 }
             })
-            .collect()
+            .collect())
     })
 }
 
@@ -123,11 +124,20 @@ pub fn msd_from_history(
     species: &[Species],
     t0: &[f64],
     times: &[f64],
-    history: impl Fn(&[f64], bool) -> Vec<HistoryPoint>,
-) -> Vec<Vec<f64>> {
+    history: impl Fn(&[f64], bool) -> Result<Vec<HistoryPoint>, TheoryError>,
+) -> Result<Vec<Vec<f64>>, TheoryError> {
+    check_input(species, t0)?;
+    check_times(times)?;
     let m = species.len();
-    let first = history(times, false);
-    let t_s = time_scale(species, t0);
+    let first = history(times, false)?;
+    ensure(first.len() == times.len(), || {
+        format!(
+            "the history gave {} states for {} output times",
+            first.len(),
+            times.len()
+        )
+    })?;
+    let t_s = checked_time_scale(species, t0)?;
     let t_max = times.iter().cloned().fold(0.0, f64::max);
     let ds = 0.5;
     let n_global = ((t_max / t_s).ln_1p() / ds).ceil() as usize + 1;
@@ -148,6 +158,11 @@ pub fn msd_from_history(
             .cloned()
             .fold(f64::INFINITY, f64::min)
             .min(t);
+        ensure(w > 0.0 && w.is_finite(), || {
+            format!(
+                "the velocity correlation time at t = {t:e} is {w:e} (a finite time > 0 expected)"
+            )
+        })?;
         let mut b: Vec<f64> = global.iter().cloned().filter(|&x| x < t).collect();
         let mut d = w / 16.0;
         while t - d > 0.0 {
@@ -167,11 +182,16 @@ pub fn msd_from_history(
     }
     all.sort_by(f64::total_cmp);
     all.dedup();
-    let states = history(&all, true);
-    let find = |t: f64| -> usize {
-        all.binary_search_by(|x| x.total_cmp(&t))
-            .expect("node time")
-    };
+    let states = history(&all, true)?;
+    ensure(states.len() == all.len(), || {
+        format!(
+            "the history gave {} states for {} times",
+            states.len(),
+            all.len()
+        )
+    })?;
+    // Every node and output time is in `all` (it was built from them).
+    let find = |t: f64| -> usize { all.binary_search_by(|x| x.total_cmp(&t)).unwrap_or(0) };
     // D_k, tau_hat_k (without tau_c(0)) and tau_k at each node.
     let mut node_d = vec![vec![0.0; m]; all.len()];
     let mut node_that = vec![vec![0.0; m]; all.len()];
@@ -182,7 +202,7 @@ pub fn msd_from_history(
             node_that[idx][k] = tv[k] * (st.temperatures[k] / t0[k]).sqrt();
         }
     }
-    times
+    let out: Vec<Vec<f64>> = times
         .iter()
         .zip(&per_output)
         .map(|(&t, (nodes, weights))| {
@@ -205,7 +225,11 @@ pub fn msd_from_history(
                 })
                 .collect()
         })
-        .collect()
+        .collect();
+    ensure(out.iter().flatten().all(|v| v.is_finite()), || {
+        "the mean-squared displacements are not finite numbers".into()
+    })?;
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -237,9 +261,9 @@ mod tests {
             (vec![1.0, 100.0, 500.0], vec![0.1, 0.1, 0.1]),
         ] {
             let s = same_material(&masses, &dens);
-            let t0 = hcs_temperatures(&s, &r, 1.0);
+            let t0 = hcs_temperatures(&s, &r, 1.0).unwrap();
             let times = [0.0, 1e-3, 0.1, 1.0, 10.0, 100.0, 1e3, 1e5, 1e7, 1e9];
-            let num = msd_numeric(&s, &r, &t0, &times);
+            let num = msd_numeric(&s, &r, &t0, &times).unwrap();
             let cf = msd_hcs_species(&s, &r, &t0, &times);
             let mut worst: f64 = 0.0;
             for j in 1..times.len() {
@@ -300,7 +324,7 @@ mod tests {
         let r = PairRestitution::Constant(1.0);
         let t0 = [1.0, 1.0];
         let times = [0.01, 1.0, 100.0, 1e4, 1e6];
-        let num = msd_numeric(&s, &r, &t0, &times);
+        let num = msd_numeric(&s, &r, &t0, &times).unwrap();
         let cf = msd_hcs_species(&s, &r, &t0, &times);
         for j in 0..times.len() {
             for k in 0..2 {
@@ -375,7 +399,7 @@ mod tests {
             .collect();
         let outs = [1000usize, 10_000, 50_000, 100_000];
         let times: Vec<f64> = outs.iter().map(|&j| j as f64 * dt).collect();
-        let num = msd_numeric(&s, &r, &t0, &times);
+        let num = msd_numeric(&s, &r, &t0, &times).unwrap();
         let mut worst: f64 = 0.0;
         for (o, &j) in outs.iter().enumerate() {
             for k in 0..2 {
@@ -409,7 +433,7 @@ mod tests {
         let r = PairRestitution::viscoelastic(&s, 0.09, |b| 1.0 - 1.15344 * b + 0.79826 * b * b);
         let times = [1e-4, 2e-4, 1e12, 1e13, 1e14];
         let start = std::time::Instant::now();
-        let m = msd_numeric(&s, &r, &[1.0, 1.0], &times);
+        let m = msd_numeric(&s, &r, &[1.0, 1.0], &times).unwrap();
         let el = start.elapsed().as_secs_f64();
         for k in 0..2 {
             let short = (m[1][k] / m[0][k]).ln() / 2f64.ln();

@@ -94,7 +94,9 @@ pub enum PairRestitution {
 /// 8-point Lagrange polynomials: relative error < 1e-12 for a smooth f, ~1e-9 for a piecewise
 /// linear f with knots every 0.05 in beta (Phi is smooth in ln x even where f is only
 /// piecewise smooth, but only on the scale ~0.07 in ln x over which the average over z
-/// smooths it). Outside the grid the quadrature is used directly.
+/// smooths it). Below the grid Phi is extrapolated as Phi(0) + c x^q from its first nodes (f
+/// must leave f(0) as a power of its argument, as the viscoelastic F does); above it the
+/// quadrature is used directly.
 pub struct ScaledEps {
     a: Vec<Vec<f64>>,
     p: f64,
@@ -144,7 +146,8 @@ impl ScaledEps {
         c[j % CHUNK]
     }
 
-    /// (Phi_1(x), Phi_2(x)), interpolated in ln x where tabulated.
+    /// (Phi_1(x), Phi_2(x)), interpolated in ln x where tabulated; below the table
+    /// (x < e^-40, 1 - eps ~ 1e-17 for the viscoelastic F) extrapolated from it.
     pub fn phi(&self, x: f64) -> (f64, f64) {
         if x <= 0.0 {
             let e = (self.f)(0.0);
@@ -152,7 +155,10 @@ impl ScaledEps {
         }
         let r = (x.ln() - LNX_LO) * LNX_PER_UNIT as f64;
         let n = ((LNX_HI - LNX_LO) as usize) * LNX_PER_UNIT + 1;
-        if !(r >= 3.0 && r <= (n - 5) as f64) {
+        if r < 3.0 {
+            return self.phi_below(x);
+        }
+        if r > (n - 5) as f64 || r.is_nan() {
             return self.phi_direct(x);
         }
         let j0 = r.floor() as usize - 3;
@@ -167,6 +173,31 @@ impl ScaledEps {
             let v = self.node(j0 + a);
             out[0] += w * v[0];
             out[1] += w * v[1];
+        }
+        (out[0], out[1])
+    }
+
+    /// Below the table: Phi_m(x) = Phi_m(0) + c_m x^q_m, with c_m and q_m from the first two
+    /// usable nodes (x_3 = e^(-40 + 3/128), x_4). For an f that leaves f(0) as a power of its
+    /// argument (the viscoelastic F = 1 - C1 beta + ...: q = 1) this is the leading term of
+    /// Phi's expansion; there the correction is below 1e-17 of Phi(0), a double's rounding.
+    /// (The quadrature there, at every rate evaluation of a nearly elastic gas, made its
+    /// theory take minutes.)
+    fn phi_below(&self, x: f64) -> (f64, f64) {
+        let e0 = (self.f)(0.0);
+        let p0 = [1.0 + e0, (1.0 + e0) * (1.0 + e0)];
+        let (a, b) = (self.node(3), self.node(4));
+        let dl = 1.0 / LNX_PER_UNIT as f64;
+        let l3 = LNX_LO + 3.0 * dl;
+        let mut out = [0.0; 2];
+        for c in 0..2 {
+            let (da, db) = (a[c] - p0[c], b[c] - p0[c]);
+            let q = if da != 0.0 && db != 0.0 && (da > 0.0) == (db > 0.0) {
+                ((db / da).ln() / dl).clamp(0.05, 20.0)
+            } else {
+                1.0
+            };
+            out[c] = p0[c] + da * (q * (x.ln() - l3)).exp();
         }
         (out[0], out[1])
     }
@@ -653,6 +684,53 @@ mod tests {
             PairRestitution::viscoelastic(&species, 0.09, |b| 1.0 - b),
             PairRestitution::Scaled(_)
         ));
+    }
+
+    /// Below the table (x < e^-40) the averages are extrapolated from it, not integrated at
+    /// each call (before, a nearly elastic gas, e.g. a_kappa = 5e-324, ran the quadrature, a
+    /// few hundred evaluations of F, at every pair rate of its theory: ~10 times slower than
+    /// a_kappa = 0.09), and equal the quadrature to 1e-14 for an F like the viscoelastic one
+    /// (1 - C1 beta + ...) and one that leaves 1 as sqrt(beta).
+    #[test]
+    fn below_the_table_is_extrapolated_not_integrated() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let fs: [fn(f64) -> f64; 2] = [
+            |b| 1.0 / (1.0 + 1.15344 * b + 0.5 * b * b),
+            |b| 1.0 - b.sqrt().min(1.0),
+        ];
+        for f in fs {
+            let calls = Arc::new(AtomicUsize::new(0));
+            let counted = calls.clone();
+            let s = ScaledEps::new(vec![vec![1.0]], 0.2, move |b| {
+                counted.fetch_add(1, Ordering::Relaxed);
+                f(b)
+            });
+            let xs = [
+                (-40.1f64).exp(),
+                (-45.0f64).exp(),
+                1e-30,
+                1e-100,
+                1e-300,
+                5e-324,
+            ];
+            // The first call tabulates the grid's first chunk.
+            s.phi(xs[0]);
+            let before = calls.load(Ordering::Relaxed);
+            let got: Vec<(f64, f64)> = xs.iter().map(|&x| s.phi(x)).collect();
+            let used = calls.load(Ordering::Relaxed) - before;
+            assert!(
+                used <= 2 * xs.len(),
+                "{used} evaluations of F for {} x",
+                xs.len()
+            );
+            for (&x, (a1, a2)) in xs.iter().zip(got) {
+                let (b1, b2) = s.phi_direct(x);
+                assert!(
+                    (a1 / b1 - 1.0).abs() < 1e-14 && (a2 / b2 - 1.0).abs() < 1e-14,
+                    "x = {x:e}: ({a1}, {a2}) vs ({b1}, {b2})"
+                );
+            }
+        }
     }
 
     /// The flux-weighted average of a smooth eps(g) = exp(-g/3) against a closed form:

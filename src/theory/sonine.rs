@@ -69,8 +69,11 @@
 use super::msd::{msd_from_history, HistoryPoint};
 use super::restitution::PairRestitution;
 use super::species::Species;
-use super::temperature::{check_input, time_scale};
-use crate::math::ode::{integrate, Lu, OdeSystem, Tolerances};
+use super::temperature::{
+    check_input, check_times, checked_time_scale, integrate_from_start, time_scale,
+};
+use super::{ensure, TheoryError};
+use crate::math::ode::{Lu, OdeSystem, Tolerances};
 use crate::math::quad::gauss_legendre;
 use std::f64::consts::PI;
 use std::sync::OnceLock;
@@ -272,7 +275,8 @@ pub fn a2_at(species: &[Species], t: &[f64], eps: &[Vec<f64>]) -> (Vec<f64>, Vec
     (a2, zeta)
 }
 
-/// The linearised stationary fourth-moment equations solved for the a2_k.
+/// The linearised stationary fourth-moment equations solved for the a2_k (NaN where the
+/// system is singular or not finite).
 fn a2_from(species: &[Species], t: &[f64], j: &[Vec<[[f64; 3]; 3]>]) -> Vec<f64> {
     let m = species.len();
     let mut a = vec![0.0; m * m];
@@ -294,9 +298,12 @@ fn a2_from(species: &[Species], t: &[f64], j: &[Vec<[[f64; 3]; 3]>]) -> Vec<f64>
             b[k] = 0.0;
         }
     }
-    Lu::new(m, a)
-        .expect("singular fourth-moment system")
-        .solve(&mut b);
+    match Lu::new(m, a) {
+        Some(lu) => lu.solve(&mut b),
+        // No finite solution: NaN, which the callers' checks and the ODE's step control
+        // turn into an error.
+        None => b.iter_mut().for_each(|v| *v = f64::NAN),
+    }
     b
 }
 
@@ -377,15 +384,17 @@ pub fn tau_v_sonine(species: &[Species], t: &[f64], eps: &[Vec<f64>]) -> (Vec<f6
 /// number-weighted mean `mean`, and the a2_k there: `(T, a2)`. Newton on ln(T_k/T_1) from the
 /// Maxwellian HCS. None for velocity-dependent restitution.
 ///
-/// # Panics
-/// If Newton does not converge.
+/// # Errors
+/// Those of [`super::hcs::hcs_temperatures`], and if Newton does not converge.
 pub fn hcs_temperatures_sonine(
     species: &[Species],
     r: &PairRestitution,
     mean: f64,
-) -> Option<(Vec<f64>, Vec<f64>)> {
+) -> Result<Option<(Vec<f64>, Vec<f64>)>, TheoryError> {
     let m = species.len();
-    let eps = constant_pairs(m, r)?;
+    let Some(eps) = constant_pairs(m, r) else {
+        return Ok(None);
+    };
     let n: f64 = species.iter().map(|s| s.density).sum();
     let norm = |t: &mut Vec<f64>| {
         let e: f64 = species
@@ -396,7 +405,7 @@ pub fn hcs_temperatures_sonine(
         let f = mean * n / e;
         t.iter_mut().for_each(|v| *v *= f);
     };
-    let mut t = super::hcs::hcs_temperatures(species, r, mean);
+    let mut t = super::hcs::hcs_temperatures(species, r, mean)?;
     let resid = |t: &[f64]| -> Vec<f64> {
         let (_, z) = a2_at(species, t, &eps);
         let ts = time_scale(species, t);
@@ -424,7 +433,7 @@ pub fn hcs_temperatures_sonine(
         }
         let mut step: Vec<f64> = f.iter().map(|v| -v).collect();
         Lu::new(m - 1, jac)
-            .expect("singular Sonine HCS Jacobian")
+            .ok_or_else(|| TheoryError::new("the Sonine HCS Jacobian is singular (or not finite)"))?
             .solve(&mut step);
         let big = step.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let sc = if big > 0.5 { 0.5 / big } else { 1.0 };
@@ -436,10 +445,15 @@ pub fn hcs_temperatures_sonine(
             converged = true;
         }
     }
-    assert!(converged, "Sonine HCS did not converge");
+    ensure(converged, || {
+        "the Sonine HCS iteration did not converge".into()
+    })?;
     norm(&mut t);
     let (a2, _) = a2_at(species, &t, &eps);
-    Some((t, a2))
+    ensure(t.iter().chain(&a2).all(|v| v.is_finite()), || {
+        "the Sonine HCS is not finite".into()
+    })?;
+    Ok(Some((t, a2)))
 }
 
 struct SonineOde<'a> {
@@ -498,10 +512,13 @@ pub fn evolve_temperatures_sonine(
     r: &PairRestitution,
     t0: &[f64],
     times: &[f64],
-) -> Option<Vec<Vec<f64>>> {
-    check_input(species, t0);
-    let eps = constant_pairs(species.len(), r)?;
-    let t_s = time_scale(species, t0);
+) -> Result<Option<Vec<Vec<f64>>>, TheoryError> {
+    check_input(species, t0)?;
+    check_times(times)?;
+    let Some(eps) = constant_pairs(species.len(), r) else {
+        return Ok(None);
+    };
+    let t_s = checked_time_scale(species, t0)?;
     let sys = SonineOde {
         species,
         eps,
@@ -517,13 +534,17 @@ pub fn evolve_temperatures_sonine(
         atol_q: 0.0,
         rtol_q: 0.0,
     };
-    let res = integrate(&sys, &y0, &[], &s_out, tols, 1e-3)
-        .unwrap_or_else(|e| panic!("Sonine temperature ODE failed: {e}"));
-    Some(
-        res.into_iter()
-            .map(|(y, _)| y.iter().map(|v| v.exp()).collect())
-            .collect(),
-    )
+    let res = integrate_from_start(&sys, &y0, &[], &s_out, tols)
+        .map_err(|e| TheoryError(format!("the Sonine temperature ODE failed: {e}")))?;
+    let out: Vec<Vec<f64>> = res
+        .into_iter()
+        .map(|(y, _)| y.iter().map(|v| v.exp()).collect())
+        .collect();
+    ensure(
+        out.iter().flatten().all(|v| v.is_finite() && *v > 0.0),
+        || "the Sonine temperatures leave the range of a double".into(),
+    )?;
+    Ok(Some(out))
 }
 
 /// The largest step of the history grid in s = ln(1 + t/t_s) (see [`msd_sonine`]).
@@ -566,10 +587,11 @@ impl<'a> SonineHistory<'a> {
         t0: &[f64],
         times: &[f64],
         maxwell: bool,
-    ) -> Self {
-        check_input(species, t0);
+    ) -> Result<Self, TheoryError> {
+        check_input(species, t0)?;
+        check_times(times)?;
         let m = species.len();
-        let t_s = time_scale(species, t0);
+        let t_s = checked_time_scale(species, t0)?;
         let t_max = times.iter().cloned().fold(0.0, f64::max);
         let t_min = times
             .iter()
@@ -609,8 +631,8 @@ impl<'a> SonineHistory<'a> {
             atol_q: 1e-10 * t_s,
             rtol_q: 1e-10,
         };
-        let res = integrate(&sys, &y0, &vec![0.0; m], &grid, tols, 1e-3)
-            .unwrap_or_else(|e| panic!("Sonine temperature ODE failed: {e}"));
+        let res = integrate_from_start(&sys, &y0, &vec![0.0; m], &grid, tols)
+            .map_err(|e| TheoryError(format!("the Sonine temperature ODE failed: {e}")))?;
         let mut out = SonineHistory {
             species,
             r,
@@ -669,7 +691,7 @@ impl<'a> SonineHistory<'a> {
                 .collect();
             out.dc.push(slope);
         }
-        out
+        Ok(out)
     }
 
     fn at(&self, t: f64) -> HistoryPoint {
@@ -710,9 +732,11 @@ pub fn msd_sonine(
     r: &PairRestitution,
     t0: &[f64],
     times: &[f64],
-) -> Option<Vec<Vec<f64>>> {
-    let eps = constant_pairs(species.len(), r)?;
-    Some(msd_sonine_with(species, r, eps, t0, times, false))
+) -> Result<Option<Vec<Vec<f64>>>, TheoryError> {
+    let Some(eps) = constant_pairs(species.len(), r) else {
+        return Ok(None);
+    };
+    msd_sonine_with(species, r, eps, t0, times, false).map(Some)
 }
 
 fn msd_sonine_with(
@@ -722,13 +746,13 @@ fn msd_sonine_with(
     t0: &[f64],
     times: &[f64],
     maxwell: bool,
-) -> Vec<Vec<f64>> {
+) -> Result<Vec<Vec<f64>>, TheoryError> {
     if times.iter().all(|&t| t <= 0.0) {
-        return vec![vec![0.0; species.len()]; times.len()];
+        return Ok(vec![vec![0.0; species.len()]; times.len()]);
     }
-    let hist = SonineHistory::new(species, r, eps, t0, times, maxwell);
+    let hist = SonineHistory::new(species, r, eps, t0, times, maxwell)?;
     msd_from_history(species, t0, times, |ts: &[f64], _| {
-        ts.iter().map(|&t| hist.at(t)).collect()
+        Ok(ts.iter().map(|&t| hist.at(t)).collect())
     })
 }
 
@@ -805,7 +829,7 @@ mod tests {
         let e = 0.5;
         let s = vec![Species::new(2.0, 1.5, 0.03), Species::new(2.0, 1.5, 0.07)];
         let r = PairRestitution::Constant(e);
-        let (t, a2) = hcs_temperatures_sonine(&s, &r, 1.3).unwrap();
+        let (t, a2) = hcs_temperatures_sonine(&s, &r, 1.3).unwrap().unwrap();
         let want = cooling_rate_one_species(&Species::new(2.0, 1.5, 0.1), 1.3, e);
         let (_, z) = a2_at(&s, &t, &constant_pairs(2, &r).unwrap());
         for k in 0..2 {
@@ -834,7 +858,9 @@ mod tests {
         let (s, r) = one(0.5);
         let tau = 2.0 / cooling_rate_one_species(&s, 1.0, 0.5);
         let times = [0.0, 0.1 * tau, tau, 100.0 * tau, 1e6 * tau];
-        let got = evolve_temperatures_sonine(&[s], &r, &[1.0], &times).unwrap();
+        let got = evolve_temperatures_sonine(&[s], &r, &[1.0], &times)
+            .unwrap()
+            .unwrap();
         for (t, g) in times.iter().zip(&got) {
             assert!((g[0] / haff(*t, tau) - 1.0).abs() < 1e-7, "{t}: {g:?}");
         }
@@ -849,17 +875,19 @@ mod tests {
             Species::new(100.0, 100f64.cbrt(), 0.001),
         ];
         let r = PairRestitution::Constant(0.5);
-        let (t0, a2) = hcs_temperatures_sonine(&s, &r, 1.0).unwrap();
-        let tm = super::super::hcs::hcs_temperatures(&s, &r, 1.0);
+        let (t0, a2) = hcs_temperatures_sonine(&s, &r, 1.0).unwrap().unwrap();
+        let tm = super::super::hcs::hcs_temperatures(&s, &r, 1.0).unwrap();
         eprintln!("fig2 Sonine HCS {t0:?} (Maxwell {tm:?}), a2 {a2:?}");
         let times = [0.0, 10.0, 1000.0];
-        let got = evolve_temperatures_sonine(&s, &r, &t0, &times).unwrap();
+        let got = evolve_temperatures_sonine(&s, &r, &t0, &times)
+            .unwrap()
+            .unwrap();
         let ratio0 = t0[1] / t0[0];
         for g in &got {
             assert!((g[1] / g[0] / ratio0 - 1.0).abs() < 1e-6, "{g:?}");
         }
         let v = PairRestitution::velocity_dependent(|_, _, g: f64| 0.5 + 0.01 * g);
-        assert!(hcs_temperatures_sonine(&s, &v, 1.0).is_none());
+        assert!(hcs_temperatures_sonine(&s, &v, 1.0).unwrap().is_none());
     }
 
     /// The quadrature tau_v,ki^-1 with Sonine distributions equals the closed form
@@ -949,7 +977,7 @@ mod tests {
                 .iter()
                 .map(|x| x * tau0)
                 .collect();
-            let got = msd_sonine(&[s], &r, &[t0], &times).unwrap();
+            let got = msd_sonine(&[s], &r, &[t0], &times).unwrap().unwrap();
             for (t, g) in times.iter().zip(&got) {
                 let want = msd_hcs(d0, tv0, tau0, *t);
                 assert!((g[0] / want - 1.0).abs() < 1e-6, "{e} {t}: {g:?} vs {want}");
@@ -964,8 +992,10 @@ mod tests {
         let r = PairRestitution::Constant(0.5);
         let s = vec![Species::new(2.0, 1.5, 0.03), Species::new(2.0, 1.5, 0.07)];
         let times = [0.01, 1.0, 30.0, 1e4];
-        let two = msd_sonine(&s, &r, &[1.3, 1.3], &times).unwrap();
-        let one = msd_sonine(&[Species::new(2.0, 1.5, 0.1)], &r, &[1.3], &times).unwrap();
+        let two = msd_sonine(&s, &r, &[1.3, 1.3], &times).unwrap().unwrap();
+        let one = msd_sonine(&[Species::new(2.0, 1.5, 0.1)], &r, &[1.3], &times)
+            .unwrap()
+            .unwrap();
         for (a, b) in two.iter().zip(&one) {
             for k in 0..2 {
                 assert!((a[k] / b[0] - 1.0).abs() < 1e-7, "{a:?} {b:?}");
@@ -986,12 +1016,12 @@ mod tests {
             Species::new(1.0, 1.0, 0.1),
             Species::new(100.0, 100f64.cbrt(), 0.001),
         ];
-        let t2 = hcs_temperatures(&fig2, &r, 1.0);
+        let t2 = hcs_temperatures(&fig2, &r, 1.0).unwrap();
         let times = [0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4];
         for (s, t0) in [(fig1, vec![1.0, 1.0]), (fig2, t2)] {
             let eps = constant_pairs(2, &r).unwrap();
-            let got = msd_sonine_with(&s, &r, eps, &t0, &times, true);
-            let want = msd_numeric(&s, &r, &t0, &times);
+            let got = msd_sonine_with(&s, &r, eps, &t0, &times, true).unwrap();
+            let want = msd_numeric(&s, &r, &t0, &times).unwrap();
             let mut worst: f64 = 0.0;
             for (g, w) in got.iter().zip(&want) {
                 for k in 0..2 {
@@ -1002,6 +1032,10 @@ mod tests {
             assert!(worst < 1e-6, "{worst}");
         }
         let v = PairRestitution::velocity_dependent(|_, _, g: f64| 0.5 + 0.01 * g);
-        assert!(msd_sonine(&[Species::new(1.0, 1.0, 0.1)], &v, &[1.0], &[1.0]).is_none());
+        assert!(
+            msd_sonine(&[Species::new(1.0, 1.0, 0.1)], &v, &[1.0], &[1.0])
+                .unwrap()
+                .is_none()
+        );
     }
 }

@@ -113,7 +113,7 @@ mod tests {
             },
         ];
         let r = PairRestitution::Constant(0.5);
-        let t = hcs_temperatures(&s, &r, 1.0);
+        let t = hcs_temperatures(&s, &r, 1.0).unwrap();
         (s, r, t)
     }
 
@@ -156,7 +156,7 @@ mod tests {
             },
         ];
         let r = PairRestitution::Constant(1.0);
-        let t0 = hcs_temperatures(&s, &r, 1.0);
+        let t0 = hcs_temperatures(&s, &r, 1.0).unwrap();
         assert!(
             (t0[1] / t0[0] - 1.0).abs() < 1e-14,
             "elastic HCS is equipartition"

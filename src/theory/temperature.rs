@@ -19,6 +19,7 @@
 
 use super::restitution::{pair_rates, PairRestitution, PairTable};
 use super::species::Species;
+use super::{ensure, TheoryError};
 use crate::math::ode::{integrate, OdeSystem, Tolerances};
 
 /// xi_ki of (15): the cooling of species k by collisions with species i.
@@ -114,6 +115,22 @@ pub fn time_scale(species: &[Species], t: &[f64]) -> f64 {
     }
 }
 
+/// [`time_scale`], or an error where the fastest collision frequency is not a finite number
+/// (it overflows, e.g. for a density near the largest double): no time unit to integrate in.
+pub(crate) fn checked_time_scale(species: &[Species], t: &[f64]) -> Result<f64, TheoryError> {
+    let nu = collision_frequencies(species, t)
+        .into_iter()
+        .fold(0.0, f64::max);
+    ensure(nu.is_finite(), || {
+        format!("the collision frequency is not a finite number ({nu:e}): densities, diameters or temperatures beyond the range of a double")
+    })?;
+    let t_s = if nu > 0.0 { 1.0 / nu } else { 1.0 };
+    ensure(t_s.is_finite() && t_s > 0.0, || {
+        format!("the collision time 1/{nu:e} is not a finite positive number")
+    })?;
+    Ok(t_s)
+}
+
 /// tau_0 of (21) for any restitution: 2 / xi(0), xi(0) the number-weighted mean of the xi_k
 /// at `t0` (exact in the HCS, where all xi_k are equal). Infinite when nothing cools (eps = 1).
 pub fn tau0_with(species: &[Species], t0: &[f64], r: &PairRestitution) -> f64 {
@@ -128,19 +145,43 @@ pub fn tau0_with(species: &[Species], t0: &[f64], r: &PairRestitution) -> f64 {
     2.0 / mean
 }
 
-pub(crate) fn check_input(species: &[Species], temps: &[f64]) {
-    assert!(!species.is_empty(), "no species");
-    assert_eq!(species.len(), temps.len(), "one temperature per species");
-    for (s, t) in species.iter().zip(temps) {
-        assert!(
-            s.mass > 0.0 && s.diameter > 0.0 && s.density >= 0.0,
-            "invalid species {s:?}"
-        );
-        assert!(
-            *t > 0.0 && t.is_finite(),
-            "temperatures must be positive and finite (got {t})"
-        );
+/// The species and temperatures every solver takes: at least one species, one temperature
+/// each, finite positive masses, diameters and temperatures, finite densities >= 0.
+pub(crate) fn check_input(species: &[Species], temps: &[f64]) -> Result<(), TheoryError> {
+    ensure(!species.is_empty(), || "no species".into())?;
+    ensure(species.len() == temps.len(), || {
+        format!(
+            "{} temperatures for {} species (one each)",
+            temps.len(),
+            species.len()
+        )
+    })?;
+    for (k, (s, t)) in species.iter().zip(temps).enumerate() {
+        let positive = |x: f64| x > 0.0 && x.is_finite();
+        ensure(
+            positive(s.mass) && positive(s.diameter) && s.density >= 0.0 && s.density.is_finite(),
+            || {
+                format!("species {}: invalid {s:?} (finite mass and diameter > 0, density >= 0 expected)", k + 1)
+            },
+        )?;
+        ensure(positive(*t), || {
+            format!(
+                "species {}: temperature {t:e} (a finite temperature > 0 expected)",
+                k + 1
+            )
+        })?;
     }
+    Ok(())
+}
+
+/// Sorted finite times >= 0.
+pub(crate) fn check_times(times: &[f64]) -> Result<(), TheoryError> {
+    ensure(times.iter().all(|t| *t >= 0.0 && t.is_finite()), || {
+        "times must be finite and >= 0".into()
+    })?;
+    ensure(times.windows(2).all(|w| w[0] <= w[1]), || {
+        "times must be sorted".into()
+    })
 }
 
 /// The temperature ODE (13) in (s, y = ln T), optionally with the reduced times (6) as
@@ -210,6 +251,41 @@ impl OdeSystem for TemperatureOde<'_> {
     }
 }
 
+/// Below this log time s = ln(1 + t/t_s) (t_s the shortest collision time) an output is
+/// taken one explicit Euler step from the start: the error, O(s^2 |df/dy| |f|) ~ 1e-24 |f|^2,
+/// is far below the integrator's tolerance (1e-11), and the implicit steps cannot be that
+/// short (the step control refuses h < 1e-14; their matrices hold 1/h).
+const TINY_S: f64 = 1e-12;
+
+/// [`integrate`] from s = 0, with the abscissae below [`TINY_S`] taken by one Euler step (a
+/// time of 1e-308 collision times left the Radau step with 1/h = inf: "step size
+/// underflow").
+pub(crate) fn integrate_from_start<S: OdeSystem>(
+    sys: &S,
+    y0: &[f64],
+    q0: &[f64],
+    s_out: &[f64],
+    tol: Tolerances,
+) -> Result<Vec<(Vec<f64>, Vec<f64>)>, String> {
+    let tiny = s_out.partition_point(|&s| s < TINY_S);
+    let mut out = Vec::with_capacity(s_out.len());
+    if tiny > 0 {
+        let mut dy = vec![0.0; y0.len()];
+        let mut dq = vec![0.0; q0.len()];
+        sys.rhs(0.0, y0, &mut dy);
+        if !dq.is_empty() {
+            sys.quad(0.0, y0, &mut dq);
+        }
+        for &s in &s_out[..tiny] {
+            let y = y0.iter().zip(&dy).map(|(y, d)| y + s * d).collect();
+            let q = q0.iter().zip(&dq).map(|(q, d)| q + s * d).collect();
+            out.push((y, q));
+        }
+    }
+    out.extend(integrate(sys, y0, q0, &s_out[tiny..], tol, 1e-3)?);
+    Ok(out)
+}
+
 /// The state of the mixture at one time of an [`evolve`] run.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TemperatureState {
@@ -225,9 +301,10 @@ pub struct TemperatureState {
 /// ln T (and relative on the reduced times); 1e-11 is the default used by
 /// [`evolve_temperatures`].
 ///
-/// # Panics
+/// # Errors
 /// On invalid input (no species, non-positive masses/diameters/temperatures, unsorted or
-/// negative times) or if the integrator fails.
+/// negative times), a collision frequency that overflows, or if the integrator fails (its
+/// step size underflows, too many steps, a temperature that leaves the range of a double).
 pub fn evolve(
     species: &[Species],
     restitution: &PairRestitution,
@@ -235,17 +312,10 @@ pub fn evolve(
     times: &[f64],
     with_reduced_time: bool,
     tol: f64,
-) -> Vec<TemperatureState> {
-    check_input(species, t0);
-    assert!(
-        times.iter().all(|t| *t >= 0.0 && t.is_finite()),
-        "times must be finite and >= 0"
-    );
-    assert!(
-        times.windows(2).all(|w| w[0] <= w[1]),
-        "times must be sorted"
-    );
-    let t_s = time_scale(species, t0);
+) -> Result<Vec<TemperatureState>, TheoryError> {
+    check_input(species, t0)?;
+    check_times(times)?;
+    let t_s = checked_time_scale(species, t0)?;
     let y0: Vec<f64> = t0.iter().map(|t| t.ln()).collect();
     let sys = TemperatureOde {
         table: PairTable::new(species, restitution),
@@ -262,15 +332,22 @@ pub fn evolve(
         atol_q: tol * t_s,
         rtol_q: tol,
     };
-    let res = integrate(&sys, &y0, &q0, &s_out, tols, 1e-3)
-        .unwrap_or_else(|e| panic!("temperature ODE failed: {e}"));
+    let res = integrate_from_start(&sys, &y0, &q0, &s_out, tols)
+        .map_err(|e| TheoryError(format!("the temperature ODE (13) failed: {e}")))?;
     times
         .iter()
         .zip(res)
-        .map(|(&t, (y, q))| TemperatureState {
-            t,
-            temperatures: y.iter().map(|v| v.exp()).collect(),
-            reduced_times: q,
+        .map(|(&t, (y, q))| {
+            let temperatures: Vec<f64> = y.iter().map(|v| v.exp()).collect();
+            ensure(
+                temperatures.iter().all(|v| v.is_finite() && *v > 0.0),
+                || format!("the temperatures at t = {t:e} leave the range of a double: {temperatures:?}"),
+            )?;
+            Ok(TemperatureState {
+                t,
+                temperatures,
+                reduced_times: q,
+            })
         })
         .collect()
 }
@@ -278,23 +355,60 @@ pub fn evolve(
 /// T_k at each of the sorted `times` (>= 0; any range, e.g. up to 1e9), solving (13)-(15)
 /// from the temperatures `t0` at t = 0: `result[j][k]` = `T_k(times[j])`. Accuracy ~1e-9 relative.
 ///
-/// # Panics
+/// # Errors
 /// See [`evolve`].
 pub fn evolve_temperatures(
     species: &[Species],
     restitution: &PairRestitution,
     t0: &[f64],
     times: &[f64],
-) -> Vec<Vec<f64>> {
-    evolve(species, restitution, t0, times, false, 1e-11)
+) -> Result<Vec<Vec<f64>>, TheoryError> {
+    Ok(evolve(species, restitution, t0, times, false, 1e-11)?
         .into_iter()
         .map(|s| s.temperatures)
-        .collect()
+        .collect())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Input the theory cannot take and numbers beyond a double are errors, not panics
+    /// (before: a density of 1e308 panicked with "temperature ODE failed: step size
+    /// underflow", invalid species or times with an assert), and an output time of 1e-308
+    /// collision times is the start (before: the Radau step could not be that short: the same
+    /// panic).
+    #[test]
+    fn failures_are_errors_and_tiny_times_are_the_start() {
+        use crate::theory::{hcs, msd, sonine};
+        let r = PairRestitution::Constant(0.5);
+        let dense = [Species::new(1.0, 1.0, 1e308)];
+        let e = evolve_temperatures(&dense, &r, &[1.0], &[0.0, 1.0]).unwrap_err();
+        assert!(e.0.contains("collision frequency"), "{e}");
+        assert!(msd::msd_numeric(&dense, &r, &[1.0], &[1.0]).is_err());
+        assert!(hcs::hcs_temperatures(&dense, &r, 1.0).is_err());
+        assert!(sonine::evolve_temperatures_sonine(&dense, &r, &[1.0], &[1.0]).is_err());
+        assert!(sonine::msd_sonine(&dense, &r, &[1.0], &[1.0]).is_err());
+        let ok = [Species::new(1.0, 1.0, 0.1)];
+        let massless = [Species::new(0.0, 1.0, 0.1)];
+        assert!(evolve_temperatures(&massless, &r, &[1.0], &[1.0]).is_err());
+        assert!(evolve_temperatures(&ok, &r, &[f64::NAN], &[1.0]).is_err());
+        assert!(evolve_temperatures(&ok, &r, &[1.0], &[2.0, 1.0]).is_err());
+        assert!(evolve_temperatures(&ok, &r, &[1.0, 1.0], &[1.0]).is_err());
+        assert!(evolve_temperatures(&[], &r, &[], &[1.0]).is_err());
+        assert!(hcs::hcs_temperatures(&ok, &r, -1.0).is_err());
+        let times = [0.0, 1e-308, 1e-200, 1e-20, 1.0];
+        let t = evolve_temperatures(&ok, &r, &[1.0], &times).unwrap();
+        for row in &t[..4] {
+            assert!((row[0] - 1.0).abs() < 1e-15, "{t:?}");
+        }
+        assert!(t[4][0] < 1.0 - 1e-3, "{t:?}");
+        let m = msd::msd_numeric(&ok, &r, &[1.0], &times).unwrap();
+        assert!(m.iter().flatten().all(|v| v.is_finite()), "{m:?}");
+        assert!(sonine::evolve_temperatures_sonine(&ok, &r, &[1.0], &times)
+            .unwrap()
+            .is_some());
+    }
 
     /// One species: xi = (4/3) sqrt(pi) n sigma^2 sqrt(T/m) (1 - eps^2), the textbook value.
     #[test]
@@ -396,7 +510,7 @@ mod tests {
             (vec![1.0, 100.0, 500.0], vec![0.1, 0.1, 0.1]),
         ] {
             let s = same_material(&masses, &dens);
-            let t0 = crate::theory::hcs::hcs_temperatures(&s, &r, 1.0);
+            let t0 = crate::theory::hcs::hcs_temperatures(&s, &r, 1.0).unwrap();
             let tau = tau0_with(&s, &t0, &r);
             let times: Vec<f64> = (0..=36)
                 .map(|j| {
@@ -407,7 +521,7 @@ mod tests {
                     }
                 })
                 .collect();
-            let ts = evolve_temperatures(&s, &r, &t0, &times);
+            let ts = evolve_temperatures(&s, &r, &t0, &times).unwrap();
             let mut worst: f64 = 0.0;
             for (t, tk) in times.iter().zip(&ts) {
                 for k in 0..s.len() {
@@ -441,7 +555,7 @@ mod tests {
         let r = PairRestitution::Constant(0.5);
         let t0 = [1.0, 1.0];
         let times = [0.1, 1.0, 10.0, 100.0, 1e3, 1e4, 1e6, 1e9];
-        let got = evolve_temperatures(&s, &r, &t0, &times);
+        let got = evolve_temperatures(&s, &r, &t0, &times).unwrap();
         let reference = rk4_reference(
             &|t| cooling_rates_with(&s, t, &r),
             &t0,
@@ -455,7 +569,7 @@ mod tests {
                 worst = worst.max((g[k] / w[k] - 1.0).abs());
             }
         }
-        let hcs = crate::theory::hcs::hcs_ratios(&s, &r)[1];
+        let hcs = crate::theory::hcs::hcs_ratios(&s, &r).unwrap()[1];
         let last = got.last().unwrap();
         eprintln!(
             "Fig 1 binary: worst deviation from RK4 {worst:.2e}; T2/T1: {:?} -> HCS {hcs:.8}",
@@ -478,7 +592,7 @@ mod tests {
         let ak = a_kappa_pairs(&s, 0.09);
         let t0 = [1.0, 1.0];
         let times = [1.0, 100.0, 1e4, 1e6, 1e9];
-        let got = evolve_temperatures(&s, &r, &t0, &times);
+        let got = evolve_temperatures(&s, &r, &t0, &times).unwrap();
         let rhs = |t: &[f64]| -> Vec<f64> {
             (0..2)
                 .map(|k| {
@@ -499,7 +613,7 @@ mod tests {
         assert!(worst < 1e-8, "{worst}");
         let one = same_material(&[1.0], &[0.1]);
         let r1 = PairRestitution::viscoelastic(&one, 0.09, |b| 1.0 - 1.15344 * b + 0.79826 * b * b);
-        let tt = evolve_temperatures(&one, &r1, &[1.0], &[1e8, 1e9]);
+        let tt = evolve_temperatures(&one, &r1, &[1.0], &[1e8, 1e9]).unwrap();
         let slope = (tt[1][0] / tt[0][0]).ln() / 10f64.ln();
         eprintln!(
             "viscoelastic single species: d ln T / d ln t at 1e8..1e9 = {slope:.5} (-5/3 = {:.5})",

@@ -222,7 +222,11 @@ fn run_with_bad_manifest_exits_2_and_creates_nothing() {
 /// What a run of the parameters would fail on (the engine's limits) and what no machine could
 /// hold or finish is refused by `validate` (exit 2) and by `run` before it writes anything.
 /// Before: `validate` accepted all but the float count, and `run` failed (exit 1, a campaign
-/// directory left behind), ran out of memory or hung.
+/// directory left behind), ran out of memory or hung; the `bounds_*` of physical scales,
+/// viscoelastic beta, the theory's cost and the runs' work were accepted, and `run` panicked
+/// (n1 = 1e308: exit 101 in the theory, a directory left behind; a cascade placement's cell
+/// grid), ran for minutes in the theory (a_kappa = 1e10) or never ended; `validate` itself
+/// panicked on an RFM box of 1e308.
 #[test]
 fn validate_and_run_refuse_what_a_run_could_not_do() {
     let dir = tempfile::tempdir().unwrap();
@@ -240,6 +244,17 @@ fn validate_and_run_refuse_what_a_run_could_not_do() {
         "bounds_sweep_points",
         "integer_written_as_float",
         "integer_written_as_float_in_params",
+        // Inputs that overflowed, panicked or never ended (issue: bounded inputs).
+        "bounds_n1_overflow",
+        "bounds_viscoelastic_beta",
+        "bounds_theory_cost",
+        "bounds_dsmc_scales",
+        "bounds_temperature_ratio",
+        "bounds_power_law_one_particle",
+        "bounds_rfm_scales",
+        "bounds_bisection_work",
+        "bounds_cascade_placement",
+        "bounds_spm_walks",
     ] {
         let manifest = repo_root().join(format!("tests/manifests/bad/{name}.json"));
         let m = manifest.to_str().unwrap();
@@ -259,6 +274,67 @@ fn validate_and_run_refuse_what_a_run_could_not_do() {
         assert_eq!(code, Some(2), "run {name}: log:\n{}", util::log_text(&log));
         assert!(!out.exists(), "run {name} created {}", out.display());
     }
+}
+
+/// A manifest whose kinetic theory is long (400 species with msd: ~200 CPU s estimated) is
+/// valid, with a warning that gives the estimate, from `validate` and `plan` (and `run`,
+/// before it computes the theory); a short one gets none. Before: no estimate anywhere.
+#[test]
+fn a_long_kinetic_theory_is_estimated_and_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let species: Vec<serde_json::Value> = (1..=400)
+        .map(|k| {
+            let k = k as f64;
+            serde_json::json!({"mass": k, "diameter": k.cbrt(), "count": 2})
+        })
+        .collect();
+    let mut m = serde_json::json!({
+        "name": "long-theory", "model": "dsmc", "seed": 1,
+        "params": {"method": "low_rank", "species": {"list": species}, "number_density": 0.1,
+                   "restitution": {"constant": 0.5}, "t_end": 1e9,
+                   "output_times": {"log": {"from": 0.01, "to": 1e9, "per_decade": 2}},
+                   "observables": ["msd"]}
+    });
+    let path = dir.path().join("m.json");
+    util::write_json(&path, &m);
+    let (code, _) = util::run_capture(&["validate", path.to_str().unwrap()], &log);
+    assert_eq!(code, Some(0), "log:\n{}", util::log_text(&log));
+    let text = util::log_text(&log);
+    assert!(
+        text.contains("the kinetic theory, computed before the runs, is estimated at ~")
+            && text.contains("CPU s for 1 point(s)"),
+        "{text}"
+    );
+    let out = dir.path().join("c");
+    let (code, stdout) = util::run_capture(
+        &[
+            "plan",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &log,
+    );
+    assert_eq!(code, Some(0), "log:\n{}", util::log_text(&log));
+    assert!(
+        stdout.contains("kinetic theory of the new points (before the runs): ~"),
+        "{stdout}"
+    );
+    assert!(util::log_text(&log).contains("is estimated at ~"));
+    assert!(!out.exists(), "plan wrote {}", out.display());
+    // Two species: no warning.
+    m["params"]["species"]["list"] = serde_json::json!([
+        {"mass": 1, "diameter": 1, "count": 10}, {"mass": 2, "diameter": 1.2, "count": 10}]);
+    util::write_json(&path, &m);
+    fs::write(&log, "").unwrap();
+    let (code, _) = util::run_capture(&["validate", path.to_str().unwrap()], &log);
+    assert_eq!(code, Some(0));
+    assert!(
+        !util::log_text(&log).contains("kinetic theory"),
+        "{}",
+        util::log_text(&log)
+    );
 }
 
 /// A manifest file is read up to 16 MiB (+1 byte): a larger file, or one without end, is

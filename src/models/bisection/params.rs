@@ -6,8 +6,12 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::aux_models::bisection::{BisectionConfig, Split};
+use crate::models::MAX_RUN_WORK;
 
 type Errors = Vec<(String, String)>;
+
+/// Most histogram bins (x_min to 1 at bins_per_decade).
+const MAX_BINS: f64 = 1e6;
 
 /// Multiplicative bisection of [0, 1] (spec 3.1).
 #[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
@@ -112,7 +116,31 @@ impl BisectionParams {
                     format!("{path}/histogram/x_min"),
                     format!("must be below 1, got {x}"),
                 ));
+            } else {
+                // The log bins from x_min to 1 (5e-324 gave infinitely many: the run's
+                // allocation failed).
+                let bins = self.histogram.bins_per_decade as f64 * (1.0 / x).log10();
+                if !(bins <= MAX_BINS) {
+                    errors.push((
+                        format!("{path}/histogram/x_min"),
+                        format!(
+                            "{x:e} gives {bins:.3e} bins ({} per decade down from 1), more than the limit of {MAX_BINS:e}",
+                            self.histogram.bins_per_decade
+                        ),
+                    ));
+                }
             }
+        }
+        // 2^(level+1) work units per realisation (the partition and its histogram).
+        let work = self.realisations as f64 * 2f64.powi(self.level as i32 + 1);
+        if work > MAX_RUN_WORK {
+            errors.push((
+                format!("{path}/realisations"),
+                format!(
+                    "{} realisations of 2^{} intervals are {work:.2e} work units, more than the limit of {MAX_RUN_WORK:e} per run (~10^7 CPU s): fewer realisations per run (more replicas instead)",
+                    self.realisations, self.level
+                ),
+            ));
         }
     }
 }

@@ -6,9 +6,13 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::aux_models::cascade::{CascadeConfig, PlacementConfig, Variant};
+use crate::models::{MAX_RUN_WORK, SCALE_MAX, SCALE_MIN};
 use crate::rfm::params::THESIS_RADIUS;
 
 type Errors = Vec<(String, String)>;
+
+/// Most cells of the placement's grid (24 bytes each: 2.4 GB).
+const MAX_PLACEMENT_CELLS: f64 = 1e8;
 
 /// Multiplicative cascade on a 2^n x 2^n grid (spec 3.4).
 #[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
@@ -128,6 +132,18 @@ impl CascadeParams {
     }
 
     pub fn check(&self, path: &str, errors: &mut Errors) {
+        let mut scale = |key: &str, v: f64| {
+            if !(SCALE_MIN..=SCALE_MAX).contains(&v) {
+                errors.push((
+                    format!("{path}/{key}"),
+                    format!("{v:e} is outside [{SCALE_MIN:e}, {SCALE_MAX:e}], the physical scales granular takes (30 orders of magnitude either side of 1, in any units)"),
+                ));
+            }
+        };
+        scale("box_length", self.box_length);
+        if let Some(p) = &self.placement {
+            scale("placement/radius", p.radius);
+        }
         let nyq = (1u64 << (self.level - 1)) as f64;
         if let Some(k) = self.k_max {
             if k > nyq {
@@ -176,6 +192,34 @@ impl CascadeParams {
                     ));
                 }
             }
+            // The placement's cell grid, (L / (2 radius))^2 cells (a tiny radius or a huge box
+            // made the run's allocation fail, or its index overflow).
+            let cells = (l / (2.0 * p.radius)).floor().powi(2);
+            if !(cells <= MAX_PLACEMENT_CELLS) {
+                errors.push((
+                    format!("{path}/placement/radius"),
+                    format!(
+                        "a radius {:e} in a box of {l:e} gives a cell grid of (L / (2 radius))^2 = {cells:.2e} cells, more than the limit of {MAX_PLACEMENT_CELLS:e} (the discs would cover a fraction {phi:.1e} of the box): a larger radius or a smaller box_length",
+                        p.radius
+                    ),
+                ));
+            }
+        }
+        // 30 4^level work units per realisation (the field, its FFT, the shells), 16 per
+        // placement attempt.
+        let work = self.realisations as f64 * 30.0 * 4f64.powi(self.level as i32)
+            + self
+                .placement
+                .as_ref()
+                .map_or(0.0, |p| 16.0 * p.max_attempts as f64);
+        if work > MAX_RUN_WORK {
+            errors.push((
+                format!("{path}/realisations"),
+                format!(
+                    "{} realisations of a 2^{} x 2^{} grid (and the placement's max_attempts) are {work:.2e} work units, more than the limit of {MAX_RUN_WORK:e} per run (~10^7 CPU s): fewer realisations per run (more replicas instead), fewer max_attempts",
+                    self.realisations, self.level, self.level
+                ),
+            ));
         }
     }
 }

@@ -19,7 +19,9 @@ pub mod tables;
 pub mod theory;
 
 use crate::dsmc::DsmcSim;
-use crate::models::{CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{
+    CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation, TheoryEstimate,
+};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
 use crate::store::parquet_io::StoreError;
@@ -159,6 +161,14 @@ impl Model for Dsmc {
             t.push(DSMC_THEORY_TAMSD);
         }
         t
+    }
+
+    fn theory_estimate(p: &DsmcParams) -> TheoryEstimate {
+        p.theory_cost()
+            .map_or_else(TheoryEstimate::default, |c| TheoryEstimate {
+                seconds: c.seconds,
+                bytes: c.bytes,
+            })
     }
 
     fn write_theory(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {

@@ -5,11 +5,14 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::dsmc::predict::SONINE_MAX_SPECIES;
 use crate::dsmc::system::{
     grid_time, power_law_species, theory_restitution, Method, RestitutionModel, SpeciesInfo,
     TamsdPlan, VdistPlan, MAX_PARTICLES,
 };
 use crate::dsmc::DsmcSystem;
+use crate::models::{ParamErrors, SCALE_MAX, SCALE_MIN};
+use crate::theory::cost::{self, Cost, Workload};
 
 /// Parameters of a DSMC run (homogeneous cooling state of a polydisperse granular gas).
 #[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
@@ -413,6 +416,27 @@ pub const MAX_SPECIES: usize = 1_000_000;
 /// far beyond, its temperature leaves the range of a double and the theory cannot follow it.
 pub const MAX_COLLISION_TIMES: f64 = 1e30;
 
+/// Largest ratio of two species' initial temperatures (the paper's starts are equal
+/// temperatures or the HCS, ratios ~400; the theory's ODE fails from ~1e6 on).
+pub const MAX_TEMPERATURE_RATIO: f64 = 1e4;
+
+/// Fewest collisions per particle between two refreshes of the speed bounds (each costs
+/// O(N)).
+pub const MIN_REFRESH_EVERY: f64 = 0.01;
+
+/// Largest beta = A kappa^(2/5) g_n^(1/5) of viscoelastic restitution at the thermal impact
+/// speeds: eps(1000) ~ 1e-5 (the grains stick), the end of the range where the tabulated
+/// eps(beta) is checked against the contact ODE; the theory's tabulated Maxwell averages go to
+/// beta ~ 1.6e5, so a run's pairs stay inside them.
+pub const MAX_THERMAL_BETA: f64 = 1e3;
+
+/// Most CPU seconds the kinetic theory of one point may take, as `theory::cost` estimates it
+/// (~3 hours: ~2 000 species, or ~1 000 with msd).
+pub const MAX_THEORY_SECONDS: f64 = 1e4;
+
+/// Most bytes the kinetic theory of one point may hold, as estimated (32 GB).
+pub const MAX_THEORY_BYTES: f64 = 32e9;
+
 impl OutputTimes {
     /// An upper bound on the number of times [`OutputTimes::resolve`] gives (0, t_end, the log
     /// grid, the list), computed without listing them (saturating).
@@ -509,7 +533,8 @@ impl DsmcParams {
                 .map(|s| crate::theory::Species::new(s.mass, s.diameter, s.count as f64 / volume))
                 .collect();
             let r = theory_restitution(&restitution, &species);
-            let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean);
+            let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean)
+                .map_err(|e| format!("no homogeneous cooling state found: {e}"))?;
             for (s, t) in species.iter_mut().zip(t0) {
                 if !(t.is_finite() && t > 0.0) {
                     return Err(format!(
@@ -756,6 +781,12 @@ impl DsmcParams {
             ),
             Some(c) => {
                 let n = c.iter().fold(0u64, |a, x| a.saturating_add(*x));
+                if n < 2 && matches!(self.species, SpeciesSpec::PowerLaw(_)) {
+                    err(
+                        particles_at,
+                        format!("the power law gives {n} particle(s) (N_k = round(N1 k^-theta)), expected at least 2 (a single particle never collides)"),
+                    );
+                }
                 if n > MAX_PARTICLES {
                     err(
                         particles_at,
@@ -907,6 +938,248 @@ impl DsmcParams {
                 }
             }
         }
+        // The physical scales, then (where they are sound) what the restitution and the
+        // kinetic theory of the point would cost.
+        let mut more = Vec::new();
+        if self.check_scales(counts.as_deref(), &mut more) {
+            self.check_restitution(counts.as_deref(), &mut more);
+            if n_times <= MAX_OUTPUT_TIMES {
+                self.check_theory_cost(species_at, counts.as_deref(), &mut more);
+            }
+        }
+        errors.extend(more.into_iter().map(|(p, m)| (format!("{path}{p}"), m)));
+    }
+
+    /// Every dimensional input within [`SCALE_MIN`, `SCALE_MAX`] (errors at paths relative to
+    /// the params); true when all are.
+    fn check_scales(&self, counts: Option<&[u64]>, errors: &mut ParamErrors) -> bool {
+        let before = errors.len();
+        let mut scale = |at: String, what: &str, v: f64| {
+            if !(SCALE_MIN..=SCALE_MAX).contains(&v) {
+                errors.push((
+                    at,
+                    format!(
+                        "{what} {v:e} is outside [{SCALE_MIN:e}, {SCALE_MAX:e}], the physical scales granular takes (30 orders of magnitude either side of 1, in any units): beyond them collision rates, energies or cooled temperatures leave the range of a double"
+                    ),
+                ));
+            }
+        };
+        match self.initial_temperature {
+            InitialTemperature::Value(t) => scale("/initial_temperature".into(), "temperature", t),
+            InitialTemperature::Hcs { mean } => scale(
+                "/initial_temperature/hcs/mean".into(),
+                "mean temperature",
+                mean,
+            ),
+        }
+        let n: f64 = counts.map_or(0.0, |c| c.iter().map(|&x| x as f64).sum());
+        match &self.species {
+            SpeciesSpec::PowerLaw(pl) => {
+                scale("/species/power_law/n1".into(), "number density n1", pl.n1);
+                if (SCALE_MIN..=SCALE_MAX).contains(&pl.n1) && n > 0.0 {
+                    scale(
+                        "/species/power_law/n1".into(),
+                        "the total number density n1 N / N1",
+                        pl.n1 * n / pl.n1_count as f64,
+                    );
+                }
+            }
+            SpeciesSpec::List(list) => {
+                for (i, sp) in list.iter().enumerate() {
+                    scale(format!("/species/list/{i}/mass"), "mass", sp.mass);
+                    scale(
+                        format!("/species/list/{i}/diameter"),
+                        "diameter",
+                        sp.diameter,
+                    );
+                    if let Some(t) = sp.temperature {
+                        scale(format!("/species/list/{i}/temperature"), "temperature", t);
+                    }
+                }
+                match (self.volume, self.number_density) {
+                    (Some(v), None) if n > 0.0 => {
+                        scale("/volume".into(), "the number density N / V", n / v)
+                    }
+                    (None, Some(d)) => scale("/number_density".into(), "number density", d),
+                    _ => {}
+                }
+                // The spread of the initial temperatures.
+                let temps: Vec<(f64, Option<usize>)> = list
+                    .iter()
+                    .enumerate()
+                    .map(|(i, sp)| match (sp.temperature, self.initial_temperature) {
+                        (Some(t), _) => (t, Some(i)),
+                        (None, InitialTemperature::Value(t)) => (t, None),
+                        (None, InitialTemperature::Hcs { mean }) => (mean, None),
+                    })
+                    .collect();
+                let hi = temps.iter().copied().max_by(|a, b| a.0.total_cmp(&b.0));
+                let lo = temps.iter().copied().min_by(|a, b| a.0.total_cmp(&b.0));
+                if let (Some((t_hi, i_hi)), Some((t_lo, i_lo))) = (hi, lo) {
+                    let ratio = t_hi / t_lo;
+                    if ratio > MAX_TEMPERATURE_RATIO {
+                        let name = |i: Option<usize>| match i {
+                            Some(i) => format!("species {}", i + 1),
+                            None => "initial_temperature".into(),
+                        };
+                        let at = match (i_hi, i_lo) {
+                            (Some(i), _) | (None, Some(i)) => {
+                                format!("/species/list/{i}/temperature")
+                            }
+                            (None, None) => "/initial_temperature".into(),
+                        };
+                        errors.push((
+                            at,
+                            format!(
+                                "the initial temperatures span a factor {ratio:.2e} ({t_hi:e} of {} to {t_lo:e} of {}), more than the limit of {MAX_TEMPERATURE_RATIO:e}: so far from equipartition the first collisions equalise them within a fraction of a collision time, faster than the theory's temperature ODE can follow",
+                                name(i_hi),
+                                name(i_lo)
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+        if !(self.refresh_every >= MIN_REFRESH_EVERY && self.refresh_every <= SCALE_MAX) {
+            errors.push((
+                "/refresh_every".into(),
+                format!(
+                    "{:e} is outside [{MIN_REFRESH_EVERY}, {SCALE_MAX:e}]: each refresh costs O(N), so more than {} per N collisions would dominate the run",
+                    self.refresh_every,
+                    1.0 / MIN_REFRESH_EVERY
+                ),
+            ));
+        }
+        errors.len() == before
+    }
+
+    /// Viscoelastic restitution: beta = A kappa_ki^(2/5) g_n^(1/5) at the thermal impact
+    /// speeds at most [`MAX_THERMAL_BETA`] (see [`DsmcParams::thermal_beta`]).
+    fn check_restitution(&self, counts: Option<&[u64]>, errors: &mut ParamErrors) {
+        let Restitution::Viscoelastic(v) = &self.restitution else {
+            return;
+        };
+        let Some(beta) = counts.and_then(|c| self.thermal_beta(c, v.a_kappa)) else {
+            return;
+        };
+        if !(beta <= MAX_THERMAL_BETA) {
+            errors.push((
+                "/restitution/viscoelastic/a_kappa".into(),
+                format!(
+                    "{:e} gives beta = A kappa^(2/5) g_n^(1/5) up to {beta:.3e} at the thermal impact speeds, more than the limit of {MAX_THERMAL_BETA:e}: eps(beta) < 1e-4 there (the grains stick), beyond the viscoelastic model (small deformations) and its tabulated eps",
+                    v.a_kappa
+                ),
+            ));
+        }
+    }
+
+    /// An upper bound of beta = A kappa_ki^(2/5) (sqrt(2) u_ki)^(1/5) over the species pairs at
+    /// t = 0 (u_ki^2 = T_k/m_k + T_i/m_i, the thermal relative speed; the HCS start at its
+    /// mean temperature): with sigma_eff <= sigma_max/2, m_eff >= m_min/2 (of any pair),
+    /// A kappa_ki^(2/5) <= a_kappa sigma_max^(1/5) m_min^(-2/5), and u_ki^2 <= 2 T_max/m_min.
+    /// The gas cools, so beta falls during a run. None without species.
+    pub fn thermal_beta(&self, counts: &[u64], a_kappa: f64) -> Option<f64> {
+        let base_t = match self.initial_temperature {
+            InitialTemperature::Value(t) => t,
+            InitialTemperature::Hcs { mean } => mean,
+        };
+        let (sigma_max, m_min, t_max) = match &self.species {
+            SpeciesSpec::PowerLaw(_) => ((counts.len() as f64).cbrt(), 1.0, base_t),
+            SpeciesSpec::List(list) => (
+                list.iter().map(|s| s.diameter).fold(0.0, f64::max),
+                list.iter().map(|s| s.mass).fold(f64::INFINITY, f64::min),
+                list.iter()
+                    .map(|s| s.temperature.unwrap_or(base_t))
+                    .fold(0.0, f64::max),
+            ),
+        };
+        if counts.is_empty() || !(m_min > 0.0 && m_min.is_finite()) {
+            return None;
+        }
+        let u = (2.0 * t_max / m_min).sqrt();
+        Some(
+            a_kappa
+                * sigma_max.powf(0.2)
+                * m_min.powf(-0.4)
+                * (std::f64::consts::SQRT_2 * u).powf(0.2),
+        )
+    }
+
+    /// What the kinetic theory of this point costs (`theory::cost`), from its size: species,
+    /// output times, the span in collision times, msd, restitution, start, TAMSD lags. None
+    /// where the species or the collision rate cannot be had (refused elsewhere).
+    pub fn theory_cost(&self) -> Option<Cost> {
+        let counts = self.species_counts()?;
+        let rate = self.collision_rate(&counts)?;
+        Some(cost::estimate(&self.workload(counts.len(), rate)))
+    }
+
+    fn workload(&self, species: usize, rate: f64) -> Workload {
+        let constant = matches!(self.restitution, Restitution::Constant(_));
+        Workload {
+            species,
+            times: self.output_times.count_bound().min(usize::MAX as u64) as usize,
+            span: (self.t_end * rate).ln_1p(),
+            msd: self.wants_msd(),
+            velocity_dependent: !constant,
+            sonine: constant && species <= SONINE_MAX_SPECIES,
+            hcs: matches!(self.initial_temperature, InitialTemperature::Hcs { .. }),
+            tamsd_lags: match (&self.tamsd, self.wants_tamsd()) {
+                (Some(tm), true) => tm.lags.len(),
+                _ => 0,
+            },
+        }
+    }
+
+    /// The kinetic theory's estimated cost against [`MAX_THEORY_SECONDS`] and
+    /// [`MAX_THEORY_BYTES`]; the error names the species (`species_at`) when they alone
+    /// exceed a limit, else the output times (with `msd`, each costs a quadrature of the
+    /// temperature history).
+    fn check_theory_cost(
+        &self,
+        species_at: &str,
+        counts: Option<&[u64]>,
+        errors: &mut ParamErrors,
+    ) {
+        let Some(counts) = counts else {
+            return;
+        };
+        let Some(rate) = self.collision_rate(counts) else {
+            return;
+        };
+        let w = self.workload(counts.len(), rate);
+        let c = cost::estimate(&w);
+        if c.seconds <= MAX_THEORY_SECONDS && c.bytes <= MAX_THEORY_BYTES {
+            return;
+        }
+        let bare = cost::estimate(&Workload {
+            times: 2,
+            msd: false,
+            tamsd_lags: 0,
+            ..w
+        });
+        let at = if bare.seconds > MAX_THEORY_SECONDS || bare.bytes > MAX_THEORY_BYTES {
+            species_at
+        } else if w.tamsd_lags > 0 && !w.msd {
+            "/tamsd/lags"
+        } else {
+            "/output_times"
+        };
+        errors.push((
+            at.into(),
+            format!(
+                "the kinetic theory of this point would take ~{:.1e} CPU s and ~{} ({} species, {} output times{}{}, {:.0} e-folds of collision times), more than the limit of {MAX_THEORY_SECONDS:e} s and {}: fewer species (a larger theta, a shorter list), fewer output times{}",
+                c.seconds,
+                crate::models::bytes_text(c.bytes.min(u64::MAX as f64) as u64),
+                w.species,
+                w.times,
+                if w.msd { ", msd" } else { "" },
+                if w.velocity_dependent { ", viscoelastic" } else { "" },
+                w.span,
+                crate::models::bytes_text(MAX_THEORY_BYTES as u64),
+                if w.msd { " or without msd" } else { "" }
+            ),
+        ));
     }
 }
 

@@ -51,17 +51,50 @@ pub fn write(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {
         .iter()
         .flat_map(|(_, ids)| ids.iter().copied())
         .collect();
+    // Say so before a long theory (validate and plan warn too).
+    let (secs, bytes) = c
+        .points
+        .iter()
+        .filter(|p| wanted.contains(&p.point_id))
+        .filter_map(|p| p.params.theory_cost())
+        .fold((0.0, 0.0f64), |(s, b), x| (s + x.seconds, b.max(x.bytes)));
+    if secs > 60.0 || bytes > 2e9 {
+        tracing::warn!(
+            "kinetic theory of {} point(s): estimated ~{secs:.0} CPU s (the largest ~{}), before the runs start",
+            wanted.len(),
+            crate::models::bytes_text(bytes.min(u64::MAX as f64) as u64)
+        );
+    }
     let preds: Vec<(u32, Prediction)> = c
         .points
         .par_iter()
         .filter(|p| wanted.contains(&p.point_id))
-        .filter_map(|p| {
+        .map(|p| {
             p.params
                 .system()
-                .ok()
-                .map(|sys| (p.point_id, predict(&sys)))
+                .and_then(|sys| predict(&sys).map_err(|e| e.to_string()))
+                .map(|pred| (p.point_id, pred))
+                .map_err(|e| {
+                    StoreError::Corrupt(
+                        DSMC_THEORY.into(),
+                        format!(
+                            "cannot be computed for point {}{}: {e}",
+                            p.point_id,
+                            if p.label.is_empty() {
+                                String::new()
+                            } else {
+                                format!(" ({})", p.label)
+                            }
+                        ),
+                    )
+                })
         })
-        .collect();
+        .collect::<Result<_, _>>()?;
+    for (id, pred) in &preds {
+        for note in &pred.notes {
+            tracing::warn!("{DSMC_THEORY}, point {id}: {note}");
+        }
+    }
     for (table, ids) in needs {
         let first = *ids.first().expect("not empty");
         let preds = preds.iter().filter(|(p, _)| ids.contains(p));

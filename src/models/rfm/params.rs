@@ -6,7 +6,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::models::check_velocity_range;
+use crate::models::{check_velocity_range, MAX_RUN_WORK, SCALE_MAX, SCALE_MIN};
 
 use crate::rfm::freepath::FreePathConfig;
 use crate::rfm::observe::{HistogramConfig, RunConfig};
@@ -721,11 +721,15 @@ impl RfmParams {
                     ),
                 ));
             } else {
-                let bins = nc.edges().len() as u64 - 1;
-                if bins * nc.h_max as u64 > 10_000_000 {
+                // Counted as `NeighbourConfig::edges` would make them, without making them (a
+                // range of 1e300 decades made validate's allocation fail).
+                let bins = ((nc.bins_per_decade as f64 * (nc.hi / nc.lo).log10()) - 1e-9)
+                    .ceil()
+                    .max(1.0);
+                if !(bins * nc.h_max as f64 <= 1e7) {
                     errors.push((
                         p.clone(),
-                        format!("{bins} bins x h_max {} is more than 10^7 bins", nc.h_max),
+                        format!("{bins:.0} bins x h_max {} is more than 10^7 bins", nc.h_max),
                     ));
                 }
             }
@@ -783,8 +787,54 @@ impl RfmParams {
         }
     }
 
+    /// The physical scales of the dimensional inputs (`models::SCALE_MIN`:
+    /// 30 orders of magnitude either side of 1), and the run's work (particle steps) against
+    /// `MAX_RUN_WORK`. A mass of 1e-308 or a noise of 1e308 made every run fail with
+    /// non-finite velocities; a warm-up of 1e15 s never ended.
+    fn check_scales(&self, path: &str, errors: &mut Vec<(String, String)>) {
+        let mut scale = |key: &str, v: f64| {
+            if !(SCALE_MIN..=SCALE_MAX).contains(&v) {
+                errors.push((
+                    format!("{path}/{key}"),
+                    format!(
+                        "{v:e} is outside [{SCALE_MIN:e}, {SCALE_MAX:e}], the physical scales granular takes (30 orders of magnitude either side of 1, in any units): beyond them forces, velocities or energies leave the range of a double"
+                    ),
+                ));
+            }
+        };
+        scale("radius", self.radius);
+        scale("mass", self.mass);
+        scale("spring_constant", self.spring_constant);
+        if self.noise_strength != 0.0 {
+            scale("noise_strength", self.noise_strength);
+        }
+        if let Some(l) = self.box_length {
+            scale("box_length", l);
+        }
+        if let Some(dt) = self.dt {
+            scale("dt", dt);
+        }
+        let cfg = self.config();
+        let dt = cfg.dt();
+        if dt > 0.0 && dt.is_finite() {
+            let steps = (self.warmup + self.duration) / dt;
+            let work = steps * self.n_particles as f64;
+            if !(work <= MAX_RUN_WORK) {
+                errors.push((
+                    format!("{path}/duration"),
+                    format!(
+                        "warmup + duration = {:e} s is {steps:.2e} steps of dt = {dt:e} s for {} particles, {work:.2e} particle steps, more than the limit of {MAX_RUN_WORK:e} per run (~10^7 CPU s)",
+                        self.warmup + self.duration,
+                        self.n_particles
+                    ),
+                ));
+            }
+        }
+    }
+
     /// Checks the schema cannot express; `path` is the JSON pointer of this object.
     pub fn check(&self, path: &str, errors: &mut Vec<(String, String)>) {
+        self.check_scales(path, errors);
         if let Err(es) = self.config().validate() {
             for e in es {
                 let (field, msg) = e.split_once(": ").unwrap_or(("", e.as_str()));

@@ -5,7 +5,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::models::check_velocity_range;
+use crate::models::{check_velocity_range, MAX_RUN_WORK, SCALE_MAX, SCALE_MIN};
 
 use crate::aux_models::spm::{FreePath, SpmConfig};
 use crate::rfm::params::{THESIS_MASS, THESIS_NOISE};
@@ -194,6 +194,14 @@ impl SpmParams {
     }
 
     pub fn check(&self, path: &str, errors: &mut Errors) {
+        for (key, v) in [("mass", self.mass), ("noise_strength", self.noise_strength)] {
+            if !(SCALE_MIN..=SCALE_MAX).contains(&v) {
+                errors.push((
+                    format!("{path}/{key}"),
+                    format!("{v:e} is outside [{SCALE_MIN:e}, {SCALE_MAX:e}], the physical scales granular takes (30 orders of magnitude either side of 1, in any units)"),
+                ));
+            }
+        }
         if self.dt < 1e-6 {
             errors.push((
                 format!("{path}/dt"),
@@ -202,6 +210,18 @@ impl SpmParams {
                     self.dt
                 ),
             ));
+        } else {
+            let work = self.walks as f64 / self.dt;
+            if work > MAX_RUN_WORK {
+                errors.push((
+                    format!("{path}/walks"),
+                    format!(
+                        "{} walks of ~1/dt = {:.0} steps are ~{work:.2e} work units, more than the limit of {MAX_RUN_WORK:e} per run (~10^7 CPU s): fewer walks per run (more replicas instead)",
+                        self.walks,
+                        1.0 / self.dt
+                    ),
+                ));
+            }
         }
         let fp = format!("{path}/free_path");
         match &self.free_path {
