@@ -14,6 +14,11 @@ use super::layout;
 use super::parquet_io::{self, Stamp, StoreError};
 use crate::fsutil::{self, Dir, Kind};
 
+/// How many times [`Dataset::read`] lists a table again when one of its files vanished
+/// while it was read (20 ms, 40 ms, ... 640 ms apart: a compaction's switch takes
+/// milliseconds).
+pub const VANISHED_RETRIES: u32 = 5;
+
 /// The tables of one campaign directory.
 #[derive(Clone, Debug)]
 pub struct Dataset {
@@ -120,8 +125,28 @@ impl Dataset {
         parquet_io::read_campaign_file(path, table, &self.identity)
     }
 
-    /// Every batch of every file of `table`.
+    /// Every batch of every file of `table`. A file that vanishes between the listing and its
+    /// reading (a `granular compact` in another process replaced the table's generation: the
+    /// same rows in other files) makes the table be listed and read again, up to
+    /// [`VANISHED_RETRIES`] times (found by the race drill: a `plan` beside a compaction
+    /// failed with exit 4).
     pub fn read(&self, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+        let mut attempt = 0;
+        loop {
+            match self.read_listed(table) {
+                Err(StoreError::Io { source, .. })
+                    if source.kind() == std::io::ErrorKind::NotFound
+                        && attempt < VANISHED_RETRIES =>
+                {
+                    attempt += 1;
+                    std::thread::sleep(std::time::Duration::from_millis(20 << attempt));
+                }
+                r => return r,
+            }
+        }
+    }
+
+    fn read_listed(&self, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
         let mut out = Vec::new();
         for f in self.files(table)? {
             out.extend(self.read_file(&f, table)?);
