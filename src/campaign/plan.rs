@@ -402,7 +402,12 @@ fn typed(
 pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
     let mut errors = runs_errors(m);
     let base = Value::Object(m.params.clone());
-    let base_typed = typed(m.model, &base, "/params", &mut errors);
+    let mut base_errors = Vec::new();
+    let base_typed = typed(m.model, &base, "/params", &mut base_errors);
+    // An error of the base params is reported once, not again with each sweep value.
+    let of_base: std::collections::HashSet<(String, String)> =
+        base_errors.iter().cloned().collect();
+    errors.extend(base_errors);
 
     let keys: Vec<String> = m.sweep.keys().cloned().collect();
     errors.extend(sweep_key_errors(&base, &m.sweep));
@@ -435,6 +440,9 @@ pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
                         .join("/")
                 );
                 for (path, msg) in errs {
+                    if of_base.contains(&(path.clone(), msg.clone())) {
+                        continue;
+                    }
                     let mapped = match path.strip_prefix(&at) {
                         Some(rest) => format!("{kp}/{i}{rest}"),
                         None => format!("{kp}/{i}"),

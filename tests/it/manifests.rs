@@ -83,6 +83,42 @@ fn good_manifests_validate() {
     );
 }
 
+/// Each error once: an error of the base params is not repeated for every sweep value (at
+/// 421c2bb `volume` and `number_density` together, swept over 3 restitution values, gave 4
+/// errors: the base's and "with this value, ..." at each value), while a sweep value's own
+/// error is still reported at that value.
+#[test]
+fn an_error_of_the_base_params_is_reported_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.json");
+    util::write_json(
+        &path,
+        &serde_json::json!({
+            "name": "once", "model": "dsmc", "seed": 1,
+            "params": {"method": "low_rank",
+                       "species": {"list": [{"mass": 1, "diameter": 1, "count": 10}]},
+                       "number_density": 0.1, "volume": 10,
+                       "restitution": {"constant": 0.5}, "t_end": 1.0},
+            "sweep": {"restitution.constant": [0.1, 0.2, 7.0]}
+        }),
+    );
+    let e = load_manifest(&path).unwrap_err();
+    let both: Vec<_> = e
+        .errors
+        .iter()
+        .filter(|x| x.message.contains("not both"))
+        .collect();
+    assert_eq!(both.len(), 1, "{e}");
+    assert_eq!(both[0].path, "/params/number_density", "{e}");
+    assert!(
+        e.errors
+            .iter()
+            .any(|x| x.path == "/sweep/restitution.constant/2"),
+        "{e}"
+    );
+    assert_eq!(e.errors.len(), 2, "{e}");
+}
+
 #[test]
 fn bad_manifests_report_every_expected_error() {
     let files = json_files(&repo_root().join("tests/manifests/bad"));
