@@ -343,7 +343,7 @@ pub fn load(path: &std::path::Path) -> Result<(Manifest, Plan), ManifestErrors> 
 
 /// Validate manifest text; `file` names it in errors.
 pub fn parse(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors> {
-    let manifest = validate::parse(text, file)?;
+    let manifest = validate::parse(text, file).map_err(|e| with_checks_beside(text, e))?;
     let to_errors = |errs: Vec<(String, String)>| {
         ManifestErrors::new(
             file,
@@ -355,6 +355,45 @@ pub fn parse(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors>
     let expansion = expand(&manifest).map_err(to_errors)?;
     let plan = fresh(&manifest, expansion).map_err(|e| to_errors(vec![(String::new(), e)]))?;
     Ok((manifest, plan))
+}
+
+/// Every error at once: where the schema found errors in `params`, the checks it cannot
+/// express (cross-field rules, sweep values, limits, the model's checks) run on the manifest
+/// with the offending members left out (`validate::pruned`), and those of their errors that
+/// have nothing to do with a member left out (not at, in or above it, not in a sweep of it,
+/// not naming it) are reported beside the schema's. Before, a bad observable hid that
+/// `volume` and `number_density` were both given until it was fixed.
+fn with_checks_beside(text: &str, e: ManifestErrors) -> ManifestErrors {
+    let Some((m, left_out)) = validate::pruned(text, &e.errors) else {
+        return e;
+    };
+    let Err(more) = expand(&m) else {
+        return e;
+    };
+    let related = |path: &str, message: &str| {
+        left_out.iter().any(|out| {
+            let key = out.rsplit('/').next().unwrap_or(out);
+            let swept = path.strip_prefix("/sweep/").map(|k| {
+                let k = k.split('/').next().unwrap_or(k);
+                format!("/params/{}", k.replace('.', "/"))
+            });
+            let near = |p: &str| {
+                p == out || p.starts_with(&format!("{out}/")) || out.starts_with(&format!("{p}/"))
+            };
+            near(path)
+                || swept.is_some_and(|p| near(&p))
+                || message.contains(&format!("`{key}`"))
+                || message.contains(&format!("\"{key}\""))
+                || message.contains(out.as_str())
+        })
+    };
+    let mut errors = e.errors;
+    errors.extend(
+        more.into_iter()
+            .filter(|(path, message)| !related(path, message))
+            .map(|(path, message)| ManifestError { path, message }),
+    );
+    ManifestErrors::new(&e.file, errors)
 }
 
 /// The plan of a new campaign of `m`: its points and runs registered in sweep order.

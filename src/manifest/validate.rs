@@ -4,7 +4,10 @@
 //! would keep the last one silently); (2) the generated JSON Schema (unknown keys, types, ranges),
 //! where a failed `oneOf` is narrowed to the variant the user evidently meant; (3) checks the
 //! schema cannot express (cross-field rules, sweep paths, duplicate points), run on the base
-//! parameters, on every sweep value and on every point of the sweep.
+//! parameters, on every sweep value and on every point of the sweep. Where stage 2 finds errors
+//! in `params`, stage 3 still runs on the manifest with those members left out ([`pruned`]), and
+//! its errors unrelated to them are reported too (`campaign::plan::parse`): every error at
+//! once, each once (an error of the base params is not repeated at each sweep value).
 
 use std::fmt;
 use std::path::Path;
@@ -135,6 +138,65 @@ pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
     // The schema takes 42.0 for an integer (JSON Schema does); serde does not: say where.
     crate::models::from_value_at(value, "")
         .map_err(|(path, message)| fail(vec![ManifestError { path, message }]))
+}
+
+/// The manifest of `text` (valid JSON) with the members of `params` that `errors` (the schema's)
+/// point into left out, so that the checks the schema cannot express can still run beside its
+/// errors ("every error at once"), and the JSON pointers of the members left out. `None` where
+/// that cannot be: an error outside `params`, or a member left out that the schema requires
+/// (its absence is an error again). At most [`PRUNE_ROUNDS`] rounds of leaving out and
+/// checking the schema again.
+pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<String>)> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut value: Value = serde_json::from_str(text).ok()?;
+    let mut left_out: Vec<String> = Vec::new();
+    let mut errors = errors.to_vec();
+    for _ in 0..PRUNE_ROUNDS {
+        for e in &errors {
+            let member = member_of(&value, &e.path)?;
+            if !member.starts_with("/params/") {
+                return None;
+            }
+            if value.pointer(&member).is_some() {
+                remove_at(&mut value, &member)?;
+                left_out.push(member);
+            }
+        }
+        errors = schema_errors(&json_schema(), &value, "");
+        if errors.is_empty() {
+            let m = crate::models::from_value_at(value, "").ok()?;
+            return Some((m, left_out));
+        }
+    }
+    None
+}
+
+/// How many times [`pruned`] leaves members out and checks again.
+const PRUNE_ROUNDS: usize = 4;
+
+/// The pointer of the object member that `path` is or lies in (an array element is left out
+/// with its whole array: indices of the others stay as the user wrote them).
+fn member_of(value: &Value, path: &str) -> Option<String> {
+    let segments: Vec<&str> = path.split('/').skip(1).collect();
+    for end in (1..=segments.len()).rev() {
+        let parent = if end == 1 {
+            String::new()
+        } else {
+            format!("/{}", segments[..end - 1].join("/"))
+        };
+        if value.pointer(&parent).is_some_and(Value::is_object) {
+            return Some(format!("/{}", segments[..end].join("/")));
+        }
+    }
+    None
+}
+
+/// Remove the object member at `pointer`.
+fn remove_at(value: &mut Value, pointer: &str) -> Option<()> {
+    let (parent, key) = pointer.rsplit_once('/')?;
+    let key = key.replace("~1", "/").replace("~0", "~");
+    value.pointer_mut(parent)?.as_object_mut()?.remove(&key)?;
+    Some(())
 }
 
 /// Every key given more than once in one object of `text` (valid JSON), as an error at the

@@ -119,6 +119,21 @@ fn an_error_of_the_base_params_is_reported_once() {
     assert_eq!(e.errors.len(), 2, "{e}");
 }
 
+/// A schema error does not hide the checks the schema cannot express, and nothing left out to
+/// run them is reported as an error of its own: the fixture's unknown observable and its
+/// `volume` beside `number_density`, exactly those two (421c2bb: the observable only).
+#[test]
+fn schema_errors_and_checks_are_reported_together_each_once() {
+    let f = repo_root().join("tests/manifests/bad/all_at_once_schema_and_checks.json");
+    let e = load_manifest(&f).unwrap_err();
+    let paths: Vec<&str> = e.errors.iter().map(|x| x.path.as_str()).collect();
+    assert_eq!(
+        paths,
+        vec!["/params/observables/0", "/params/number_density"],
+        "{e}"
+    );
+}
+
 #[test]
 fn bad_manifests_report_every_expected_error() {
     let files = json_files(&repo_root().join("tests/manifests/bad"));
