@@ -761,15 +761,30 @@ macro_rules! models {
         }
 
         impl Engine {
-            fn sim(&self) -> &dyn Simulation {
+            // Each call dispatched statically to the concrete simulator (no `dyn Simulation`).
+
+            /// See [`Simulation::advance`].
+            pub fn advance(&mut self, work: u64) -> Result<bool, PhysicsError> {
                 match self {
-                    $(Engine::$variant(s) => s.as_ref(),)+
+                    $(Engine::$variant(s) => Simulation::advance(s.as_mut(), work),)+
                 }
             }
 
-            fn sim_mut(&mut self) -> &mut dyn Simulation {
+            pub fn progress(&self) -> f64 {
                 match self {
-                    $(Engine::$variant(s) => s.as_mut(),)+
+                    $(Engine::$variant(s) => Simulation::progress(s.as_ref()),)+
+                }
+            }
+
+            pub fn time(&self) -> f64 {
+                match self {
+                    $(Engine::$variant(s) => Simulation::time(s.as_ref()),)+
+                }
+            }
+
+            pub fn state_bytes(&mut self) -> Vec<u8> {
+                match self {
+                    $(Engine::$variant(s) => Simulation::state_bytes(s.as_mut()),)+
                 }
             }
 
@@ -801,25 +816,6 @@ models! {
     Cascade = "cascade" => cascade::Cascade,
     /// Single particle model: Q(v, l) and P(v) from a free-path distribution (sec. 5.2-5.3).
     Spm = "spm" => spm::Spm,
-}
-
-impl Engine {
-    /// See [`Simulation::advance`].
-    pub fn advance(&mut self, work: u64) -> Result<bool, PhysicsError> {
-        self.sim_mut().advance(work)
-    }
-
-    pub fn progress(&self) -> f64 {
-        self.sim().progress()
-    }
-
-    pub fn time(&self) -> f64 {
-        self.sim().time()
-    }
-
-    pub fn state_bytes(&mut self) -> Vec<u8> {
-        self.sim_mut().state_bytes()
-    }
 }
 
 /// Run one simulation to its end in memory, without a campaign directory (tests, benches).
