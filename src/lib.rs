@@ -12,7 +12,8 @@
 //!   drives it.
 //! - [`theory`]: kinetic theory (pure functions, usable without simulating), on [`math`].
 //! - [`store`]: Parquet tables, datasets, atomic files, checkpoints; knows no physics.
-//! - [`analysis`]: the thesis's fits of finished campaigns; [`plot`]: the figure renderer.
+//! - [`analysis`]: what every model's analysis (`granular analyze`, in the model's home)
+//!   shares; [`plot`]: the figure renderer.
 //! - [`report`]: one HTML page of a campaign; [`serve`]: that page live over HTTP, with the
 //!   status JSON and the table files (read-only).
 

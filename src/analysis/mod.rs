@@ -1,51 +1,32 @@
-//! `granular analyze`: the thesis's analysis of a campaign (spec 2.4-2.10), from the
-//! run-level tables to the table `analysis_fits` (one row per fitted quantity), the table
-//! `analysis_curves` (the data behind every figure: measured points, fitted lines, the
-//! collapse and the Moon plot) and figures (PNG + SVG).
+//! `granular analyze`, the part every model's analysis shares: the options, the rows of the
+//! table `analysis_fits` (one row per fitted quantity) and of the table `analysis_curves`
+//! (the data behind every figure: measured points, fitted lines), the figures (PNG + SVG),
+//! and their writing into the output directory.
 //!
-//! Physics in pure, unit-tested functions: [`multiscaling`] (xi_m, zeta_m, collapse),
-//! [`fractal`] (D_f from S(k), C(R), n(R)), [`tails`] (alpha windows, crossover (5.32), Moon
-//! plot), [`free_path`] ((4.25)), with the least squares of `math::fit`. This module reads the
-//! tables, groups points, calls them and writes the results; `plot` draws.
+//! The fits themselves are each model's (`Model::analyze` in its home: the RFM's in
+//! `models::rfm::analysis`, the cascade's in `models::cascade::analysis`); they fill an
+//! [`Analysis`], which [`Analysis::write`] writes. This module knows no model and no
+//! campaign: it imports only `math`, `plot`, `store` and `fsutil`.
 //!
-//! Only finished runs (`runs.status = 'done'`) are used, so a campaign that is still running
-//! (or was interrupted) is analysed as far as it got, with a warning. Replica statistics are
-//! recomputed here from the run-level tables (the `*_summary` tables exist only once a
-//! campaign is complete): the mean over replicas with its standard error, or with one
+//! Only finished runs are analysed, so a campaign that is still running (or was interrupted)
+//! is analysed as far as it got, with a warning ([`Analysis::start`]). Replica statistics are
+//! recomputed from the run-level tables ([`replica_stat`]; the `*_summary` tables exist only
+//! once a campaign is complete): the mean over replicas with its standard error, or with one
 //! replica the run's own block error where the table has one.
 
-pub mod fractal;
-pub mod free_path;
-pub mod multiscaling;
-pub mod tails;
-
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use arrow_array::{Array, RecordBatch};
+use arrow_array::RecordBatch;
 
-use crate::campaign::tables::{POINTS, RUNS};
-use crate::campaign::Campaign;
 use crate::math::stats::mean_sem;
-use crate::models::rfm::tables as rt;
-use crate::models::rfm::RfmParams;
-use crate::models::ModelParams;
 use crate::plot::{self, Figure, Series};
-use crate::store::cols::{get_f64 as f64s, get_str, get_u32 as u32s, get_u64 as u64s, table};
-use crate::store::parquet_io::{self, StoreError};
-
-/// Every batch of a table of the campaign.
-fn batches(c: &Campaign, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
-    c.data().read(table)
-}
+use crate::store::cols::table;
+use crate::store::parquet_io::{self, Stamp, StoreError};
 
 /// The fits table.
 pub const ANALYSIS_FITS: &str = "analysis_fits";
 /// The figure data table.
 pub const ANALYSIS_CURVES: &str = "analysis_curves";
-/// The cascade model's structure factor (columns as `rfm_structure_factor_summary`:
-/// point_id, n2, k, n_vectors, n_replicas, s_mean, s_sem), fitted when present.
-pub const CASCADE_STRUCTURE_FACTOR: &str = "cascade_structure_factor";
 
 /// Settings of the analysis (defaults: the thesis's choices).
 #[derive(Clone, Debug)]
@@ -123,7 +104,7 @@ pub enum AnalysisError {
 }
 
 /// Mean and standard error over replicas; with one replica its own error (if any).
-fn replica_stat(v: &[(f64, Option<f64>)]) -> (f64, Option<f64>) {
+pub fn replica_stat(v: &[(f64, Option<f64>)]) -> (f64, Option<f64>) {
     match v.len() {
         0 => (f64::NAN, None),
         1 => v[0],
@@ -136,159 +117,8 @@ fn replica_stat(v: &[(f64, Option<f64>)]) -> (f64, Option<f64>) {
     }
 }
 
-/// The finished runs: run_id -> point_id, for status 'done'.
-fn done_runs(c: &Campaign) -> Result<BTreeMap<u64, u32>, StoreError> {
-    let mut out = BTreeMap::new();
-    for b in batches(c, RUNS)? {
-        let (r, p, s) = (
-            u64s(&b, RUNS, "run_id")?,
-            u32s(&b, RUNS, "point_id")?,
-            get_str(&b, RUNS, "status")?,
-        );
-        for i in 0..b.num_rows() {
-            if s.value(i) == "done" {
-                out.entry(r.value(i)).or_insert(p.value(i));
-            }
-        }
-    }
-    Ok(out)
-}
-
-/// Per run: a value and its own (block) error.
-type PerRun = Vec<(f64, Option<f64>)>;
-/// Histogram bins by the bits of their lower edge: (lo, hi, count).
-type Bins = BTreeMap<u64, (f64, f64, f64)>;
-
-/// Per-point data of an RFM campaign, from the finished runs.
-#[derive(Default)]
-struct RfmData {
-    /// (point, order) -> [(value, block sem)] per run.
-    moments: BTreeMap<(u32, u32), PerRun>,
-    /// (point, order) of h = 1.
-    neighbour: BTreeMap<(u32, u32), PerRun>,
-    /// (point, kind) -> lo bits -> (lo, hi, count) summed over runs (h = 0 / 1 only).
-    hist: BTreeMap<(u32, String), Bins>,
-    /// (point, n2) -> (k, [S per run]).
-    sk: BTreeMap<(u32, u64), (f64, PerRun)>,
-    /// (point, r_lo bits) -> (r_lo, r_hi, [C per run]).
-    radial: BTreeMap<(u32, u64), (f64, f64, PerRun)>,
-}
-
-/// Each batch of `table` with the indices of its rows from finished runs.
-fn finished_rows(
-    c: &Campaign,
-    table: &str,
-    done: &BTreeMap<u64, u32>,
-) -> Result<Vec<(RecordBatch, Vec<usize>)>, StoreError> {
-    batches(c, table)?
-        .into_iter()
-        .map(|b| {
-            let r = u64s(&b, table, "run_id")?;
-            let rows = (0..b.num_rows())
-                .filter(|&i| done.contains_key(&r.value(i)))
-                .collect();
-            Ok((b, rows))
-        })
-        .collect()
-}
-
-fn load_rfm(c: &Campaign, done: &BTreeMap<u64, u32>) -> Result<RfmData, StoreError> {
-    let mut d = RfmData::default();
-    let t = rt::RFM_MOMENTS;
-    for (b, rows) in finished_rows(c, t, done)? {
-        let (p, o, v, s) = (
-            u32s(&b, t, "point_id")?,
-            u32s(&b, t, "order")?,
-            f64s(&b, t, "value")?,
-            f64s(&b, t, "sem")?,
-        );
-        for i in rows {
-            let sem = (!s.is_null(i)).then(|| s.value(i));
-            d.moments
-                .entry((p.value(i), o.value(i)))
-                .or_default()
-                .push((v.value(i), sem));
-        }
-    }
-    let t = rt::RFM_NEIGHBOUR_MOMENTS;
-    for (b, rows) in finished_rows(c, t, done)? {
-        let (p, h, o, v, s) = (
-            u32s(&b, t, "point_id")?,
-            u32s(&b, t, "h")?,
-            u32s(&b, t, "order")?,
-            f64s(&b, t, "value")?,
-            f64s(&b, t, "sem")?,
-        );
-        for i in rows {
-            if h.value(i) == 1 {
-                let sem = (!s.is_null(i)).then(|| s.value(i));
-                d.neighbour
-                    .entry((p.value(i), o.value(i)))
-                    .or_default()
-                    .push((v.value(i), sem));
-            }
-        }
-    }
-    let t = rt::RFM_HISTOGRAMS;
-    for (b, rows) in finished_rows(c, t, done)? {
-        let (p, kind, h, lo, hi, n) = (
-            u32s(&b, t, "point_id")?,
-            get_str(&b, t, "kind")?,
-            u32s(&b, t, "h")?,
-            f64s(&b, t, "lo")?,
-            f64s(&b, t, "hi")?,
-            u64s(&b, t, "count")?,
-        );
-        for i in rows {
-            if h.value(i) > 1 {
-                continue;
-            }
-            let e = d
-                .hist
-                .entry((p.value(i), kind.value(i).to_string()))
-                .or_default()
-                .entry(lo.value(i).to_bits())
-                .or_insert((lo.value(i), hi.value(i), 0.0));
-            e.2 += n.value(i) as f64;
-        }
-    }
-    let t = rt::RFM_STRUCTURE_FACTOR;
-    for (b, rows) in finished_rows(c, t, done)? {
-        let (p, n2, k, s, sem) = (
-            u32s(&b, t, "point_id")?,
-            u64s(&b, t, "n2")?,
-            f64s(&b, t, "k")?,
-            f64s(&b, t, "s")?,
-            f64s(&b, t, "sem")?,
-        );
-        for i in rows {
-            let e =
-                d.sk.entry((p.value(i), n2.value(i)))
-                    .or_insert((k.value(i), Vec::new()));
-            e.1.push((s.value(i), (!sem.is_null(i)).then(|| sem.value(i))));
-        }
-    }
-    let t = rt::RFM_RADIAL;
-    for (b, rows) in finished_rows(c, t, done)? {
-        let (p, lo, hi, cv) = (
-            u32s(&b, t, "point_id")?,
-            f64s(&b, t, "r_lo")?,
-            f64s(&b, t, "r_hi")?,
-            f64s(&b, t, "c")?,
-        );
-        for i in rows {
-            let e = d
-                .radial
-                .entry((p.value(i), lo.value(i).to_bits()))
-                .or_insert((lo.value(i), hi.value(i), Vec::new()));
-            e.2.push((cv.value(i), None));
-        }
-    }
-    Ok(d)
-}
-
 /// Short number text for keys: up to 4 significant digits.
-fn num(v: f64) -> String {
+pub fn num(v: f64) -> String {
     let s = format!("{:.4}", v);
     let s = s.trim_end_matches('0').trim_end_matches('.').to_string();
     if s.is_empty() || s == "-" {
@@ -298,48 +128,8 @@ fn num(v: f64) -> String {
     }
 }
 
-/// Physical description of an RFM point, used as `key`: 1D "eps=0.5,L'=1[,N=398]";
-/// 2D "phi=0.53,L=0.2,eps_n=0.1,eps_t=0.1[,N=3000]"; plus swept keys not covered by these.
-fn rfm_key(c: &Campaign, point: u32, p: &RfmParams, with_n: bool) -> String {
-    let cfg = p.config();
-    let mut parts = Vec::new();
-    if p.dim == 1 {
-        parts.push(format!("eps={}", num(p.restitution_normal)));
-        parts.push(format!(
-            "L'={}",
-            num(cfg.box_length() - cfg.n_particles as f64 * cfg.diameter())
-        ));
-    } else {
-        parts.push(format!("phi={}", num(cfg.fill_fraction())));
-        parts.push(format!("L={}", num(cfg.box_length())));
-        parts.push(format!("eps_n={}", num(p.restitution_normal)));
-        parts.push(format!("eps_t={}", num(p.restitution_tangential)));
-    }
-    if with_n {
-        parts.push(format!("N={}", p.n_particles));
-    }
-    let covered = [
-        "n_particles",
-        "restitution_normal",
-        "restitution_tangential",
-        "packing_fraction",
-        "box_length",
-        "reduced_length",
-    ];
-    for (k, v) in c.plan.sweep_keys.iter().zip(&c.plan.point(point).values) {
-        if !covered.contains(&k.as_str()) {
-            let v = match v {
-                serde_json::Value::String(s) => s.clone(),
-                other => other.to_string(),
-            };
-            parts.push(format!("{k}={v}"));
-        }
-    }
-    parts.join(",")
-}
-
 /// File-name-safe version of a key.
-fn slug(key: &str) -> String {
+pub fn slug(key: &str) -> String {
     key.chars()
         .map(|ch| {
             if ch.is_ascii_alphanumeric() || ch == '.' || ch == '-' {
@@ -351,16 +141,52 @@ fn slug(key: &str) -> String {
         .collect()
 }
 
-struct Ctx<'a> {
-    c: &'a Campaign,
-    opts: &'a Options,
-    report: Report,
+/// An analysis in progress: what a model's `analyze` fills (fits, figures and their data,
+/// warnings), then [`Analysis::write`] writes.
+pub struct Analysis {
+    /// The campaign's name (figure titles, the tables' `campaign` column).
+    name: String,
+    pub opts: Options,
+    pub report: Report,
     figs: Vec<(String, Figure)>,
 }
 
-impl Ctx<'_> {
+impl Analysis {
+    /// A new analysis of campaign `name`, of which `runs_done` of `runs_total` runs are
+    /// finished.
+    pub fn new(name: &str, opts: &Options, runs_done: u64, runs_total: u64) -> Self {
+        Analysis {
+            name: name.to_string(),
+            opts: opts.clone(),
+            report: Report {
+                runs_done,
+                runs_total,
+                ..Default::default()
+            },
+            figs: Vec::new(),
+        }
+    }
+
+    /// Where every model's analysis begins: refused without a finished run, a warning when
+    /// only some are finished.
+    pub fn start(&mut self) -> Result<(), AnalysisError> {
+        let (done, total) = (self.report.runs_done, self.report.runs_total);
+        if done == 0 {
+            return Err(AnalysisError::NotAnalysable(
+                "no finished runs yet; nothing to analyse".into(),
+            ));
+        }
+        if done < total {
+            self.warn(format!(
+                "only {done} of {total} runs are finished (done); analysing those"
+            ));
+        }
+        Ok(())
+    }
+
+    /// Record one row of `analysis_fits` (non-finite errors and chi^2 as null).
     #[allow(clippy::too_many_arguments)]
-    fn fit(
+    pub fn fit(
         &mut self,
         quantity: impl Into<String>,
         key: &str,
@@ -382,12 +208,12 @@ impl Ctx<'_> {
             reference,
         });
     }
-    fn warn(&mut self, w: String) {
+    pub fn warn(&mut self, w: String) {
         tracing::warn!("{w}");
         self.report.warnings.push(w);
     }
     /// Record a figure and its data in `analysis_curves`.
-    fn figure(&mut self, name: String, plot: Figure) {
+    pub fn figure(&mut self, name: String, plot: Figure) {
         for s in &plot.series {
             for p in &s.points {
                 self.report.curves.push(CurveRow {
@@ -401,133 +227,55 @@ impl Ctx<'_> {
         }
         self.figs.push((name, plot));
     }
-    fn title(&self, what: &str) -> String {
-        format!("{} - {what}", self.c.manifest.name)
-    }
-}
 
-/// Analyse a campaign into `out` (tables `analysis_fits.parquet`, `analysis_curves.parquet`,
-/// figures under `out/figures`).
-pub fn analyze(c: &Campaign, out: &Path, opts: &Options) -> Result<Report, AnalysisError> {
-    let rfm: Vec<(u32, &RfmParams)> = c
-        .plan
-        .points
-        .iter()
-        .filter_map(|p| match &p.params {
-            ModelParams::Rfm(r) => Some((p.point_id, r)),
-            _ => None,
-        })
-        .collect();
-    let has_cascade = c
-        .root
-        .join("tables")
-        .join(CASCADE_STRUCTURE_FACTOR)
-        .is_dir();
-    if rfm.is_empty() && !has_cascade {
-        return Err(AnalysisError::NotAnalysable(format!(
-            "{}: campaign {:?} is of model {}; `granular analyze` analyses rfm campaigns (and \
-             campaigns with a {CASCADE_STRUCTURE_FACTOR} table)",
-            c.root.display(),
-            c.manifest.name,
-            c.manifest.model.as_str()
-        )));
+    /// A figure's title: the campaign's name, then `what`.
+    pub fn title(&self, what: &str) -> String {
+        format!("{} - {what}", self.name)
     }
-    let mut ctx = Ctx {
-        c,
-        opts,
-        report: Report {
-            runs_total: c.plan.n_runs(),
-            ..Default::default()
-        },
-        figs: Vec::new(),
-    };
-    if !rfm.is_empty() {
-        if !c.root.join("tables").join(RUNS).is_dir() {
-            return Err(AnalysisError::NotAnalysable(format!(
-                "{}: table {} is missing (has the campaign been run?)",
-                c.root.display(),
-                RUNS
-            )));
+
+    /// Write the tables `analysis_fits.parquet` and `analysis_curves.parquet` into `out`
+    /// (atomically, stamped with `stamp`) and, unless the options say otherwise, the figures
+    /// under `out/figures`; the report lists the files.
+    pub fn write(mut self, out: &Path, stamp: Stamp<'_>) -> Result<Report, AnalysisError> {
+        if self.report.fits.is_empty() {
+            self.warn(
+                "no fit was possible (too few points or observables; see the warnings above)"
+                    .into(),
+            );
         }
-        let done = done_runs(c)?;
-        ctx.report.runs_done = done.len() as u64;
-        if done.is_empty() {
-            return Err(AnalysisError::NotAnalysable(format!(
-                "{}: no finished runs yet; nothing to analyse",
-                c.root.display()
-            )));
-        }
-        if (done.len() as u64) < c.plan.n_runs() {
-            ctx.warn(format!(
-                "only {} of {} runs are finished (done); analysing those",
-                done.len(),
-                c.plan.n_runs()
-            ));
-        }
-        // Every run-level table the manifest asks for must exist.
-        for t in c.tables() {
-            if t.ends_with("_summary") || t == rt::RFM_SNAPSHOTS {
-                continue;
-            }
-            if !c.root.join("tables").join(t).is_dir() {
-                return Err(AnalysisError::NotAnalysable(format!(
-                    "{}: table {t} is missing",
-                    c.root.display()
-                )));
+        std::fs::create_dir_all(out)
+            .map_err(|e| AnalysisError::Io(format!("{}: {e}", out.display())))?;
+        let fits = fits_batch(&self.name, &self.report.fits);
+        write_table(out, ANALYSIS_FITS, &fits, stamp)?;
+        self.report
+            .files
+            .push(out.join(format!("{ANALYSIS_FITS}.parquet")));
+        let curves = curves_batch(&self.name, &self.report.curves);
+        write_table(out, ANALYSIS_CURVES, &curves, stamp)?;
+        self.report
+            .files
+            .push(out.join(format!("{ANALYSIS_CURVES}.parquet")));
+        if self.opts.figures && !self.figs.is_empty() {
+            let dir = out.join("figures");
+            let (files, failed) = plot::render(&self.figs, &dir).map_err(AnalysisError::Io)?;
+            self.report.files.extend(files);
+            for f in failed {
+                self.warn(f);
             }
         }
-        let data = load_rfm(c, &done)?;
-        let points_done: std::collections::BTreeSet<u32> = done.values().copied().collect();
-        let rfm: Vec<(u32, &RfmParams)> = rfm
-            .into_iter()
-            .filter(|(p, _)| points_done.contains(p))
-            .collect();
-        multiscaling_fits(&mut ctx, &rfm, &data);
-        bisection_comparison(&mut ctx, &rfm, &data);
-        structure_fits(&mut ctx, &rfm, &data);
-        tail_fits(&mut ctx, &rfm, &data);
-        free_path_fits(&mut ctx, &rfm, &data);
+        Ok(self.report)
     }
-    if has_cascade {
-        cascade_fits(&mut ctx)?;
-    }
-    if ctx.report.fits.is_empty() {
-        ctx.warn(
-            "no fit was possible (too few points or observables; see the warnings above)".into(),
-        );
-    }
-    std::fs::create_dir_all(out)
-        .map_err(|e| AnalysisError::Io(format!("{}: {e}", out.display())))?;
-    let fits = fits_batch(&c.manifest.name, &ctx.report.fits);
-    write_table(c, out, ANALYSIS_FITS, &fits)?;
-    ctx.report
-        .files
-        .push(out.join(format!("{ANALYSIS_FITS}.parquet")));
-    let curves = curves_batch(&c.manifest.name, &ctx.report.curves);
-    write_table(c, out, ANALYSIS_CURVES, &curves)?;
-    ctx.report
-        .files
-        .push(out.join(format!("{ANALYSIS_CURVES}.parquet")));
-    if opts.figures && !ctx.figs.is_empty() {
-        let dir = out.join("figures");
-        let (files, failed) = plot::render(&ctx.figs, &dir).map_err(AnalysisError::Io)?;
-        ctx.report.files.extend(files);
-        for f in failed {
-            ctx.warn(f);
-        }
-    }
-    Ok(ctx.report)
 }
 
 fn write_table(
-    c: &Campaign,
     out: &Path,
     table: &str,
     batch: &RecordBatch,
+    stamp: Stamp<'_>,
 ) -> Result<(), AnalysisError> {
     let path = out.join(format!("{table}.parquet"));
     let tmp = crate::fsutil::temp_path(&path);
-    parquet_io::write_file(&tmp, batch, table, c.stamp())?;
+    parquet_io::write_file(&tmp, batch, table, stamp)?;
     std::fs::rename(&tmp, &path)
         .map_err(|e| AnalysisError::Io(format!("{}: {e}", path.display())))?;
     crate::fsutil::sync_dir(out).map_err(|e| AnalysisError::Io(format!("{}: {e}", out.display())))
@@ -563,7 +311,7 @@ fn curves_batch(campaign: &str, rows: &[CurveRow]) -> RecordBatch {
 }
 
 /// A fitted power law drawn over [x0, x1] as a line series.
-fn line(label: String, x0: f64, x1: f64, f: impl Fn(f64) -> f64) -> Series {
+pub fn line(label: String, x0: f64, x1: f64, f: impl Fn(f64) -> f64) -> Series {
     let points = (0..=40)
         .map(|j| {
             let x = x0 * (x1 / x0).powf(j as f64 / 40.0);
@@ -577,931 +325,8 @@ fn line(label: String, x0: f64, x1: f64, f: impl Fn(f64) -> f64) -> Series {
     }
 }
 
-fn fig(title: String, x: &str, y: &str, series: Vec<Series>) -> Figure {
+pub fn fig(title: String, x: &str, y: &str, series: Vec<Series>) -> Figure {
     Figure::new(title, x, y, series)
-}
-
-/// 1D: xi_m from <|v|^m> vs N and zeta_m from <R^m> vs N, per group of points that differ
-/// only in N; the collapse of F 3.3.
-fn multiscaling_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
-    // Group the 1D points by their key without N.
-    let mut groups: BTreeMap<String, Vec<(u32, &RfmParams)>> = BTreeMap::new();
-    for &(p, r) in rfm {
-        if r.dim == 1 {
-            groups
-                .entry(rfm_key(ctx.c, p, r, false))
-                .or_default()
-                .push((p, r));
-        }
-    }
-    let mut figs = MultiscalingFigures::default();
-    for (key, pts) in &groups {
-        let distinct_n: std::collections::BTreeSet<u64> =
-            pts.iter().map(|p| p.1.n_particles).collect();
-        if distinct_n.len() < 2 {
-            continue;
-        }
-        for (table, sym) in [(&d.moments, "xi"), (&d.neighbour, "zeta")] {
-            let per_m = exponents(ctx, key, pts, table, sym, &mut figs);
-            if !per_m.is_empty() {
-                let s = Series {
-                    label: key.clone(),
-                    points: per_m,
-                    line: false,
-                };
-                if sym == "xi" {
-                    figs.xim.push(s);
-                } else {
-                    figs.zeta.push(s);
-                }
-            }
-        }
-    }
-    figs.draw(ctx);
-}
-
-/// The series of the multiscaling figures, gathered over the groups of points.
-#[derive(Default)]
-struct MultiscalingFigures {
-    /// <v^2> against N with the fitted lines (F 3.1).
-    v2: Vec<Series>,
-    /// N -> (1 - eps^2, collapsed <v^2>, error) (F 3.3).
-    collapse: BTreeMap<u64, Vec<(f64, f64, f64)>>,
-    /// xi_m / m and zeta_m / m against m, per group.
-    xim: Vec<Series>,
-    zeta: Vec<Series>,
-}
-
-/// The exponents `sym`_m (xi: velocity moments, zeta: neighbour distances) of one group of
-/// points against N, each a fit row; returns (m, exponent / m, error / m) per order.
-fn exponents(
-    ctx: &mut Ctx,
-    key: &str,
-    pts: &[(u32, &RfmParams)],
-    table: &BTreeMap<(u32, u32), PerRun>,
-    sym: &str,
-    figs: &mut MultiscalingFigures,
-) -> Vec<(f64, f64, f64)> {
-    let orders: std::collections::BTreeSet<u32> = table
-        .keys()
-        .filter(|(p, _)| pts.iter().any(|x| x.0 == *p))
-        .map(|k| k.1)
-        .collect();
-    let mut per_m = Vec::new();
-    for m in orders {
-        let at_n: Vec<multiscaling::MomentAtN> = pts
-            .iter()
-            .filter_map(|(p, r)| {
-                table.get(&(*p, m)).map(|v| {
-                    let (value, sem) = replica_stat(v);
-                    multiscaling::MomentAtN {
-                        n: r.n_particles as f64,
-                        value,
-                        sem,
-                    }
-                })
-            })
-            .collect();
-        // The thesis's N cut (for velocity moments); keep at least 3 points.
-        let cut = if sym == "xi" { ctx.opts.n_min } else { 0.0 };
-        let above = at_n.iter().filter(|x| x.n >= cut).count();
-        let (cut, note) = if above >= 3 || cut == 0.0 {
-            (cut, String::new())
-        } else {
-            (
-                0.0,
-                format!(" (only {above} points with N >= {cut}: all N used)"),
-            )
-        };
-        if !note.is_empty() && m == 2 {
-            ctx.warn(format!("{key}: xi_2{note}"));
-        }
-        let Some(f) = multiscaling::exponent_vs_n(&at_n, cut) else {
-            continue;
-        };
-        let reference = (sym == "zeta").then(|| multiscaling::bisection_zeta(m));
-        let weighted = if f.fit.chi2_reduced.is_some() {
-            "weighted"
-        } else {
-            "unweighted"
-        };
-        ctx.fit(
-            format!("{sym}_{m}"),
-            key,
-            f.exponent,
-            Some(f.error),
-            f.fit.chi2_reduced,
-            f.fit.n_points,
-            format!(
-                "N in [{}, {}], {weighted}{note}",
-                f.n_lo as u64, f.n_hi as u64
-            ),
-            reference,
-        );
-        per_m.push((m as f64, f.exponent / m as f64, f.error / m as f64));
-        if sym == "xi" && m == 2 {
-            lambda_and_collapse(ctx, key, pts[0].1, &f, &at_n, figs);
-        }
-    }
-    per_m
-}
-
-/// From the xi_2 fit of a group: lambda(eps) of (3.8) (the amplitude over (D L'/M^2)^(2/3)),
-/// the <v^2>(N) series with its line, and the group's points of the collapse (F 3.3).
-fn lambda_and_collapse(
-    ctx: &mut Ctx,
-    key: &str,
-    r: &RfmParams,
-    f: &multiscaling::ExponentFit,
-    at_n: &[multiscaling::MomentAtN],
-    figs: &mut MultiscalingFigures,
-) {
-    let cfg = r.config();
-    let lr = cfg.box_length() - cfg.n_particles as f64 * cfg.diameter();
-    let scale = (r.noise_strength * lr / (r.mass * r.mass)).powf(2.0 / 3.0);
-    let lambda = f.ln_amplitude.exp() / scale;
-    let lam_err = lambda * f.fit.errors[0];
-    ctx.fit(
-        "lambda",
-        key,
-        lambda,
-        Some(lam_err),
-        f.fit.chi2_reduced,
-        f.fit.n_points,
-        format!(
-            "<v^2> = (D L'/M^2)^(2/3) lambda N^-xi_2, N >= {}",
-            f.n_lo as u64
-        ),
-        None,
-    );
-    figs.v2.push(Series {
-        label: key.to_string(),
-        points: at_n
-            .iter()
-            .map(|x| (x.n, x.value, x.sem.unwrap_or(0.0)))
-            .collect(),
-        line: false,
-    });
-    let (la, xi) = (f.ln_amplitude, f.exponent);
-    figs.v2
-        .push(line(format!("N^-{:.3}", xi), f.n_lo, f.n_hi, move |n| {
-            (la - xi * n.ln()).exp()
-        }));
-    for x in at_n {
-        let y = multiscaling::collapse_value(x.value, x.n, xi, r.noise_strength, lr, r.mass);
-        let e = y * x.sem.unwrap_or(0.0) / x.value;
-        figs.collapse.entry(x.n as u64).or_default().push((
-            1.0 - r.restitution_normal.powi(2),
-            y,
-            e,
-        ));
-    }
-}
-
-impl MultiscalingFigures {
-    fn draw(self, ctx: &mut Ctx) {
-        if !self.v2.is_empty() {
-            let f = fig(
-                ctx.title("<v^2> vs N (3.8)"),
-                "N",
-                "<v^2> (m^2/s^2)",
-                self.v2,
-            );
-            ctx.figure("xi2-fit".into(), plot::loglog(f));
-        }
-        if !self.xim.is_empty() {
-            let mut s = self.xim;
-            let r = s.len();
-            s.push(Series {
-                label: "mean field 1/3".into(),
-                points: vec![(1.0, 1.0 / 3.0, 0.0), (12.0, 1.0 / 3.0, 0.0)],
-                line: true,
-            });
-            let f = fig(ctx.title("xi_m / m (3.14)"), "m", "xi_m / m", s);
-            ctx.figure("xi-m".into(), plot::linear(f).with_references_from(r));
-        }
-        if !self.zeta.is_empty() {
-            let mut s = self.zeta;
-            let r = s.len();
-            s.push(Series {
-                label: "uniform bisection ln(1+m)/(m ln 2)".into(),
-                points: (1..=9)
-                    .map(|m| (m as f64, multiscaling::bisection_zeta(m) / m as f64, 0.0))
-                    .collect(),
-                line: true,
-            });
-            let f = fig(ctx.title("zeta_m / m (3.20)"), "m", "zeta_m / m", s);
-            ctx.figure("zeta-m".into(), plot::linear(f).with_references_from(r));
-        }
-        if !self.collapse.is_empty() {
-            let s = self
-                .collapse
-                .into_iter()
-                .map(|(n, mut v)| {
-                    v.sort_by(|a, b| a.0.total_cmp(&b.0));
-                    Series {
-                        label: format!("N = {n}"),
-                        points: v,
-                        line: false,
-                    }
-                })
-                .collect();
-            let f = fig(
-                ctx.title("collapse (F 3.3)"),
-                "1 - eps^2",
-                "<v^2> N^xi_2 (D L'/M^2)^(-2/3)",
-                s,
-            );
-            ctx.figure("collapse".into(), plot::loglog(f));
-        }
-    }
-}
-
-/// 1D: G_1(R; N) (neighbour-distance histogram, h = 1) beside the uniform bisection P_n(x),
-/// n = log2 N, with x = R/L' (F 3.16; no fit parameter). Figure and curves only.
-fn bisection_comparison(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
-    for &(p, r) in rfm {
-        if r.dim != 1 {
-            continue;
-        }
-        let Some(bins) = d.hist.get(&(p, "neighbour_distance".to_string())) else {
-            continue;
-        };
-        let cfg = r.config();
-        let lr = cfg.box_length() - cfg.n_particles as f64 * cfg.diameter();
-        let total: f64 = bins.values().map(|b| b.2).sum();
-        let n = (r.n_particles as f64).log2();
-        let data: Vec<(f64, f64, f64)> = bins
-            .values()
-            .filter(|b| b.0 > 0.0 && b.1.is_finite() && b.1 > b.0 && b.2 > 0.0)
-            .map(|&(lo, hi, c)| {
-                // G_1 as a density of x = R / L'.
-                let dens = c / (total * (hi - lo)) * lr;
-                ((lo * hi).sqrt() / lr, dens, dens / c.sqrt())
-            })
-            .collect();
-        if data.is_empty() {
-            continue;
-        }
-        let key = rfm_key(ctx.c, p, r, true);
-        // rms of ln(G_1 / P_n) over the well-sampled bins (X >= 10 <=> sigma <= 0.32 dens).
-        let logs: Vec<f64> = data
-            .iter()
-            .filter(|q| q.2 <= 0.32 * q.1 && q.0 < 1.0)
-            .map(|q| (q.1 / multiscaling::bisection_density(q.0, n)).ln())
-            .filter(|v| v.is_finite())
-            .collect();
-        if !logs.is_empty() {
-            let rms = (logs.iter().map(|v| v * v).sum::<f64>() / logs.len() as f64).sqrt();
-            ctx.fit(
-                "G_1_vs_bisection_rms_log_ratio",
-                &key,
-                rms,
-                None,
-                None,
-                logs.len(),
-                format!(
-                    "rms of ln(G_1(R; N) / P_n(R/L')), n = log2 N = {n:.3}, bins with X >= 10 \
-                     (no fit parameter; 0 = identical)"
-                ),
-                Some(0.0),
-            );
-        }
-        let (x0, x1) = (data[0].0, data[data.len() - 1].0.min(0.999));
-        let series = vec![
-            Series {
-                label: "G_1(R; N), x = R/L'".into(),
-                points: data,
-                line: false,
-            },
-            line(
-                format!("uniform bisection P_n(x), n = log2 N = {n:.2}"),
-                x0,
-                x1,
-                move |x| multiscaling::bisection_density(x, n),
-            ),
-        ];
-        let fg = fig(
-            ctx.title(&format!("G_1 vs bisection (F 3.16) [{key}]")),
-            "x = R / L'",
-            "density",
-            series,
-        );
-        ctx.figure(
-            format!("g1-bisection-{}", slug(&key)),
-            plot::loglog(fg).with_references_from(1),
-        );
-    }
-}
-
-/// 2D: D_f from S(k) with the k_D/L_Eff window; C(R) and n(R) power laws.
-fn structure_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
-    for &(p, r) in rfm {
-        if r.dim == 2 {
-            let key = rfm_key(ctx.c, p, r, true);
-            structure_factor_fit(ctx, &key, p, r, d);
-            cumulative_count_fits(ctx, &key, p, r, d);
-        }
-    }
-}
-
-/// D_f from the point's S(k) below the fit cut-off k' (k_D, L_Eff; 4.5-4.9), and its figure.
-fn structure_factor_fit(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &RfmData) {
-    let cfg = r.config();
-    let (l, dd, phi) = (cfg.box_length(), cfg.diameter(), cfg.fill_fraction());
-    let shells: Vec<fractal::SkPoint> =
-        d.sk.range((p, 0)..(p, u64::MAX))
-            .map(|(_, (k, v))| {
-                let (s, e) = replica_stat(v);
-                fractal::SkPoint { k: *k, s, err: e }
-            })
-            .collect();
-    if !shells.is_empty() {
-        let kd = fractal::k_dissipative(r.restitution_normal, r.restitution_tangential, phi, dd);
-        let (kp, rule) = fractal::fit_cutoff(kd, l);
-        let window = format!(
-            "{rule}: k d < {:.4} (k_D d = {:.4}, L_Eff = {:.3} m)",
-            kp * dd,
-            kd * dd,
-            fractal::l_eff(kd)
-        );
-        match fractal::fractal_dimension(&shells, 0.0, kp) {
-            Some(f) => {
-                ctx.fit(
-                    "D_f_structure_factor",
-                    key,
-                    f.exponent,
-                    Some(f.error),
-                    f.fit.chi2_reduced,
-                    f.fit.n_points,
-                    window,
-                    None,
-                );
-                let data: Vec<(f64, f64, f64)> = shells
-                    .iter()
-                    .filter(|s| s.s > 0.0 && s.k * dd <= 25.0)
-                    .map(|s| (s.k * dd, s.s, s.err.unwrap_or(0.0)))
-                    .collect();
-                let (la, df) = (f.ln_amplitude, f.exponent);
-                let series = vec![
-                    Series {
-                        label: "S(k)".into(),
-                        points: data,
-                        line: false,
-                    },
-                    line(
-                        format!("k^-{df:.2} (fit, k d < {:.3})", kp * dd),
-                        f.x_lo * dd,
-                        kp * dd,
-                        move |x| (la - df * (x / dd).ln()).exp(),
-                    ),
-                ];
-                let fg = fig(ctx.title(&format!("S(k) [{key}]")), "k d", "S(k)", series);
-                ctx.figure(format!("sk-{}", slug(key)), plot::loglog(fg));
-            }
-            None => ctx.warn(format!(
-                "{key}: fewer than two S(k) shells below k' (k' d = {:.4}, first shell k d = \
-                 {:.4}): no D_f; a larger box is needed",
-                kp * dd,
-                2.0 * std::f64::consts::PI / l * dd
-            )),
-        }
-    }
-}
-
-/// C(R) and n(R) = C(R) - n_bar at R = r_hi of each bin, their power laws over the window
-/// [2 d, L/4] [REC], and their figure.
-fn cumulative_count_fits(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &RfmData) {
-    let cfg = r.config();
-    let (l, dd) = (cfg.box_length(), cfg.diameter());
-    let rows: Vec<(f64, f64, Option<f64>)> = d
-        .radial
-        .range((p, 0)..(p, u64::MAX))
-        .map(|(_, (_, hi, v))| {
-            let (m, s) = replica_stat(v);
-            (*hi, m, s)
-        })
-        .collect();
-    if rows.is_empty() {
-        return;
-    }
-    {
-        let n = r.n_particles as f64;
-        let r_: Vec<f64> = rows.iter().map(|x| x.0).collect();
-        let cv: Vec<f64> = rows.iter().map(|x| x.1).collect();
-        let ce: Vec<Option<f64>> = rows.iter().map(|x| x.2).collect();
-        let nv: Vec<f64> = rows
-            .iter()
-            .map(|x| x.1 - fractal::mean_field_count(x.0, n, l))
-            .collect();
-        let (lo, hi) = (2.0 * dd, 0.25 * l);
-        let window = format!("R in [2 d, L/4] = [{lo:.4}, {hi:.4}] m");
-        let mut series = vec![Series {
-            label: "C(R)".into(),
-            points: r_
-                .iter()
-                .zip(&cv)
-                .map(|(a, b)| (*a / dd, *b, 0.0))
-                .collect(),
-            line: false,
-        }];
-        if let Some(f) = fractal::cumulative_exponent(&r_, &cv, &ce, lo, hi) {
-            ctx.fit(
-                "C_R_exponent",
-                key,
-                f.exponent,
-                Some(f.error),
-                f.fit.chi2_reduced,
-                f.fit.n_points,
-                window.clone(),
-                None,
-            );
-        }
-        series.push(Series {
-            label: "n(R) = C(R) - n_bar".into(),
-            points: r_
-                .iter()
-                .zip(&nv)
-                .filter(|(_, v)| **v > 0.0)
-                .map(|(a, b)| (*a / dd, *b, 0.0))
-                .collect(),
-            line: false,
-        });
-        match fractal::cumulative_exponent(&r_, &nv, &ce, lo, hi) {
-            Some(f) => {
-                ctx.fit(
-                    "D_f_n_R",
-                    key,
-                    f.exponent,
-                    Some(f.error),
-                    f.fit.chi2_reduced,
-                    f.fit.n_points,
-                    window,
-                    None,
-                );
-                let (la, e) = (f.ln_amplitude, f.exponent);
-                series.push(line(
-                    format!("n(R) ~ R^{e:.2}"),
-                    f.x_lo / dd,
-                    f.x_hi / dd,
-                    move |x| (la + e * (x * dd).ln()).exp(),
-                ));
-            }
-            None => ctx.warn(format!("{key}: n(R) has no positive values in {window}")),
-        }
-        let fg = fig(
-            ctx.title(&format!("C(R), n(R) [{key}]")),
-            "R / d",
-            "count within R",
-            series,
-        );
-        ctx.figure(format!("cr-{}", slug(key)), plot::loglog(fg));
-    }
-}
-
-/// Velocity tails: alpha window, crossover (5.32), Moon plot (5.6); with several points, the
-/// inverse-variance mean of their accepted alphas (the thesis's summary of T 5.1, 1.163 +-
-/// 0.017 over its bold entries).
-fn tail_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
-    tail_fits_per_point(ctx, rfm, d);
-    let alphas: Vec<(f64, f64)> = ctx
-        .report
-        .fits
-        .iter()
-        .filter(|f| f.quantity == "alpha")
-        .filter_map(|f| f.error.map(|e| (f.value, e)))
-        .collect();
-    if alphas.len() >= 2 {
-        let (v, e): (Vec<f64>, Vec<f64>) = alphas.iter().copied().unzip();
-        if let Some((m, err, chi)) = crate::math::fit::weighted_mean(&v, &e) {
-            ctx.fit(
-                "alpha_weighted_mean",
-                "all points with an accepted alpha",
-                m,
-                Some(err),
-                chi,
-                v.len(),
-                "inverse-variance mean of the accepted ranges (centre, half-width)",
-                None,
-            );
-        }
-    }
-}
-
-fn tail_fits_per_point(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
-    for &(p, r) in rfm {
-        let Some(bins) = d.hist.get(&(p, "velocity".to_string())) else {
-            continue;
-        };
-        let key = rfm_key(ctx.c, p, r, true);
-        let total: f64 = bins.values().map(|b| b.2).sum();
-        let raw: Vec<(f64, f64, f64)> = bins.values().copied().collect();
-        let folded = tails::fold(&raw);
-        if folded.is_empty() || total <= 0.0 {
-            continue;
-        }
-        let mut rule = tails::AlphaRule::thesis(r.dim);
-        rule.factor = ctx.opts.count_error_factor;
-        rule.chi2_max = ctx.opts.chi2_accept;
-        alpha_fits(ctx, &key, &folded, &rule);
-        let rms = tails::v_rms(&folded);
-        velocity_distribution(ctx, &key, &folded, total, rms);
-        moon_plot(ctx, &key, &folded, total, rms, &rule);
-    }
-}
-
-/// The accepted alpha window of the tail (A.3, 5.1.1) and the best alpha.
-fn alpha_fits(ctx: &mut Ctx, key: &str, folded: &[tails::FoldedBin], rule: &tails::AlphaRule) {
-    let step = rule.grid.2;
-    let window = |w: &tails::AlphaWindow| {
-        format!(
-            "counts in [{}, {}], |v| in [{:.3}, {:.3}] m/s, s = {} sqrt(X), chi_r^2 < {}",
-            rule.count_lo, rule.count_hi, w.v_lo, w.v_hi, rule.factor, rule.chi2_max
-        )
-    };
-    match tails::alpha_window(folded, rule) {
-        Some(w) => {
-            match w.centre_half_width(step) {
-                Some((c, h)) => ctx.fit(
-                    "alpha",
-                    key,
-                    c,
-                    Some(h),
-                    Some(w.best_chi2_reduced),
-                    w.n_bins,
-                    format!("accepted range (centre +- half-width); {}", window(&w)),
-                    None,
-                ),
-                None => ctx.warn(format!(
-                    "{key}: no alpha has chi_r^2 < {} (best alpha {:.2}, chi_r^2 {:.2})",
-                    rule.chi2_max, w.best_alpha, w.best_chi2_reduced
-                )),
-            }
-            ctx.fit(
-                "alpha_best",
-                key,
-                w.best_alpha,
-                None,
-                Some(w.best_chi2_reduced),
-                w.n_bins,
-                format!("smallest chi_r^2 on the grid (step {step}); {}", window(&w)),
-                None,
-            );
-        }
-        None => ctx.warn(format!(
-            "{key}: fewer than 4 tail bins with counts in [{}, {}]: no alpha window (more \
-             samples needed)",
-            rule.count_lo, rule.count_hi
-        )),
-    }
-}
-
-/// P(v) against v / v_rms with the crossover fit (5.32).
-fn velocity_distribution(
-    ctx: &mut Ctx,
-    key: &str,
-    folded: &[tails::FoldedBin],
-    total: f64,
-    rms: f64,
-) {
-    let p_v: Vec<(f64, f64, f64)> = folded
-        .iter()
-        .filter(|b| b.count > 0.0)
-        .map(|b| {
-            let dens = tails::density(b, total);
-            (b.v / rms, dens, dens / b.count.sqrt())
-        })
-        .collect();
-    let mut pv_series = vec![Series {
-        label: "P(v)".into(),
-        points: p_v,
-        line: false,
-    }];
-    // The crossover function (5.32), alpha = 1.
-    if let Some(cr) = tails::crossover_fit(folded, total, 10.0) {
-        let ((vr, vre), (vc, vce)) = (cr.v_r(), cr.v_c());
-        let chi = cr.fit.chi2_reduced;
-        let n = cr.fit.n_points;
-        let w = "(5.32), alpha = 1, ln P, bins with X >= 10";
-        ctx.fit("v_r", key, vr, Some(vre), chi, n, w, None);
-        ctx.fit("v_c", key, vc, Some(vce), chi, n, w, None);
-        let ratio = vc / vr;
-        let ratio_err = ratio * ((vre / vr).powi(2) + (vce / vc).powi(2)).sqrt();
-        ctx.fit("v_c/v_r", key, ratio, Some(ratio_err), chi, n, w, None);
-        ctx.fit("P(v_c)/P(0)", key, cr.ratio_at_v_c(), None, chi, n, w, None);
-        ctx.fit("v_A", key, vr * vr / vc, None, chi, n, "v_r^2 / v_c", None);
-        let params = cr.fit.params.clone();
-        let vmax = folded
-            .iter()
-            .filter(|b| b.count >= 10.0)
-            .map(|b| b.v)
-            .fold(0.0, f64::max);
-        pv_series.push(Series {
-            label: format!("(5.32): v_r = {vr:.3}, v_c = {vc:.3} m/s"),
-            points: (1..=80)
-                .map(|j| {
-                    let v = vmax * j as f64 / 80.0;
-                    (v / rms, tails::crossover_ln(&params, v).exp(), 0.0)
-                })
-                .collect(),
-            line: true,
-        });
-    } else {
-        ctx.warn(format!("{key}: the crossover fit (5.32) did not converge"));
-    }
-    let fg = fig(
-        ctx.title(&format!("P(v) [{key}]")),
-        "v / v_rms",
-        "P(v)",
-        pv_series,
-    );
-    ctx.figure(format!("pv-{}", slug(key)), plot::semilog_y(fg));
-}
-
-/// The Moon plot (5.6) with P' = P(0) and P' = A_0 (the exponential tail's amplitude), its
-/// slopes, and reference lines of slope alpha_T.
-fn moon_plot(
-    ctx: &mut Ctx,
-    key: &str,
-    folded: &[tails::FoldedBin],
-    total: f64,
-    rms: f64,
-    rule: &tails::AlphaRule,
-) {
-    // Moon plot with P' = P(0) and P' = A_0 (exponential tail amplitude).
-    let p0 = tails::density(&folded[0], total);
-    let mut moon = Vec::new();
-    let mut refs = vec![("P(0)", p0)];
-    if let Some(f) = tails::tail_fit(folded, rule, 1.0) {
-        let width = folded[0].width;
-        refs.push(("A_0", f.params[0] / (2.0 * total * width)));
-        ctx.fit(
-            "A_0/P(0)",
-            key,
-            f.params[0] / (2.0 * total * width) / p0,
-            None,
-            f.chi2_reduced,
-            f.n_points,
-            "exponential tail fit (alpha = 1) over the alpha window",
-            None,
-        );
-    }
-    for (name, pref) in refs {
-        let pts = tails::moon_points(folded, total, rms, pref, 10.0);
-        if let Some(f) = tails::moon_slope(&pts, 2f64.ln()) {
-            ctx.fit(
-                format!("moon_slope_{}", if name == "P(0)" { "P0" } else { "A0" }),
-                key,
-                f.params[1],
-                Some(f.errors[1]),
-                f.chi2_reduced,
-                f.n_points,
-                format!("Moon plot (5.6) with P' = {name}, v > 2 v_rms, X >= 10"),
-                None,
-            );
-        }
-        moon.push(Series {
-            label: format!("P' = {name}"),
-            points: pts.iter().map(|m| (m.x, m.y, m.err)).collect(),
-            line: false,
-        });
-    }
-    // Reference lines f = -alpha_T x + C through the first tail point.
-    let r = moon.len();
-    if let Some(first) = moon
-        .first()
-        .and_then(|s| s.points.iter().find(|p| p.0 >= 2f64.ln()))
-    {
-        let (x0, y0) = (first.0, first.1);
-        let x1 = moon[0].points.iter().map(|p| p.0).fold(x0, f64::max);
-        for a in [2.0, 1.5, 1.16, 1.0] {
-            moon.push(Series {
-                label: format!("alpha_T = {a}"),
-                points: vec![(x0, y0, 0.0), (x1, y0 - a * (x1 - x0), 0.0)],
-                line: true,
-            });
-        }
-    }
-    let fg = fig(
-        ctx.title(&format!("Moon plot [{key}]")),
-        "ln(v / v_rms)",
-        "-ln(-ln(P / P'))",
-        moon,
-    );
-    ctx.figure(
-        format!("moon-{}", slug(key)),
-        plot::linear(fg).with_references_from(r),
-    );
-}
-
-/// Free paths: the tail fit (4.25).
-fn free_path_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
-    for &(p, r) in rfm {
-        let Some(bins) = d.hist.get(&(p, "free_path".to_string())) else {
-            continue;
-        };
-        let key = rfm_key(ctx.c, p, r, true);
-        let total: f64 = bins.values().map(|b| b.2).sum();
-        let pb: Vec<free_path::PathBin> = bins
-            .values()
-            .filter(|b| b.0 > 0.0 && b.1.is_finite() && b.1 > b.0)
-            .map(|&(lo, hi, n)| free_path::PathBin {
-                l: (lo * hi).sqrt(),
-                density: n / (total * (hi - lo)),
-                count: n,
-            })
-            .collect();
-        let tail = free_path::tail(&pb, 1.0, 10.0);
-        let window = |t: &[free_path::PathBin]| {
-            format!(
-                "P_l < 1 m^-1 beyond its maximum, X >= 10: l in [{:.3e}, {:.3e}] m",
-                t.first().map_or(f64::NAN, |b| b.l),
-                t.last().map_or(f64::NAN, |b| b.l)
-            )
-        };
-        let mut series = vec![Series {
-            label: "P_l(l)".into(),
-            points: pb
-                .iter()
-                .filter(|b| b.count > 0.0)
-                .map(|b| (b.l, b.density, b.density / b.count.sqrt()))
-                .collect(),
-            line: false,
-        }];
-        match free_path::fit_tail(&tail, None) {
-            Some(f) => {
-                let w = window(&tail);
-                ctx.fit(
-                    "free_path_D_f",
-                    &key,
-                    f.params[2],
-                    Some(f.errors[2]),
-                    f.chi2_reduced,
-                    f.n_points,
-                    w.clone(),
-                    None,
-                );
-                ctx.fit(
-                    "free_path_C",
-                    &key,
-                    f.params[1],
-                    Some(f.errors[1]),
-                    f.chi2_reduced,
-                    f.n_points,
-                    w,
-                    None,
-                );
-                let params = f.params.clone();
-                let (l0, l1) = (tail[0].l, tail[tail.len() - 1].l);
-                series.push(line(
-                    format!("(4.25): D_f = {:.2}, C = {:.3}", params[2], params[1]),
-                    l0,
-                    l1,
-                    move |l| free_path::ln_tail(&params, l).exp(),
-                ));
-            }
-            None => ctx.warn(format!(
-                "{key}: free-path tail fit (4.25) impossible ({} tail bins)",
-                tail.len()
-            )),
-        }
-        let df = ctx.opts.fixed_df;
-        if let Some(f) = free_path::fit_tail(&tail, Some(df)) {
-            ctx.fit(
-                "free_path_C_fixed_D_f",
-                &key,
-                f.params[1],
-                Some(f.errors[1]),
-                f.chi2_reduced,
-                f.n_points,
-                format!("D_f = {df} fixed; {}", window(&tail)),
-                None,
-            );
-        }
-        let fg = fig(
-            ctx.title(&format!("free paths [{key}]")),
-            "l (m)",
-            "P_l (1/m)",
-            series,
-        );
-        ctx.figure(format!("free-path-{}", slug(&key)), plot::loglog(fg));
-    }
-}
-
-/// Per point: the params JSON (points table), for models this module has no types for.
-fn point_params_json(c: &Campaign) -> Result<BTreeMap<u32, serde_json::Value>, StoreError> {
-    let mut out = BTreeMap::new();
-    for b in batches(c, POINTS)? {
-        let p = u32s(&b, POINTS, "point_id")?;
-        let j = get_str(&b, POINTS, "params")?;
-        for i in 0..b.num_rows() {
-            out.insert(
-                p.value(i),
-                serde_json::from_str(j.value(i)).unwrap_or(serde_json::Value::Null),
-            );
-        }
-    }
-    Ok(out)
-}
-
-/// The cascade's S(k): D_f per point, keyed by the variant, over 2 pi/L <= k <= 2 pi
-/// 2^(n-3)/L (spec 3.4 [REC]: below the cell-scale periodic features), n = the number of
-/// levels (params `levels`/`n`, default 8), L = params `box_length` (default 1 m).
-fn cascade_fits(ctx: &mut Ctx) -> Result<(), AnalysisError> {
-    let c = ctx.c;
-    let params = point_params_json(c)?;
-    let t = CASCADE_STRUCTURE_FACTOR;
-    let mut by_point: BTreeMap<u32, Vec<fractal::SkPoint>> = BTreeMap::new();
-    for b in batches(c, t)? {
-        let (p, k, s, e) = (
-            u32s(&b, t, "point_id")?,
-            f64s(&b, t, "k")?,
-            f64s(&b, t, "s_mean")?,
-            f64s(&b, t, "s_sem")?,
-        );
-        for i in 0..b.num_rows() {
-            by_point
-                .entry(p.value(i))
-                .or_default()
-                .push(fractal::SkPoint {
-                    k: k.value(i),
-                    s: s.value(i),
-                    err: (!e.is_null(i)).then(|| e.value(i)),
-                });
-        }
-    }
-    if by_point.is_empty() {
-        ctx.warn(format!("table {t} has no rows"));
-    }
-    for (p, pts) in by_point {
-        let j = params.get(&p).cloned().unwrap_or(serde_json::Value::Null);
-        let get = |names: &[&str]| {
-            names
-                .iter()
-                .find_map(|n| j.get(*n).and_then(|v| v.as_f64()))
-        };
-        let levels = get(&["levels", "n", "n_levels", "level"]).unwrap_or(8.0);
-        let l = get(&["box_length", "L"]).unwrap_or(1.0);
-        let variant = ["variant", "process", "kind"]
-            .iter()
-            .find_map(|n| j.get(*n))
-            .map(|v| match v {
-                serde_json::Value::String(s) => s.clone(),
-                other => other.to_string(),
-            })
-            .unwrap_or_else(|| format!("point={p}"));
-        let key = format!("variant={variant},n={},L={}", num(levels), num(l));
-        let two_pi = 2.0 * std::f64::consts::PI;
-        let (k_lo, k_hi) = (
-            two_pi / l * (1.0 - 1e-9),
-            two_pi * 2f64.powf(levels - 3.0) / l * (1.0 + 1e-9),
-        );
-        let window = format!(
-            "k L / 2 pi in [1, {}] (2 pi/L <= k <= 2 pi 2^(n-3)/L)",
-            num(2f64.powf(levels - 3.0))
-        );
-        // The window's upper end is inclusive here.
-        match fractal::fractal_dimension(&pts, k_lo, k_hi) {
-            Some(f) => {
-                ctx.fit(
-                    "D_f_cascade",
-                    &key,
-                    f.exponent,
-                    Some(f.error),
-                    f.fit.chi2_reduced,
-                    f.fit.n_points,
-                    window,
-                    None,
-                );
-                let (la, df) = (f.ln_amplitude, f.exponent);
-                let series = vec![
-                    Series {
-                        label: "S(k)".into(),
-                        points: pts
-                            .iter()
-                            .filter(|s| s.s > 0.0)
-                            .map(|s| (s.k, s.s, s.err.unwrap_or(0.0)))
-                            .collect(),
-                        line: false,
-                    },
-                    line(format!("k^-{df:.2}"), f.x_lo, f.x_hi, move |k| {
-                        (la - df * k.ln()).exp()
-                    }),
-                ];
-                let fg = fig(
-                    ctx.title(&format!("cascade S(k) [{key}]")),
-                    "k (1/m)",
-                    "S(k)",
-                    series,
-                );
-                ctx.figure(format!("cascade-sk-{}", slug(&key)), plot::loglog(fg));
-            }
-            None => ctx.warn(format!(
-                "{key}: fewer than two cascade S(k) points in {window}"
-            )),
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]

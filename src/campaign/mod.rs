@@ -42,10 +42,11 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use crate::analysis::{Analysis, AnalysisError, Options, Report as AnalysisReport};
 use crate::fsutil;
 use crate::manifest::validate::ManifestErrors;
 use crate::manifest::Manifest;
-use crate::models::{CampaignView, ModelParams, PointView};
+use crate::models::{CampaignView, ModelKind, ModelParams, PointView};
 use crate::store::dataset::Dataset;
 use crate::store::parquet_io::Stamp;
 use crate::store::FORMAT_VERSION;
@@ -527,6 +528,10 @@ impl Campaign {
         done: &'a BTreeMap<u64, u32>,
         current_only: bool,
     ) -> CampaignView<'a, ModelParams> {
+        let mut runs_done: BTreeMap<u32, u32> = BTreeMap::new();
+        for r in done.keys() {
+            *runs_done.entry(self.plan.run(*r).point_id).or_default() += 1;
+        }
         CampaignView {
             name: &self.manifest.name,
             points: self
@@ -538,6 +543,14 @@ impl Campaign {
                     point_id: p.point_id,
                     params: &p.params,
                     label: self.plan.label(p.point_id),
+                    swept: self
+                        .plan
+                        .sweep_keys
+                        .iter()
+                        .map(String::as_str)
+                        .zip(&p.values)
+                        .collect(),
+                    runs_done: runs_done.get(&p.point_id).copied().unwrap_or(0),
                 })
                 .collect(),
             replicas: self.plan.runs_asked_per_point(),
@@ -634,6 +647,37 @@ impl Campaign {
         let view = self.view(&data, &done);
         self.plan.model.write_summaries(&view)?;
         self.plan.model.figures(&self.view(&data, &done))
+    }
+
+    /// `granular analyze`: the model's analysis ([`crate::models::Model::analyze`]) of the
+    /// runs of the latest manifest finished so far (as [`Campaign::figures`] sees them),
+    /// written into `out` ([`Analysis::write`]). Refused for a model without analysis.
+    pub fn analyze(&self, out: &Path, opts: &Options) -> Result<AnalysisReport, AnalysisError> {
+        let data = self.data();
+        let ledger = ledger::read_ledger(&self.root).map_err(|e| {
+            crate::store::parquet_io::StoreError::Corrupt(self.root.display().to_string(), e)
+        })?;
+        let done = self.done_replicas(&ledger::finished_runs(&ledger.commits));
+        let total = self.plan.current_runs().count() as u64;
+        let mut a = Analysis::new(&self.manifest.name, opts, done.len() as u64, total);
+        match self.plan.model.analyze(&self.view(&data, &done), &mut a) {
+            None => Err(AnalysisError::NotAnalysable(format!(
+                "campaign {:?} is of model {}, which has no analysis; `granular analyze` \
+                 analyses campaigns of the models {}",
+                self.manifest.name,
+                self.manifest.model.as_str(),
+                ModelKind::ALL
+                    .iter()
+                    .filter(|k| k.has_analysis())
+                    .map(|k| k.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))),
+            Some(r) => {
+                r?;
+                a.write(out, self.stamp())
+            }
+        }
     }
 
     /// `DIR/analysis`: where `granular analyze` writes its tables and `figures/` by default,

@@ -1,4 +1,5 @@
-//! `granular analyze DIR [--out ADIR]`: the thesis's fits of an rfm campaign.
+//! `granular analyze DIR [--out ADIR]`: the thesis's fits of a campaign, by its model
+//! (`Campaign::analyze`: rfm, cascade).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -54,12 +55,15 @@ pub fn run(a: Args) -> i32 {
         fixed_df: a.fixed_df,
         figures: !a.no_figures,
     };
-    match crate::analysis::analyze(&c, &out, &opts) {
+    match c.analyze(&out, &opts) {
         Ok(r) => {
             print_fits(&c, &out, &r);
             exit_codes::OK
         }
-        Err(AnalysisError::NotAnalysable(m)) => fail(exit_codes::DIRECTORY_REFUSED, m),
+        Err(AnalysisError::NotAnalysable(m)) => fail(
+            exit_codes::DIRECTORY_REFUSED,
+            format!("{}: {m}", c.root.display()),
+        ),
         Err(e) => fail(exit_codes::IO_ERROR, e),
     }
 }

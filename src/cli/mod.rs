@@ -114,7 +114,7 @@ enum Command {
     /// Upgrade a campaign directory written by an earlier granular, in place (logged).
     Upgrade(upgrade::Args),
     /// Fit the thesis's observables of an rfm campaign (xi_m, zeta_m, D_f, alpha, (5.32),
-    /// (4.25), ...) into the table analysis_fits, the figure data analysis_curves and figures.
+    /// (4.25), ...) or a cascade campaign (D_f) into the table analysis_fits, the figure data analysis_curves and figures.
     /// Uses the finished runs (warns if some are missing).
     Analyze(analyze::Args),
 }

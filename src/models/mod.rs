@@ -26,6 +26,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use crate::analysis::{Analysis, AnalysisError};
 use crate::physics::PhysicsError;
 use crate::plot::{Figure, Series};
 use crate::store::cols::{Column, Columns};
@@ -211,7 +212,17 @@ pub trait Model {
     ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
         Ok(None)
     }
+    /// `granular analyze`: the function that records the model's fits across points (rows of
+    /// `analysis_fits`, figures and their data) into an [`Analysis`], from the finished runs
+    /// of the view, beginning with [`Analysis::start`]; `None` (the default): the model has
+    /// no analysis.
+    fn analysis() -> Option<AnalyzeFn<Self::Params>> {
+        None
+    }
 }
+
+/// A model's analysis (see [`Model::analysis`]).
+pub type AnalyzeFn<P> = fn(&CampaignView<'_, P>, &mut Analysis) -> Result<(), AnalysisError>;
 
 /// A running simulation as the campaign drives it: in bounded chunks, checkpointed between
 /// them.
@@ -494,6 +505,11 @@ pub struct PointView<'a, P> {
     pub params: &'a P,
     /// The swept values, `key=value, ...` (empty without a sweep).
     pub label: String,
+    /// The swept values: each sweep key (a dotted path into `params`) with the point's value
+    /// there, in the manifest's order (empty without a sweep).
+    pub swept: Vec<(&'a str, &'a Value)>,
+    /// How many of the view's finished runs (`CampaignView::done`) are of this point.
+    pub runs_done: u32,
 }
 
 impl<'a> CampaignView<'a, ModelParams> {
@@ -508,6 +524,8 @@ impl<'a> CampaignView<'a, ModelParams> {
                         point_id: p.point_id,
                         params,
                         label: p.label.clone(),
+                        swept: p.swept.clone(),
+                        runs_done: p.runs_done,
                     })
                 })
                 .collect(),
@@ -662,6 +680,27 @@ macro_rules! models {
             ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
                 match self {
                     $(ModelKind::$variant => <$model as Model>::figures(&c.typed::<$model>()),)+
+                }
+            }
+
+            /// The model's analysis of `c` into `a` (see [`Model::analysis`]); `None` if it
+            /// has none.
+            pub fn analyze(
+                self,
+                c: &CampaignView<'_, ModelParams>,
+                a: &mut Analysis,
+            ) -> Option<Result<(), AnalysisError>> {
+                match self {
+                    $(ModelKind::$variant => {
+                        <$model as Model>::analysis().map(|f| f(&c.typed::<$model>(), a))
+                    })+
+                }
+            }
+
+            /// Whether the model has an analysis (see [`Model::analysis`]).
+            pub fn has_analysis(self) -> bool {
+                match self {
+                    $(ModelKind::$variant => <$model as Model>::analysis().is_some(),)+
                 }
             }
 

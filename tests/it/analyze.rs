@@ -1,7 +1,7 @@
 //! `granular analyze`: tiny 1D and 2D RFM campaigns -> analysis_fits with the expected
 //! columns and sane values (zeta_1 = 1 exactly by (3.19)), figures, a partly finished
-//! campaign (warning, exit 0), and the error cases (no campaign, another model, a missing
-//! table).
+//! campaign (warning, exit 0), a cascade campaign's D_f, and the error cases (no campaign,
+//! a model without analysis, a missing table).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -229,26 +229,56 @@ fn analyze_end_to_end() {
     assert!(fits.values().all(|v| v.0.is_finite()));
     assert!(std::fs::read_dir(out_dir.join("figures")).unwrap().count() >= 4);
 
-    // A cascade_structure_factor table (the cascade model's; columns as
-    // rfm_structure_factor_summary) is fitted when present: S = 2 k^-1.6 on the lattice
-    // shells, window k L / 2 pi <= 2^(8-3) (default n = 8, L = 1).
-    write_cascade_table(&b);
-    let (code, out) = run_capture(&["analyze", b_s, "--out", out_dir.to_str().unwrap()], &log);
+    // A cascade campaign: D_f per point from its runs' S(k) (cascade_structure_factor),
+    // keyed by its typed params (variant, level, box_length), over 1 <= k L / 2 pi <=
+    // 2^(n-3). (The exact D_f of a synthetic S = 2 k^-1.6, n = 8, L = 1, is
+    // `models::cascade::analysis::tests::df_of_a_power_law_structure_factor`.)
+    let m3 = dir.path().join("m3.json");
+    write_json(
+        &m3,
+        &json!({
+            "name": "analyze-cascade",
+            "model": "cascade",
+            "seed": 7,
+            "params": {"level": 5, "box_length": 1.0, "variant": "ucp", "realisations": 8}
+        }),
+    );
+    let cas_dir = dir.path().join("C");
+    let code = run(
+        &[
+            "run",
+            m3.to_str().unwrap(),
+            "--out",
+            cas_dir.to_str().unwrap(),
+            "--quiet",
+        ],
+        &log,
+    );
+    assert_eq!(code, Some(0), "{}", log_text(&log));
+    let (code, out) = run_capture(&["analyze", cas_dir.to_str().unwrap()], &log);
     assert_eq!(code, Some(0), "{out}\n{}", log_text(&log));
-    let fits = read_fits(&out_dir.join("analysis_fits.parquet"));
+    let fits = read_fits(&cas_dir.join("analysis").join("analysis_fits.parquet"));
     let cas = fits
         .iter()
         .find(|(k, _)| k.0 == "D_f_cascade")
         .expect("cascade D_f row");
-    assert!((cas.1 .0 - 1.6).abs() < 1e-9, "cascade D_f {}", cas.1 .0);
     assert!(cas.0 .1.starts_with("variant="), "{}", cas.0 .1);
-    // Shells n^2 = a^2 + b^2 in (0, 1024]: every one is in the window.
-    let shells = (0..=32i64)
-        .flat_map(|a| (0..=32i64).map(move |b| a * a + b * b))
-        .filter(|&s| s > 0 && s <= 1024)
+    assert_eq!(cas.0 .1, "variant=ucp,n=5,L=1");
+    assert!(
+        cas.1 .0.is_finite() && cas.1 .0 > 0.5 && cas.1 .0 < 2.5,
+        "cascade D_f {}",
+        cas.1 .0
+    );
+    // Shells n^2 = a^2 + b^2 in (0, 16] (k L / 2 pi <= 2^(5-3)): every one is in the window.
+    let shells = (0..=4i64)
+        .flat_map(|a| (0..=4i64).map(move |b| a * a + b * b))
+        .filter(|&s| s > 0 && s <= 16)
         .collect::<std::collections::BTreeSet<_>>()
         .len();
     assert_eq!(cas.1 .3 as usize, shells);
+    assert!(cas_dir
+        .join("analysis/figures/cascade-sk-variant_ucp_n_5_L_1.svg")
+        .is_file());
 
     // A missing table: refused (exit 3), not a panic; its committed parts are named missing
     // by the integrity check that analyze makes first (`granular resume` runs them again).
@@ -262,70 +292,6 @@ fn analyze_end_to_end() {
         "{}",
         log_text(&log)
     );
-}
-
-fn write_cascade_table(campaign: &Path) {
-    use std::sync::Arc;
-    let mut shells: Vec<i64> = (0..=40i64)
-        .flat_map(|a| (0..=40i64).map(move |b| a * a + b * b))
-        .filter(|&s| s > 0 && s <= 1600)
-        .collect();
-    shells.sort_unstable();
-    shells.dedup();
-    let k: Vec<f64> = shells
-        .iter()
-        .map(|&s| 2.0 * std::f64::consts::PI * (s as f64).sqrt())
-        .collect();
-    let s: Vec<f64> = k.iter().map(|k| 2.0 * k.powf(-1.6)).collect();
-    let n = shells.len();
-    let schema = arrow_schema::Schema::new(vec![
-        arrow_schema::Field::new("point_id", arrow_schema::DataType::UInt32, false),
-        arrow_schema::Field::new("n2", arrow_schema::DataType::UInt64, false),
-        arrow_schema::Field::new("k", arrow_schema::DataType::Float64, false),
-        arrow_schema::Field::new("n_vectors", arrow_schema::DataType::UInt64, false),
-        arrow_schema::Field::new("n_replicas", arrow_schema::DataType::UInt32, false),
-        arrow_schema::Field::new("s_mean", arrow_schema::DataType::Float64, false),
-        arrow_schema::Field::new("s_sem", arrow_schema::DataType::Float64, true),
-    ]);
-    let batch = arrow_array::RecordBatch::try_new(
-        Arc::new(schema),
-        vec![
-            Arc::new(arrow_array::UInt32Array::from(vec![0u32; n])),
-            Arc::new(arrow_array::UInt64Array::from(
-                shells.iter().map(|&s| s as u64).collect::<Vec<_>>(),
-            )),
-            Arc::new(arrow_array::Float64Array::from(k.clone())),
-            Arc::new(arrow_array::UInt64Array::from(vec![4u64; n])),
-            Arc::new(arrow_array::UInt32Array::from(vec![10u32; n])),
-            Arc::new(arrow_array::Float64Array::from(s.clone())),
-            Arc::new(arrow_array::Float64Array::from(
-                s.iter().map(|v| 0.01 * v).collect::<Vec<_>>(),
-            )),
-        ],
-    )
-    .unwrap();
-    let dir = campaign.join("tables").join("cascade_structure_factor");
-    std::fs::create_dir_all(&dir).unwrap();
-    // Written for this campaign (analyze reads only parts stamped with the campaign's
-    // identity).
-    // With its checksum sidecar, as the campaign writes a table written whole (`analyze`
-    // checks the tables against the ledger and sidecars first).
-    let c = granular::campaign::Campaign::open(campaign).unwrap();
-    let w = granular::store::parquet_io::write_file(
-        &dir.join("summary.parquet"),
-        &batch,
-        "cascade_structure_factor",
-        c.stamp(),
-    )
-    .unwrap();
-    granular::store::checksum::write_sidecar(
-        campaign,
-        "cascade_structure_factor",
-        "summary.parquet",
-        w.bytes,
-        &w.sha256,
-    )
-    .unwrap();
 }
 
 #[test]
@@ -348,7 +314,8 @@ fn analyze_refuses_what_it_cannot_analyse() {
     let (code, _) = run_capture(&["analyze", d.to_str().unwrap()], &log);
     assert_eq!(code, Some(3), "{}", log_text(&log));
     assert!(
-        log_text(&log).contains("is of model dsmc"),
+        log_text(&log).contains("is of model dsmc")
+            && log_text(&log).contains("which has no analysis"),
         "{}",
         log_text(&log)
     );

@@ -10,8 +10,12 @@
 //! - `store` imports no physics, theory, model, manifest or campaign: it knows no physics;
 //! - `campaign` names no particular model: it imports `models` (the closed list and its
 //!   interface), never `models::<model>` or a simulator;
-//! - a model's home (`models::<model>`) imports no other model's home, no campaign, manifest,
-//!   command line or analysis;
+//! - a model's home (`models::<model>`) imports no other model's home, no campaign, manifest
+//!   or command line (it may use the shared part of the analysis, `analysis`, as it uses
+//!   `plot`: its own analysis lives in it);
+//! - `analysis` (what every model's analysis shares: options, fit and curve rows, their
+//!   writing) imports no model (neither `models` nor a home), campaign, manifest, command
+//!   line, report, server or simulator;
 //! - `manifest` imports no campaign, store, simulator or model home (only the list of models);
 //! - `plot` (the renderer) imports nothing of the crate;
 //! - `report` (the HTML page) imports the campaign, store and plot, no model home, simulator,
@@ -384,9 +388,21 @@ fn forbidden(from: &str, to: &str) -> Option<&'static str> {
         if model_home(to).is_some_and(|h| h != home) {
             return Some("a model's home imports no other model's home");
         }
-        if matches!(t, "campaign" | "manifest" | "cli" | "analysis") {
-            return Some("a model's home imports no campaign, manifest, CLI or analysis");
+        if matches!(t, "campaign" | "manifest" | "cli") {
+            return Some("a model's home imports no campaign, manifest or CLI");
         }
+    }
+    if f == "analysis"
+        && (sim(t)
+            || matches!(
+                t,
+                "models" | "campaign" | "manifest" | "cli" | "report" | "serve"
+            ))
+    {
+        return Some(
+            "the analysis's shared part imports no model, campaign, manifest, CLI, report or \
+             simulator: each model's analysis lives in its home",
+        );
     }
     if f == "manifest" && (sim(t) || matches!(t, "campaign" | "store") || model_home(to).is_some())
     {
@@ -495,4 +511,11 @@ fn the_checker_sees_what_it_should() {
     assert!(forbidden("theory::hcs", "dsmc").is_some());
     assert!(forbidden("walk::sim", "store::dataset").is_some());
     assert!(forbidden("rng", "dsmc").is_some());
+    assert!(forbidden("analysis", "models::rfm::params").is_some());
+    assert!(forbidden("analysis", "models").is_some());
+    assert!(forbidden("analysis", "campaign").is_some());
+    assert!(forbidden("analysis", "math::fit").is_none());
+    assert!(forbidden("models::rfm::analysis", "analysis").is_none());
+    assert!(forbidden("models::rfm::analysis", "campaign::tables").is_some());
+    assert!(forbidden("models::cascade::analysis", "models::rfm::analysis").is_some());
 }

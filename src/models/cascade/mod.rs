@@ -1,13 +1,15 @@
 //! The `cascade` model: multiplicative cascades on a 2^n x 2^n grid (spec `rfm.md` 3.4, thesis
-//! ch. 6), S(k) by FFT, the D_f fit, and the particle placement of F 6.3.
+//! ch. 6), S(k) by FFT, the D_f fit, and the particle placement of F 6.3; [`analysis`]: its
+//! D_f fits of `granular analyze`.
 
+pub mod analysis;
 pub mod figures;
 pub mod params;
 pub mod summary;
 pub mod tables;
 
 use crate::aux_models::cascade::{CascadeOutput, CascadeRun};
-use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{AnalyzeFn, CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
 use crate::store::parquet_io::StoreError;
@@ -100,6 +102,10 @@ impl Model for Cascade {
         c: &CampaignView<'_, CascadeParams>,
     ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
         figures::figures(c).map(Some)
+    }
+
+    fn analysis() -> Option<AnalyzeFn<CascadeParams>> {
+        Some(analysis::analyze)
     }
 }
 

@@ -16,8 +16,8 @@
 //!   large-k limit);
 //! - `radial-distribution`: g(R), reference g = 1 (uniform gas).
 //!
-//! The fits of `granular analyze` are not drawn here (the model home imports no analysis):
-//! the report embeds what `analyze` wrote in `DIR/analysis`.
+//! The fits of `granular analyze` are not drawn here but by [`super::analysis`], into
+//! `DIR/analysis`, which the report embeds as files.
 
 use std::collections::BTreeMap;
 

@@ -4,10 +4,10 @@
 //! - [`params`]: the manifest's `params` and their resolution into the run's configuration;
 //! - [`tables`]: the run-level tables in Arrow form;
 //! - [`summary`]: the replica summaries;
-//! - [`figures`]: the standard figures from the summaries.
-//!
-//! The thesis's fits across points (`granular analyze`) are in `crate::analysis`.
+//! - [`figures`]: the standard figures from the summaries;
+//! - [`analysis`]: the thesis's fits across points (`granular analyze`).
 
+pub mod analysis;
 pub mod figures;
 pub mod params;
 pub mod summary;
@@ -15,7 +15,9 @@ pub mod tables;
 #[cfg(test)]
 mod tests;
 
-use crate::models::{CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{
+    AnalyzeFn, CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation,
+};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
 use crate::rfm::observe::RfmRun;
@@ -140,6 +142,10 @@ impl Model for Rfm {
         c: &CampaignView<'_, RfmParams>,
     ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
         figures::figures(c).map(Some)
+    }
+
+    fn analysis() -> Option<AnalyzeFn<RfmParams>> {
+        Some(analysis::analyze)
     }
 }
 

@@ -1,13 +1,9 @@
-//! 2D structure (thesis ch. 4, spec 2.7-2.8): the fractal dimension D_f from S(k) = A k^-D_f
-//! (4.4) over the dissipative range with the k_D / L_Eff window rule (4.5)-(4.9), and the
-//! real-space power laws of C(R) (4.15)-(4.16) and n(R) = C(R) - n_bar ~ R^D_f (4.17).
-//!
-//! [`fractal_dimension`] works on any (k, S, error) table: the RFM's
-//! `rfm_structure_factor_summary` and the cascade's `cascade_structure_factor`.
+//! 2D structure of the RFM (thesis ch. 4, spec 2.7-2.8): the window of the fractal-dimension
+//! fit of S(k) = A k^-D_f (4.4) over the dissipative range, by the k_D / L_Eff rule
+//! (4.5)-(4.9), and the mean-field count n_bar of n(R) = C(R) - n_bar ~ R^D_f (4.17). The power
+//! laws themselves are fitted by `math::power`.
 
 use std::f64::consts::PI;
-
-use crate::math::fit::{self, Fit};
 
 /// k_D (4.5) with l_0 from (4.7): (2 - eps_n^2 - eps_t^2) phi / (pi d). (The /8 form of the
 /// thesis's tables, spec 6.18.)
@@ -34,73 +30,6 @@ pub fn fit_cutoff(k_d: f64, box_length: f64) -> (f64, &'static str) {
     }
 }
 
-/// One shell (or k bin) of a structure factor.
-#[derive(Clone, Copy, Debug)]
-pub struct SkPoint {
-    pub k: f64,
-    pub s: f64,
-    pub err: Option<f64>,
-}
-
-/// A power-law exponent fit y = A x^(+-exponent) over a window.
-#[derive(Clone, Debug)]
-pub struct PowerFit {
-    pub exponent: f64,
-    pub error: f64,
-    pub ln_amplitude: f64,
-    pub fit: Fit,
-    pub x_lo: f64,
-    pub x_hi: f64,
-}
-
-fn power_fit(x: &[f64], y: &[f64], err: &[Option<f64>], sign: f64) -> Option<PowerFit> {
-    if x.len() < 2 {
-        return None;
-    }
-    let sig = fit::usable(err);
-    let f = fit::power_law(x, y, sig.as_deref())?;
-    Some(PowerFit {
-        exponent: sign * f.params[1],
-        error: f.errors[1],
-        ln_amplitude: f.params[0],
-        x_lo: x.iter().copied().fold(f64::INFINITY, f64::min),
-        x_hi: x.iter().copied().fold(0.0, f64::max),
-        fit: f,
-    })
-}
-
-/// D_f from S(k) = A k^-D_f fitted over k_lo <= k < k_hi (weighted by the errors when every
-/// shell in the window has one). `None` with fewer than two shells.
-pub fn fractal_dimension(points: &[SkPoint], k_lo: f64, k_hi: f64) -> Option<PowerFit> {
-    let w: Vec<&SkPoint> = points
-        .iter()
-        .filter(|p| p.k >= k_lo && p.k < k_hi && p.s > 0.0)
-        .collect();
-    let x: Vec<f64> = w.iter().map(|p| p.k).collect();
-    let y: Vec<f64> = w.iter().map(|p| p.s).collect();
-    let e: Vec<Option<f64>> = w.iter().map(|p| p.err).collect();
-    power_fit(&x, &y, &e, -1.0)
-}
-
-/// C(R) = A R^exponent over r_lo <= R <= r_hi (positive values only).
-pub fn cumulative_exponent(
-    r: &[f64],
-    c: &[f64],
-    err: &[Option<f64>],
-    r_lo: f64,
-    r_hi: f64,
-) -> Option<PowerFit> {
-    let idx: Vec<usize> = (0..r.len())
-        .filter(|&i| r[i] >= r_lo && r[i] <= r_hi && c[i] > 0.0)
-        .collect();
-    power_fit(
-        &idx.iter().map(|&i| r[i]).collect::<Vec<_>>(),
-        &idx.iter().map(|&i| c[i]).collect::<Vec<_>>(),
-        &idx.iter().map(|&i| err[i]).collect::<Vec<_>>(),
-        1.0,
-    )
-}
-
 /// The mean-field count n_bar = (N - 1) pi R^2 / L^2 (spec 2.8 [REC]).
 pub fn mean_field_count(r: f64, n: f64, box_length: f64) -> f64 {
     (n - 1.0) * PI * r * r / (box_length * box_length)
@@ -110,6 +39,7 @@ pub fn mean_field_count(r: f64, n: f64, box_length: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::math::fit::tests::sd;
+    use crate::math::power::{decay_exponent, Sample};
     use crate::rng::RunRng;
 
     #[test]
@@ -146,20 +76,20 @@ mod tests {
         let (mut est, mut errs) = (vec![], vec![]);
         for seed in 0..300 {
             let mut rng = RunRng::new(31 + seed);
-            let pts: Vec<SkPoint> = shells
+            let pts: Vec<Sample> = shells
                 .iter()
                 .map(|&s| {
                     let k = 2.0 * PI / l * (s as f64).sqrt();
                     let t = if k < kd { 0.05 * k.powf(-1.63) } else { 1.0 };
-                    SkPoint {
-                        k,
-                        s: t * (1.0 + 0.05 * rng.normal()),
+                    Sample {
+                        x: k,
+                        y: t * (1.0 + 0.05 * rng.normal()),
                         err: Some(0.05 * t),
                     }
                 })
                 .collect();
             let (kp, _) = fit_cutoff(kd, l);
-            let f = fractal_dimension(&pts, 0.0, kp).unwrap();
+            let f = decay_exponent(&pts, 0.0, kp).unwrap();
             assert_eq!(f.fit.n_points, 7, "shells 1, 2, 4, 5, 8, 9, 10 below k_D");
             est.push(f.exponent);
             errs.push(f.error);
@@ -174,12 +104,8 @@ mod tests {
     }
 
     #[test]
-    fn cumulative_count_exponent() {
-        let r: Vec<f64> = (1..100).map(|j| 1e-3 * j as f64).collect();
-        let c: Vec<f64> = r.iter().map(|r| 3.0 * r.powf(1.6)).collect();
-        let f = cumulative_exponent(&r, &c, &vec![None; r.len()], 0.0095, 0.0505).unwrap();
-        assert!((f.exponent - 1.6).abs() < 1e-9);
-        assert_eq!(f.fit.n_points, 41);
+    fn mean_field_count_is_the_ideal_gas_count() {
+        // The count of the exponent is in `math::power` (`cumulative_count_exponent`).
         assert!((mean_field_count(1.0, 101.0, 10.0) - PI).abs() < 1e-12);
     }
 }
