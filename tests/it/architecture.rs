@@ -331,8 +331,19 @@ fn top(m: &str) -> &str {
 fn model_home(m: &str) -> Option<String> {
     let mut p = m.split("::");
     (p.next() == Some("models"))
-        .then(|| p.next().map(|x| format!("models::{x}")))
+        .then(|| p.next().filter(|x| !MODELS_SHARED.contains(x)))
         .flatten()
+        .map(|x| format!("models::{x}"))
+}
+
+/// The parts of `models` that every model shares (split from the registry file, re-exported by
+/// it): no model's home, and they import none.
+const MODELS_SHARED: &[&str] = &["checks", "overlay", "rows", "view"];
+
+/// Whether `m` is one of [`MODELS_SHARED`].
+fn models_shared(m: &str) -> bool {
+    let mut p = m.split("::");
+    p.next() == Some("models") && p.next().is_some_and(|x| MODELS_SHARED.contains(&x))
 }
 
 /// Top-level modules that are not simulators; every other one is (`dsmc`, `rfm`,
@@ -383,6 +394,9 @@ fn forbidden(from: &str, to: &str) -> Option<&'static str> {
     }
     if f == "campaign" && (sim(t) || t == "theory" || model_home(to).is_some()) {
         return Some("the campaign names no particular model or simulator");
+    }
+    if models_shared(from) && model_home(to).is_some() {
+        return Some("the models' shared parts import no model's home");
     }
     if let Some(home) = model_home(from) {
         if model_home(to).is_some_and(|h| h != home) {
@@ -511,6 +525,13 @@ fn the_checker_sees_what_it_should() {
     assert!(forbidden("theory::hcs", "dsmc").is_some());
     assert!(forbidden("walk::sim", "store::dataset").is_some());
     assert!(forbidden("rng", "dsmc").is_some());
+    assert!(forbidden("models::view", "models::rfm").is_some());
+    assert!(forbidden("models::rfm", "models::view").is_none());
+    assert!(model_home("models::checks").is_none());
+    assert_eq!(
+        model_home("models::rfm::analysis").as_deref(),
+        Some("models::rfm")
+    );
     assert!(forbidden("analysis", "models::rfm::params").is_some());
     assert!(forbidden("analysis", "models").is_some());
     assert!(forbidden("analysis", "campaign").is_some());

@@ -1,0 +1,93 @@
+//! A campaign as a model sees it (summaries, figures, analysis): its points with their typed
+//! parameters, its finished runs, its tables.
+
+use std::collections::BTreeMap;
+
+use arrow_array::RecordBatch;
+use serde_json::Value;
+
+use crate::store::dataset::Dataset;
+use crate::store::parquet_io::StoreError;
+
+/// A campaign as a model sees it: its points with their parameters, its finished runs, its
+/// tables. `P` is the model's `Params` (or [`ModelParams`] before dispatch).
+pub struct CampaignView<'a, P> {
+    /// The campaign's name (figure titles).
+    pub name: &'a str,
+    pub points: Vec<PointView<'a, P>>,
+    /// Replicas per point (an upper bound on the runs per point).
+    pub replicas: u32,
+    /// The runs finished with status done, and their replica numbers.
+    pub done: &'a BTreeMap<u64, u32>,
+    pub data: &'a Dataset,
+    /// The swept parameters of every point: `point_id` and the `points` table's sweep
+    /// columns (same names and types), one row per point; see [`CampaignView::write_summary`].
+    pub sweep: RecordBatch,
+}
+
+impl<P> CampaignView<'_, P> {
+    /// Write a replica summary whole (`tables/<table>/summary.parquet`): `batch`, whose rows
+    /// each name their point in a `point_id` column, with the point's sweep columns right
+    /// after `point_id` (so a summary is read without a join with `points`). Every summary
+    /// goes through here; the model names no sweep key.
+    pub fn write_summary(&self, table: &str, batch: &RecordBatch) -> Result<(), StoreError> {
+        let batch = crate::store::cols::join_after_key(batch, table, "point_id", &self.sweep)?;
+        self.data.write_whole(table, "summary.parquet", &batch)
+    }
+}
+
+impl<P> CampaignView<'_, P> {
+    /// The batches of a raw table (one row per run and more, with a `run_id` column) holding
+    /// only the rows of the runs this view describes (`done`: the latest manifest's finished
+    /// runs), as every figure drawn from a raw table must: rows of runs the latest manifest no
+    /// longer asks for stay in the table but in no figure.
+    pub fn read_done(&self, table: &str) -> Result<Vec<RecordBatch>, StoreError> {
+        self.data
+            .read(table)?
+            .iter()
+            .map(|b| self.keep_done(b, table))
+            .collect()
+    }
+
+    /// The rows of `b` (of `table`, with a `run_id` column) of the runs in `done`.
+    pub fn keep_done(&self, b: &RecordBatch, table: &str) -> Result<RecordBatch, StoreError> {
+        let runs = crate::store::cols::get_u64(b, table, "run_id")?;
+        let keep: arrow_array::BooleanArray = runs
+            .iter()
+            .map(|r| Some(r.is_some_and(|r| self.done.contains_key(&r))))
+            .collect();
+        arrow_select::filter::filter_record_batch(b, &keep)
+            .map_err(|e| StoreError::Arrow(format!("{table}: {e}")))
+    }
+}
+
+impl<P> CampaignView<'_, P> {
+    /// The legend label of a point: its swept values (quotes dropped), `point <id>` without a
+    /// sweep.
+    pub fn point_label(&self, point: u32) -> String {
+        let label = self
+            .points
+            .iter()
+            .find(|p| p.point_id == point)
+            .map(|p| p.label.replace('"', ""))
+            .unwrap_or_default();
+        if label.is_empty() {
+            format!("point {point}")
+        } else {
+            label
+        }
+    }
+}
+
+/// One sweep point of a [`CampaignView`].
+pub struct PointView<'a, P> {
+    pub point_id: u32,
+    pub params: &'a P,
+    /// The swept values, `key=value, ...` (empty without a sweep).
+    pub label: String,
+    /// The swept values: each sweep key (a dotted path into `params`) with the point's value
+    /// there, in the manifest's order (empty without a sweep).
+    pub swept: Vec<(&'a str, &'a Value)>,
+    /// How many of the view's finished runs (`CampaignView::done`) are of this point.
+    pub runs_done: u32,
+}
