@@ -17,7 +17,8 @@ physics is tame); 4 (I/O) or a panic (101), a hang (over --hang seconds) or anyt
 the drill. `verify` may also say 3 while another command writes (a part not yet committed, a
 live compaction).
 
-At the end: `resume` until it exits 0, then the campaign must equal (scripts/compare_tables.py
+At the end: a growth to every replicated value with 3 replicas (`run`, must exit 0), so the
+comparison covers the runs the drill made; `resume` until it exits 0, then the campaign must equal (scripts/compare_tables.py
 --current) a campaign run directly from its final manifest (DIR/manifest.json), `verify` must
 exit 0, and nothing in the sibling directory `outside/` (files planted next to the campaign,
 and reachable through a symbolic link that the drill plants in the campaign once, at the
@@ -188,6 +189,20 @@ class Drill:
     def final(self) -> None:
         d = str(self.dir)
         logf = self.work / "logs" / "final.log"
+        # Grow to every replicated value with 3 replicas, so that the comparison below covers
+        # the runs the drill made (not only the last random manifest's few).
+        whole = manifest(random.Random(0), self.t_end)
+        whole.pop("seeds", None)
+        whole["replicas"] = 3
+        whole["sweep"]["restitution.constant"] = RESTITUTIONS
+        path = self.work / "manifests" / "final.json"
+        path.write_text(json.dumps(whole))
+        with open(logf, "a") as lf:
+            code = subprocess.call([self.bin, "run", str(path), "--out", d, "--quiet"],
+                                   stdout=lf, stderr=lf)
+        if code != 0:
+            self.failures.append(f"the final growth exited {code}; see {logf}")
+            return
         for attempt in range(5):
             with open(logf, "a") as lf:
                 code = subprocess.call([self.bin, "resume", d, "--quiet"], stdout=lf, stderr=lf)
