@@ -9,7 +9,6 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 use serde_json::{json, Value};
@@ -17,12 +16,9 @@ use serde_json::{json, Value};
 use super::util::{
     self, heavy, log_text, read_tables, run_capture, run_granular, write_json, Tables,
 };
+use super::util::{copy_dir, s};
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// 4 small runs (two points x two replicas), committed one by one (`--flush-every 0`), so the
 /// ledger has four commit records.
@@ -63,14 +59,6 @@ fn run_committing_each(m: &Path, out: &Path, extra: &[&str], log: &Path) {
         "{}",
         log_text(log)
     );
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    let ok = Command::new("cp")
-        .args(["-a", s(from), s(to)])
-        .status()
-        .unwrap();
-    assert!(ok.success());
 }
 
 /// Flip 8 bytes in the middle of a file (its size unchanged).

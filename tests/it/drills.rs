@@ -9,16 +9,13 @@ use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
 
+use super::util::s;
 use super::util::{
     self, granular, heavy, log_text, read_tables, run_capture, run_granular, wait_limited,
     write_json, Tables,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// 4 runs of ~0.5-1 s each (N1 = 1.5e5, t_end = 40): long enough to be caught running.
 fn slow_manifest() -> Value {

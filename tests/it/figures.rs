@@ -10,13 +10,10 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
+use super::util::s;
 use super::util::{heavy, log_text, repo_root, run_capture, run_granular, write_json};
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// The names (without extension) of the files of `dir` ending in `.ext`.
 fn stems(dir: &Path, ext: &str) -> BTreeSet<String> {

@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
+use super::util::s;
 use super::util::{
     self, assert_same_current, assert_same_current_except, heavy, log_text, read_all, read_table,
     run_capture, run_granular, Cell, Table,
@@ -20,10 +21,6 @@ use super::util::{
 
 /// Upper bound on any single `granular` process of these tests (a hang is a failure).
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// Bytes of every Parquet file under `tables/`, by path relative to `tables/`.
 fn table_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {

@@ -18,12 +18,9 @@ use std::time::{Duration, SystemTime};
 use serde_json::{json, Value};
 
 use super::util::{self, heavy, log_text, read_tables, run_capture, run_granular, write_json};
+use super::util::{copy_dir, dead_pid, s};
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// 4 small runs (two points x two replicas), each its own commit.
 fn manifest() -> Value {
@@ -66,40 +63,8 @@ fn base(dir: &Path, log: &Path) -> PathBuf {
     base
 }
 
-fn copy_dir(from: &Path, to: &Path) {
-    let ok = std::process::Command::new("cp")
-        .args(["-a", s(from), s(to)])
-        .status()
-        .unwrap();
-    assert!(ok.success());
-}
-
 fn symlink(target: &Path, link: &Path) {
     std::os::unix::fs::symlink(target, link).unwrap();
-}
-
-/// What `fsutil::host_tag` makes of this host's name (temporary files carry it).
-fn host_tag() -> String {
-    fs::read_to_string("/proc/sys/kernel/hostname")
-        .unwrap()
-        .trim()
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
-}
-
-/// The pid of a process that has ended (so its temporaries look stale).
-fn dead_pid() -> u32 {
-    let mut c = std::process::Command::new("true").spawn().unwrap();
-    let pid = c.id();
-    c.wait().unwrap();
-    pid
 }
 
 /// Files that a command following links would take for its own, in the outside directory:
@@ -110,7 +75,10 @@ fn bait(out: &Path, pid: u32) {
     fs::write(out.join("secret.txt"), b"not granular's").unwrap();
     fs::write(out.join(".part-s1of1-00000009.parquet.pending"), b"p").unwrap();
     fs::write(
-        out.join(format!(".run-0000000003.ckpt.{pid}-1@{}.tmp", host_tag())),
+        out.join(format!(
+            ".run-0000000003.ckpt.{pid}-1@{}.tmp",
+            granular::fsutil::host_tag()
+        )),
         b"t",
     )
     .unwrap();

@@ -17,16 +17,13 @@ use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
 
+use super::util::s;
 use super::util::{
     self, assert_same_current, granular, heavy, log_text, read_table, run_granular, wait_limited,
     Cell,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// A tiny DSMC campaign (1 restitution value x 2 replicas, ~1200 particles, t_end 5): each
 /// run takes milliseconds.

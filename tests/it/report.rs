@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
+use super::util::s;
 use super::util::{heavy, log_text, run_capture, run_granular, snapshot, write_json};
 
 const LIMIT: Duration = Duration::from_secs(300);
@@ -32,10 +33,6 @@ fn manifest() -> Value {
         },
         "sweep": {"restitution.constant": [0.7, 0.9]}
     })
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// Sources or links to the network, scripts, stylesheets or imports.

@@ -13,6 +13,7 @@ use serde_json::{json, Value};
 use super::util::{
     self, heavy, log_text, read_table, read_tables, run_granular, status_json, Lcg, Tables,
 };
+use super::util::{dead_pid, s};
 
 /// Upper bound on any single `granular` process of these tests (a hang is a failure).
 const LIMIT: Duration = Duration::from_secs(300);
@@ -69,10 +70,6 @@ struct Reference {
 }
 
 static REFERENCE: OnceLock<Reference> = OnceLock::new();
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// Sanity of a finished campaign's tables: every run once, done, with its rows.
 fn check_complete(t: &Tables, n_runs: u64, what: &str) {
@@ -669,15 +666,6 @@ fn finished_small(dir: &Path) -> (PathBuf, PathBuf, Tables) {
     let t = read_tables(&e);
     check_complete(&t, 4, "small campaign");
     (e, log, t)
-}
-
-/// The pid of a process that has exited (and been reaped): what a killed writer leaves.
-fn dead_pid() -> u32 {
-    let mut c = std::process::Command::new("true")
-        .spawn()
-        .expect("spawn true");
-    c.wait().unwrap();
-    c.id()
 }
 
 /// The ledger's recovery, staged by hand: a part whose commit record exists but which was

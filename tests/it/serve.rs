@@ -28,15 +28,12 @@ use std::time::{Duration, Instant, SystemTime};
 
 use serde_json::{json, Value};
 
+use super::util::s;
 use super::util::{
     bin, granular, heavy, log_text, run_capture, run_granular, snapshot, write_json,
 };
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// A running `granular serve`, killed on drop.
 struct Server {

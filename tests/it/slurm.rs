@@ -12,13 +12,10 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
+use super::util::s;
 use super::util::{self, bin, heavy, log_text, read_tables, run_granular, write_json};
 
 const LIMIT: Duration = Duration::from_secs(300);
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// 10 short runs (2 points x 5 replicas).
 fn manifest() -> Value {

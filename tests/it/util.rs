@@ -696,3 +696,24 @@ pub fn assert_same_current_except(a: &Path, b: &Path, what: &str, drop: &[&str])
         }
     }
 }
+
+/// A path as the `&str` of a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// `cp -a from to`.
+pub fn copy_dir(from: &Path, to: &Path) {
+    let ok = Command::new("cp")
+        .args(["-a", s(from), s(to)])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
+/// The pid of a process that has ended (its locks and temporaries look stale).
+pub fn dead_pid() -> u32 {
+    let mut c = Command::new("true").spawn().expect("spawn true");
+    c.wait().unwrap();
+    c.id()
+}
