@@ -331,17 +331,8 @@ impl Campaign {
             }
             return Ok((self, Growth::default()));
         }
-        let expansion = plan::expand(&manifest).map_err(|errs| {
-            CampaignError::Manifest(ManifestErrors::new(
-                "manifest",
-                errs.into_iter()
-                    .map(|(path, message)| crate::manifest::validate::ManifestError {
-                        path,
-                        message,
-                    })
-                    .collect(),
-            ))
-        })?;
+        let expansion = plan::expand(&manifest)
+            .map_err(|errs| CampaignError::Manifest(ManifestErrors::of_pairs("manifest", errs)))?;
         let mut registry = self.plan.registry.clone();
         let runs = manifest.runs_per_point();
         let old_plan = &self.plan;

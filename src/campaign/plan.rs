@@ -1,5 +1,6 @@
 //! The plan: a validated manifest expanded into sweep points and runs with stable ids and
-//! seeds; loading a manifest with all three stages of validation ([`load`], [`parse`]).
+//! seeds; a manifest file or text validated (`manifest::check`, the one validation
+//! pass) and planned as a new campaign ([`load`], [`parse`]).
 //!
 //! Points are the cartesian product of the sweep lists (first key outermost) and are numbered
 //! `point_id = 0..`; each point has `replicas` runs, `run_id = point_id * replicas + replica`.
@@ -12,9 +13,9 @@ use serde_json::Value;
 
 use super::registry::{run_identity, Asked, Registry, RunBlock, SeedSource};
 pub use crate::manifest::sweep::canonical;
-use crate::manifest::sweep::{path_exists, pointer_escape, set_path, sweep_key_errors};
-use crate::manifest::validate::{self, params_schema_errors};
-use crate::manifest::validate::{ManifestError, ManifestErrors};
+pub use crate::manifest::expand::{expand, Expansion};
+use crate::manifest::validate;
+use crate::manifest::validate::ManifestErrors;
 use crate::manifest::{Manifest, RunsPerPoint};
 use crate::models::{ModelKind, ModelParams};
 
@@ -334,66 +335,19 @@ pub fn derive_seed_swept(
     ChaCha20Rng::from_seed(key).next_u64()
 }
 
-/// Read and validate a manifest file: JSON syntax, schema, then the expanded sweep.
+/// Read and validate a manifest file and plan a new campaign of it.
 pub fn load(path: &std::path::Path) -> Result<(Manifest, Plan), ManifestErrors> {
     let file = path.display().to_string();
     let text = validate::read(path)?;
     parse(&text, &file)
 }
 
-/// Validate manifest text; `file` names it in errors.
+/// Validate manifest text ([`crate::manifest::check`]: the one validation pass) and plan a new
+/// campaign of it; `file` names it in errors.
 pub fn parse(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors> {
-    let manifest = validate::parse(text, file).map_err(|e| with_checks_beside(text, e))?;
-    let to_errors = |errs: Vec<(String, String)>| {
-        ManifestErrors::new(
-            file,
-            errs.into_iter()
-                .map(|(path, message)| ManifestError { path, message })
-                .collect(),
-        )
-    };
-    let expansion = expand(&manifest).map_err(to_errors)?;
-    let plan = fresh(&manifest, expansion).map_err(|e| to_errors(vec![(String::new(), e)]))?;
+    let (manifest, expansion) = crate::manifest::check::check(text, file)?;
+    let plan = fresh(&manifest, expansion).map_err(|e| ManifestErrors::whole(file, e))?;
     Ok((manifest, plan))
-}
-
-/// Every error at once: where the schema found errors in `params`, the checks it cannot
-/// express (cross-field rules, sweep values, limits, the model's checks) run on the manifest
-/// with the offending members left out (`validate::pruned`), and those of their errors that
-/// have nothing to do with a member left out (not at, in or above it, not in a sweep of it,
-/// not naming it) are reported beside the schema's. Before, a bad observable hid that
-/// `volume` and `number_density` were both given until it was fixed.
-fn with_checks_beside(text: &str, e: ManifestErrors) -> ManifestErrors {
-    let Some((m, left_out)) = validate::pruned(text, &e.errors) else {
-        return e;
-    };
-    let Err(more) = expand(&m) else {
-        return e;
-    };
-    let related = |path: &str, message: &str| {
-        left_out.iter().any(|out| {
-            let key = out.rsplit('/').next().unwrap_or(out);
-            let swept = path.strip_prefix("/sweep/").map(|k| {
-                let k = k.split('/').next().unwrap_or(k);
-                format!("/params/{}", k.replace('.', "/"))
-            });
-            let near = |p: &str| {
-                p == out || p.starts_with(&format!("{out}/")) || out.starts_with(&format!("{p}/"))
-            };
-            near(path)
-                || swept.is_some_and(|p| near(&p))
-                || message.contains(&format!("`{key}`"))
-                || message.contains(&format!("\"{key}\""))
-                || message.contains(out.as_str())
-        })
-    };
-    let mut errors = e.errors;
-    errors.extend(
-        more.into_iter()
-            .filter(|(path, message)| !related(path, message))
-            .map(|(path, message)| ManifestError { path, message }),
-    );
-    ManifestErrors::new(&e.file, errors)
 }
 
 /// The plan of a new campaign of `m`: its points and runs registered in sweep order.
@@ -411,213 +365,6 @@ pub fn fresh(m: &Manifest, expansion: Expansion) -> Result<Plan, String> {
         )
         .map_err(|e| e.join("; "))?;
     Plan::new(m, expansion, registry)
-}
-
-/// A manifest's points in sweep order (first key outermost), typed and checked.
-#[derive(Clone, Debug)]
-pub struct Expansion {
-    /// Dotted sweep paths into `params`, in manifest order.
-    pub sweep_keys: Vec<String>,
-    pub points: Vec<ModelParams>,
-    /// Each point's swept values, as the sweep lists give them.
-    pub values: Vec<Vec<Value>>,
-}
-
-fn typed(
-    model: ModelKind,
-    params: &Value,
-    prefix: &str,
-    errors: &mut Vec<(String, String)>,
-) -> Option<ModelParams> {
-    let schema_errs = params_schema_errors(model, params, prefix);
-    if !schema_errs.is_empty() {
-        errors.extend(schema_errs.into_iter().map(|e| (e.path, e.message)));
-        return None;
-    }
-    model.params_from(params, prefix, errors)
-}
-
-/// Expand the sweep; every problem is returned as (JSON pointer, message).
-pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
-    let mut errors = runs_errors(m);
-    let base = Value::Object(m.params.clone());
-    let mut base_errors = Vec::new();
-    let base_typed = typed(m.model, &base, "/params", &mut base_errors);
-    // An error of the base params is reported once, not again with each sweep value.
-    let of_base: std::collections::HashSet<(String, String)> =
-        base_errors.iter().cloned().collect();
-    errors.extend(base_errors);
-
-    let keys: Vec<String> = m.sweep.keys().cloned().collect();
-    errors.extend(sweep_key_errors(&base, &m.sweep));
-    let lists: Vec<Vec<Value>> = keys
-        .iter()
-        .map(|k| m.sweep[k].as_array().cloned().unwrap_or_default())
-        .collect();
-    // The size of the campaign, from the list lengths: nothing is expanded beyond the limits,
-    // and the values of a sweep too large are not checked one by one.
-    let size = size_errors(m, &lists);
-    let too_large = !size.is_empty();
-    errors.extend(size);
-    for (key, list) in keys.iter().zip(&lists) {
-        let kp = format!("/sweep/{}", pointer_escape(key));
-        let parts: Vec<&str> = key.split('.').collect();
-        let ok = path_exists(&base, &parts);
-        // Each value alone must make valid params; report at the sweep value.
-        if ok && base_typed.is_some() && !too_large {
-            for (i, v) in list.iter().enumerate() {
-                let mut p = base.clone();
-                set_path(&mut p, &parts, v.clone());
-                let mut errs = Vec::new();
-                typed(m.model, &p, "/params", &mut errs);
-                let at = format!(
-                    "/params/{}",
-                    parts
-                        .iter()
-                        .map(|s| pointer_escape(s))
-                        .collect::<Vec<_>>()
-                        .join("/")
-                );
-                for (path, msg) in errs {
-                    if of_base.contains(&(path.clone(), msg.clone())) {
-                        continue;
-                    }
-                    let mapped = match path.strip_prefix(&at) {
-                        Some(rest) => format!("{kp}/{i}{rest}"),
-                        None => format!("{kp}/{i}"),
-                    };
-                    let msg = if path.starts_with(&at) {
-                        msg
-                    } else {
-                        format!("with this value, {path}: {msg}")
-                    };
-                    errors.push((mapped, msg));
-                }
-            }
-        }
-    }
-    if !errors.is_empty() || base_typed.is_none() {
-        return Err(errors);
-    }
-
-    // Cartesian product, first key outermost.
-    let n_points: usize = lists.iter().map(|l| l.len()).product();
-    let mut points = Vec::with_capacity(n_points);
-    let mut swept = Vec::with_capacity(n_points);
-    for point_id in 0..n_points {
-        let mut rem = point_id;
-        let mut idx = vec![0usize; lists.len()];
-        for (j, l) in lists.iter().enumerate().rev() {
-            idx[j] = rem % l.len();
-            rem /= l.len();
-        }
-        let values: Vec<Value> = idx
-            .iter()
-            .enumerate()
-            .map(|(j, &i)| lists[j][i].clone())
-            .collect();
-        let params = if keys.is_empty() {
-            base_typed.clone()
-        } else {
-            let mut p = base.clone();
-            for (key, v) in keys.iter().zip(&values) {
-                let parts: Vec<&str> = key.split('.').collect();
-                set_path(&mut p, &parts, v.clone());
-            }
-            let mut errs = Vec::new();
-            let t = typed(m.model, &p, "/params", &mut errs);
-            for (path, msg) in errs {
-                let desc: Vec<String> = keys
-                    .iter()
-                    .zip(&values)
-                    .map(|(k, v)| format!("{k}={v}"))
-                    .collect();
-                errors.push((path, format!("{msg} (at sweep point {})", desc.join(", "))));
-            }
-            t
-        };
-        if let Some(params) = params {
-            points.push(params);
-            swept.push(values);
-        }
-    }
-    if !errors.is_empty() {
-        return Err(errors);
-    }
-    Ok(Expansion {
-        sweep_keys: keys,
-        points,
-        values: swept,
-    })
-}
-
-/// Most sweep points a manifest may ask for (the thesis's largest sweep has 154).
-pub const MAX_POINTS: u64 = 100_000;
-
-/// Most runs a manifest may ask for (points x replicas or seeds); `scripts/bench-scale.sh`
-/// makes 10^5.
-pub const MAX_RUNS: u64 = 10_000_000;
-
-/// The points (the product of the sweep lists' lengths) and runs (times the replicas or seeds)
-/// against [`MAX_POINTS`] and [`MAX_RUNS`], in saturating arithmetic.
-fn size_errors(m: &Manifest, lists: &[Vec<Value>]) -> Vec<(String, String)> {
-    let mut errors = Vec::new();
-    let points = lists
-        .iter()
-        .fold(1u64, |a, l| a.saturating_mul(l.len() as u64));
-    let (per_point, per_at, per_what) = match m.runs_per_point() {
-        RunsPerPoint::Replicas(r) => (r as u64, "/replicas", "replicas"),
-        RunsPerPoint::Seeds(s) => (s.len() as u64, "/seeds", "seeds"),
-    };
-    let product = || {
-        lists
-            .iter()
-            .map(|l| l.len().to_string())
-            .collect::<Vec<_>>()
-            .join(" x ")
-    };
-    if points > MAX_POINTS {
-        errors.push((
-            "/sweep".into(),
-            format!(
-                "{points} points ({} values), more than the limit of {MAX_POINTS} points per manifest",
-                product()
-            ),
-        ));
-    }
-    let runs = points.saturating_mul(per_point);
-    if runs > MAX_RUNS {
-        errors.push((
-            per_at.into(),
-            format!(
-                "{runs} runs ({points} point{} x {per_point} {per_what}), more than the limit of {MAX_RUNS} runs per manifest",
-                if points == 1 { "" } else { "s" }
-            ),
-        ));
-    }
-    errors
-}
-
-/// `replicas` and `seeds` exclude each other; given seeds are distinct.
-fn runs_errors(m: &Manifest) -> Vec<(String, String)> {
-    let mut errors = Vec::new();
-    if m.replicas.is_some() && m.seeds.is_some() {
-        errors.push((
-            "/seeds".into(),
-            "give `replicas` or `seeds`, not both".into(),
-        ));
-    }
-    if let Some(seeds) = &m.seeds {
-        for (i, s) in seeds.iter().enumerate() {
-            if seeds[..i].contains(s) {
-                errors.push((
-                    format!("/seeds/{i}"),
-                    format!("duplicate seed {s} (would make the same run twice)"),
-                ));
-            }
-        }
-    }
-    errors
 }
 
 #[cfg(test)]

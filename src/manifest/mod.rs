@@ -1,9 +1,12 @@
 //! The JSON manifest's envelope: serde types that mirror the file exactly
 //! (`deny_unknown_fields`, no `untagged`/`flatten`), the JSON Schema generated from them with
-//! each model's `params` schema (from `models`), and the first two stages of validation
-//! ([`validate`]: JSON syntax and the schema, every error at once with its JSON path). The
-//! third stage, the checks of the expanded sweep, is `campaign::plan`.
+//! each model's `params` schema (from `models`), and the one validation pass
+//! ([`check`]: JSON syntax, the schema, then the checks the schema cannot express on
+//! the expanded sweep ([`expand`]), every error at once with its JSON path). `campaign::plan`
+//! numbers and seeds the points of a valid manifest; it checks nothing of the manifest.
 
+pub mod check;
+pub mod expand;
 pub mod sweep;
 pub mod validate;
 

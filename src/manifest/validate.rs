@@ -6,7 +6,7 @@
 //! schema cannot express (cross-field rules, sweep paths, duplicate points), run on the base
 //! parameters, on every sweep value and on every point of the sweep. Where stage 2 finds errors
 //! in `params`, stage 3 still runs on the manifest with those members left out ([`pruned`]), and
-//! its errors unrelated to them are reported too (`campaign::plan::parse`): every error at
+//! its errors unrelated to them are reported too ([`super::check`], the one pass): every error at
 //! once, each once (an error of the base params is not repeated at each sweep value).
 
 use std::fmt;
@@ -62,10 +62,26 @@ impl ManifestErrors {
             errors,
         }
     }
+
+    /// The problems of `file` given as (JSON pointer, message) pairs, each reported once.
+    pub fn of_pairs(file: &str, errors: Vec<(String, String)>) -> Self {
+        Self::new(
+            file,
+            errors
+                .into_iter()
+                .map(|(path, message)| ManifestError { path, message })
+                .collect(),
+        )
+    }
+
+    /// One problem of the manifest as a whole (no JSON path).
+    pub fn whole(file: &str, message: String) -> Self {
+        Self::of_pairs(file, vec![(String::new(), message)])
+    }
 }
 
 /// The largest manifest file read (16 MiB): a manifest is a few kilobytes, a sweep of the
-/// largest size allowed (`campaign::plan::MAX_POINTS`) a few megabytes at most.
+/// largest size allowed (`manifest::expand::MAX_POINTS`) a few megabytes at most.
 pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
 
 /// The text of a manifest file (an unreadable file, one larger than [`MAX_MANIFEST_BYTES`] or

@@ -481,6 +481,46 @@ fn no_forbidden_arrows() {
     assert!(bad.is_empty(), "forbidden arrows:\n{}", bad.join("\n"));
 }
 
+/// What in a file's code builds or runs a manifest check outside the one validation pass
+/// (`manifest::check`: stages 1-2 in `manifest::validate`, 3 in `manifest::expand`): a `ManifestError` made
+/// by hand, or a call of the pass's checks. Every manifest error is found in `src/manifest/`
+/// (and in each model's `check`, which the pass calls through `ModelKind::params_from`).
+fn validation_outside(code: &str) -> Vec<&'static str> {
+    [
+        "ManifestError {",
+        "params_schema_errors(",
+        "sweep_key_errors(",
+        "size_errors(",
+        "runs_errors(",
+        "with_checks_beside(",
+    ]
+    .into_iter()
+    .filter(|k| code.contains(k))
+    .collect()
+}
+
+#[test]
+fn validation_lives_in_one_place() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut bad = Vec::new();
+    for f in &files {
+        if f.starts_with(src.join("manifest")) {
+            continue;
+        }
+        let text = std::fs::read_to_string(f).expect("readable source");
+        for k in validation_outside(&code_of(&text)) {
+            bad.push(format!("{}: {k}", f.display()));
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "manifest checks outside the one validation pass (src/manifest/):\n{}",
+        bad.join("\n")
+    );
+}
+
 /// The checker itself: use trees, `super`, inline paths and test modules are read right, and a
 /// planted circle and forbidden arrow are found.
 #[test]
@@ -539,4 +579,9 @@ fn the_checker_sees_what_it_should() {
     assert!(forbidden("models::rfm::analysis", "analysis").is_none());
     assert!(forbidden("models::rfm::analysis", "campaign::tables").is_some());
     assert!(forbidden("models::cascade::analysis", "models::rfm::analysis").is_some());
+    assert_eq!(
+        validation_outside("let e = ManifestError { path, message };"),
+        vec!["ManifestError {"]
+    );
+    assert!(validation_outside(&code_of("// sweep_key_errors(p, s)\nfn f() {}\n")).is_empty());
 }

@@ -1,0 +1,220 @@
+//! The third stage of the one validation pass ([`super::validate::check`]): the checks the
+//! JSON Schema cannot express, on the typed manifest. The limits of a manifest (points, runs),
+//! `replicas` against `seeds`, then each model's own checks (through
+//! `ModelKind::params_from`: `Model::check` in the model's home) on the base parameters, on every
+//! sweep value alone and on every point of the sweep, every error with its JSON path, each once.
+//! Its result, the [`Expansion`], is what `campaign::plan` numbers and seeds.
+
+use serde_json::Value;
+
+use super::sweep::{path_exists, pointer_escape, set_path, sweep_key_errors};
+use super::validate::params_schema_errors;
+use super::{Manifest, RunsPerPoint};
+use crate::models::{ModelKind, ModelParams};
+
+/// A manifest's points in sweep order (first key outermost), typed and checked.
+#[derive(Clone, Debug)]
+pub struct Expansion {
+    /// Dotted sweep paths into `params`, in manifest order.
+    pub sweep_keys: Vec<String>,
+    pub points: Vec<ModelParams>,
+    /// Each point's swept values, as the sweep lists give them.
+    pub values: Vec<Vec<Value>>,
+}
+
+fn typed(
+    model: ModelKind,
+    params: &Value,
+    prefix: &str,
+    errors: &mut Vec<(String, String)>,
+) -> Option<ModelParams> {
+    let schema_errs = params_schema_errors(model, params, prefix);
+    if !schema_errs.is_empty() {
+        errors.extend(schema_errs.into_iter().map(|e| (e.path, e.message)));
+        return None;
+    }
+    model.params_from(params, prefix, errors)
+}
+
+/// Expand the sweep; every problem is returned as (JSON pointer, message).
+pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
+    let mut errors = runs_errors(m);
+    let base = Value::Object(m.params.clone());
+    let mut base_errors = Vec::new();
+    let base_typed = typed(m.model, &base, "/params", &mut base_errors);
+    // An error of the base params is reported once, not again with each sweep value.
+    let of_base: std::collections::HashSet<(String, String)> =
+        base_errors.iter().cloned().collect();
+    errors.extend(base_errors);
+
+    let keys: Vec<String> = m.sweep.keys().cloned().collect();
+    errors.extend(sweep_key_errors(&base, &m.sweep));
+    let lists: Vec<Vec<Value>> = keys
+        .iter()
+        .map(|k| m.sweep[k].as_array().cloned().unwrap_or_default())
+        .collect();
+    // The size of the campaign, from the list lengths: nothing is expanded beyond the limits,
+    // and the values of a sweep too large are not checked one by one.
+    let size = size_errors(m, &lists);
+    let too_large = !size.is_empty();
+    errors.extend(size);
+    for (key, list) in keys.iter().zip(&lists) {
+        let kp = format!("/sweep/{}", pointer_escape(key));
+        let parts: Vec<&str> = key.split('.').collect();
+        let ok = path_exists(&base, &parts);
+        // Each value alone must make valid params; report at the sweep value.
+        if ok && base_typed.is_some() && !too_large {
+            for (i, v) in list.iter().enumerate() {
+                let mut p = base.clone();
+                set_path(&mut p, &parts, v.clone());
+                let mut errs = Vec::new();
+                typed(m.model, &p, "/params", &mut errs);
+                let at = format!(
+                    "/params/{}",
+                    parts
+                        .iter()
+                        .map(|s| pointer_escape(s))
+                        .collect::<Vec<_>>()
+                        .join("/")
+                );
+                for (path, msg) in errs {
+                    if of_base.contains(&(path.clone(), msg.clone())) {
+                        continue;
+                    }
+                    let mapped = match path.strip_prefix(&at) {
+                        Some(rest) => format!("{kp}/{i}{rest}"),
+                        None => format!("{kp}/{i}"),
+                    };
+                    let msg = if path.starts_with(&at) {
+                        msg
+                    } else {
+                        format!("with this value, {path}: {msg}")
+                    };
+                    errors.push((mapped, msg));
+                }
+            }
+        }
+    }
+    if !errors.is_empty() || base_typed.is_none() {
+        return Err(errors);
+    }
+
+    // Cartesian product, first key outermost.
+    let n_points: usize = lists.iter().map(|l| l.len()).product();
+    let mut points = Vec::with_capacity(n_points);
+    let mut swept = Vec::with_capacity(n_points);
+    for point_id in 0..n_points {
+        let mut rem = point_id;
+        let mut idx = vec![0usize; lists.len()];
+        for (j, l) in lists.iter().enumerate().rev() {
+            idx[j] = rem % l.len();
+            rem /= l.len();
+        }
+        let values: Vec<Value> = idx
+            .iter()
+            .enumerate()
+            .map(|(j, &i)| lists[j][i].clone())
+            .collect();
+        let params = if keys.is_empty() {
+            base_typed.clone()
+        } else {
+            let mut p = base.clone();
+            for (key, v) in keys.iter().zip(&values) {
+                let parts: Vec<&str> = key.split('.').collect();
+                set_path(&mut p, &parts, v.clone());
+            }
+            let mut errs = Vec::new();
+            let t = typed(m.model, &p, "/params", &mut errs);
+            for (path, msg) in errs {
+                let desc: Vec<String> = keys
+                    .iter()
+                    .zip(&values)
+                    .map(|(k, v)| format!("{k}={v}"))
+                    .collect();
+                errors.push((path, format!("{msg} (at sweep point {})", desc.join(", "))));
+            }
+            t
+        };
+        if let Some(params) = params {
+            points.push(params);
+            swept.push(values);
+        }
+    }
+    if !errors.is_empty() {
+        return Err(errors);
+    }
+    Ok(Expansion {
+        sweep_keys: keys,
+        points,
+        values: swept,
+    })
+}
+
+/// Most sweep points a manifest may ask for (the thesis's largest sweep has 154).
+pub const MAX_POINTS: u64 = 100_000;
+
+/// Most runs a manifest may ask for (points x replicas or seeds); `scripts/bench-scale.sh`
+/// makes 10^5.
+pub const MAX_RUNS: u64 = 10_000_000;
+
+/// The points (the product of the sweep lists' lengths) and runs (times the replicas or seeds)
+/// against [`MAX_POINTS`] and [`MAX_RUNS`], in saturating arithmetic.
+fn size_errors(m: &Manifest, lists: &[Vec<Value>]) -> Vec<(String, String)> {
+    let mut errors = Vec::new();
+    let points = lists
+        .iter()
+        .fold(1u64, |a, l| a.saturating_mul(l.len() as u64));
+    let (per_point, per_at, per_what) = match m.runs_per_point() {
+        RunsPerPoint::Replicas(r) => (r as u64, "/replicas", "replicas"),
+        RunsPerPoint::Seeds(s) => (s.len() as u64, "/seeds", "seeds"),
+    };
+    let product = || {
+        lists
+            .iter()
+            .map(|l| l.len().to_string())
+            .collect::<Vec<_>>()
+            .join(" x ")
+    };
+    if points > MAX_POINTS {
+        errors.push((
+            "/sweep".into(),
+            format!(
+                "{points} points ({} values), more than the limit of {MAX_POINTS} points per manifest",
+                product()
+            ),
+        ));
+    }
+    let runs = points.saturating_mul(per_point);
+    if runs > MAX_RUNS {
+        errors.push((
+            per_at.into(),
+            format!(
+                "{runs} runs ({points} point{} x {per_point} {per_what}), more than the limit of {MAX_RUNS} runs per manifest",
+                if points == 1 { "" } else { "s" }
+            ),
+        ));
+    }
+    errors
+}
+
+/// `replicas` and `seeds` exclude each other; given seeds are distinct.
+fn runs_errors(m: &Manifest) -> Vec<(String, String)> {
+    let mut errors = Vec::new();
+    if m.replicas.is_some() && m.seeds.is_some() {
+        errors.push((
+            "/seeds".into(),
+            "give `replicas` or `seeds`, not both".into(),
+        ));
+    }
+    if let Some(seeds) = &m.seeds {
+        for (i, s) in seeds.iter().enumerate() {
+            if seeds[..i].contains(s) {
+                errors.push((
+                    format!("/seeds/{i}"),
+                    format!("duplicate seed {s} (would make the same run twice)"),
+                ));
+            }
+        }
+    }
+    errors
+}
