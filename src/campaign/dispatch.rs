@@ -35,20 +35,7 @@ pub fn run(
 ) -> Result<Outcome, CampaignError> {
     let _lock = ShardLock::acquire(&c.root, opts.shard)?;
     super::test_hook::pause("shard-locked");
-    let fresh = Campaign::open(&c.root)?;
-    if fresh.manifest_json != c.manifest_json || fresh.plan.registry != c.plan.registry {
-        reporter.event(&Event::Warning {
-            message: format!(
-                "{}: the campaign was changed by another command since this one read it; running its latest manifest ({})",
-                c.root.display(),
-                fresh
-                    .history
-                    .last()
-                    .map(|h| h.file.as_str())
-                    .unwrap_or("campaign.json")
-            ),
-        });
-    }
+    let fresh = reopen(c, reporter)?;
     let c = &fresh;
     let memory = Memory::of_this_machine();
     if let Some(mem) = memory {
@@ -56,90 +43,24 @@ pub fn run(
     }
     c.repair_manifest_copy();
     let tag = opts.shard.tag();
-    {
-        // Dead shards' commits and damage, one shard process at a time.
-        let _upkeep = Upkeep::acquire(&c.root)?;
-        for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
-            reporter.event(&Event::Warning { message: note });
-        }
-        // The tables against the ledger (sizes), healed before anything is planned.
-        heal(c, integrity::Depth::Quick, &tag, reporter)?;
-    }
+    recover_and_heal(c, &tag, reporter)?;
     let ckpt_dir = c.checkpoint_dir();
     fsutil::create_dir_durable(&ckpt_dir).map_err(|e| io_err(&ckpt_dir, e))?;
-    let io = |e: crate::store::parquet_io::StoreError| CampaignError::Io(e.to_string());
     let threads = worker_threads(c, opts, memory, reporter);
     let mut outcome = Outcome::default();
     let mut rounds = 0;
     loop {
-        let finished = finished_runs(c)?;
         // The runs of this shard that the latest manifest asks for.
         let mine: Vec<RunSpec> = c
             .plan
             .current_runs()
             .filter(|r| opts.shard.contains(r.run_id))
             .collect();
-        let pending: Vec<RunSpec> = mine
-            .iter()
-            .filter(|r| !finished.contains_key(&r.run_id))
-            .copied()
-            .collect();
-        reporter.event(&Event::Plan {
-            total: mine.len() as u64,
-            already: (mine.len() - pending.len()) as u64,
-            pending: pending.len() as u64,
-        });
-        let writer = writer::Writer::new(c, &tag).map_err(io)?;
-        {
-            // The tables written whole (points, registered runs, theory) are rewritten by one
-            // shard process at a time, never while another heals.
-            let _upkeep = Upkeep::acquire(&c.root)?;
-            writer.ensure_points().map_err(io)?;
-            writer.ensure_theory().map_err(io)?;
-        }
-        let mut d = Dispatcher {
-            c,
-            opts,
-            tag: &tag,
-            reporter: &mut *reporter,
-            writer,
-            outcome: std::mem::take(&mut outcome),
-            fatal: None,
-            running: Default::default(),
-            last_heartbeat: Instant::now() - Duration::from_secs(60),
-        };
-        d.drive(&pending, threads)?;
-        let Dispatcher {
-            mut writer,
-            outcome: o,
-            reporter: rep,
-            ..
-        } = d;
-        outcome = o;
-        if let Some((runs, seq)) = writer
-            .flush()
-            .map_err(|e| CampaignError::Io(format!("writing the tables failed: {e}")))?
-        {
-            rep.event(&Event::Committed { runs, seq });
-        }
-        status::remove_heartbeat(&c.root, &tag);
-        if opts.interrupt.load(Ordering::SeqCst) > 0 {
-            outcome.interrupted = true;
-        }
+        outcome = run_pending(c, opts, &tag, &mine, threads, outcome, reporter)?;
         // The ledger as it is now; a record damaged meanwhile is healed below.
         let ledger = ledger::read_ledger(&c.root).map_err(CampaignError::Io)?;
         let finished = ledger::finished_runs(&ledger.commits);
-        outcome.remaining = mine
-            .iter()
-            .filter(|r| !finished.contains_key(&r.run_id))
-            .count() as u64;
-        outcome.failed_in_shard = mine
-            .iter()
-            .filter(|r| finished.get(&r.run_id) == Some(&RunStatus::Failed))
-            .count() as u64;
-        if outcome.remaining == 0 {
-            outcome.interrupted = false;
-        }
+        tally(&mut outcome, &mine, &finished);
         if outcome.interrupted {
             return Ok(outcome);
         }
@@ -175,25 +96,9 @@ pub fn run(
             // Other shards' runs are left: the shard that finishes last writes the summaries.
             return Ok(outcome);
         }
-        // Every run is finished: scrub every file before the summaries read them. Damage
-        // found now is healed and its runs run again.
-        let acted = heal(c, integrity::Depth::Full, &tag, reporter)?;
-        if acted == 0 {
-            // The summaries of the ledger as it is now (read under the upkeep lock, after the
-            // scrub), checked again after they are written.
-            let finished = finished_runs(c)?;
-            if c.plan
-                .current_runs()
-                .all(|r| finished.contains_key(&r.run_id))
-            {
-                c.write_summaries(&finished)
-                    .map_err(|e| CampaignError::Io(e.to_string()))?;
-                let after = finished_runs(c)?;
-                if c.done_replicas(&after) == c.done_replicas(&finished) {
-                    outcome.complete = true;
-                    return Ok(outcome);
-                }
-            }
+        if scrub_and_summarise(c, &tag, reporter)? {
+            outcome.complete = true;
+            return Ok(outcome);
         }
         rounds += 1;
         if rounds >= MAX_ROUNDS {
@@ -203,6 +108,145 @@ pub fn run(
             )));
         }
     }
+}
+
+/// The campaign `c` opened again under the shard's lock (a warning if another command changed
+/// its manifest or registry since `c` was read).
+fn reopen(c: &Campaign, reporter: &mut dyn Reporter) -> Result<Campaign, CampaignError> {
+    let fresh = Campaign::open(&c.root)?;
+    if fresh.manifest_json != c.manifest_json || fresh.plan.registry != c.plan.registry {
+        reporter.event(&Event::Warning {
+            message: format!(
+                "{}: the campaign was changed by another command since this one read it; running its latest manifest ({})",
+                c.root.display(),
+                fresh
+                    .history
+                    .last()
+                    .map(|h| h.file.as_str())
+                    .unwrap_or("campaign.json")
+            ),
+        });
+    }
+    Ok(fresh)
+}
+
+/// Dead shards' commits and damage, one shard process at a time: recover the ledger, then
+/// heal the tables against it (sizes), before anything is planned.
+fn recover_and_heal(
+    c: &Campaign,
+    tag: &str,
+    reporter: &mut dyn Reporter,
+) -> Result<(), CampaignError> {
+    let _upkeep = Upkeep::acquire(&c.root)?;
+    for note in ledger::recover(&c.root, tag).map_err(CampaignError::Io)? {
+        reporter.event(&Event::Warning { message: note });
+    }
+    heal(c, integrity::Depth::Quick, tag, reporter)?;
+    Ok(())
+}
+
+/// One round: the runs of `mine` not finished in the ledger, run on `threads` workers and
+/// committed; `outcome` with their counts added.
+fn run_pending(
+    c: &Campaign,
+    opts: &RunOptions,
+    tag: &str,
+    mine: &[RunSpec],
+    threads: usize,
+    outcome: Outcome,
+    reporter: &mut dyn Reporter,
+) -> Result<Outcome, CampaignError> {
+    let io = |e: crate::store::parquet_io::StoreError| CampaignError::Io(e.to_string());
+    let finished = finished_runs(c)?;
+    let pending: Vec<RunSpec> = mine
+        .iter()
+        .filter(|r| !finished.contains_key(&r.run_id))
+        .copied()
+        .collect();
+    reporter.event(&Event::Plan {
+        total: mine.len() as u64,
+        already: (mine.len() - pending.len()) as u64,
+        pending: pending.len() as u64,
+    });
+    let writer = writer::Writer::new(c, tag).map_err(io)?;
+    {
+        // The tables written whole (points, registered runs, theory) are rewritten by one
+        // shard process at a time, never while another heals.
+        let _upkeep = Upkeep::acquire(&c.root)?;
+        writer.ensure_points().map_err(io)?;
+        writer.ensure_theory().map_err(io)?;
+    }
+    let mut d = Dispatcher {
+        c,
+        opts,
+        tag,
+        reporter: &mut *reporter,
+        writer,
+        outcome,
+        fatal: None,
+        running: Default::default(),
+        last_heartbeat: Instant::now() - Duration::from_secs(60),
+    };
+    d.drive(&pending, threads)?;
+    let Dispatcher {
+        mut writer,
+        mut outcome,
+        reporter: rep,
+        ..
+    } = d;
+    if let Some((runs, seq)) = writer
+        .flush()
+        .map_err(|e| CampaignError::Io(format!("writing the tables failed: {e}")))?
+    {
+        rep.event(&Event::Committed { runs, seq });
+    }
+    status::remove_heartbeat(&c.root, tag);
+    if opts.interrupt.load(Ordering::SeqCst) > 0 {
+        outcome.interrupted = true;
+    }
+    Ok(outcome)
+}
+
+/// The runs of `mine` left unfinished, and failed, in the ledger's `finished`; a shard with
+/// nothing left is not interrupted.
+fn tally(outcome: &mut Outcome, mine: &[RunSpec], finished: &BTreeMap<u64, RunStatus>) {
+    outcome.remaining = mine
+        .iter()
+        .filter(|r| !finished.contains_key(&r.run_id))
+        .count() as u64;
+    outcome.failed_in_shard = mine
+        .iter()
+        .filter(|r| finished.get(&r.run_id) == Some(&RunStatus::Failed))
+        .count() as u64;
+    if outcome.remaining == 0 {
+        outcome.interrupted = false;
+    }
+}
+
+/// Every run is finished: scrub every file before the summaries read them (damage found now
+/// is healed and its runs run again: false), then write the summaries of the ledger as it is
+/// now (read under the upkeep lock, after the scrub); true if they still hold once written.
+fn scrub_and_summarise(
+    c: &Campaign,
+    tag: &str,
+    reporter: &mut dyn Reporter,
+) -> Result<bool, CampaignError> {
+    let acted = heal(c, integrity::Depth::Full, tag, reporter)?;
+    if acted != 0 {
+        return Ok(false);
+    }
+    let finished = finished_runs(c)?;
+    if !c
+        .plan
+        .current_runs()
+        .all(|r| finished.contains_key(&r.run_id))
+    {
+        return Ok(false);
+    }
+    c.write_summaries(&finished)
+        .map_err(|e| CampaignError::Io(e.to_string()))?;
+    let after = finished_runs(c)?;
+    Ok(c.done_replicas(&after) == c.done_replicas(&finished))
 }
 
 fn finished_runs(c: &Campaign) -> Result<BTreeMap<u64, RunStatus>, CampaignError> {

@@ -161,23 +161,12 @@ impl Registry {
         let mut growth = Growth::default();
         let mut refused = Vec::new();
         let mut asked_ids = BTreeSet::new();
-        let n_before = self.points.len();
         let mut index: HashMap<String, u32> = self
             .points
             .iter()
             .map(|p| (canonical(&p.params), p.id))
             .collect();
-        // The points registered before, by run identity (their typed params parsed when first
-        // needed), and the identity of every point the manifest adds.
-        let mut by_identity: HashMap<String, Vec<usize>> = HashMap::new();
-        for (i, p) in self.points.iter().enumerate() {
-            by_identity
-                .entry(run_identity(asked.model, &p.params))
-                .or_default()
-                .push(i);
-        }
-        let mut typed_before: Vec<Option<Option<ModelParams>>> = vec![None; n_before];
-        let mut added_per_identity: HashMap<String, u32> = HashMap::new();
+        let mut horizons = Horizons::of(&self.points, asked.model);
         let mut blocks_of: HashMap<u32, Vec<usize>> = HashMap::new();
         for (i, b) in self.blocks.iter().enumerate() {
             blocks_of.entry(b.point).or_default().push(i);
@@ -202,19 +191,9 @@ impl Registry {
             // A longer run of a point registered before: its runs continue (or rerun) those.
             let mut shorter = None;
             if is_new {
-                let identity = run_identity(asked.model, &value);
-                let same: &[usize] = by_identity.get(&identity).map_or(&[], |v| v.as_slice());
-                let added = added_per_identity.entry(identity).or_default();
-                *added += 1;
-                let variants = same.len() as u64 + *added as u64;
-                if variants > MAX_HORIZON_VARIANTS as u64 {
-                    // Reported once per identity, when the limit is first passed.
-                    if variants == MAX_HORIZON_VARIANTS as u64 + 1 {
-                        refused.push(format!(
-                            "more than {MAX_HORIZON_VARIANTS} points differ only in {} (the first new one is point {id}), the limit: they are one trajectory cut at different ends (the same seeds); ask for more output times of fewer points instead",
-                            horizon_text(asked.model)
-                        ));
-                    }
+                let placed =
+                    horizons.place(&self.points, id, &value, params, &mut refused, &mut growth);
+                let Some(continues) = placed else {
                     self.grow_point(
                         id,
                         true,
@@ -225,43 +204,12 @@ impl Registry {
                         &mut blocks_of,
                     );
                     continue;
-                }
-                for &i in same {
-                    if typed_before[i].is_none() {
-                        let mut errs = Vec::new();
-                        typed_before[i] = Some(asked.model.params_from(
-                            &self.points[i].params,
-                            "",
-                            &mut errs,
-                        ));
-                    }
-                }
-                let olds: Vec<(u32, &ModelParams)> = same
-                    .iter()
-                    .filter_map(|&i| {
-                        typed_before[i]
-                            .as_ref()
-                            .and_then(|t| t.as_ref())
-                            .map(|t| (self.points[i].id, t))
-                    })
-                    .collect();
-                refused.extend(shorter_than_before(&olds, params));
-                shorter = shorter_point(&olds, params, &mut growth);
+                };
+                shorter = continues;
             }
             if let RunsPerPoint::Replicas(r) = asked.runs {
-                let mut given: Vec<u32> = Vec::new();
-                for p in [(!is_new).then_some(id), shorter].into_iter().flatten() {
-                    given.extend(self.given_below(p, *r, &blocks_of));
-                }
-                if !given.is_empty() {
-                    given.sort_unstable();
-                    given.dedup();
-                    refused.push(format!(
-                        "point {id} holds runs of given seeds at replica place(s) {given:?}: with \
-                         `replicas` they would count as its replicas, which a campaign started \
-                         from this manifest would not have (its seeds derive from the campaign \
-                         seed); keep `seeds` for this campaign, or use another --out"
-                    ));
+                if let Some(why) = self.given_as_replicas(id, is_new, shorter, *r, &blocks_of) {
+                    refused.push(why);
                     continue;
                 }
             }
@@ -285,6 +233,34 @@ impl Registry {
             .filter(|id| !asked_ids.contains(id))
             .collect();
         Ok(growth)
+    }
+
+    /// With `replicas`, why point `id` is refused when replica places below `r` of it
+    /// (registered before: not `is_new`) or of the point it continues (`shorter`) hold runs of
+    /// given seeds: they would count as its replicas.
+    fn given_as_replicas(
+        &self,
+        id: u32,
+        is_new: bool,
+        shorter: Option<u32>,
+        r: u32,
+        blocks_of: &HashMap<u32, Vec<usize>>,
+    ) -> Option<String> {
+        let mut given: Vec<u32> = Vec::new();
+        for p in [(!is_new).then_some(id), shorter].into_iter().flatten() {
+            given.extend(self.given_below(p, r, blocks_of));
+        }
+        if given.is_empty() {
+            return None;
+        }
+        given.sort_unstable();
+        given.dedup();
+        Some(format!(
+            "point {id} holds runs of given seeds at replica place(s) {given:?}: with \
+             `replicas` they would count as its replicas, which a campaign started \
+             from this manifest would not have (its seeds derive from the campaign \
+             seed); keep `seeds` for this campaign, or use another --out"
+        ))
     }
 
     /// Register the runs point `id` is asked for and does not have. A point that continues a
@@ -337,67 +313,8 @@ impl Registry {
                 other => other.clone(),
             })
         };
-        // (replica, seed source, continued)
-        let mut wanted: Vec<(u32, SeedSource, bool)> = Vec::new();
-        match runs {
-            RunsPerPoint::Replicas(r) => {
-                for x in (0..*r).filter(|x| !have.contains_key(x)) {
-                    match inherited(x) {
-                        Some(src) => wanted.push((x, src, true)),
-                        None => wanted.push((x, SeedSource::Params, false)),
-                    }
-                }
-            }
-            RunsPerPoint::Seeds(seeds) => {
-                let known: BTreeSet<u64> = have.values().copied().collect();
-                let mut taken: BTreeSet<u32> = have.keys().copied().collect();
-                taken.extend(old.keys());
-                // The first replica with each seed, as a search in replica order finds it.
-                let mut by_seed: HashMap<u64, u32> = HashMap::new();
-                for (&r, &seed) in &old {
-                    by_seed.entry(seed).or_insert(r);
-                }
-                let mut next = taken.iter().next_back().map_or(0, |r| r + 1);
-                for s in seeds.iter().filter(|s| !known.contains(s)) {
-                    match by_seed
-                        .get(s)
-                        .and_then(|&r| inherited(r).map(|src| (r, src)))
-                    {
-                        Some((r, src)) => wanted.push((r, src, true)),
-                        None => {
-                            wanted.push((next, SeedSource::Given(vec![*s]), false));
-                            next += 1;
-                        }
-                    }
-                }
-                wanted.sort_by_key(|w| w.0);
-            }
-        }
-        // Consecutive replicas of one kind form one block.
-        let mut new_blocks: Vec<RunBlock> = Vec::new();
-        for (replica, seeds, cont) in wanted {
-            let cont = cont.then_some(continues).flatten();
-            match new_blocks.last_mut() {
-                Some(b)
-                    if b.first_replica + b.count == replica
-                        && b.continues == cont
-                        && mergeable(&b.seeds, &seeds) =>
-                {
-                    if let (SeedSource::Given(v), SeedSource::Given(w)) = (&mut b.seeds, &seeds) {
-                        v.extend(w);
-                    }
-                    b.count += 1;
-                }
-                _ => new_blocks.push(RunBlock {
-                    point: id,
-                    first_run: 0,
-                    first_replica: replica,
-                    count: 1,
-                    seeds,
-                    continues: cont,
-                }),
-            }
-        }
+        let wanted = wanted_runs(runs, &have, &old, &inherited);
+        let new_blocks = wanted_blocks(id, wanted, continues);
         let old_runs: Vec<(u32, u32, u64)> = continues
             .map(|o| {
                 of(o)
@@ -406,24 +323,7 @@ impl Registry {
                     .collect()
             })
             .unwrap_or_default();
-        let old_run = |replica: u32| {
-            old_runs
-                .iter()
-                .find(|(first, count, _)| replica >= *first && replica < first + count)
-                .map(|(first, _, run)| run + (replica - first) as u64)
-        };
-        let mut continued = Vec::new();
-        let mut first = self.n_runs();
-        for b in &new_blocks {
-            if b.continues.is_some() {
-                for i in 0..b.count {
-                    if let Some(r) = old_run(b.first_replica + i) {
-                        continued.push((first + i as u64, r));
-                    }
-                }
-            }
-            first += b.count as u64;
-        }
+        let continued = continued_runs(self.n_runs(), &new_blocks, &old_runs);
         for b in new_blocks {
             blocks_of.entry(id).or_default().push(self.blocks.len());
             self.push_block(b, growth);
@@ -450,6 +350,193 @@ impl Registry {
             .find(|b| replica >= b.first_replica && replica < b.first_replica + b.count)
             .map(|b| b.first_run + (replica - b.first_replica) as u64)
     }
+}
+
+/// The points registered before a growth by run identity (their typed params parsed when
+/// first needed), and how many points of each identity the manifest adds.
+struct Horizons {
+    model: ModelKind,
+    by_identity: HashMap<String, Vec<usize>>,
+    typed_before: Vec<Option<Option<ModelParams>>>,
+    added_per_identity: HashMap<String, u32>,
+}
+
+impl Horizons {
+    fn of(points: &[RegPoint], model: ModelKind) -> Self {
+        let mut by_identity: HashMap<String, Vec<usize>> = HashMap::new();
+        for (i, p) in points.iter().enumerate() {
+            by_identity
+                .entry(run_identity(model, &p.params))
+                .or_default()
+                .push(i);
+        }
+        Horizons {
+            model,
+            by_identity,
+            typed_before: vec![None; points.len()],
+            added_per_identity: HashMap::new(),
+        }
+    }
+
+    /// The new point `id` (`value`, typed `params`) among the registered `points` of its run
+    /// identity: None when it is beyond [`MAX_HORIZON_VARIANTS`] of them (refused once per
+    /// identity, when the limit is first passed); else the shorter point it continues, if
+    /// any (a registered point that ran longer is refused).
+    fn place(
+        &mut self,
+        points: &[RegPoint],
+        id: u32,
+        value: &Value,
+        params: &ModelParams,
+        refused: &mut Vec<String>,
+        growth: &mut Growth,
+    ) -> Option<Option<u32>> {
+        let identity = run_identity(self.model, value);
+        let same: &[usize] = self
+            .by_identity
+            .get(&identity)
+            .map_or(&[], |v| v.as_slice());
+        let added = self.added_per_identity.entry(identity).or_default();
+        *added += 1;
+        let variants = same.len() as u64 + *added as u64;
+        if variants > MAX_HORIZON_VARIANTS as u64 {
+            // Reported once per identity, when the limit is first passed.
+            if variants == MAX_HORIZON_VARIANTS as u64 + 1 {
+                refused.push(format!(
+                    "more than {MAX_HORIZON_VARIANTS} points differ only in {} (the first new one is point {id}), the limit: they are one trajectory cut at different ends (the same seeds); ask for more output times of fewer points instead",
+                    horizon_text(self.model)
+                ));
+            }
+            return None;
+        }
+        for &i in same {
+            if self.typed_before[i].is_none() {
+                let mut errs = Vec::new();
+                self.typed_before[i] =
+                    Some(self.model.params_from(&points[i].params, "", &mut errs));
+            }
+        }
+        let olds: Vec<(u32, &ModelParams)> = same
+            .iter()
+            .filter_map(|&i| {
+                self.typed_before[i]
+                    .as_ref()
+                    .and_then(|t| t.as_ref())
+                    .map(|t| (points[i].id, t))
+            })
+            .collect();
+        refused.extend(shorter_than_before(&olds, params));
+        Some(shorter_point(&olds, params, growth))
+    }
+}
+
+/// The runs a point is asked for and does not `have` (replica -> seed), as (replica, seed
+/// source, continued): a replica (or given seed) that the shorter point it continues has
+/// (`old`) takes that run's seed source (`inherited`); a new given seed takes the next
+/// replica place after every one taken. In replica order.
+fn wanted_runs(
+    runs: &RunsPerPoint,
+    have: &BTreeMap<u32, u64>,
+    old: &BTreeMap<u32, u64>,
+    inherited: &dyn Fn(u32) -> Option<SeedSource>,
+) -> Vec<(u32, SeedSource, bool)> {
+    let mut wanted: Vec<(u32, SeedSource, bool)> = Vec::new();
+    match runs {
+        RunsPerPoint::Replicas(r) => {
+            for x in (0..*r).filter(|x| !have.contains_key(x)) {
+                match inherited(x) {
+                    Some(src) => wanted.push((x, src, true)),
+                    None => wanted.push((x, SeedSource::Params, false)),
+                }
+            }
+        }
+        RunsPerPoint::Seeds(seeds) => {
+            let known: BTreeSet<u64> = have.values().copied().collect();
+            let mut taken: BTreeSet<u32> = have.keys().copied().collect();
+            taken.extend(old.keys());
+            // The first replica with each seed, as a search in replica order finds it.
+            let mut by_seed: HashMap<u64, u32> = HashMap::new();
+            for (&r, &seed) in old {
+                by_seed.entry(seed).or_insert(r);
+            }
+            let mut next = taken.iter().next_back().map_or(0, |r| r + 1);
+            for s in seeds.iter().filter(|s| !known.contains(s)) {
+                match by_seed
+                    .get(s)
+                    .and_then(|&r| inherited(r).map(|src| (r, src)))
+                {
+                    Some((r, src)) => wanted.push((r, src, true)),
+                    None => {
+                        wanted.push((next, SeedSource::Given(vec![*s]), false));
+                        next += 1;
+                    }
+                }
+            }
+            wanted.sort_by_key(|w| w.0);
+        }
+    }
+    wanted
+}
+
+/// The new blocks of point `id` for its `wanted` runs: consecutive replicas of one kind
+/// (seed source, continuing `continues` or not) form one block (`first_run` set when pushed).
+fn wanted_blocks(
+    id: u32,
+    wanted: Vec<(u32, SeedSource, bool)>,
+    continues: Option<u32>,
+) -> Vec<RunBlock> {
+    let mut new_blocks: Vec<RunBlock> = Vec::new();
+    for (replica, seeds, cont) in wanted {
+        let cont = cont.then_some(continues).flatten();
+        match new_blocks.last_mut() {
+            Some(b)
+                if b.first_replica + b.count == replica
+                    && b.continues == cont
+                    && mergeable(&b.seeds, &seeds) =>
+            {
+                if let (SeedSource::Given(v), SeedSource::Given(w)) = (&mut b.seeds, &seeds) {
+                    v.extend(w);
+                }
+                b.count += 1;
+            }
+            _ => new_blocks.push(RunBlock {
+                point: id,
+                first_run: 0,
+                first_replica: replica,
+                count: 1,
+                seeds,
+                continues: cont,
+            }),
+        }
+    }
+    new_blocks
+}
+
+/// (new run, the old run it continues) of `new_blocks`, numbered from run `first` on, whose
+/// replica the continued point ran (`old_runs`: its blocks' first replica, count, first run).
+fn continued_runs(
+    mut first: u64,
+    new_blocks: &[RunBlock],
+    old_runs: &[(u32, u32, u64)],
+) -> Vec<(u64, u64)> {
+    let old_run = |replica: u32| {
+        old_runs
+            .iter()
+            .find(|(first, count, _)| replica >= *first && replica < first + count)
+            .map(|(first, _, run)| run + (replica - first) as u64)
+    };
+    let mut continued = Vec::new();
+    for b in new_blocks {
+        if b.continues.is_some() {
+            for i in 0..b.count {
+                if let Some(r) = old_run(b.first_replica + i) {
+                    continued.push((first + i as u64, r));
+                }
+            }
+        }
+        first += b.count as u64;
+    }
+    continued
 }
 
 /// Why `params` is refused: a registered point of the same run identity (`olds`: id and

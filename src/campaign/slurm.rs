@@ -614,120 +614,19 @@ pub fn plan(
     let existing = read_record(root).map_err(CampaignError::Refused)?;
     let mut notes = Vec::new();
     let mut rec = match (&existing, missing) {
-        (Some(_), false) => {
-            return Err(CampaignError::Refused(format!(
-                "{} was already submitted to SLURM (slurm/submission.json); resubmit unfinished work with `granular submit --missing {}`, or submit a grown manifest",
-                root.display(),
-                root.display()
-            )))
-        }
-        (None, true) => {
-            return Err(CampaignError::Refused(format!(
-                "{} has no SLURM submission (slurm/submission.json); submit it first with `granular submit MANIFEST --out {} --slurm ...`",
-                root.display(),
-                root.display()
-            )))
-        }
-        (Some(r), true) => {
-            let mut r = r.clone();
-            if let Some(o) = options {
-                r.options = o;
-            }
-            r.binary = binary.to_string();
-            r
-        }
-        (None, false) => {
-            let o = options.expect("options of a first submission");
-            let (shards, per) = layout(c.plan.n_runs(), o.per_task_runs, max_array);
-            if per != o.per_task_runs.max(1) {
-                notes.push(format!(
-                    "{} runs at {} per task would need {} array tasks, more than MaxArraySize = {max_array}: packed {per} runs per task into {shards} tasks",
-                    c.plan.n_runs(),
-                    o.per_task_runs,
-                    c.plan.n_runs().div_ceil(o.per_task_runs.max(1)),
-                ));
-            }
-            SubmissionRecord {
-                format_version: SUBMISSION_FORMAT,
-                kind: SUBMISSION_KIND.into(),
-                shards,
-                runs_per_shard: per,
-                options: o,
-                binary: binary.to_string(),
-                submissions: Vec::new(),
-            }
-        }
+        (Some(_), false) => return Err(already_submitted(root)),
+        (None, true) => return Err(never_submitted(root)),
+        (Some(r), true) => resubmission(r, options, binary),
+        (None, false) => first_submission(c, options, binary, max_array, &mut notes),
     };
     check_time(&rec.options.time).map_err(CampaignError::Refused)?;
     // What the scripts would hold (the CLI refuses bad flags before this; here the options of
     // an earlier submission read back from its record, and the directory it was given).
-    let (dir, mut refused) = match check_dir("the campaign directory", root) {
-        Ok(d) => (Some(d), Vec::new()),
-        Err(e) => (None, e),
-    };
-    refused.extend(check_value("the granular binary", &rec.binary, false));
-    refused.extend(check_options(&rec.options));
-    let dir = match dir {
-        Some(d) if refused.is_empty() => d,
-        _ => {
-            return Err(CampaignError::Refused(format!(
-                "cannot write the SLURM scripts: {}",
-                refused.join("; ")
-            )))
-        }
-    };
-    let n = rec.shards;
-    let mut still_queued_arrays = Vec::new();
-    let indices: Vec<u64> = if !missing {
-        (0..n).collect()
+    let dir = scriptable_dir(root, &rec)?;
+    let (indices, still_queued_arrays) = if !missing {
+        ((0..rec.shards).collect(), Vec::new())
     } else {
-        let commits = ledger::read_commits(root).map_err(CampaignError::Refused)?;
-        let finished = ledger::finished_runs(&commits);
-        let mut unfinished = BTreeSet::new();
-        for r in c.plan.current_runs() {
-            if !finished.contains_key(&r.run_id) {
-                unfinished.insert(r.run_id % n);
-            }
-        }
-        let live: BTreeSet<u64> = ledger::live_locks(root)
-            .into_iter()
-            .filter(|l| l.shard_count as u64 == n && l.shard_tag != ledger::COMPACT_TAG)
-            .filter_map(|l| {
-                l.shard
-                    .split('/')
-                    .next()
-                    .and_then(|i| i.parse::<u64>().ok())
-                    .map(|i| i - 1)
-            })
-            .collect();
-        let queued = match queued_indices(&rec) {
-            Some((q, arrays)) => {
-                still_queued_arrays = arrays.into_iter().collect();
-                q
-            }
-            None => {
-                notes.push(
-                    "squeue not available: only shard locks tell which tasks still run".into(),
-                );
-                BTreeSet::new()
-            }
-        };
-        let busy: Vec<u64> = unfinished
-            .iter()
-            .filter(|i| live.contains(i) || queued.contains(i))
-            .copied()
-            .collect();
-        if !busy.is_empty() {
-            notes.push(format!(
-                "{} shard(s) with unfinished runs are still queued or running and are not resubmitted: {}",
-                busy.len(),
-                ranges(&busy)
-            ));
-        }
-        unfinished
-            .into_iter()
-            .filter(|i| !busy.contains(i))
-            .collect()
+        missing_shards(c, root, &rec, &mut notes)?
     };
     let number = rec.submissions.len() as u32 + 1;
     let array = format!("{}%{}", ranges(&indices), rec.options.throttle.max(1));
@@ -752,6 +651,149 @@ pub fn plan(
         notes,
         still_queued_arrays,
     })
+}
+
+fn already_submitted(root: &Path) -> CampaignError {
+    CampaignError::Refused(format!(
+        "{} was already submitted to SLURM (slurm/submission.json); resubmit unfinished work with `granular submit --missing {}`, or submit a grown manifest",
+        root.display(),
+        root.display()
+    ))
+}
+
+fn never_submitted(root: &Path) -> CampaignError {
+    CampaignError::Refused(format!(
+        "{} has no SLURM submission (slurm/submission.json); submit it first with `granular submit MANIFEST --out {} --slurm ...`",
+        root.display(),
+        root.display()
+    ))
+}
+
+/// The record of an earlier submission for `--missing`: its layout, with the options given
+/// now (if any) and this binary.
+fn resubmission(
+    earlier: &SubmissionRecord,
+    options: Option<SlurmOptions>,
+    binary: &str,
+) -> SubmissionRecord {
+    let mut r = earlier.clone();
+    if let Some(o) = options {
+        r.options = o;
+    }
+    r.binary = binary.to_string();
+    r
+}
+
+/// The record of a first submission: runs packed into shards under `max_array` tasks (a note
+/// if more runs per task than asked).
+fn first_submission(
+    c: &Campaign,
+    options: Option<SlurmOptions>,
+    binary: &str,
+    max_array: u64,
+    notes: &mut Vec<String>,
+) -> SubmissionRecord {
+    let o = options.expect("options of a first submission");
+    let (shards, per) = layout(c.plan.n_runs(), o.per_task_runs, max_array);
+    if per != o.per_task_runs.max(1) {
+        notes.push(format!(
+            "{} runs at {} per task would need {} array tasks, more than MaxArraySize = {max_array}: packed {per} runs per task into {shards} tasks",
+            c.plan.n_runs(),
+            o.per_task_runs,
+            c.plan.n_runs().div_ceil(o.per_task_runs.max(1)),
+        ));
+    }
+    SubmissionRecord {
+        format_version: SUBMISSION_FORMAT,
+        kind: SUBMISSION_KIND.into(),
+        shards,
+        runs_per_shard: per,
+        options: o,
+        binary: binary.to_string(),
+        submissions: Vec::new(),
+    }
+}
+
+/// The campaign directory as the scripts would hold it, once it, the binary and the options
+/// are known to be scriptable (every reason they are not, at once).
+fn scriptable_dir<'a>(root: &'a Path, rec: &SubmissionRecord) -> Result<&'a str, CampaignError> {
+    let (dir, mut refused) = match check_dir("the campaign directory", root) {
+        Ok(d) => (Some(d), Vec::new()),
+        Err(e) => (None, e),
+    };
+    refused.extend(check_value("the granular binary", &rec.binary, false));
+    refused.extend(check_options(&rec.options));
+    match dir {
+        Some(d) if refused.is_empty() => Ok(d),
+        _ => Err(CampaignError::Refused(format!(
+            "cannot write the SLURM scripts: {}",
+            refused.join("; ")
+        ))),
+    }
+}
+
+/// For `--missing`: the shards with unfinished runs that neither a live shard lock nor
+/// `squeue` shows at work (a note names those left out), and the arrays of earlier
+/// submissions still queued or running.
+fn missing_shards(
+    c: &Campaign,
+    root: &Path,
+    rec: &SubmissionRecord,
+    notes: &mut Vec<String>,
+) -> Result<(Vec<u64>, Vec<String>), CampaignError> {
+    let n = rec.shards;
+    let mut still_queued_arrays = Vec::new();
+    let commits = ledger::read_commits(root).map_err(CampaignError::Refused)?;
+    let finished = ledger::finished_runs(&commits);
+    let mut unfinished = BTreeSet::new();
+    for r in c.plan.current_runs() {
+        if !finished.contains_key(&r.run_id) {
+            unfinished.insert(r.run_id % n);
+        }
+    }
+    let live = live_shards(root, n);
+    let queued = match queued_indices(rec) {
+        Some((q, arrays)) => {
+            still_queued_arrays = arrays.into_iter().collect();
+            q
+        }
+        None => {
+            notes.push("squeue not available: only shard locks tell which tasks still run".into());
+            BTreeSet::new()
+        }
+    };
+    let busy: Vec<u64> = unfinished
+        .iter()
+        .filter(|i| live.contains(i) || queued.contains(i))
+        .copied()
+        .collect();
+    if !busy.is_empty() {
+        notes.push(format!(
+            "{} shard(s) with unfinished runs are still queued or running and are not resubmitted: {}",
+            busy.len(),
+            ranges(&busy)
+        ));
+    }
+    let indices = unfinished
+        .into_iter()
+        .filter(|i| !busy.contains(i))
+        .collect();
+    Ok((indices, still_queued_arrays))
+}
+
+/// The (0-based) shards of an `n`-shard layout whose lock a live process holds.
+fn live_shards(root: &Path, n: u64) -> BTreeSet<u64> {
+    ledger::live_locks(root)
+        .into_iter()
+        .filter(|l| l.shard_count as u64 == n && l.shard_tag != ledger::COMPACT_TAG)
+        .filter_map(|l| {
+            l.shard
+                .split('/')
+                .next()
+                .and_then(|i| i.parse::<u64>().ok())
+                .map(|i| i - 1)
+        })
+        .collect()
 }
 
 fn sbatch(args: &[&str]) -> Result<String, String> {

@@ -717,8 +717,47 @@ impl DsmcParams {
     }
 
     /// Checks that the schema cannot express; `path` is the JSON pointer of this object.
+    ///
+    /// One group of params after another, each adding its errors (at paths relative to the
+    /// params) in this order: species and the volume, particle counts, t_end, output times,
+    /// observables, velocity distribution, TAMSD, then the physical scales and, where they are
+    /// sound, the restitution and the cost of the kinetic theory.
     pub fn check(&self, path: &str, errors: &mut Vec<(String, String)>) {
-        let mut err = |p: &str, m: String| errors.push((format!("{path}{p}"), m));
+        let mut found = ParamErrors::new();
+        self.check_species(&mut found);
+        // The engine's own limits (`DsmcParams::system`), so that `validate` refuses what a
+        // run would fail on.
+        let counts = self.species_counts();
+        self.check_particle_counts(counts.as_deref(), &mut found);
+        self.check_t_end(counts.as_deref(), &mut found);
+        let n_times = self.check_output_times(&mut found);
+        self.check_observables(&mut found);
+        self.check_velocity_distribution(&mut found);
+        self.check_tamsd(counts.as_deref(), &mut found);
+        // The physical scales, then (where they are sound) what the restitution and the
+        // kinetic theory of the point would cost.
+        if self.check_scales(counts.as_deref(), &mut found) {
+            self.check_restitution(counts.as_deref(), &mut found);
+            if n_times <= MAX_OUTPUT_TIMES {
+                self.check_theory_cost(self.species_paths().0, counts.as_deref(), &mut found);
+            }
+        }
+        errors.extend(found.into_iter().map(|(p, m)| (format!("{path}{p}"), m)));
+    }
+
+    /// The JSON paths that name the species, and the particle counts, of this point.
+    fn species_paths(&self) -> (&'static str, &'static str) {
+        match &self.species {
+            SpeciesSpec::PowerLaw(_) => ("/species/power_law/theta", "/species/power_law/N1"),
+            SpeciesSpec::List(_) => ("/species/list", "/species/list"),
+        }
+    }
+
+    /// The species and how the volume is given: `volume`/`number_density` never with a power
+    /// law, one of them with a list; a list of at least one species and two particles, without
+    /// temperatures of their own under an HCS start.
+    fn check_species(&self, errors: &mut ParamErrors) {
+        let mut err = |p: &str, m: String| errors.push((p.to_string(), m));
         match &self.species {
             SpeciesSpec::PowerLaw(_) => {
                 if self.volume.is_some() {
@@ -765,14 +804,14 @@ impl DsmcParams {
                 }
             }
         }
-        // The engine's own limits (`DsmcParams::system`), so that `validate` refuses what a
-        // run would fail on.
-        let counts = self.species_counts();
-        let (species_at, particles_at) = match &self.species {
-            SpeciesSpec::PowerLaw(_) => ("/species/power_law/theta", "/species/power_law/N1"),
-            SpeciesSpec::List(_) => ("/species/list", "/species/list"),
-        };
-        match &counts {
+    }
+
+    /// The species and particles a run can hold: at most [`MAX_SPECIES`] species (`counts` is
+    /// None beyond), at least 2 particles of a power law, at most [`MAX_PARTICLES`].
+    fn check_particle_counts(&self, counts: Option<&[u64]>, errors: &mut ParamErrors) {
+        let mut err = |p: &str, m: String| errors.push((p.to_string(), m));
+        let (species_at, particles_at) = self.species_paths();
+        match counts {
             None => err(
                 species_at,
                 format!(
@@ -797,12 +836,17 @@ impl DsmcParams {
                 }
             }
         }
+    }
+
+    /// `t_end`: finite, and at most [`MAX_COLLISION_TIMES`] collision times.
+    fn check_t_end(&self, counts: Option<&[u64]>, errors: &mut ParamErrors) {
+        let mut err = |p: &str, m: String| errors.push((p.to_string(), m));
         if !self.t_end.is_finite() {
             err(
                 "/t_end",
                 format!("expected a finite time > 0, got {}", self.t_end),
             );
-        } else if let Some(rate) = counts.as_deref().and_then(|c| self.collision_rate(c)) {
+        } else if let Some(rate) = counts.and_then(|c| self.collision_rate(c)) {
             let times = self.t_end * rate;
             if times > MAX_COLLISION_TIMES {
                 err(
@@ -814,6 +858,12 @@ impl DsmcParams {
                 );
             }
         }
+    }
+
+    /// The output times: at most [`MAX_OUTPUT_TIMES`], the log grid and the list within
+    /// [0, t_end]; returns the bound of their number.
+    fn check_output_times(&self, errors: &mut ParamErrors) -> u64 {
+        let mut err = |p: &str, m: String| errors.push((p.to_string(), m));
         let n_times = self.output_times.count_bound();
         if n_times > MAX_OUTPUT_TIMES {
             err(
@@ -848,6 +898,12 @@ impl DsmcParams {
                 }
             }
         }
+        n_times
+    }
+
+    /// The observables: no duplicates, `tamsd` only with its `tamsd` object.
+    fn check_observables(&self, errors: &mut ParamErrors) {
+        let mut err = |p: &str, m: String| errors.push((p.to_string(), m));
         let mut seen = Vec::new();
         for (i, o) in self.observables.iter().enumerate() {
             if seen.contains(o) {
@@ -864,90 +920,96 @@ impl DsmcParams {
             }
             seen.push(*o);
         }
-        if let Some(vd) = &self.velocity_distribution {
-            if !self.wants_vdist() {
-                err(
-                    "/velocity_distribution",
-                    "given, but `velocity_distribution` is not in `observables`".into(),
-                );
-            }
-            if !(1..=MAX_BINS).contains(&vd.bins) {
-                err(
-                    "/velocity_distribution/bins",
-                    format!("expected 1..={MAX_BINS} bins, got {}", vd.bins),
-                );
-            }
-            if !(vd.c_max.is_finite() && vd.c_max > 0.0) {
-                err(
-                    "/velocity_distribution/c_max",
-                    format!("expected a finite c_max > 0, got {}", vd.c_max),
-                );
-            }
-            if let Some(times) = &vd.times {
-                if self.output_times.count_bound() <= MAX_OUTPUT_TIMES {
-                    let outputs = self.output_times.resolve(self.t_end);
-                    for (i, &t) in times.iter().enumerate() {
-                        let one = VdistSpec {
-                            times: Some(vec![t]),
-                            ..VdistSpec::default()
-                        };
-                        if one.resolve_times(&outputs).is_err() {
-                            err(
-                                &format!("/velocity_distribution/times/{i}"),
-                                format!("{t} is not an output time (0, t_end, the log grid or the list)"),
-                            );
-                        }
+    }
+
+    /// `velocity_distribution`: only with its observable; its bins, `c_max`, and times that
+    /// are output times.
+    fn check_velocity_distribution(&self, errors: &mut ParamErrors) {
+        let mut err = |p: &str, m: String| errors.push((p.to_string(), m));
+        let Some(vd) = &self.velocity_distribution else {
+            return;
+        };
+        if !self.wants_vdist() {
+            err(
+                "/velocity_distribution",
+                "given, but `velocity_distribution` is not in `observables`".into(),
+            );
+        }
+        if !(1..=MAX_BINS).contains(&vd.bins) {
+            err(
+                "/velocity_distribution/bins",
+                format!("expected 1..={MAX_BINS} bins, got {}", vd.bins),
+            );
+        }
+        if !(vd.c_max.is_finite() && vd.c_max > 0.0) {
+            err(
+                "/velocity_distribution/c_max",
+                format!("expected a finite c_max > 0, got {}", vd.c_max),
+            );
+        }
+        if let Some(times) = &vd.times {
+            if self.output_times.count_bound() <= MAX_OUTPUT_TIMES {
+                let outputs = self.output_times.resolve(self.t_end);
+                for (i, &t) in times.iter().enumerate() {
+                    let one = VdistSpec {
+                        times: Some(vec![t]),
+                        ..VdistSpec::default()
+                    };
+                    if one.resolve_times(&outputs).is_err() {
+                        err(
+                            &format!("/velocity_distribution/times/{i}"),
+                            format!(
+                                "{t} is not an output time (0, t_end, the log grid or the list)"
+                            ),
+                        );
                     }
                 }
             }
         }
-        if let Some(tm) = &self.tamsd {
-            if !self.wants_tamsd() {
+    }
+
+    /// `tamsd`: only with its observable; lags inside (0, t_end) that do not round to t_end on
+    /// its grid; trajectories of at most [`TAMSD_MAX_DOUBLES`] doubles.
+    fn check_tamsd(&self, counts: Option<&[u64]>, errors: &mut ParamErrors) {
+        let mut err = |p: &str, m: String| errors.push((p.to_string(), m));
+        let Some(tm) = &self.tamsd else {
+            return;
+        };
+        if !self.wants_tamsd() {
+            err(
+                "/tamsd",
+                "given, but `tamsd` is not in `observables`".into(),
+            );
+        }
+        let step = self.t_end / tm.grid as f64;
+        for (i, &lag) in tm.lags.iter().enumerate() {
+            if !(lag > 0.0 && lag < self.t_end) {
                 err(
-                    "/tamsd",
-                    "given, but `tamsd` is not in `observables`".into(),
+                    &format!("/tamsd/lags/{i}"),
+                    format!("expected a lag in (0, t_end = {}), got {lag}", self.t_end),
+                );
+            } else if (lag / step).round() >= tm.grid as f64 {
+                err(
+                    &format!("/tamsd/lags/{i}"),
+                    format!("lag {lag} rounds to t_end on the grid of step t_end / grid = {step}: expected a lag < t_end - step / 2"),
                 );
             }
-            let step = self.t_end / tm.grid as f64;
-            for (i, &lag) in tm.lags.iter().enumerate() {
-                if !(lag > 0.0 && lag < self.t_end) {
-                    err(
-                        &format!("/tamsd/lags/{i}"),
-                        format!("expected a lag in (0, t_end = {}), got {lag}", self.t_end),
-                    );
-                } else if (lag / step).round() >= tm.grid as f64 {
-                    err(
-                        &format!("/tamsd/lags/{i}"),
-                        format!("lag {lag} rounds to t_end on the grid of step t_end / grid = {step}: expected a lag < t_end - step / 2"),
-                    );
-                }
-            }
-            if let Some(counts) = &counts {
-                let tracers: u64 = counts
-                    .iter()
-                    .fold(0u64, |a, &n| a.saturating_add(n.min(tm.tracers)));
-                let doubles = tracers as f64 * 3.0 * (tm.grid as f64 + 1.0);
-                if doubles > TAMSD_MAX_DOUBLES {
-                    err(
-                        "/tamsd",
-                        format!(
-                            "{tracers} tracers x 3 x (grid + 1 = {}) = {doubles:.3e} doubles of trajectories, more than the limit {TAMSD_MAX_DOUBLES:e} (1.6 GB): lower `tracers` or `grid`",
-                            tm.grid as f64 + 1.0
-                        ),
-                    );
-                }
+        }
+        if let Some(counts) = counts {
+            let tracers: u64 = counts
+                .iter()
+                .fold(0u64, |a, &n| a.saturating_add(n.min(tm.tracers)));
+            let doubles = tracers as f64 * 3.0 * (tm.grid as f64 + 1.0);
+            if doubles > TAMSD_MAX_DOUBLES {
+                err(
+                    "/tamsd",
+                    format!(
+                        "{tracers} tracers x 3 x (grid + 1 = {}) = {doubles:.3e} doubles of trajectories, more than the limit {TAMSD_MAX_DOUBLES:e} (1.6 GB): lower `tracers` or `grid`",
+                        tm.grid as f64 + 1.0
+                    ),
+                );
             }
         }
-        // The physical scales, then (where they are sound) what the restitution and the
-        // kinetic theory of the point would cost.
-        let mut more = Vec::new();
-        if self.check_scales(counts.as_deref(), &mut more) {
-            self.check_restitution(counts.as_deref(), &mut more);
-            if n_times <= MAX_OUTPUT_TIMES {
-                self.check_theory_cost(species_at, counts.as_deref(), &mut more);
-            }
-        }
-        errors.extend(more.into_iter().map(|(p, m)| (format!("{path}{p}"), m)));
     }
 
     /// Every dimensional input within [`SCALE_MIN`, `SCALE_MAX`] (errors at paths relative to
@@ -1003,41 +1065,7 @@ impl DsmcParams {
                     (None, Some(d)) => scale("/number_density".into(), "number density", d),
                     _ => {}
                 }
-                // The spread of the initial temperatures.
-                let temps: Vec<(f64, Option<usize>)> = list
-                    .iter()
-                    .enumerate()
-                    .map(|(i, sp)| match (sp.temperature, self.initial_temperature) {
-                        (Some(t), _) => (t, Some(i)),
-                        (None, InitialTemperature::Value(t)) => (t, None),
-                        (None, InitialTemperature::Hcs { mean }) => (mean, None),
-                    })
-                    .collect();
-                let hi = temps.iter().copied().max_by(|a, b| a.0.total_cmp(&b.0));
-                let lo = temps.iter().copied().min_by(|a, b| a.0.total_cmp(&b.0));
-                if let (Some((t_hi, i_hi)), Some((t_lo, i_lo))) = (hi, lo) {
-                    let ratio = t_hi / t_lo;
-                    if ratio > MAX_TEMPERATURE_RATIO {
-                        let name = |i: Option<usize>| match i {
-                            Some(i) => format!("species {}", i + 1),
-                            None => "initial_temperature".into(),
-                        };
-                        let at = match (i_hi, i_lo) {
-                            (Some(i), _) | (None, Some(i)) => {
-                                format!("/species/list/{i}/temperature")
-                            }
-                            (None, None) => "/initial_temperature".into(),
-                        };
-                        errors.push((
-                            at,
-                            format!(
-                                "the initial temperatures span a factor {ratio:.2e} ({t_hi:e} of {} to {t_lo:e} of {}), more than the limit of {MAX_TEMPERATURE_RATIO:e}: so far from equipartition the first collisions equalise them within a fraction of a collision time, faster than the theory's temperature ODE can follow",
-                                name(i_hi),
-                                name(i_lo)
-                            ),
-                        ));
-                    }
-                }
+                self.check_temperature_spread(list, errors);
             }
         }
         if !(self.refresh_every >= MIN_REFRESH_EVERY && self.refresh_every <= SCALE_MAX) {
@@ -1051,6 +1079,45 @@ impl DsmcParams {
             ));
         }
         errors.len() == before
+    }
+
+    /// The spread of the initial temperatures of a species list: at most
+    /// [`MAX_TEMPERATURE_RATIO`] (the error at the temperature of a species that sets it).
+    fn check_temperature_spread(&self, list: &[SpeciesEntry], errors: &mut ParamErrors) {
+        let temps: Vec<(f64, Option<usize>)> = list
+            .iter()
+            .enumerate()
+            .map(|(i, sp)| match (sp.temperature, self.initial_temperature) {
+                (Some(t), _) => (t, Some(i)),
+                (None, InitialTemperature::Value(t)) => (t, None),
+                (None, InitialTemperature::Hcs { mean }) => (mean, None),
+            })
+            .collect();
+        let hi = temps.iter().copied().max_by(|a, b| a.0.total_cmp(&b.0));
+        let lo = temps.iter().copied().min_by(|a, b| a.0.total_cmp(&b.0));
+        if let (Some((t_hi, i_hi)), Some((t_lo, i_lo))) = (hi, lo) {
+            let ratio = t_hi / t_lo;
+            if ratio > MAX_TEMPERATURE_RATIO {
+                let name = |i: Option<usize>| match i {
+                    Some(i) => format!("species {}", i + 1),
+                    None => "initial_temperature".into(),
+                };
+                let at = match (i_hi, i_lo) {
+                    (Some(i), _) | (None, Some(i)) => {
+                        format!("/species/list/{i}/temperature")
+                    }
+                    (None, None) => "/initial_temperature".into(),
+                };
+                errors.push((
+                    at,
+                    format!(
+                        "the initial temperatures span a factor {ratio:.2e} ({t_hi:e} of {} to {t_lo:e} of {}), more than the limit of {MAX_TEMPERATURE_RATIO:e}: so far from equipartition the first collisions equalise them within a fraction of a collision time, faster than the theory's temperature ODE can follow",
+                        name(i_hi),
+                        name(i_lo)
+                    ),
+                ));
+            }
+        }
     }
 
     /// Viscoelastic restitution: beta = A kappa_ki^(2/5) g_n^(1/5) at the thermal impact

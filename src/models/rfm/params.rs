@@ -652,8 +652,23 @@ impl RfmParams {
         }
     }
 
-    /// Cross-field rules of the structure observables.
+    /// Cross-field rules of the structure observables: each in its dimension and given with
+    /// its object; then (on a sound configuration) each object's own limits.
     fn check_structure(&self, path: &str, errors: &mut Vec<(String, String)>) {
+        self.check_structure_observables(path, errors);
+        let cfg = self.config();
+        if cfg.validate().is_err() {
+            return;
+        }
+        let samples = cfg.duration_steps() / self.sample_every;
+        self.check_neighbour_distances(path, errors);
+        self.check_structure_factor(path, samples, errors);
+        self.check_radial_distribution(path, samples, errors);
+    }
+
+    /// Each structure observable in the dimension it is made for, and each of their objects
+    /// given only with its observable.
+    fn check_structure_observables(&self, path: &str, errors: &mut Vec<(String, String)>) {
         use RfmObservable as O;
         for (i, o) in self.observables.iter().enumerate() {
             let need = match o {
@@ -696,11 +711,11 @@ impl RfmParams {
                 ));
             }
         }
-        let cfg = self.config();
-        if cfg.validate().is_err() {
-            return;
-        }
-        let samples = cfg.duration_steps() / self.sample_every;
+    }
+
+    /// `neighbour_distances` (1D): `h_max` below the particle count, a sound range, at most
+    /// 10^7 bins.
+    fn check_neighbour_distances(&self, path: &str, errors: &mut Vec<(String, String)>) {
         if let (Some(nc), 1) = (self.neighbour_config(), self.dim) {
             let p = format!("{path}/neighbour_distances");
             if nc.h_max as u64 >= self.n_particles {
@@ -734,6 +749,11 @@ impl RfmParams {
                 }
             }
         }
+    }
+
+    /// `structure_factor` (2D): `k_max` in [1, 5000], evaluated in each of the 10 blocks of
+    /// the `samples`.
+    fn check_structure_factor(&self, path: &str, samples: u64, errors: &mut Vec<(String, String)>) {
         if let (Some(sk), 2) = (self.structure_factor_config(), self.dim) {
             let p = format!("{path}/structure_factor");
             if !(sk.n_max.is_finite() && sk.n_max >= 1.0) {
@@ -762,6 +782,16 @@ impl RfmParams {
                 ));
             }
         }
+    }
+
+    /// `radial_distribution` (2D): `r_max` in (0, L/2], evaluated in each of the 10 blocks of
+    /// the `samples`.
+    fn check_radial_distribution(
+        &self,
+        path: &str,
+        samples: u64,
+        errors: &mut Vec<(String, String)>,
+    ) {
         if let (Some(rc), 2) = (self.radial_config(), self.dim) {
             let p = format!("{path}/radial_distribution");
             if !(rc.r_max > 0.0 && rc.r_max <= 0.5 * rc.l * (1.0 + 1e-12)) {

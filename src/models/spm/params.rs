@@ -193,7 +193,44 @@ impl SpmParams {
         c
     }
 
+    /// Cross-field rules, every error at its JSON path below `path`: the scales and the work of
+    /// a run, the free-path law, the velocity histogram, the fit windows.
     pub fn check(&self, path: &str, errors: &mut Errors) {
+        self.check_run_size(path, errors);
+        let fp = format!("{path}/free_path");
+        match &self.free_path {
+            FreePathSpec::Fixed { .. } => {}
+            FreePathSpec::Fitted {
+                c,
+                fractal_dimension: d,
+                range,
+            } => check_fitted_free_path(&fp, *c, *d, *range, errors),
+            FreePathSpec::Table {
+                edges,
+                density,
+                fractal_dimension,
+                ..
+            } => check_free_path_table(&fp, edges, density, *fractal_dimension, errors),
+        }
+        if let Some(h) = &self.velocity_histogram {
+            check_velocity_range(h.range, format!("{path}/velocity_histogram/range"), errors);
+        }
+        for (key, w) in [
+            ("gaussian_fit", self.gaussian_fit),
+            ("tail_fit", self.tail_fit),
+        ] {
+            if !(w[0] > 0.0 && w[0] < w[1] && w[1].is_finite()) {
+                errors.push((
+                    format!("{path}/{key}"),
+                    format!("expected [lo, hi] with 0 < lo < hi, got {w:?}"),
+                ));
+            }
+        }
+    }
+
+    /// The mass and noise within the physical scales; `dt` at least 1e-6, and the walks of a
+    /// run (~1/dt steps each) within [`MAX_RUN_WORK`].
+    fn check_run_size(&self, path: &str, errors: &mut Errors) {
         for (key, v) in [("mass", self.mass), ("noise_strength", self.noise_strength)] {
             if !(SCALE_MIN..=SCALE_MAX).contains(&v) {
                 errors.push((
@@ -223,102 +260,83 @@ impl SpmParams {
                 ));
             }
         }
-        let fp = format!("{path}/free_path");
-        match &self.free_path {
-            FreePathSpec::Fixed { .. } => {}
-            FreePathSpec::Fitted {
-                c,
-                fractal_dimension: d,
-                range,
-            } => {
-                if !(*d > 1.0 && *d < 2.0) {
-                    errors.push((
-                        format!("{fp}/fitted/fractal_dimension"),
-                        format!("must lie in (1, 2), got {d}"),
-                    ));
-                } else if let Some([a, b]) = range {
-                    let beta = d - 1.0;
-                    let mass = (-c * a.max(0.0).powf(beta)).exp() - (-c * b.powf(beta)).exp();
-                    if !(*a >= 0.0 && a < b) {
-                        errors.push((
-                            format!("{fp}/fitted/range"),
-                            format!(
-                                "expected [l_min, l_max] with 0 <= l_min < l_max, got [{a}, {b}]"
-                            ),
-                        ));
-                    } else if !(mass > 1e-6) {
-                        errors.push((
-                            format!("{fp}/fitted/range"),
-                            format!(
-                                "holds a probability {mass:.1e} of (4.25); at least 1e-6 is needed"
-                            ),
-                        ));
-                    }
-                }
-            }
-            FreePathSpec::Table {
-                edges,
-                density,
-                fractal_dimension,
-                ..
-            } => {
-                let p = format!("{fp}/table");
-                if edges.len() != density.len() + 1 {
-                    errors.push((
-                        format!("{p}/edges"),
-                        format!(
-                            "expected one more edge than densities: {} edges, {} densities",
-                            edges.len(),
-                            density.len()
-                        ),
-                    ));
-                }
-                for (i, w) in edges.windows(2).enumerate() {
-                    if !(w[0] >= 0.0 && w[0] < w[1] && w[1].is_finite()) {
-                        errors.push((
-                            format!("{p}/edges/{}", i + 1),
-                            format!(
-                                "edges must be finite, >= 0 and increasing, got {} after {}",
-                                w[1], w[0]
-                            ),
-                        ));
-                        break;
-                    }
-                }
-                for (i, d) in density.iter().enumerate() {
-                    if !(*d >= 0.0 && d.is_finite()) {
-                        errors.push((
-                            format!("{p}/density/{i}"),
-                            format!("must be finite and >= 0, got {d}"),
-                        ));
-                    }
-                }
-                if !density.iter().any(|d| *d > 0.0) {
-                    errors.push((format!("{p}/density"), "no positive density".into()));
-                }
-                if let Some(d) = fractal_dimension {
-                    if !(*d > 1.0 && *d < 2.0) {
-                        errors.push((
-                            format!("{p}/fractal_dimension"),
-                            format!("must lie in (1, 2), got {d}"),
-                        ));
-                    }
-                }
-            }
+    }
+}
+
+/// The fitted free-path law (4.25) at `fp`: a fractal dimension in (1, 2), a range of
+/// probability at least 1e-6.
+fn check_fitted_free_path(fp: &str, c: f64, d: f64, range: Option<[f64; 2]>, errors: &mut Errors) {
+    if !(d > 1.0 && d < 2.0) {
+        errors.push((
+            format!("{fp}/fitted/fractal_dimension"),
+            format!("must lie in (1, 2), got {d}"),
+        ));
+    } else if let Some([a, b]) = range {
+        let beta = d - 1.0;
+        let mass = (-c * a.max(0.0).powf(beta)).exp() - (-c * b.powf(beta)).exp();
+        if !(a >= 0.0 && a < b) {
+            errors.push((
+                format!("{fp}/fitted/range"),
+                format!("expected [l_min, l_max] with 0 <= l_min < l_max, got [{a}, {b}]"),
+            ));
+        } else if !(mass > 1e-6) {
+            errors.push((
+                format!("{fp}/fitted/range"),
+                format!("holds a probability {mass:.1e} of (4.25); at least 1e-6 is needed"),
+            ));
         }
-        if let Some(h) = &self.velocity_histogram {
-            check_velocity_range(h.range, format!("{path}/velocity_histogram/range"), errors);
+    }
+}
+
+/// A tabulated free-path law at `fp`: one more edge than densities, finite increasing edges,
+/// finite non-negative densities (one positive), a fractal dimension in (1, 2).
+fn check_free_path_table(
+    fp: &str,
+    edges: &[f64],
+    density: &[f64],
+    fractal_dimension: Option<f64>,
+    errors: &mut Errors,
+) {
+    let p = format!("{fp}/table");
+    if edges.len() != density.len() + 1 {
+        errors.push((
+            format!("{p}/edges"),
+            format!(
+                "expected one more edge than densities: {} edges, {} densities",
+                edges.len(),
+                density.len()
+            ),
+        ));
+    }
+    for (i, w) in edges.windows(2).enumerate() {
+        if !(w[0] >= 0.0 && w[0] < w[1] && w[1].is_finite()) {
+            errors.push((
+                format!("{p}/edges/{}", i + 1),
+                format!(
+                    "edges must be finite, >= 0 and increasing, got {} after {}",
+                    w[1], w[0]
+                ),
+            ));
+            break;
         }
-        for (key, w) in [
-            ("gaussian_fit", self.gaussian_fit),
-            ("tail_fit", self.tail_fit),
-        ] {
-            if !(w[0] > 0.0 && w[0] < w[1] && w[1].is_finite()) {
-                errors.push((
-                    format!("{path}/{key}"),
-                    format!("expected [lo, hi] with 0 < lo < hi, got {w:?}"),
-                ));
-            }
+    }
+    for (i, d) in density.iter().enumerate() {
+        if !(*d >= 0.0 && d.is_finite()) {
+            errors.push((
+                format!("{p}/density/{i}"),
+                format!("must be finite and >= 0, got {d}"),
+            ));
+        }
+    }
+    if !density.iter().any(|d| *d > 0.0) {
+        errors.push((format!("{p}/density"), "no positive density".into()));
+    }
+    if let Some(d) = fractal_dimension {
+        if !(d > 1.0 && d < 2.0) {
+            errors.push((
+                format!("{p}/fractal_dimension"),
+                format!("must lie in (1, 2), got {d}"),
+            ));
         }
     }
 }
