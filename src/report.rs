@@ -19,10 +19,10 @@ use std::fmt::Write as _;
 use crate::campaign::history::{self, Accepted};
 use crate::campaign::ledger::{finished_runs, Ledger, RunStatus};
 use crate::campaign::status::{self, CampaignStatus, Counts};
-use crate::campaign::tables::RUNS;
+use crate::campaign::tables::{RunsTableCols, RUNS};
 use crate::campaign::{Campaign, CampaignInfo};
 use crate::plot;
-use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
+use crate::store::cols::opt;
 
 /// A built report.
 pub struct Report {
@@ -80,17 +80,10 @@ pub fn read_runs(c: &Campaign) -> Result<RunsRead, String> {
     for f in data.files(RUNS).map_err(|e| e.to_string())? {
         let name = f.display().to_string();
         for b in data.read_file(&f, RUNS).map_err(|e| e.to_string())? {
-            let cols = (|| {
-                Ok::<_, crate::store::parquet_io::StoreError>((
-                    get_u64(&b, &name, "run_id")?,
-                    get_u32(&b, &name, "point_id")?,
-                    get_u64(&b, &name, "seed")?,
-                    get_str(&b, &name, "status")?,
-                    get_str(&b, &name, "reason")?,
-                    get_f64(&b, &name, "t_failed")?,
-                    get_f64(&b, &name, "wall_seconds")?,
-                ))
-            })();
+            let cols = RunsTableCols::read(&b, &name).map(|c| {
+                let t = c.t_failed;
+                (c.run_id, c.point_id, c.seed, c.status, c.reason, t, c.wall_seconds)
+            });
             let (run, point, seed, st, reason, t, wall) = cols.map_err(|e| e.to_string())?;
             for i in 0..b.num_rows() {
                 if !seen.insert(run.value(i)) {

@@ -9,9 +9,8 @@ use serde::Serialize;
 use super::ledger::{self, RunStatus};
 use super::plan::Plan;
 use super::registry::Growth;
-use super::tables::RUNS;
+use super::tables::{RunsTableCols, RUNS};
 use super::{Campaign, CampaignError};
-use crate::store::cols::{get_f64, get_str, get_u64};
 
 /// The plan of a manifest against a campaign directory.
 #[derive(Serialize, Clone, Debug, Default, PartialEq)]
@@ -418,9 +417,12 @@ fn done_walls(c: &Campaign) -> Result<BTreeMap<u64, f64>, CampaignError> {
         .map_err(|e| CampaignError::Io(e.to_string()))?;
     for b in batches {
         let io = |e: crate::store::parquet_io::StoreError| CampaignError::Io(e.to_string());
-        let run = get_u64(&b, RUNS, "run_id").map_err(io)?;
-        let status = get_str(&b, RUNS, "status").map_err(io)?;
-        let wall = get_f64(&b, RUNS, "wall_seconds").map_err(io)?;
+        let RunsTableCols {
+            run_id: run,
+            status,
+            wall_seconds: wall,
+            ..
+        } = RunsTableCols::read(&b, RUNS).map_err(io)?;
         for i in 0..b.num_rows() {
             if status.value(i) == "done" {
                 out.insert(run.value(i), wall.value(i));

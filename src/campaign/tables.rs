@@ -11,9 +11,11 @@ use arrow_schema::{DataType, Field, Schema};
 use serde_json::Value;
 
 use super::plan::{canonical, Plan};
+use crate::declare_table;
 use crate::store::cols::table;
+use crate::store::typed::{Absent, OptF64, OptStr, OptU64, Str, F64, U32, U64};
 
-pub const RUNS: &str = "runs";
+pub const RUNS: &str = RunsTable::TABLE;
 pub const POINTS: &str = "points";
 pub const REGISTERED_RUNS: &str = "registered_runs";
 
@@ -147,24 +149,47 @@ pub struct RunRow {
     pub continued_from: Option<u64>,
 }
 
+declare_table! {
+    /// `runs`: one row per finished run (its point's parameters are in `points`), as written
+    /// and read ([`RunRow`] is what the writer is handed: the row without `code_version`).
+    pub struct RunsTable in "runs", read as RunsTableCols {
+        run_id: U64,
+        point_id: U32,
+        replica: U32,
+        seed: U64,
+        /// "done" or "failed".
+        status: Str,
+        reason: OptStr,
+        t_failed: OptF64,
+        wall_seconds: F64,
+        collisions: U64,
+        trials: U64,
+        /// Null in the rows of format 1 (`granular upgrade`).
+        continued_from: Absent<OptU64>,
+        code_version: Str,
+    }
+}
+
 /// `runs`: one row per finished run (its point's parameters are in `points`).
 pub fn runs_batch(rows: &[RunRow]) -> RecordBatch {
-    table(rows, |c| {
-        vec![
-            c.u64("run_id", |r| r.run_id),
-            c.u32("point_id", |r| r.point_id),
-            c.u32("replica", |r| r.replica),
-            c.u64("seed", |r| r.seed),
-            c.str("status", |r| &r.status),
-            c.opt_str("reason", |r| r.reason.as_deref()),
-            c.opt_f64("t_failed", |r| r.t_failed),
-            c.f64("wall_seconds", |r| r.wall_seconds),
-            c.u64("collisions", |r| r.collisions),
-            c.u64("trials", |r| r.trials),
-            c.opt_u64("continued_from", |r| r.continued_from),
-            c.const_str("code_version", crate::CODE_VERSION),
-        ]
-    })
+    let rows: Vec<RunsTable> = rows
+        .iter()
+        .map(|r| RunsTable {
+            run_id: r.run_id,
+            point_id: r.point_id,
+            replica: r.replica,
+            seed: r.seed,
+            status: r.status.clone(),
+            reason: r.reason.clone(),
+            t_failed: r.t_failed,
+            wall_seconds: r.wall_seconds,
+            collisions: r.collisions,
+            trials: r.trials,
+            continued_from: r.continued_from,
+            code_version: crate::CODE_VERSION.to_string(),
+        })
+        .collect();
+    RunsTable::batch(&rows)
 }
 
 /// `point_id` and the typed sweep columns of every registered point (the latest manifest's

@@ -6,8 +6,25 @@ use std::collections::BTreeMap;
 use arrow_array::RecordBatch;
 use serde_json::Value;
 
+use crate::declare_table;
 use crate::store::dataset::Dataset;
 use crate::store::parquet_io::StoreError;
+use crate::store::typed::{U32, U64};
+
+declare_table! {
+    /// The key of every point's rows: [`CampaignView::sweep`] (`point_id`, then one column
+    /// per sweep key) and every summary.
+    pub struct SweepKey in "sweep", read as SweepKeyCols {
+        point_id: U32,
+    }
+}
+
+declare_table! {
+    /// The key of every run table's rows (`run_id`, `point_id`, then the model's columns).
+    pub struct RunKey in "run table", read as RunKeyCols {
+        run_id: U64,
+    }
+}
 
 /// A campaign as a model sees it: its points with their parameters, its finished runs, its
 /// tables. `P` is the model's `Params` (or [`ModelParams`] before dispatch).
@@ -31,7 +48,8 @@ impl<P> CampaignView<'_, P> {
     /// after `point_id` (so a summary is read without a join with `points`). Every summary
     /// goes through here; the model names no sweep key.
     pub fn write_summary(&self, table: &str, batch: &RecordBatch) -> Result<(), StoreError> {
-        let batch = crate::store::cols::join_after_key(batch, table, "point_id", &self.sweep)?;
+        const KEY: &str = SweepKey::column("point_id");
+        let batch = crate::store::cols::join_after_key(batch, table, KEY, &self.sweep)?;
         self.data.write_whole(table, "summary.parquet", &batch)
     }
 }
@@ -51,7 +69,7 @@ impl<P> CampaignView<'_, P> {
 
     /// The rows of `b` (of `table`, with a `run_id` column) of the runs in `done`.
     pub fn keep_done(&self, b: &RecordBatch, table: &str) -> Result<RecordBatch, StoreError> {
-        let runs = crate::store::cols::get_u64(b, table, "run_id")?;
+        let runs = RunKeyCols::read(b, table)?.run_id;
         let keep: arrow_array::BooleanArray = runs
             .iter()
             .map(|r| Some(r.is_some_and(|r| self.done.contains_key(&r))))

@@ -1,19 +1,19 @@
-//! Arrow columns: a table's columns declared once each, name and values together
-//! (`table(&rows, |c| vec![c.f64("t", |r| r.t), ...])`), or built from a field of every row
-//! (`cols::f64s(&rows, |r| r.t)`); and read back by name with their type checked
-//! (`cols::get_f64(&batch, "t")`), so a table file that lacks a column, or has it with another
-//! type, is an error that names the column, never a panic.
+//! Arrow columns of tables whose columns are not fixed (the `points` and `registered_runs`
+//! tables with the sweep's columns, the analysis's tables, test fixtures): built from the rows,
+//! name and values together (`table(&rows, |c| vec![c.f64("t", |r| r.t), ...])`), or from a
+//! field of every row (`cols::f64s(&rows, |r| r.t)`); and the join of a summary with the
+//! sweep columns. A table of fixed columns is declared once with [`crate::declare_table!`]
+//! ([`super::typed`]), which writes it and reads it back by typed fields, never by name.
 
 use std::sync::Arc;
 
-use arrow_array::cast::AsArray;
-use arrow_array::types::{Float64Type, UInt32Type, UInt64Type};
 use arrow_array::{
     Array, ArrayRef, BooleanArray, Float64Array, RecordBatch, StringArray, UInt32Array, UInt64Array,
 };
 use arrow_schema::{DataType, Field, Schema};
 
 use super::parquet_io::StoreError;
+use super::typed::{Kind, U32};
 
 pub fn f64s<T>(v: &[T], f: impl Fn(&T) -> f64) -> ArrayRef {
     Arc::new(v.iter().map(f).collect::<Float64Array>())
@@ -147,57 +147,6 @@ pub fn field_opt(name: &str, t: DataType) -> Field {
     Field::new(name, t, true)
 }
 
-/// The column `name` of a batch read from a table file.
-pub fn get<'a>(b: &'a RecordBatch, table: &str, name: &str) -> Result<&'a ArrayRef, StoreError> {
-    b.column_by_name(name)
-        .ok_or_else(|| StoreError::Corrupt(table.into(), format!("has no column {name}")))
-}
-
-fn typed<'a>(
-    b: &'a RecordBatch,
-    table: &str,
-    name: &str,
-    want: DataType,
-) -> Result<&'a ArrayRef, StoreError> {
-    let c = get(b, table, name)?;
-    if c.data_type() != &want {
-        return Err(StoreError::Corrupt(
-            table.into(),
-            format!("column {name} is {}, expected {want}", c.data_type()),
-        ));
-    }
-    Ok(c)
-}
-
-pub fn get_f64<'a>(
-    b: &'a RecordBatch,
-    table: &str,
-    name: &str,
-) -> Result<&'a Float64Array, StoreError> {
-    Ok(typed(b, table, name, DataType::Float64)?.as_primitive::<Float64Type>())
-}
-pub fn get_u32<'a>(
-    b: &'a RecordBatch,
-    table: &str,
-    name: &str,
-) -> Result<&'a UInt32Array, StoreError> {
-    Ok(typed(b, table, name, DataType::UInt32)?.as_primitive::<UInt32Type>())
-}
-pub fn get_u64<'a>(
-    b: &'a RecordBatch,
-    table: &str,
-    name: &str,
-) -> Result<&'a UInt64Array, StoreError> {
-    Ok(typed(b, table, name, DataType::UInt64)?.as_primitive::<UInt64Type>())
-}
-pub fn get_str<'a>(
-    b: &'a RecordBatch,
-    table: &str,
-    name: &str,
-) -> Result<&'a StringArray, StoreError> {
-    Ok(typed(b, table, name, DataType::Utf8)?.as_string::<i32>())
-}
-
 /// Value `i` of a nullable column.
 pub fn opt<T: arrow_array::ArrowPrimitiveType>(
     a: &arrow_array::PrimitiveArray<T>,
@@ -217,8 +166,8 @@ pub fn join_after_key(
     key: &str,
     lookup: &RecordBatch,
 ) -> Result<RecordBatch, StoreError> {
-    let keys = get_u32(batch, table, key)?;
-    let lookup_keys = get_u32(lookup, "lookup", key)?;
+    let keys = U32::read(batch, key).map_err(|e| StoreError::Corrupt(table.into(), e))?;
+    let lookup_keys = U32::read(lookup, key).map_err(|e| StoreError::Corrupt("lookup".into(), e))?;
     let row_of: std::collections::HashMap<u32, u32> = lookup_keys
         .iter()
         .enumerate()
@@ -229,7 +178,7 @@ pub fn join_after_key(
         .map(|k| k.and_then(|k| row_of.get(&k).copied()))
         .collect();
     let schema = batch.schema();
-    let at = schema.index_of(key).expect("get_u32 found it") + 1;
+    let at = schema.index_of(key).expect("U32::read found it") + 1;
     let mut fields: Vec<Field> = schema.fields()[..at]
         .iter()
         .map(|f| f.as_ref().clone())
@@ -254,6 +203,8 @@ pub fn join_after_key(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::Float64Type;
 
     #[test]
     fn join_after_key_places_lookup_columns_after_the_key() {
@@ -278,11 +229,11 @@ mod tests {
             .collect();
         // `x` of the batch stays; the lookup's `x` is left out.
         assert_eq!(names, ["point_id", "method", "x"]);
-        let m = get_str(&out, "t", "method").unwrap();
+        let m = out.column(1).as_string::<i32>();
         let got: Vec<Option<&str>> = m.iter().collect();
         assert_eq!(got, [Some("b"), Some("a"), Some("b"), None]);
         assert_eq!(
-            get_f64(&out, "t", "x").unwrap().values(),
+            out.column(2).as_primitive::<Float64Type>().values(),
             &[0.5, 1.5, 2.5, 3.5]
         );
         assert!(join_after_key(&lookup, "t", "run_id", &lookup).is_err());

@@ -1,7 +1,7 @@
 //! Storage, knowing no physics: Parquet files written atomically with the campaign's identity
 //! in their footer ([`parquet_io`]), a campaign's tables as generation directories
 //! ([`layout`], [`dataset`]) of one schema each ([`schema`]), Arrow column builders and
-//! readers ([`cols`]), checkpoint files ([`checkpoint`]).
+//! readers ([`cols`]), typed tables declared once ([`typed`], `declare_table!`), checkpoint files ([`checkpoint`]).
 
 pub mod checkpoint;
 pub mod checksum;
@@ -10,6 +10,7 @@ pub mod dataset;
 pub mod layout;
 pub mod parquet_io;
 pub mod schema;
+pub mod typed;
 
 /// Version of a campaign directory's layout (`campaign.json` and the tables). 2: the registry
 /// of points and runs in `campaign.json` (campaigns grow), `runs` without the sweep columns

@@ -12,11 +12,10 @@ use std::collections::BTreeMap;
 use arrow_array::RecordBatch;
 
 use super::params::{BisectionParams, SplitSpec};
-use super::tables::{BISECTION_HISTOGRAM, BISECTION_MOMENTS};
+use super::tables::{BisectionHistogram, BisectionMoments, BISECTION_HISTOGRAM, BISECTION_MOMENTS};
 use crate::math::stats::mean_sem;
 use crate::models::{overlay_figures, CampaignView, Overlay, PointCurve};
 use crate::plot::Figure;
-use crate::store::cols::{get_f64, get_u32, get_u64, opt};
 use crate::store::parquet_io::StoreError;
 
 /// One run's row: (x, value, sem, exact).
@@ -36,26 +35,19 @@ pub(crate) fn read_histogram(files: &[Vec<RecordBatch>]) -> Result<Runs, StoreEr
         .enumerate()
         .flat_map(|(fi, f)| f.iter().map(move |b| (fi, b)))
     {
-        let (p, r) = (get_u32(b, t, "point_id")?, get_u64(b, t, "run_id")?);
-        let (lo, hi) = (get_f64(b, t, "x_lo")?, get_f64(b, t, "x_hi")?);
-        let (d, s, e) = (
-            get_f64(b, t, "density")?,
-            get_f64(b, t, "density_sem")?,
-            get_f64(b, t, "density_exact")?,
-        );
-        for i in 0..b.num_rows() {
-            if *seen.entry((p.value(i), r.value(i))).or_insert(fi) != fi || lo.value(i) <= 0.0 {
+        for r in BisectionHistogram::read_rows(b, t)? {
+            if *seen.entry((r.point_id, r.run_id)).or_insert(fi) != fi || r.x_lo <= 0.0 {
                 continue;
             }
-            out.entry(p.value(i))
+            out.entry(r.point_id)
                 .or_default()
-                .entry(r.value(i))
+                .entry(r.run_id)
                 .or_default()
                 .push((
-                    (lo.value(i) * hi.value(i)).sqrt(),
-                    d.value(i),
-                    opt(s, i),
-                    opt(e, i),
+                    (r.x_lo * r.x_hi).sqrt(),
+                    r.density,
+                    r.density_sem,
+                    r.density_exact,
                 ));
         }
     }
@@ -72,25 +64,15 @@ pub(crate) fn read_moments(files: &[Vec<RecordBatch>]) -> Result<Runs, StoreErro
         .enumerate()
         .flat_map(|(fi, f)| f.iter().map(move |b| (fi, b)))
     {
-        let (p, r, o) = (
-            get_u32(b, t, "point_id")?,
-            get_u64(b, t, "run_id")?,
-            get_u32(b, t, "order")?,
-        );
-        let (m, s, e) = (
-            get_f64(b, t, "mean")?,
-            get_f64(b, t, "sem")?,
-            get_f64(b, t, "exact")?,
-        );
-        for i in 0..b.num_rows() {
-            if *seen.entry((p.value(i), r.value(i))).or_insert(fi) != fi {
+        for r in BisectionMoments::read_rows(b, t)? {
+            if *seen.entry((r.point_id, r.run_id)).or_insert(fi) != fi {
                 continue;
             }
-            out.entry(p.value(i))
+            out.entry(r.point_id)
                 .or_default()
-                .entry(r.value(i))
+                .entry(r.run_id)
                 .or_default()
-                .push((o.value(i) as f64, m.value(i), opt(s, i), Some(e.value(i))));
+                .push((r.order as f64, r.mean, r.sem, Some(r.exact)));
         }
     }
     Ok(out)
@@ -223,7 +205,6 @@ pub fn figures(c: &CampaignView<'_, BisectionParams>) -> Result<Vec<(String, Fig
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::cols::table;
 
     #[test]
     fn replicas_averaged_with_propagated_errors() {
@@ -235,18 +216,20 @@ mod tests {
             (2, 1, 0.1, 1.0, 1.0, None, None),
             (3, 1, 0.1, 1.0, 3.0, None, None),
         ];
-        let b = table(&rows, |c| {
-            vec![
-                c.u64("run_id", |r| r.0),
-                c.u32("point_id", |r| r.1),
-                c.f64("x_lo", |r| r.2),
-                c.f64("x_hi", |r| r.3),
-                c.u64("count", |_| 1),
-                c.f64("density", |r| r.4),
-                c.opt_f64("density_sem", |r| r.5),
-                c.opt_f64("density_exact", |r| r.6),
-            ]
-        });
+        let rows: Vec<BisectionHistogram> = rows
+            .iter()
+            .map(|r| BisectionHistogram {
+                run_id: r.0,
+                point_id: r.1,
+                x_lo: r.2,
+                x_hi: r.3,
+                count: 1,
+                density: r.4,
+                density_sem: r.5,
+                density_exact: r.6,
+            })
+            .collect();
+        let b = BisectionHistogram::batch(&rows);
         // A run's rows split over batches of one file all count; the same run in a second
         // file (a doubled run) counts once.
         let (head, tail) = (b.slice(0, 1), b.slice(1, 4));

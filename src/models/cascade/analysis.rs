@@ -7,29 +7,22 @@
 use std::collections::BTreeMap;
 
 use super::params::CascadeParams;
-use super::tables::CASCADE_STRUCTURE_FACTOR;
+use super::tables::{CascadeStructureFactor, CASCADE_STRUCTURE_FACTOR};
 use crate::analysis::{fig, line, num, slug, Analysis, AnalysisError};
 use crate::math::power::{self, Sample};
 use crate::models::CampaignView;
 use crate::plot::{self, Series};
-use crate::store::cols::{get_f64, get_u32, opt};
 
 pub fn analyze(c: &CampaignView<'_, CascadeParams>, a: &mut Analysis) -> Result<(), AnalysisError> {
     a.start()?;
     let t = CASCADE_STRUCTURE_FACTOR;
     let mut by_point: BTreeMap<u32, Vec<Sample>> = BTreeMap::new();
     for b in c.read_done(t)? {
-        let (p, k, s, e) = (
-            get_u32(&b, t, "point_id")?,
-            get_f64(&b, t, "k")?,
-            get_f64(&b, t, "s_mean")?,
-            get_f64(&b, t, "s_sem")?,
-        );
-        for i in 0..b.num_rows() {
-            by_point.entry(p.value(i)).or_default().push(Sample {
-                x: k.value(i),
-                y: s.value(i),
-                err: opt(e, i),
+        for r in CascadeStructureFactor::read_rows(&b, t)? {
+            by_point.entry(r.point_id).or_default().push(Sample {
+                x: r.k,
+                y: r.s_mean,
+                err: r.s_sem,
             });
         }
     }

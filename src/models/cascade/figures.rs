@@ -15,10 +15,12 @@ use std::collections::BTreeMap;
 use arrow_array::RecordBatch;
 
 use super::params::CascadeParams;
-use super::tables::{CASCADE_FIT, CASCADE_PLACEMENT, CASCADE_STRUCTURE_FACTOR_SUMMARY};
+use super::tables::{
+    CascadeFit, CascadePlacementCols, CascadeStructureFactorSummary, CASCADE_FIT,
+    CASCADE_PLACEMENT, CASCADE_STRUCTURE_FACTOR_SUMMARY,
+};
 use crate::models::{log_binned, overlay_figures, CampaignView, Overlay, PointCurve, Rows};
 use crate::plot::{Figure, Series};
-use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
 use crate::store::parquet_io::StoreError;
 
 /// Display bins per decade of k of a point with more than `models::MAX_LOG_ROWS` shells.
@@ -34,16 +36,10 @@ pub(crate) fn read_summary(batches: &[RecordBatch]) -> Result<Sk, StoreError> {
     let t = CASCADE_STRUCTURE_FACTOR_SUMMARY;
     let mut out = Sk::new();
     for b in batches {
-        let (p, src, k) = (
-            get_u32(b, t, "point_id")?,
-            get_str(b, t, "source")?,
-            get_f64(b, t, "k")?,
-        );
-        let (m, s) = (get_f64(b, t, "s_mean")?, get_f64(b, t, "s_sem")?);
-        for i in 0..b.num_rows() {
-            out.entry((p.value(i), src.value(i).to_string()))
+        for r in CascadeStructureFactorSummary::read_rows(b, t)? {
+            out.entry((r.point_id, r.source))
                 .or_default()
-                .push((k.value(i), m.value(i), opt(s, i).unwrap_or(0.0)));
+                .push((r.k, r.s_mean, r.s_sem.unwrap_or(0.0)));
         }
     }
     for v in out.values_mut() {
@@ -70,26 +66,15 @@ pub(crate) fn read_fits(
     // (point, source) -> run -> (d_f, amplitude, k_lo, k_hi)
     let mut runs: BTreeMap<(u32, String), BTreeMap<u64, Fit>> = BTreeMap::new();
     for b in batches {
-        let (r, p, src) = (
-            get_u64(b, t, "run_id")?,
-            get_u32(b, t, "point_id")?,
-            get_str(b, t, "source")?,
-        );
-        let (lo, hi, df, a) = (
-            get_f64(b, t, "k_lo")?,
-            get_f64(b, t, "k_hi")?,
-            get_f64(b, t, "d_f")?,
-            get_f64(b, t, "amplitude")?,
-        );
-        for i in 0..b.num_rows() {
-            let (Some(df), Some(a)) = (opt(df, i), opt(a, i)) else {
+        for r in CascadeFit::read_rows(b, t)? {
+            let (Some(df), Some(a)) = (r.d_f, r.amplitude) else {
                 continue;
             };
             if a > 0.0 {
-                runs.entry((p.value(i), src.value(i).to_string()))
+                runs.entry((r.point_id, r.source))
                     .or_default()
-                    .entry(r.value(i))
-                    .or_insert((df, a, lo.value(i), hi.value(i)));
+                    .entry(r.run_id)
+                    .or_insert((df, a, r.k_lo, r.k_hi));
             }
         }
     }
@@ -190,8 +175,13 @@ fn placements(c: &CampaignView<'_, CascadeParams>) -> Result<Vec<(String, Figure
     // point -> (first run, its discs)
     let mut first: BTreeMap<u32, (u64, Rows)> = BTreeMap::new();
     for b in c.read_done(t)? {
-        let (r, p) = (get_u64(&b, t, "run_id")?, get_u32(&b, t, "point_id")?);
-        let (x, y) = (get_f64(&b, t, "x")?, get_f64(&b, t, "y")?);
+        let CascadePlacementCols {
+            run_id: r,
+            point_id: p,
+            x,
+            y,
+            ..
+        } = CascadePlacementCols::read(&b, t)?;
         for i in 0..b.num_rows() {
             let e = first.entry(p.value(i)).or_insert((r.value(i), Vec::new()));
             if r.value(i) < e.0 {
@@ -226,7 +216,6 @@ fn placements(c: &CampaignView<'_, CascadeParams>) -> Result<Vec<(String, Figure
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::cols::table;
 
     #[test]
     fn fits_averaged_over_replicas_and_drawn_in_their_window() {
@@ -237,17 +226,29 @@ mod tests {
             (2, 1, "field", 2.0, 8.0, None, None),
             (0, 0, "placement", 2.0, 8.0, Some(0.1), Some(1.0)),
         ];
-        let b = table(&rows, |c| {
-            vec![
-                c.u64("run_id", |r| r.0),
-                c.u32("point_id", |r| r.1),
-                c.str("source", |r| r.2),
-                c.f64("k_lo", |r| r.3),
-                c.f64("k_hi", |r| r.4),
-                c.opt_f64("d_f", |r| r.5),
-                c.opt_f64("amplitude", |r| r.6),
-            ]
-        });
+        let rows: Vec<CascadeFit> = rows
+            .iter()
+            .map(|r| CascadeFit {
+                run_id: r.0,
+                point_id: r.1,
+                source: r.2.into(),
+                variant: "v".into(),
+                level: 3,
+                k_lo: r.3,
+                k_hi: r.4,
+                n_shells: 4,
+                d_f: r.5,
+                d_f_err: None,
+                amplitude: r.6,
+                chi2_red: None,
+                d_f_thesis: None,
+                d_f_thesis_err: None,
+                weight_sum_mean: 1.0,
+                weight_sum_sem: None,
+                attempts: None,
+            })
+            .collect();
+        let b = CascadeFit::batch(&rows);
         let f = read_fits(&[b]).unwrap();
         assert_eq!(f.len(), 2, "a failed fit (no D_f) has no line");
         let (df, a, lo, hi) = f[&(0, "field".to_string())];
@@ -274,15 +275,21 @@ mod tests {
             (0, "placement", 1.0, 0.8, Some(0.1)),
             (0, "placement", 3.0, 1e-20, Some(1e-21)),
         ];
-        let b = table(&rows, |c| {
-            vec![
-                c.u32("point_id", |r| r.0),
-                c.str("source", |r| r.1),
-                c.f64("k", |r| r.2),
-                c.f64("s_mean", |r| r.3),
-                c.opt_f64("s_sem", |r| r.4),
-            ]
-        });
+        let rows: Vec<CascadeStructureFactorSummary> = rows
+            .iter()
+            .map(|r| CascadeStructureFactorSummary {
+                point_id: r.0,
+                source: r.1.into(),
+                n2: 1,
+                k: r.2,
+                n_vectors: 4,
+                n_replicas: 1,
+                n_realisations: 1,
+                s_mean: r.3,
+                s_sem: r.4,
+            })
+            .collect();
+        let b = CascadeStructureFactorSummary::batch(&rows);
         let s = read_summary(&[b]).unwrap();
         assert_eq!(
             s[&(0, "field".to_string())],

@@ -9,10 +9,12 @@
 use std::collections::BTreeMap;
 
 use super::params::CascadeParams;
-use super::tables::{CASCADE_STRUCTURE_FACTOR, CASCADE_STRUCTURE_FACTOR_SUMMARY};
+use super::tables::{
+    CascadeStructureFactorCols, CascadeStructureFactorSummary, CASCADE_STRUCTURE_FACTOR,
+    CASCADE_STRUCTURE_FACTOR_SUMMARY,
+};
 use crate::math::stats::mean_sem;
 use crate::models::CampaignView;
-use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt, table};
 use crate::store::parquet_io::StoreError;
 
 /// One run's shell: (replica, k, n_vectors, n_realisations, s_mean, s_sem).
@@ -24,29 +26,20 @@ pub fn write(c: &CampaignView<'_, CascadeParams>) -> Result<(), StoreError> {
     for f in c.data.files(t)? {
         let name = f.display().to_string();
         for b in c.data.read_file(&f, t)? {
-            let r = get_u64(&b, &name, "run_id")?;
-            let p = get_u32(&b, &name, "point_id")?;
-            let src = get_str(&b, &name, "source")?;
-            let n2 = get_u64(&b, &name, "n2")?;
-            let k = get_f64(&b, &name, "k")?;
-            let nv = get_u64(&b, &name, "n_vectors")?;
-            let nr = get_u64(&b, &name, "n_realisations")?;
-            let s = get_f64(&b, &name, "s_mean")?;
-            let se = get_f64(&b, &name, "s_sem")?;
-            for i in 0..b.num_rows() {
-                let Some(&replica) = c.done.get(&r.value(i)) else {
+            let cols = CascadeStructureFactorCols::read(&b, &name)?;
+            for i in 0..cols.len() {
+                let Some(&replica) = c.done.get(&cols.run_id.value(i)) else {
                     continue;
                 };
-                g.entry((p.value(i), src.value(i).to_string(), n2.value(i)))
-                    .or_default()
-                    .push((
-                        replica as u64,
-                        k.value(i),
-                        nv.value(i),
-                        nr.value(i),
-                        s.value(i),
-                        opt(se, i),
-                    ));
+                let r = cols.row(i);
+                g.entry((r.point_id, r.source, r.n2)).or_default().push((
+                    replica as u64,
+                    r.k,
+                    r.n_vectors,
+                    r.n_realisations,
+                    r.s_mean,
+                    r.s_sem,
+                ));
             }
         }
     }
@@ -68,18 +61,20 @@ pub fn write(c: &CampaignView<'_, CascadeParams>) -> Result<(), StoreError> {
             (key, v[0].1, v[0].2, v.len() as u32, real, mean, sem)
         })
         .collect();
-    let batch = table(&rows, |col| {
-        vec![
-            col.u32("point_id", |r| r.0 .0),
-            col.str("source", |r| r.0 .1.as_str()),
-            col.u64("n2", |r| r.0 .2),
-            col.f64("k", |r| r.1),
-            col.u64("n_vectors", |r| r.2),
-            col.u32("n_replicas", |r| r.3),
-            col.u64("n_realisations", |r| r.4),
-            col.f64("s_mean", |r| r.5),
-            col.opt_f64("s_sem", |r| r.6),
-        ]
-    });
+    let rows: Vec<CascadeStructureFactorSummary> = rows
+        .into_iter()
+        .map(|r| CascadeStructureFactorSummary {
+            point_id: r.0 .0,
+            source: r.0 .1,
+            n2: r.0 .2,
+            k: r.1,
+            n_vectors: r.2,
+            n_replicas: r.3,
+            n_realisations: r.4,
+            s_mean: r.5,
+            s_sem: r.6,
+        })
+        .collect();
+    let batch = CascadeStructureFactorSummary::batch(&rows);
     c.write_summary(CASCADE_STRUCTURE_FACTOR_SUMMARY, &batch)
 }

@@ -1,59 +1,141 @@
-//! The tables of the `cascade` model: S(k) of each run (`cascade_structure_factor`, with its
-//! replica summary in [`super::summary`]), the D_f fits (`cascade_fit`) and the placed discs
+//! The tables of the `cascade` model, each declared once ([`crate::declare_table!`]): S(k) of
+//! each run (`cascade_structure_factor`, with its replica summary written by
+//! [`super::summary`]), the D_f fits (`cascade_fit`) and the placed discs
 //! (`cascade_placement`).
 
 use arrow_array::RecordBatch;
 
 use crate::aux_models::cascade::{FitRow, PlacementRow, SkRow};
-use crate::models::{run_batch, RunIds};
+use crate::declare_table;
+use crate::models::RunIds;
+use crate::store::typed::{OptF64, OptU64, Str, F64, U32, U64};
 
-pub const CASCADE_STRUCTURE_FACTOR: &str = "cascade_structure_factor";
-pub const CASCADE_STRUCTURE_FACTOR_SUMMARY: &str = "cascade_structure_factor_summary";
-pub const CASCADE_FIT: &str = "cascade_fit";
-pub const CASCADE_PLACEMENT: &str = "cascade_placement";
+pub const CASCADE_STRUCTURE_FACTOR: &str = CascadeStructureFactor::TABLE;
+pub const CASCADE_STRUCTURE_FACTOR_SUMMARY: &str = CascadeStructureFactorSummary::TABLE;
+pub const CASCADE_FIT: &str = CascadeFit::TABLE;
+pub const CASCADE_PLACEMENT: &str = CascadePlacement::TABLE;
+
+declare_table! {
+    /// `cascade_structure_factor`: S(k) per source and shell (per run).
+    pub struct CascadeStructureFactor in "cascade_structure_factor",
+        read as CascadeStructureFactorCols {
+        run_id: U64,
+        point_id: U32,
+        source: Str,
+        n2: U64,
+        k: F64,
+        n_vectors: U64,
+        n_realisations: U64,
+        s_mean: F64,
+        s_sem: OptF64,
+    }
+}
+
+declare_table! {
+    /// `cascade_structure_factor_summary`: S(k) over the finished replicas per point, source
+    /// and shell (errors propagated from the runs').
+    pub struct CascadeStructureFactorSummary in "cascade_structure_factor_summary",
+        read as CascadeStructureFactorSummaryCols {
+        point_id: U32,
+        source: Str,
+        n2: U64,
+        k: F64,
+        n_vectors: U64,
+        n_replicas: U32,
+        n_realisations: U64,
+        s_mean: F64,
+        s_sem: OptF64,
+    }
+}
+
+declare_table! {
+    /// `cascade_fit`: the D_f fits per source and variant (per run).
+    pub struct CascadeFit in "cascade_fit", read as CascadeFitCols {
+        run_id: U64,
+        point_id: U32,
+        source: Str,
+        variant: Str,
+        level: U32,
+        k_lo: F64,
+        k_hi: F64,
+        n_shells: U32,
+        d_f: OptF64,
+        d_f_err: OptF64,
+        amplitude: OptF64,
+        chi2_red: OptF64,
+        d_f_thesis: OptF64,
+        d_f_thesis_err: OptF64,
+        weight_sum_mean: F64,
+        weight_sum_sem: OptF64,
+        attempts: OptU64,
+    }
+}
+
+declare_table! {
+    /// `cascade_placement`: the placed discs (per run).
+    pub struct CascadePlacement in "cascade_placement", read as CascadePlacementCols {
+        run_id: U64,
+        point_id: U32,
+        particle: U32,
+        x: F64,
+        y: F64,
+    }
+}
 
 pub fn structure_factor_batch(ids: RunIds, v: &[SkRow]) -> RecordBatch {
-    run_batch(ids, v, |c| {
-        vec![
-            c.str("source", |r| &r.source),
-            c.u64("n2", |r| r.n2),
-            c.f64("k", |r| r.k),
-            c.u64("n_vectors", |r| r.n_vectors),
-            c.u64("n_realisations", |r| r.n_realisations),
-            c.f64("s_mean", |r| r.s_mean),
-            c.opt_f64("s_sem", |r| r.s_sem),
-        ]
-    })
+    let rows: Vec<CascadeStructureFactor> = v
+        .iter()
+        .map(|r| CascadeStructureFactor {
+            run_id: ids.run_id,
+            point_id: ids.point_id,
+            source: r.source.clone(),
+            n2: r.n2,
+            k: r.k,
+            n_vectors: r.n_vectors,
+            n_realisations: r.n_realisations,
+            s_mean: r.s_mean,
+            s_sem: r.s_sem,
+        })
+        .collect();
+    CascadeStructureFactor::batch(&rows)
 }
 
 pub fn fit_batch(ids: RunIds, v: &[FitRow]) -> RecordBatch {
-    run_batch(ids, v, |c| {
-        vec![
-            c.str("source", |r| &r.source),
-            c.str("variant", |r| &r.variant),
-            c.u32("level", |r| r.level),
-            c.f64("k_lo", |r| r.k_lo),
-            c.f64("k_hi", |r| r.k_hi),
-            c.u32("n_shells", |r| r.n_shells),
-            c.opt_f64("d_f", |r| r.d_f),
-            c.opt_f64("d_f_err", |r| r.d_f_err),
-            c.opt_f64("amplitude", |r| r.amplitude),
-            c.opt_f64("chi2_red", |r| r.chi2_red),
-            c.opt_f64("d_f_thesis", |r| r.d_f_thesis),
-            c.opt_f64("d_f_thesis_err", |r| r.d_f_thesis_err),
-            c.f64("weight_sum_mean", |r| r.weight_sum_mean),
-            c.opt_f64("weight_sum_sem", |r| r.weight_sum_sem),
-            c.opt_u64("attempts", |r| r.attempts),
-        ]
-    })
+    let rows: Vec<CascadeFit> = v
+        .iter()
+        .map(|r| CascadeFit {
+            run_id: ids.run_id,
+            point_id: ids.point_id,
+            source: r.source.clone(),
+            variant: r.variant.clone(),
+            level: r.level,
+            k_lo: r.k_lo,
+            k_hi: r.k_hi,
+            n_shells: r.n_shells,
+            d_f: r.d_f,
+            d_f_err: r.d_f_err,
+            amplitude: r.amplitude,
+            chi2_red: r.chi2_red,
+            d_f_thesis: r.d_f_thesis,
+            d_f_thesis_err: r.d_f_thesis_err,
+            weight_sum_mean: r.weight_sum_mean,
+            weight_sum_sem: r.weight_sum_sem,
+            attempts: r.attempts,
+        })
+        .collect();
+    CascadeFit::batch(&rows)
 }
 
 pub fn placement_batch(ids: RunIds, v: &[PlacementRow]) -> RecordBatch {
-    run_batch(ids, v, |c| {
-        vec![
-            c.u32("particle", |r| r.particle),
-            c.f64("x", |r| r.x),
-            c.f64("y", |r| r.y),
-        ]
-    })
+    let rows: Vec<CascadePlacement> = v
+        .iter()
+        .map(|r| CascadePlacement {
+            run_id: ids.run_id,
+            point_id: ids.point_id,
+            particle: r.particle,
+            x: r.x,
+            y: r.y,
+        })
+        .collect();
+    CascadePlacement::batch(&rows)
 }

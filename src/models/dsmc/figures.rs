@@ -10,10 +10,12 @@
 use std::collections::BTreeMap;
 
 use super::params::DsmcParams;
-use super::tables::{DSMC_SPECIES_SUMMARY, DSMC_SPEED_HISTOGRAM_SUMMARY, DSMC_THEORY};
+use super::tables::{
+    DsmcSpeciesSummaryCols, DsmcSpeedHistogramSummaryCols, DsmcTheoryCols, DSMC_SPECIES_SUMMARY,
+    DSMC_SPEED_HISTOGRAM_SUMMARY, DSMC_THEORY,
+};
 use crate::models::CampaignView;
 use crate::plot::{Figure, Series};
-use crate::store::cols::{get_f64, get_u32, opt};
 use crate::store::parquet_io::StoreError;
 
 type View<'a, 'b> = &'a CampaignView<'b, DsmcParams>;
@@ -21,8 +23,17 @@ type View<'a, 'b> = &'a CampaignView<'b, DsmcParams>;
 /// point -> species -> rows, each list sorted by time.
 type ByPoint<T> = BTreeMap<u32, BTreeMap<u32, Vec<T>>>;
 
-/// A summary row: (t, T mean, T sem, msd mean, msd sem, a2 (mean, sem) where observed).
-type SummaryPoint = (f64, f64, f64, Option<f64>, f64, Option<(f64, f64)>);
+/// A summary row of a species at a time (a missing sem is 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct SummaryPoint {
+    t: f64,
+    temperature: f64,
+    temperature_sem: f64,
+    msd: Option<f64>,
+    msd_sem: f64,
+    /// (mean, sem) where observed.
+    a2: Option<(f64, f64)>,
+}
 
 /// The summary rows per point and species.
 fn read_summary(c: View) -> Result<ByPoint<SummaryPoint>, StoreError> {
@@ -30,35 +41,39 @@ fn read_summary(c: View) -> Result<ByPoint<SummaryPoint>, StoreError> {
     for f in c.data.files(DSMC_SPECIES_SUMMARY)? {
         let name = f.display().to_string();
         for b in c.data.read_file(&f, DSMC_SPECIES_SUMMARY)? {
-            let p = get_u32(&b, &name, "point_id")?;
-            let t = get_f64(&b, &name, "t")?;
-            let s = get_u32(&b, &name, "species")?;
-            let tm = get_f64(&b, &name, "temperature_mean")?;
-            let ts = get_f64(&b, &name, "temperature_sem")?;
-            let mm = get_f64(&b, &name, "msd_mean")?;
-            let ms = get_f64(&b, &name, "msd_sem")?;
-            // Absent from a summary written before the observable existed.
-            let am = get_f64(&b, &name, "a2_mean").ok();
-            let asem = get_f64(&b, &name, "a2_sem").ok();
-            for i in 0..b.num_rows() {
-                let sem = |a| opt(a, i).unwrap_or(0.0);
-                let a2 = am
-                    .and_then(|a| opt(a, i))
-                    .map(|m| (m, asem.map_or(0.0, sem)));
-                out.entry(p.value(i))
+            // a2 is absent from a summary written before the observable existed.
+            let cols = DsmcSpeciesSummaryCols::read(&b, &name)?;
+            for i in 0..cols.len() {
+                let r = cols.row(i);
+                out.entry(r.point_id)
                     .or_default()
-                    .entry(s.value(i))
+                    .entry(r.species)
                     .or_default()
-                    .push((t.value(i), tm.value(i), sem(ts), opt(mm, i), sem(ms), a2));
+                    .push(SummaryPoint {
+                        t: r.t,
+                        temperature: r.temperature_mean,
+                        temperature_sem: r.temperature_sem.unwrap_or(0.0),
+                        msd: r.msd_mean,
+                        msd_sem: r.msd_sem.unwrap_or(0.0),
+                        a2: r.a2_mean.map(|m| (m, r.a2_sem.unwrap_or(0.0))),
+                    });
             }
         }
     }
-    sort_by_time(&mut out, |r| r.0);
+    sort_by_time(&mut out, |r| r.t);
     Ok(out)
 }
 
-/// A theory row: (t, T, msd, T Sonine, msd Sonine, a2).
-type TheoryPoint = (f64, f64, Option<f64>, Option<f64>, Option<f64>, Option<f64>);
+/// A theory row of a species at a time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TheoryPoint {
+    t: f64,
+    temperature: f64,
+    msd: Option<f64>,
+    temperature_sonine: Option<f64>,
+    msd_sonine: Option<f64>,
+    a2: Option<f64>,
+}
 
 /// The theory rows per point and species, if the campaign has a readable `dsmc_theory` table
 /// (the Sonine columns and a2 where the table has them).
@@ -66,37 +81,26 @@ fn read_theory(c: View) -> ByPoint<TheoryPoint> {
     let mut out: ByPoint<TheoryPoint> = BTreeMap::new();
     let batches = c.data.read(DSMC_THEORY).unwrap_or_default();
     for b in batches {
-        let cols = (|| {
-            Ok::<_, StoreError>((
-                get_u32(&b, DSMC_THEORY, "point_id")?,
-                get_f64(&b, DSMC_THEORY, "t")?,
-                get_u32(&b, DSMC_THEORY, "species")?,
-                get_f64(&b, DSMC_THEORY, "temperature")?,
-                get_f64(&b, DSMC_THEORY, "msd")?,
-            ))
-        })();
-        let Ok((p, t, s, tt, m)) = cols else {
+        let Ok(cols) = DsmcTheoryCols::read(&b, DSMC_THEORY) else {
             continue;
         };
-        let ts = get_f64(&b, DSMC_THEORY, "temperature_sonine").ok();
-        let ms = get_f64(&b, DSMC_THEORY, "msd_sonine").ok();
-        let a2 = get_f64(&b, DSMC_THEORY, "a2").ok();
-        for i in 0..b.num_rows() {
-            out.entry(p.value(i))
+        for i in 0..cols.len() {
+            let r = cols.row(i);
+            out.entry(r.point_id)
                 .or_default()
-                .entry(s.value(i))
+                .entry(r.species)
                 .or_default()
-                .push((
-                    t.value(i),
-                    tt.value(i),
-                    opt(m, i),
-                    ts.and_then(|c| opt(c, i)),
-                    ms.and_then(|c| opt(c, i)),
-                    a2.and_then(|c| opt(c, i)),
-                ));
+                .push(TheoryPoint {
+                    t: r.t,
+                    temperature: r.temperature,
+                    msd: r.msd,
+                    temperature_sonine: r.temperature_sonine,
+                    msd_sonine: r.msd_sonine,
+                    a2: r.a2,
+                });
         }
     }
-    sort_by_time(&mut out, |r| r.0);
+    sort_by_time(&mut out, |r| r.t);
     out
 }
 
@@ -188,18 +192,18 @@ fn time_figures(
             label: format!("T_{k} (DSMC)"),
             points: rows
                 .iter()
-                .filter(|r| r.0 > 0.0)
-                .map(|r| (r.0, r.1, r.2))
+                .filter(|r| r.t > 0.0)
+                .map(|r| (r.t, r.temperature, r.temperature_sem))
                 .collect(),
             line: false,
         });
-        if rows.iter().any(|r| r.3.is_some()) {
+        if rows.iter().any(|r| r.msd.is_some()) {
             msd.push(Series {
                 label: format!("<R_{k}^2> (DSMC)"),
                 points: rows
                     .iter()
-                    .filter(|r| r.0 > 0.0 && r.3.is_some_and(|m| m > 0.0))
-                    .map(|r| (r.0, r.3.unwrap_or(0.0), r.4))
+                    .filter(|r| r.t > 0.0 && r.msd.is_some_and(|m| m > 0.0))
+                    .map(|r| (r.t, r.msd.unwrap_or(0.0), r.msd_sem))
                     .collect(),
                 line: false,
             });
@@ -209,39 +213,39 @@ fn time_figures(
                 label: format!("T_{k} (theory)"),
                 points: tr
                     .iter()
-                    .filter(|r| r.0 > 0.0)
-                    .map(|r| (r.0, r.1, 0.0))
+                    .filter(|r| r.t > 0.0)
+                    .map(|r| (r.t, r.temperature, 0.0))
                     .collect(),
                 line: true,
             });
-            if tr.iter().any(|r| r.3.is_some()) {
+            if tr.iter().any(|r| r.temperature_sonine.is_some()) {
                 temp.push(Series {
                     label: format!("T_{k} (Sonine)"),
                     points: tr
                         .iter()
-                        .filter(|r| r.0 > 0.0 && r.3.is_some_and(|x| x > 0.0))
-                        .map(|r| (r.0, r.3.unwrap_or(0.0), 0.0))
+                        .filter(|r| r.t > 0.0 && r.temperature_sonine.is_some_and(|x| x > 0.0))
+                        .map(|r| (r.t, r.temperature_sonine.unwrap_or(0.0), 0.0))
                         .collect(),
                     line: true,
                 });
             }
-            if tr.iter().any(|r| r.2.is_some()) && !msd.is_empty() {
+            if tr.iter().any(|r| r.msd.is_some()) && !msd.is_empty() {
                 msd.push(Series {
                     label: format!("<R_{k}^2> (theory)"),
                     points: tr
                         .iter()
-                        .filter(|r| r.0 > 0.0 && r.2.is_some_and(|m| m > 0.0))
-                        .map(|r| (r.0, r.2.unwrap_or(0.0), 0.0))
+                        .filter(|r| r.t > 0.0 && r.msd.is_some_and(|m| m > 0.0))
+                        .map(|r| (r.t, r.msd.unwrap_or(0.0), 0.0))
                         .collect(),
                     line: true,
                 });
-                if tr.iter().any(|r| r.4.is_some()) {
+                if tr.iter().any(|r| r.msd_sonine.is_some()) {
                     msd.push(Series {
                         label: format!("<R_{k}^2> (Sonine)"),
                         points: tr
                             .iter()
-                            .filter(|r| r.0 > 0.0 && r.4.is_some_and(|m| m > 0.0))
-                            .map(|r| (r.0, r.4.unwrap_or(0.0), 0.0))
+                            .filter(|r| r.t > 0.0 && r.msd_sonine.is_some_and(|m| m > 0.0))
+                            .map(|r| (r.t, r.msd_sonine.unwrap_or(0.0), 0.0))
                             .collect(),
                         line: true,
                     });
@@ -303,17 +307,17 @@ fn ratio_figures(
             "temperature",
             "temperature-vs-theory",
             "T_{k}",
-            |r| Some((r.1, r.2)),
-            |t| Some(t.1),
-            |t| t.3,
+            |r| Some((r.temperature, r.temperature_sem)),
+            |t| Some(t.temperature),
+            |t| t.temperature_sonine,
         ),
         (
             "MSD",
             "msd-vs-theory",
             "MSD_{k}",
-            |r| r.3.map(|m| (m, r.4)),
-            |t| t.2,
-            |t| t.4,
+            |r| r.msd.map(|m| (m, r.msd_sem)),
+            |t| t.msd,
+            |t| t.msd_sonine,
         ),
     ];
     for (what, id, sym, pick, maxwell, sonine) in kinds {
@@ -321,15 +325,15 @@ fn ratio_figures(
         let (mut t0, mut t1) = (f64::INFINITY, 0.0f64);
         for k in &shown {
             let Some(tr) = th.get(k) else { continue };
-            let at = |t: f64| tr.iter().find(|r| r.0 == t);
+            let at = |t: f64| tr.iter().find(|r| r.t == t);
             for (name, f) in [("Maxwell", maxwell), ("Sonine", sonine)] {
                 let points: Vec<(f64, f64, f64)> = species[k]
                     .iter()
-                    .filter(|r| r.0 > 0.0)
+                    .filter(|r| r.t > 0.0)
                     .filter_map(|r| {
                         let (v, e) = pick(r)?;
-                        let x = f(at(r.0)?)?;
-                        (x > 0.0).then(|| (r.0, v / x, e / x))
+                        let x = f(at(r.t)?)?;
+                        (x > 0.0).then(|| (r.t, v / x, e / x))
                     })
                     .collect();
                 if name == "Sonine" && points.is_empty() {
@@ -384,12 +388,12 @@ fn vs_k_figures(
     let mut figs = Vec::new();
     let last = species
         .values()
-        .filter_map(|rows| rows.last().map(|r| r.0))
+        .filter_map(|rows| rows.last().map(|r| r.t))
         .fold(0.0, f64::max);
-    let at_last = |k: &u32| species[k].iter().find(|r| r.0 == last).copied();
+    let at_last = |k: &u32| species[k].iter().find(|r| r.t == last).copied();
     let tk: Vec<(f64, f64, f64)> = all
         .iter()
-        .filter_map(|k| at_last(k).map(|r| (*k as f64, r.1, r.2)))
+        .filter_map(|k| at_last(k).map(|r| (*k as f64, r.temperature, r.temperature_sem)))
         .collect();
     figs.push((
         format!("point-{point:04}-temperature-vs-k"),
@@ -409,10 +413,12 @@ fn vs_k_figures(
             heatmap: None,
         },
     ));
-    if let Some(r1) = at_last(&1).and_then(|r| r.3) {
+    if let Some(r1) = at_last(&1).and_then(|r| r.msd) {
         let ratio: Vec<(f64, f64, f64)> = all
             .iter()
-            .filter_map(|k| at_last(k).and_then(|r| r.3.map(|m| (*k as f64, m / r1, r.4 / r1))))
+            .filter_map(|k| {
+                at_last(k).and_then(|r| r.msd.map(|m| (*k as f64, m / r1, r.msd_sem / r1)))
+            })
             .collect();
         figs.push((
             format!("point-{point:04}-msd-ratio-vs-k"),
@@ -443,7 +449,7 @@ fn measured_a2(species: &BTreeMap<u32, Vec<SummaryPoint>>) -> BTreeMap<u32, Vec<
         .map(|(&k, rows)| {
             let a2: Vec<(f64, f64, f64)> = rows
                 .iter()
-                .filter_map(|r| r.5.map(|(m, e)| (r.0, m, e)))
+                .filter_map(|r| r.a2.map(|(m, e)| (r.t, m, e)))
                 .collect();
             (k, a2)
         })
@@ -455,15 +461,22 @@ fn measured_a2(species: &BTreeMap<u32, Vec<SummaryPoint>>) -> BTreeMap<u32, Vec<
 fn theory_a2(th: &BTreeMap<u32, Vec<TheoryPoint>>) -> BTreeMap<u32, Vec<(f64, f64)>> {
     th.iter()
         .map(|(&k, rows)| {
-            let a2: Vec<(f64, f64)> = rows.iter().filter_map(|r| r.5.map(|a| (r.0, a))).collect();
+            let a2: Vec<(f64, f64)> = rows.iter().filter_map(|r| r.a2.map(|a| (r.t, a))).collect();
             (k, a2)
         })
         .filter(|(_, a2)| !a2.is_empty())
         .collect()
 }
 
-/// A histogram summary row: (t, c_lo, c_hi, density mean, density sem).
-type HistPoint = (f64, f64, f64, f64, f64);
+/// A histogram summary row of a species (a missing sem is 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct HistPoint {
+    t: f64,
+    c_lo: f64,
+    c_hi: f64,
+    density: f64,
+    density_sem: f64,
+}
 
 /// The speed-histogram summary per point and species, sorted by time then bin.
 fn read_hist(c: View) -> Result<ByPoint<HistPoint>, StoreError> {
@@ -471,31 +484,26 @@ fn read_hist(c: View) -> Result<ByPoint<HistPoint>, StoreError> {
     for f in c.data.files(DSMC_SPEED_HISTOGRAM_SUMMARY)? {
         let name = f.display().to_string();
         for b in c.data.read_file(&f, DSMC_SPEED_HISTOGRAM_SUMMARY)? {
-            let p = get_u32(&b, &name, "point_id")?;
-            let t = get_f64(&b, &name, "t")?;
-            let s = get_u32(&b, &name, "species")?;
-            let lo = get_f64(&b, &name, "c_lo")?;
-            let hi = get_f64(&b, &name, "c_hi")?;
-            let m = get_f64(&b, &name, "density_mean")?;
-            let e = get_f64(&b, &name, "density_sem")?;
-            for i in 0..b.num_rows() {
-                out.entry(p.value(i))
+            let cols = DsmcSpeedHistogramSummaryCols::read(&b, &name)?;
+            for i in 0..cols.len() {
+                let r = cols.row(i);
+                out.entry(r.point_id)
                     .or_default()
-                    .entry(s.value(i))
+                    .entry(r.species)
                     .or_default()
-                    .push((
-                        t.value(i),
-                        lo.value(i),
-                        hi.value(i),
-                        m.value(i),
-                        opt(e, i).unwrap_or(0.0),
-                    ));
+                    .push(HistPoint {
+                        t: r.t,
+                        c_lo: r.c_lo,
+                        c_hi: r.c_hi,
+                        density: r.density_mean,
+                        density_sem: r.density_sem.unwrap_or(0.0),
+                    });
             }
         }
     }
     for sp in out.values_mut() {
         for rows in sp.values_mut() {
-            rows.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+            rows.sort_by(|a, b| a.t.total_cmp(&b.t).then(a.c_lo.total_cmp(&b.c_lo)));
         }
     }
     Ok(out)
@@ -584,17 +592,17 @@ fn speed_figure(
     let shown = shown_species(&all);
     let last = hist
         .values()
-        .filter_map(|rows| rows.last().map(|r| r.0))
+        .filter_map(|rows| rows.last().map(|r| r.t))
         .fold(0.0, f64::max);
-    let c_max = hist.values().flatten().map(|r| r.2).fold(0.0, f64::max);
+    let c_max = hist.values().flatten().map(|r| r.c_hi).fold(0.0, f64::max);
     let mut series: Vec<Series> = shown
         .iter()
         .map(|k| Series {
             label: format!("species {k} (DSMC)"),
             points: hist[k]
                 .iter()
-                .filter(|r| r.0 == last && r.3 > 0.0)
-                .map(|r| (0.5 * (r.1 + r.2), r.3, r.4))
+                .filter(|r| r.t == last && r.density > 0.0)
+                .map(|r| (0.5 * (r.c_lo + r.c_hi), r.density, r.density_sem))
                 .collect(),
             line: false,
         })
@@ -649,6 +657,34 @@ fn speed_figure(
 mod tests {
     use super::*;
 
+    fn summary_point(t: f64, tm: f64, ts: f64, msd: Option<f64>, ms: f64) -> SummaryPoint {
+        SummaryPoint {
+            t,
+            temperature: tm,
+            temperature_sem: ts,
+            msd,
+            msd_sem: ms,
+            a2: None,
+        }
+    }
+
+    fn theory_point(
+        t: f64,
+        temperature: f64,
+        msd: Option<f64>,
+        temperature_sonine: Option<f64>,
+        msd_sonine: Option<f64>,
+    ) -> TheoryPoint {
+        TheoryPoint {
+            t,
+            temperature,
+            msd,
+            temperature_sonine,
+            msd_sonine,
+            a2: None,
+        }
+    }
+
     /// The ratio figures divide each measurement (and its sem) by the theory at the same
     /// time, one series per species and theory, and are absent without Sonine columns.
     #[test]
@@ -657,15 +693,15 @@ mod tests {
         let species: BTreeMap<u32, Vec<SummaryPoint>> = BTreeMap::from([(
             1,
             vec![
-                (1.0, 2.04, 0.02, Some(3.0), 0.3, None),
-                (2.0, 1.1, 0.01, None, 0.0, None),
+                summary_point(1.0, 2.04, 0.02, Some(3.0), 0.3),
+                summary_point(2.0, 1.1, 0.01, None, 0.0),
             ],
         )]);
         let th: BTreeMap<u32, Vec<TheoryPoint>> = BTreeMap::from([(
             1,
             vec![
-                (1.0, 2.0, Some(2.0), Some(2.04), Some(3.0), None),
-                (2.0, 1.0, None, Some(1.0), None, None),
+                theory_point(1.0, 2.0, Some(2.0), Some(2.04), Some(3.0)),
+                theory_point(2.0, 1.0, None, Some(1.0), None),
             ],
         )]);
         let figs = ratio_figures(0, &species, &th, &title);
@@ -692,7 +728,7 @@ mod tests {
         assert!(close(&m[0].points, (1.0, 1.5, 0.15)), "{:?}", m[0].points);
         assert!(close(&m[1].points, (1.0, 1.0, 0.1)), "{:?}", m[1].points);
         let maxwell_only: BTreeMap<u32, Vec<TheoryPoint>> =
-            BTreeMap::from([(1, vec![(1.0, 2.0, Some(2.0), None, None, None)])]);
+            BTreeMap::from([(1, vec![theory_point(1.0, 2.0, Some(2.0), None, None)])]);
         assert!(ratio_figures(0, &species, &maxwell_only, &title).is_empty());
     }
 

@@ -23,10 +23,9 @@ use std::collections::{BTreeMap, BTreeSet, HashSet};
 use arrow_array::{Array, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray};
 
 use super::params::DsmcParams;
-use super::tables::DSMC_SPECIES_SUMMARY;
-use crate::models::CampaignView;
+use super::tables::{DsmcSpeciesSummaryCols, DSMC_SPECIES_SUMMARY};
+use crate::models::{CampaignView, SweepKey, SweepKeyCols};
 use crate::plot::{Figure, Heatmap, Series};
-use crate::store::cols::{get_f64, get_u32, opt};
 use crate::store::parquet_io::StoreError;
 
 type View<'a, 'b> = &'a CampaignView<'b, DsmcParams>;
@@ -86,14 +85,12 @@ pub struct Sweep {
 /// key: integers and floats are numeric, booleans and strings text).
 pub fn sweep_of(batch: &RecordBatch) -> Sweep {
     let schema = batch.schema();
-    let Some(ids) = batch
-        .column_by_name("point_id")
-        .and_then(|c| c.as_any().downcast_ref::<arrow_array::UInt32Array>())
-    else {
+    let Ok(SweepKeyCols { point_id: ids, .. }) = SweepKeyCols::read(batch, "sweep") else {
         return Sweep::default();
     };
+    const KEY: &str = SweepKey::column("point_id");
     let cols: Vec<usize> = (0..batch.num_columns())
-        .filter(|&j| schema.field(j).name() != "point_id")
+        .filter(|&j| schema.field(j).name() != KEY)
         .collect();
     let keys = cols
         .iter()
@@ -133,37 +130,26 @@ pub fn read_ends(c: View) -> Result<Ends, StoreError> {
     for f in c.data.files(DSMC_SPECIES_SUMMARY)? {
         let name = f.display().to_string();
         for b in c.data.read_file(&f, DSMC_SPECIES_SUMMARY)? {
-            let p = get_u32(&b, &name, "point_id")?;
-            let t = get_f64(&b, &name, "t")?;
-            let s = get_u32(&b, &name, "species")?;
-            let tm = get_f64(&b, &name, "temperature_mean")?;
-            let ts = get_f64(&b, &name, "temperature_sem")?;
-            let mm = get_f64(&b, &name, "msd_mean")?;
-            let ms = get_f64(&b, &name, "msd_sem")?;
-            let optional = |col: &str| get_f64(&b, &name, col).ok();
-            let (tth, tdev) = (
-                optional("temperature_theory"),
-                optional("temperature_dev_sigma"),
-            );
-            let (mth, mdev) = (optional("msd_theory"), optional("msd_dev_sigma"));
-            let at = |a: Option<&arrow_array::Float64Array>, i| a.and_then(|a| opt(a, i));
-            for i in 0..b.num_rows() {
+            // The theory and deviation columns are None where the summary lacks them.
+            let cols = DsmcSpeciesSummaryCols::read(&b, &name)?;
+            for i in 0..cols.len() {
+                let r = cols.row(i);
                 let row = AtEnd {
-                    t: t.value(i),
+                    t: r.t,
                     temperature: Measured {
-                        mean: tm.value(i),
-                        sem: opt(ts, i).unwrap_or(0.0),
-                        theory: at(tth, i),
-                        dev_sigma: at(tdev, i),
+                        mean: r.temperature_mean,
+                        sem: r.temperature_sem.unwrap_or(0.0),
+                        theory: r.temperature_theory,
+                        dev_sigma: r.temperature_dev_sigma,
                     },
-                    msd: opt(mm, i).map(|mean| Measured {
+                    msd: r.msd_mean.map(|mean| Measured {
                         mean,
-                        sem: opt(ms, i).unwrap_or(0.0),
-                        theory: at(mth, i),
-                        dev_sigma: at(mdev, i),
+                        sem: r.msd_sem.unwrap_or(0.0),
+                        theory: r.msd_theory,
+                        dev_sigma: r.msd_dev_sigma,
                     }),
                 };
-                let e = last.entry((p.value(i), s.value(i))).or_insert(row);
+                let e = last.entry((r.point_id, r.species)).or_insert(row);
                 if row.t > e.t {
                     *e = row;
                 }

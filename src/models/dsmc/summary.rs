@@ -14,7 +14,6 @@ use super::params::DsmcParams;
 use super::tables::*;
 use crate::math::stats::{mean_sem, replica_mean_sem};
 use crate::models::CampaignView;
-use crate::store::cols::{get_f64, get_u32, get_u64, opt, table};
 use crate::store::parquet_io::StoreError;
 
 type View<'a, 'b> = &'a CampaignView<'b, DsmcParams>;
@@ -79,31 +78,18 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
         for f in &files {
             let name = f.display().to_string();
             for b in c.data.read_file(f, DSMC_SPECIES)? {
-                let run = get_u64(&b, &name, "run_id")?;
-                let point = get_u32(&b, &name, "point_id")?;
-                let t = get_f64(&b, &name, "t")?;
-                let sp = get_u32(&b, &name, "species")?;
-                let temp = get_f64(&b, &name, "temperature")?;
-                let msd = get_f64(&b, &name, "msd")?;
-                // Tables written before the observable existed have no `a2` column.
-                let a2 = match b.schema().index_of("a2") {
-                    Ok(_) => Some(get_f64(&b, &name, "a2")?),
-                    Err(_) => None,
-                };
-                for i in 0..b.num_rows() {
-                    let p = point.value(i);
-                    let replica = c.done.get(&run.value(i));
+                // Tables written before the observable existed have no `a2` column (None).
+                let cols = DsmcSpeciesCols::read(&b, &name)?;
+                for i in 0..cols.len() {
+                    let r = cols.row(i);
+                    let p = r.point_id;
+                    let replica = c.done.get(&r.run_id);
                     let (Some(&replica), true) = (replica, p >= p0 && p < p1) else {
                         continue;
                     };
-                    acc.entry((p, t.value(i).to_bits(), sp.value(i)))
+                    acc.entry((p, r.t.to_bits(), r.species))
                         .or_default()
-                        .push((
-                            replica,
-                            temp.value(i),
-                            opt(msd, i),
-                            a2.and_then(|a| opt(a, i)),
-                        ));
+                        .push((replica, r.temperature, r.msd, r.a2));
                 }
             }
         }
@@ -181,20 +167,17 @@ fn write_tamsd_summary(c: View) -> Result<(), StoreError> {
         for f in &files {
             let name = f.display().to_string();
             for b in c.data.read_file(f, DSMC_TAMSD)? {
-                let run = get_u64(&b, &name, "run_id")?;
-                let point = get_u32(&b, &name, "point_id")?;
-                let sp = get_u32(&b, &name, "species")?;
-                let lag = get_f64(&b, &name, "lag")?;
-                let val = get_f64(&b, &name, "tamsd")?;
-                for i in 0..b.num_rows() {
-                    let p = point.value(i);
-                    let replica = c.done.get(&run.value(i));
+                let cols = DsmcTamsdCols::read(&b, &name)?;
+                for i in 0..cols.len() {
+                    let r = cols.row(i);
+                    let p = r.point_id;
+                    let replica = c.done.get(&r.run_id);
                     let (Some(&replica), true) = (replica, p >= p0 && p < p1) else {
                         continue;
                     };
-                    acc.entry((p, sp.value(i), lag.value(i).to_bits()))
+                    acc.entry((p, r.species, r.lag.to_bits()))
                         .or_default()
-                        .push((replica, val.value(i)));
+                        .push((replica, r.tamsd));
                 }
             }
         }
@@ -227,12 +210,8 @@ fn read_tamsd_theory(c: View) -> Result<BTreeMap<TamsdKey, f64>, StoreError> {
     for f in c.data.files(DSMC_THEORY_TAMSD)? {
         let name = f.display().to_string();
         for b in c.data.read_file(&f, DSMC_THEORY_TAMSD)? {
-            let p = get_u32(&b, &name, "point_id")?;
-            let s = get_u32(&b, &name, "species")?;
-            let l = get_f64(&b, &name, "lag")?;
-            let v = get_f64(&b, &name, "tamsd")?;
-            for i in 0..b.num_rows() {
-                out.insert((p.value(i), s.value(i), l.value(i).to_bits()), v.value(i));
+            for r in DsmcTheoryTamsd::read_rows(&b, &name)? {
+                out.insert((r.point_id, r.species, r.lag.to_bits()), r.tamsd);
             }
         }
     }
@@ -260,24 +239,18 @@ fn write_hist_summary(c: View) -> Result<(), StoreError> {
         for f in &files {
             let name = f.display().to_string();
             for b in c.data.read_file(f, DSMC_SPEED_HISTOGRAM)? {
-                let run = get_u64(&b, &name, "run_id")?;
-                let point = get_u32(&b, &name, "point_id")?;
-                let t = get_f64(&b, &name, "t")?;
-                let sp = get_u32(&b, &name, "species")?;
-                let bin = get_u32(&b, &name, "bin")?;
-                let lo = get_f64(&b, &name, "c_lo")?;
-                let hi = get_f64(&b, &name, "c_hi")?;
-                let val = get_f64(&b, &name, "density")?;
-                for i in 0..b.num_rows() {
-                    let p = point.value(i);
-                    let replica = c.done.get(&run.value(i));
+                let cols = DsmcSpeedHistogramCols::read(&b, &name)?;
+                for i in 0..cols.len() {
+                    let r = cols.row(i);
+                    let p = r.point_id;
+                    let replica = c.done.get(&r.run_id);
                     let (Some(&replica), true) = (replica, p >= p0 && p < p1) else {
                         continue;
                     };
-                    acc.entry((p, t.value(i).to_bits(), sp.value(i), bin.value(i)))
-                        .or_insert_with(|| (lo.value(i), hi.value(i), Vec::new()))
+                    acc.entry((p, r.t.to_bits(), r.species, r.bin))
+                        .or_insert_with(|| (r.c_lo, r.c_hi, Vec::new()))
                         .2
-                        .push((replica, val.value(i)));
+                        .push((replica, r.density));
                 }
             }
         }
@@ -321,19 +294,21 @@ struct HistSummaryRow {
 }
 
 fn hist_summary(rows: &[HistSummaryRow]) -> RecordBatch {
-    table(rows, |c| {
-        vec![
-            c.u32("point_id", |r| r.point),
-            c.f64("t", |r| r.t),
-            c.u32("species", |r| r.species),
-            c.u32("bin", |r| r.bin),
-            c.f64("c_lo", |r| r.c_lo),
-            c.f64("c_hi", |r| r.c_hi),
-            c.u32("n_replicas", |r| r.n),
-            c.f64("density_mean", |r| r.mean),
-            c.opt_f64("density_sem", |r| r.sem),
-        ]
-    })
+    let rows: Vec<DsmcSpeedHistogramSummary> = rows
+        .iter()
+        .map(|r| DsmcSpeedHistogramSummary {
+            point_id: r.point,
+            t: r.t,
+            species: r.species,
+            bin: r.bin,
+            c_lo: r.c_lo,
+            c_hi: r.c_hi,
+            n_replicas: r.n,
+            density_mean: r.mean,
+            density_sem: r.sem,
+        })
+        .collect();
+    DsmcSpeedHistogramSummary::batch(&rows)
 }
 
 /// One row of `dsmc_tamsd_summary`.
@@ -348,17 +323,19 @@ struct TamsdSummaryRow {
 }
 
 fn tamsd_summary(rows: &[TamsdSummaryRow]) -> RecordBatch {
-    table(rows, |c| {
-        vec![
-            c.u32("point_id", |r| r.point),
-            c.u32("species", |r| r.species),
-            c.f64("lag", |r| r.lag),
-            c.u32("n_replicas", |r| r.n),
-            c.f64("tamsd_mean", |r| r.mean),
-            c.opt_f64("tamsd_sem", |r| r.sem),
-            c.opt_f64("tamsd_theory", |r| r.theory),
-        ]
-    })
+    let rows: Vec<DsmcTamsdSummary> = rows
+        .iter()
+        .map(|r| DsmcTamsdSummary {
+            point_id: r.point,
+            species: r.species,
+            lag: r.lag,
+            n_replicas: r.n,
+            tamsd_mean: r.mean,
+            tamsd_sem: r.sem,
+            tamsd_theory: r.theory,
+        })
+        .collect();
+    DsmcTamsdSummary::batch(&rows)
 }
 
 /// One row of `dsmc_species_summary` before the deviations.
@@ -399,37 +376,35 @@ impl SummaryRow {
 }
 
 fn species_summary(rows: &[SummaryRow]) -> RecordBatch {
-    table(rows, |c| {
-        vec![
-            c.u32("point_id", |r| r.point),
-            c.f64("t", |r| r.t),
-            c.u32("species", |r| r.species),
-            c.u32("n_replicas", |r| r.n),
-            c.f64("temperature_mean", |r| r.tm),
-            c.opt_f64("temperature_sem", |r| r.ts),
-            c.opt_f64("msd_mean", |r| r.mm),
-            c.opt_f64("msd_sem", |r| r.ms),
-            c.opt_f64("temperature_theory", |r| r.t_th),
-            c.opt_f64("msd_theory", |r| r.m_th),
-            c.opt_f64("temperature_dev_sigma", |r| r.temperature_dev().0),
-            c.opt_f64("temperature_dev_rel", |r| r.temperature_dev().1),
-            c.opt_f64("msd_dev_sigma", |r| r.msd_dev().0),
-            c.opt_f64("msd_dev_rel", |r| r.msd_dev().1),
-            c.opt_f64("temperature_sonine", |r| r.ts_th),
-            c.opt_f64("temperature_sonine_dev_sigma", |r| {
-                r.temperature_sonine_dev().0
-            }),
-            c.opt_f64("temperature_sonine_dev_rel", |r| {
-                r.temperature_sonine_dev().1
-            }),
-            c.opt_f64("msd_sonine", |r| r.ms_th),
-            c.opt_f64("msd_sonine_dev_sigma", |r| r.msd_sonine_dev().0),
-            c.opt_f64("msd_sonine_dev_rel", |r| r.msd_sonine_dev().1),
-            c.opt_f64("a2_mean", |r| r.am),
-            c.opt_f64("a2_sem", |r| r.as_),
-            c.opt_f64("a2_theory", |r| r.a2_th),
-        ]
-    })
+    let rows: Vec<DsmcSpeciesSummary> = rows
+        .iter()
+        .map(|r| DsmcSpeciesSummary {
+            point_id: r.point,
+            t: r.t,
+            species: r.species,
+            n_replicas: r.n,
+            temperature_mean: r.tm,
+            temperature_sem: r.ts,
+            msd_mean: r.mm,
+            msd_sem: r.ms,
+            temperature_theory: r.t_th,
+            msd_theory: r.m_th,
+            temperature_dev_sigma: r.temperature_dev().0,
+            temperature_dev_rel: r.temperature_dev().1,
+            msd_dev_sigma: r.msd_dev().0,
+            msd_dev_rel: r.msd_dev().1,
+            temperature_sonine: r.ts_th,
+            temperature_sonine_dev_sigma: r.temperature_sonine_dev().0,
+            temperature_sonine_dev_rel: r.temperature_sonine_dev().1,
+            msd_sonine: r.ms_th,
+            msd_sonine_dev_sigma: r.msd_sonine_dev().0,
+            msd_sonine_dev_rel: r.msd_sonine_dev().1,
+            a2_mean: r.am,
+            a2_sem: r.as_,
+            a2_theory: r.a2_th,
+        })
+        .collect();
+    DsmcSpeciesSummary::batch(&rows)
 }
 
 /// (mean - theory) / sem and (mean - theory) / theory.
@@ -458,39 +433,20 @@ fn read_theory(c: View) -> Result<BTreeMap<Key, TheoryValues>, StoreError> {
     for f in c.data.files(DSMC_THEORY)? {
         let name = f.display().to_string();
         for b in c.data.read_file(&f, DSMC_THEORY)? {
-            let p = get_u32(&b, &name, "point_id")?;
-            let t = get_f64(&b, &name, "t")?;
-            let s = get_u32(&b, &name, "species")?;
-            let tt = get_f64(&b, &name, "temperature")?;
-            let m = get_f64(&b, &name, "msd")?;
-            let ts = optional_f64(&b, &name, "temperature_sonine")?;
-            let a2 = optional_f64(&b, &name, "a2")?;
-            let msn = optional_f64(&b, &name, "msd_sonine")?;
-            for i in 0..b.num_rows() {
+            // The Sonine columns and a2 are None where a theory file predates them.
+            for r in DsmcTheory::read_rows(&b, &name)? {
                 out.insert(
-                    (p.value(i), t.value(i).to_bits(), s.value(i)),
+                    (r.point_id, r.t.to_bits(), r.species),
                     (
-                        tt.value(i),
-                        opt(m, i),
-                        ts.and_then(|a| opt(a, i)),
-                        a2.and_then(|a| opt(a, i)),
-                        msn.and_then(|a| opt(a, i)),
+                        r.temperature,
+                        r.msd,
+                        r.temperature_sonine,
+                        r.a2,
+                        r.msd_sonine,
                     ),
                 );
             }
         }
     }
     Ok(out)
-}
-
-/// A Float64 column that older files may lack: None when absent.
-fn optional_f64<'a>(
-    b: &'a RecordBatch,
-    name: &str,
-    column: &str,
-) -> Result<Option<&'a arrow_array::Float64Array>, StoreError> {
-    match b.column_by_name(column) {
-        None => Ok(None),
-        Some(_) => get_f64(b, name, column).map(Some),
-    }
 }

@@ -1,115 +1,268 @@
-//! The tables of the `dsmc` model: names and the Arrow form of a run's rows (`dsmc_species`,
-//! `dsmc_tamsd`) and of the kinetic theory (`dsmc_theory`, `dsmc_theory_point`,
-//! `dsmc_theory_tamsd`). The summaries are in [`super::summary`].
+//! The tables of the `dsmc` model, each declared once ([`crate::declare_table!`]: names,
+//! Arrow types, nullability, columns older files lack): a run's rows (`dsmc_species`,
+//! `dsmc_tamsd`, `dsmc_speed_histogram`), the kinetic theory (`dsmc_theory`,
+//! `dsmc_theory_point`, `dsmc_theory_tamsd`) and the replica summaries (`*_summary`, written
+//! by [`super::summary`]). Writers and readers use these declarations only.
 
-use std::sync::Arc;
-
-use arrow_array::builder::{Float64Builder, ListBuilder};
-use arrow_array::{ArrayRef, RecordBatch};
-
+use crate::declare_table;
 use crate::dsmc::predict::{TamsdTheoryRow, TheoryRow};
 use crate::dsmc::{HistRow, SpeciesRow, TamsdRow};
-use crate::models::{run_batch, RunIds};
-use crate::store::cols::table;
+use crate::models::RunIds;
+use crate::store::typed::{Absent, ListF64, OptF64, F64, U32, U64};
+use arrow_array::RecordBatch;
 
-pub const DSMC_SPECIES: &str = "dsmc_species";
-pub const DSMC_SPECIES_SUMMARY: &str = "dsmc_species_summary";
-pub const DSMC_TAMSD: &str = "dsmc_tamsd";
-pub const DSMC_TAMSD_SUMMARY: &str = "dsmc_tamsd_summary";
-pub const DSMC_SPEED_HISTOGRAM: &str = "dsmc_speed_histogram";
-pub const DSMC_SPEED_HISTOGRAM_SUMMARY: &str = "dsmc_speed_histogram_summary";
-pub const DSMC_THEORY: &str = "dsmc_theory";
-pub const DSMC_THEORY_TAMSD: &str = "dsmc_theory_tamsd";
-pub const DSMC_THEORY_POINT: &str = "dsmc_theory_point";
+pub const DSMC_SPECIES: &str = DsmcSpecies::TABLE;
+pub const DSMC_SPECIES_SUMMARY: &str = DsmcSpeciesSummary::TABLE;
+pub const DSMC_TAMSD: &str = DsmcTamsd::TABLE;
+pub const DSMC_TAMSD_SUMMARY: &str = DsmcTamsdSummary::TABLE;
+pub const DSMC_SPEED_HISTOGRAM: &str = DsmcSpeedHistogram::TABLE;
+pub const DSMC_SPEED_HISTOGRAM_SUMMARY: &str = DsmcSpeedHistogramSummary::TABLE;
+pub const DSMC_THEORY: &str = DsmcTheory::TABLE;
+pub const DSMC_THEORY_TAMSD: &str = DsmcTheoryTamsd::TABLE;
+pub const DSMC_THEORY_POINT: &str = DsmcTheoryPoint::TABLE;
+
+declare_table! {
+    /// `dsmc_species`: per run, output time and species. The columns of an optional
+    /// observable are nullable (null where it is not recorded) and `Absent` where tables
+    /// written before the observable existed lack them (`a2`, issue 16).
+    pub struct DsmcSpecies in "dsmc_species", read as DsmcSpeciesCols {
+        run_id: U64,
+        point_id: U32,
+        t: F64,
+        species: U32,
+        mass: F64,
+        diameter: F64,
+        count: U64,
+        temperature: F64,
+        msd: OptF64,
+        collisions: U64,
+        a2: Absent<OptF64>,
+    }
+}
+
+declare_table! {
+    /// `dsmc_speed_histogram`: per run, histogram time, species and bin.
+    pub struct DsmcSpeedHistogram in "dsmc_speed_histogram", read as DsmcSpeedHistogramCols {
+        run_id: U64,
+        point_id: U32,
+        t: F64,
+        species: U32,
+        bin: U32,
+        c_lo: F64,
+        c_hi: F64,
+        count: U64,
+        density: F64,
+    }
+}
+
+declare_table! {
+    /// `dsmc_tamsd`: per run, species and lag.
+    pub struct DsmcTamsd in "dsmc_tamsd", read as DsmcTamsdCols {
+        run_id: U64,
+        point_id: U32,
+        species: U32,
+        lag: F64,
+        tamsd: F64,
+        t_total: F64,
+    }
+}
+
+declare_table! {
+    /// `dsmc_theory`: the kinetic-theory prediction per point, time and species (the Sonine
+    /// columns and `a2` absent from theory files written before them).
+    pub struct DsmcTheory in "dsmc_theory", read as DsmcTheoryCols {
+        point_id: U32,
+        t: F64,
+        species: U32,
+        temperature: F64,
+        msd: OptF64,
+        tau_v: F64,
+        a2: Absent<OptF64>,
+        temperature_sonine: Absent<OptF64>,
+        msd_sonine: Absent<OptF64>,
+    }
+}
+
+declare_table! {
+    /// `dsmc_theory_tamsd`: the TAMSD (27) per point, species and lag (over [0, t_end]).
+    pub struct DsmcTheoryTamsd in "dsmc_theory_tamsd", read as DsmcTheoryTamsdCols {
+        point_id: U32,
+        species: U32,
+        lag: F64,
+        tamsd: F64,
+    }
+}
+
+declare_table! {
+    /// `dsmc_theory_point`: per point, tau_0 (21) and the initial temperatures actually used.
+    pub struct DsmcTheoryPoint in "dsmc_theory_point", read as DsmcTheoryPointCols {
+        point_id: U32,
+        tau_0: F64,
+        initial_temperatures: ListF64,
+    }
+}
+
+declare_table! {
+    /// `dsmc_species_summary`: mean and sem over the replicas per point, time and species,
+    /// with the theory and the deviations from it (the point's sweep columns follow
+    /// `point_id` in the file: `CampaignView::write_summary`). The theory, deviation, Sonine
+    /// and a2 columns may be absent (summaries written before them, or without theory).
+    pub struct DsmcSpeciesSummary in "dsmc_species_summary", read as DsmcSpeciesSummaryCols {
+        point_id: U32,
+        t: F64,
+        species: U32,
+        n_replicas: U32,
+        temperature_mean: F64,
+        temperature_sem: OptF64,
+        msd_mean: OptF64,
+        msd_sem: OptF64,
+        temperature_theory: Absent<OptF64>,
+        msd_theory: Absent<OptF64>,
+        temperature_dev_sigma: Absent<OptF64>,
+        temperature_dev_rel: Absent<OptF64>,
+        msd_dev_sigma: Absent<OptF64>,
+        msd_dev_rel: Absent<OptF64>,
+        temperature_sonine: Absent<OptF64>,
+        temperature_sonine_dev_sigma: Absent<OptF64>,
+        temperature_sonine_dev_rel: Absent<OptF64>,
+        msd_sonine: Absent<OptF64>,
+        msd_sonine_dev_sigma: Absent<OptF64>,
+        msd_sonine_dev_rel: Absent<OptF64>,
+        a2_mean: Absent<OptF64>,
+        a2_sem: Absent<OptF64>,
+        a2_theory: Absent<OptF64>,
+    }
+}
+
+declare_table! {
+    /// `dsmc_tamsd_summary`: mean and sem over the replicas per point, species and lag, with
+    /// the theory (27).
+    pub struct DsmcTamsdSummary in "dsmc_tamsd_summary", read as DsmcTamsdSummaryCols {
+        point_id: U32,
+        species: U32,
+        lag: F64,
+        n_replicas: U32,
+        tamsd_mean: F64,
+        tamsd_sem: OptF64,
+        tamsd_theory: OptF64,
+    }
+}
+
+declare_table! {
+    /// `dsmc_speed_histogram_summary`: mean and sem of the density over the replicas per
+    /// point, time, species and bin.
+    pub struct DsmcSpeedHistogramSummary in "dsmc_speed_histogram_summary",
+        read as DsmcSpeedHistogramSummaryCols {
+        point_id: U32,
+        t: F64,
+        species: U32,
+        bin: U32,
+        c_lo: F64,
+        c_hi: F64,
+        n_replicas: U32,
+        density_mean: F64,
+        density_sem: OptF64,
+    }
+}
 
 /// `dsmc_species`: per output time and species.
 pub fn species_batch(ids: RunIds, rows: &[SpeciesRow]) -> RecordBatch {
-    run_batch(ids, rows, |c| {
-        vec![
-            c.f64("t", |r| r.t),
-            c.u32("species", |r| r.species),
-            c.f64("mass", |r| r.mass),
-            c.f64("diameter", |r| r.diameter),
-            c.u64("count", |r| r.count),
-            c.f64("temperature", |r| r.temperature),
-            c.opt_f64("msd", |r| r.msd),
-            c.u64("collisions", |r| r.collisions),
-            c.opt_f64("a2", |r| r.a2),
-        ]
-    })
+    let rows: Vec<DsmcSpecies> = rows
+        .iter()
+        .map(|r| DsmcSpecies {
+            run_id: ids.run_id,
+            point_id: ids.point_id,
+            t: r.t,
+            species: r.species,
+            mass: r.mass,
+            diameter: r.diameter,
+            count: r.count,
+            temperature: r.temperature,
+            msd: r.msd,
+            collisions: r.collisions,
+            a2: r.a2,
+        })
+        .collect();
+    DsmcSpecies::batch(&rows)
 }
 
 /// `dsmc_speed_histogram`: per histogram time, species and bin.
 pub fn hist_batch(ids: RunIds, rows: &[HistRow]) -> RecordBatch {
-    run_batch(ids, rows, |c| {
-        vec![
-            c.f64("t", |r| r.t),
-            c.u32("species", |r| r.species),
-            c.u32("bin", |r| r.bin),
-            c.f64("c_lo", |r| r.c_lo),
-            c.f64("c_hi", |r| r.c_hi),
-            c.u64("count", |r| r.count),
-            c.f64("density", |r| r.density),
-        ]
-    })
+    let rows: Vec<DsmcSpeedHistogram> = rows
+        .iter()
+        .map(|r| DsmcSpeedHistogram {
+            run_id: ids.run_id,
+            point_id: ids.point_id,
+            t: r.t,
+            species: r.species,
+            bin: r.bin,
+            c_lo: r.c_lo,
+            c_hi: r.c_hi,
+            count: r.count,
+            density: r.density,
+        })
+        .collect();
+    DsmcSpeedHistogram::batch(&rows)
 }
 
 /// `dsmc_tamsd`: per species and lag.
 pub fn tamsd_batch(ids: RunIds, rows: &[TamsdRow]) -> RecordBatch {
-    run_batch(ids, rows, |c| {
-        vec![
-            c.u32("species", |r| r.species),
-            c.f64("lag", |r| r.lag),
-            c.f64("tamsd", |r| r.tamsd),
-            c.f64("t_total", |r| r.t_total),
-        ]
-    })
+    let rows: Vec<DsmcTamsd> = rows
+        .iter()
+        .map(|r| DsmcTamsd {
+            run_id: ids.run_id,
+            point_id: ids.point_id,
+            species: r.species,
+            lag: r.lag,
+            tamsd: r.tamsd,
+            t_total: r.t_total,
+        })
+        .collect();
+    DsmcTamsd::batch(&rows)
 }
 
 /// `dsmc_theory`: the kinetic-theory prediction per point, time and species.
 pub fn theory_batch(rows: &[(u32, TheoryRow)]) -> RecordBatch {
-    table(rows, |c| {
-        vec![
-            c.u32("point_id", |r| r.0),
-            c.f64("t", |r| r.1.t),
-            c.u32("species", |r| r.1.species),
-            c.f64("temperature", |r| r.1.temperature),
-            c.opt_f64("msd", |r| r.1.msd),
-            c.f64("tau_v", |r| r.1.tau_v),
-            c.opt_f64("a2", |r| r.1.a2),
-            c.opt_f64("temperature_sonine", |r| r.1.temperature_sonine),
-            c.opt_f64("msd_sonine", |r| r.1.msd_sonine),
-        ]
-    })
+    let rows: Vec<DsmcTheory> = rows
+        .iter()
+        .map(|(p, r)| DsmcTheory {
+            point_id: *p,
+            t: r.t,
+            species: r.species,
+            temperature: r.temperature,
+            msd: r.msd,
+            tau_v: r.tau_v,
+            a2: r.a2,
+            temperature_sonine: r.temperature_sonine,
+            msd_sonine: r.msd_sonine,
+        })
+        .collect();
+    DsmcTheory::batch(&rows)
 }
 
 /// `dsmc_theory_tamsd`: the TAMSD (27) per point, species and lag (measured over [0, t_end]).
 pub fn theory_tamsd_batch(rows: &[(u32, TamsdTheoryRow)]) -> RecordBatch {
-    table(rows, |c| {
-        vec![
-            c.u32("point_id", |r| r.0),
-            c.u32("species", |r| r.1.species),
-            c.f64("lag", |r| r.1.lag),
-            c.f64("tamsd", |r| r.1.tamsd),
-        ]
-    })
+    let rows: Vec<DsmcTheoryTamsd> = rows
+        .iter()
+        .map(|(p, r)| DsmcTheoryTamsd {
+            point_id: *p,
+            species: r.species,
+            lag: r.lag,
+            tamsd: r.tamsd,
+        })
+        .collect();
+    DsmcTheoryTamsd::batch(&rows)
 }
 
 /// `dsmc_theory_point`: per point, tau_0 (21) and the initial temperatures actually used.
 pub fn theory_point_batch(points: &[(u32, f64, Vec<f64>)]) -> RecordBatch {
-    let temperatures = |v: &[(u32, f64, Vec<f64>)]| -> ArrayRef {
-        let mut temps = ListBuilder::new(Float64Builder::new());
-        for (_, _, t) in v {
-            temps.values().append_slice(t);
-            temps.append(true);
-        }
-        Arc::new(temps.finish())
-    };
-    table(points, |c| {
-        vec![
-            c.u32("point_id", |p| p.0),
-            c.f64("tau_0", |p| p.1),
-            c.array("initial_temperatures", false, temperatures),
-        ]
-    })
+    let rows: Vec<DsmcTheoryPoint> = points
+        .iter()
+        .map(|(p, tau_0, t)| DsmcTheoryPoint {
+            point_id: *p,
+            tau_0: *tau_0,
+            initial_temperatures: t.clone(),
+        })
+        .collect();
+    DsmcTheoryPoint::batch(&rows)
 }

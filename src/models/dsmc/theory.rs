@@ -8,8 +8,6 @@
 
 use std::collections::BTreeSet;
 
-use arrow_array::cast::AsArray;
-use arrow_array::types::UInt32Type;
 use rayon::prelude::*;
 
 use super::params::DsmcParams;
@@ -142,12 +140,7 @@ fn file_name(table: &str, first: u32) -> String {
 fn covered_points(c: &CampaignView<'_, DsmcParams>) -> Result<BTreeSet<u32>, StoreError> {
     let mut out = BTreeSet::new();
     for b in c.data.read(DSMC_THEORY_POINT)? {
-        let ids = b
-            .column_by_name("point_id")
-            .and_then(|a| a.as_primitive_opt::<UInt32Type>())
-            .ok_or_else(|| {
-                StoreError::Corrupt(DSMC_THEORY_POINT.into(), "has no point_id column".into())
-            })?;
+        let ids = DsmcTheoryPointCols::read(&b, DSMC_THEORY_POINT)?.point_id;
         out.extend(ids.iter().flatten());
     }
     Ok(out)

@@ -27,7 +27,6 @@ use super::params::RfmParams;
 use super::tables::*;
 use crate::models::{log_binned, overlay_figures, CampaignView, Overlay, PointCurve, Rows};
 use crate::plot::{Figure, Series};
-use crate::store::cols::{get_f64, get_str, get_u32, get_u64, opt};
 use crate::store::parquet_io::StoreError;
 
 type View<'a, 'b> = &'a CampaignView<'b, RfmParams>;
@@ -53,16 +52,11 @@ pub(crate) fn timeseries(batches: &[RecordBatch]) -> Result<PerPoint, StoreError
     let t = RFM_TIMESERIES_SUMMARY;
     let mut out = PerPoint::new();
     for b in batches {
-        let (p, time) = (get_u32(b, t, "point_id")?, get_f64(b, t, "t")?);
-        let (m, s) = (
-            get_f64(b, t, "temperature_mean")?,
-            get_f64(b, t, "temperature_sem")?,
-        );
-        for i in 0..b.num_rows() {
-            out.entry(p.value(i)).or_default().push((
-                time.value(i),
-                m.value(i),
-                opt(s, i).unwrap_or(0.0),
+        for r in RfmTimeseriesSummary::read_rows(b, t)? {
+            out.entry(r.point_id).or_default().push((
+                r.t,
+                r.temperature_mean,
+                r.temperature_sem.unwrap_or(0.0),
             ));
         }
     }
@@ -82,13 +76,11 @@ pub(crate) fn moments(batches: &[RecordBatch]) -> Result<PerPoint, StoreError> {
     let t = RFM_MOMENTS_SUMMARY;
     let mut out = PerPoint::new();
     for b in batches {
-        let (p, o) = (get_u32(b, t, "point_id")?, get_u32(b, t, "order")?);
-        let (m, s) = (get_f64(b, t, "mean")?, get_f64(b, t, "sem")?);
-        for i in 0..b.num_rows() {
-            out.entry(p.value(i)).or_default().push((
-                o.value(i) as f64,
-                m.value(i),
-                opt(s, i).unwrap_or(0.0),
+        for r in RfmMomentsSummary::read_rows(b, t)? {
+            out.entry(r.point_id).or_default().push((
+                r.order as f64,
+                r.mean,
+                r.sem.unwrap_or(0.0),
             ));
         }
     }
@@ -143,20 +135,13 @@ pub(crate) fn histograms(batches: &[RecordBatch]) -> Result<Histograms, StoreErr
     let t = RFM_HISTOGRAMS_SUMMARY;
     let mut out = Histograms::new();
     for b in batches {
-        let (p, kind, h) = (
-            get_u32(b, t, "point_id")?,
-            get_str(b, t, "kind")?,
-            get_u32(b, t, "h")?,
-        );
-        let (lo, hi, n, d) = (
-            get_f64(b, t, "lo")?,
-            get_f64(b, t, "hi")?,
-            get_u64(b, t, "count")?,
-            get_f64(b, t, "density")?,
-        );
-        for i in 0..b.num_rows() {
-            let (a, z, count) = (lo.value(i), hi.value(i), n.value(i));
-            let Some(dens) = opt(d, i) else { continue };
+        let cols = RfmHistogramsSummaryCols::read(b, t)?;
+        let kind = cols.kind;
+        for i in 0..cols.len() {
+            let (a, z, count) = (cols.lo.value(i), cols.hi.value(i), cols.count.value(i));
+            let Some(dens) = cols.row(i).density else {
+                continue;
+            };
             if !(a.is_finite() && z.is_finite()) || count == 0 || dens <= 0.0 {
                 continue;
             }
@@ -166,7 +151,7 @@ pub(crate) fn histograms(batches: &[RecordBatch]) -> Result<Histograms, StoreErr
             } else {
                 0.5 * (a + z)
             };
-            out.entry((p.value(i), kind.value(i).to_string(), h.value(i)))
+            out.entry((cols.point_id.value(i), kind.value(i).to_string(), cols.h.value(i)))
                 .or_default()
                 .push((x, dens, dens / (count as f64).sqrt()));
         }
@@ -196,14 +181,10 @@ pub(crate) fn structure_factor(batches: &[RecordBatch]) -> Result<PerPoint, Stor
     let t = RFM_STRUCTURE_FACTOR_SUMMARY;
     let mut out = PerPoint::new();
     for b in batches {
-        let (p, k) = (get_u32(b, t, "point_id")?, get_f64(b, t, "k")?);
-        let (m, s) = (get_f64(b, t, "s_mean")?, get_f64(b, t, "s_sem")?);
-        for i in 0..b.num_rows() {
-            out.entry(p.value(i)).or_default().push((
-                k.value(i),
-                m.value(i),
-                opt(s, i).unwrap_or(0.0),
-            ));
+        for r in RfmStructureFactorSummary::read_rows(b, t)? {
+            out.entry(r.point_id)
+                .or_default()
+                .push((r.k, r.s_mean, r.s_sem.unwrap_or(0.0)));
         }
     }
     Ok(sorted(out))
@@ -214,17 +195,11 @@ pub(crate) fn radial(batches: &[RecordBatch]) -> Result<PerPoint, StoreError> {
     let t = RFM_RADIAL_SUMMARY;
     let mut out = PerPoint::new();
     for b in batches {
-        let (p, lo, hi) = (
-            get_u32(b, t, "point_id")?,
-            get_f64(b, t, "r_lo")?,
-            get_f64(b, t, "r_hi")?,
-        );
-        let (m, s) = (get_f64(b, t, "g_mean")?, get_f64(b, t, "g_sem")?);
-        for i in 0..b.num_rows() {
-            out.entry(p.value(i)).or_default().push((
-                0.5 * (lo.value(i) + hi.value(i)),
-                m.value(i),
-                opt(s, i).unwrap_or(0.0),
+        for r in RfmRadialSummary::read_rows(b, t)? {
+            out.entry(r.point_id).or_default().push((
+                0.5 * (r.r_lo + r.r_hi),
+                r.g_mean,
+                r.g_sem.unwrap_or(0.0),
             ));
         }
     }

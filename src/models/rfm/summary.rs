@@ -16,7 +16,7 @@ use super::params::RfmParams;
 use super::tables::*;
 use crate::math::stats::{mean_sem, replica_mean_sem};
 use crate::models::CampaignView;
-use crate::store::cols::{get_f64, get_str, get_u32, get_u64, table};
+use crate::models::RunKeyCols;
 use crate::store::parquet_io::StoreError;
 
 type View<'a, 'b> = &'a CampaignView<'b, RfmParams>;
@@ -53,7 +53,7 @@ fn done_batches(c: View, table: &str) -> Result<Vec<DoneBatch>, StoreError> {
         .read(table)?
         .into_iter()
         .map(|b| {
-            let runs = get_u64(&b, table, "run_id")?;
+            let runs = RunKeyCols::read(&b, table)?.run_id;
             let replicas = runs
                 .iter()
                 .map(|r| r.and_then(|r| c.done.get(&r)).map(|&x| x as u64))
@@ -90,14 +90,12 @@ fn write_summary(c: View, name: &str, batch: RecordBatch) -> Result<(), StoreErr
 fn timeseries(c: View) -> Result<(), StoreError> {
     let mut ts: BTreeMap<(u32, u64), Vec<(u64, f64)>> = BTreeMap::new();
     for (b, rep) in done_batches(c, RFM_TIMESERIES)? {
-        let p = get_u32(&b, RFM_TIMESERIES, "point_id")?;
-        let t = get_f64(&b, RFM_TIMESERIES, "t")?;
-        let v = get_f64(&b, RFM_TIMESERIES, "temperature")?;
+        let cols = RfmTimeseriesCols::read(&b, RFM_TIMESERIES)?;
         for (i, r) in rep.iter().enumerate() {
             if let Some(r) = r {
-                ts.entry((p.value(i), t.value(i).to_bits()))
+                ts.entry((cols.point_id.value(i), cols.t.value(i).to_bits()))
                     .or_default()
-                    .push((*r, v.value(i)));
+                    .push((*r, cols.temperature.value(i)));
             }
         }
     }
@@ -114,15 +112,18 @@ fn timeseries(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_TIMESERIES_SUMMARY,
-        table(&rows, |col| {
-            vec![
-                col.u32("point_id", |r| r.0 .0),
-                col.f64("t", |r| f64::from_bits(r.0 .1)),
-                col.u32("n_replicas", |r| r.1 .0),
-                col.f64("temperature_mean", |r| r.1 .1),
-                col.opt_f64("temperature_sem", |r| r.1 .2),
-            ]
-        }),
+        RfmTimeseriesSummary::batch(
+            &rows
+                .iter()
+                .map(|r| RfmTimeseriesSummary {
+                    point_id: r.0 .0,
+                    t: f64::from_bits(r.0 .1),
+                    n_replicas: r.1 .0,
+                    temperature_mean: r.1 .1,
+                    temperature_sem: r.1 .2,
+                })
+                .collect::<Vec<_>>(),
+        ),
     )
 }
 
@@ -130,14 +131,12 @@ fn timeseries(c: View) -> Result<(), StoreError> {
 fn moments(c: View) -> Result<(), StoreError> {
     let mut mo: BTreeMap<(u32, u32), Vec<(u64, f64)>> = BTreeMap::new();
     for (b, rep) in done_batches(c, RFM_MOMENTS)? {
-        let p = get_u32(&b, RFM_MOMENTS, "point_id")?;
-        let o = get_u32(&b, RFM_MOMENTS, "order")?;
-        let v = get_f64(&b, RFM_MOMENTS, "value")?;
+        let cols = RfmMomentsCols::read(&b, RFM_MOMENTS)?;
         for (i, r) in rep.iter().enumerate() {
             if let Some(r) = r {
-                mo.entry((p.value(i), o.value(i)))
+                mo.entry((cols.point_id.value(i), cols.order.value(i)))
                     .or_default()
-                    .push((*r, v.value(i)));
+                    .push((*r, cols.value.value(i)));
             }
         }
     }
@@ -148,15 +147,18 @@ fn moments(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_MOMENTS_SUMMARY,
-        table(&rows, |col| {
-            vec![
-                col.u32("point_id", |r| r.0 .0),
-                col.u32("order", |r| r.0 .1),
-                col.u32("n_replicas", |r| r.1 .0),
-                col.f64("mean", |r| r.1 .1),
-                col.opt_f64("sem", |r| r.1 .2),
-            ]
-        }),
+        RfmMomentsSummary::batch(
+            &rows
+                .iter()
+                .map(|r| RfmMomentsSummary {
+                    point_id: r.0 .0,
+                    order: r.0 .1,
+                    n_replicas: r.1 .0,
+                    mean: r.1 .1,
+                    sem: r.1 .2,
+                })
+                .collect::<Vec<_>>(),
+        ),
     )
 }
 
@@ -168,12 +170,15 @@ fn histograms(c: View) -> Result<(), StoreError> {
     let mut totals: BTreeMap<(u32, String, u32), u64> = BTreeMap::new();
     let t = RFM_HISTOGRAMS;
     for (b, rep) in done_batches(c, t)? {
-        let p = get_u32(&b, t, "point_id")?;
-        let kind = get_str(&b, t, "kind")?;
-        let h = get_u32(&b, t, "h")?;
-        let lo = get_f64(&b, t, "lo")?;
-        let hi = get_f64(&b, t, "hi")?;
-        let n = get_u64(&b, t, "count")?;
+        let RfmHistogramsCols {
+            point_id: p,
+            kind,
+            h,
+            lo,
+            hi,
+            count: n,
+            ..
+        } = RfmHistogramsCols::read(&b, t)?;
         for (i, r) in rep.iter().enumerate() {
             if r.is_none() {
                 continue;
@@ -205,17 +210,20 @@ fn histograms(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_HISTOGRAMS_SUMMARY,
-        table(&rows, |col| {
-            vec![
-                col.u32("point_id", |r| r.0 .0),
-                col.str("kind", |r| r.0 .1.as_str()),
-                col.u32("h", |r| r.0 .2),
-                col.f64("lo", |r| f64::from_bits(r.0 .3)),
-                col.f64("hi", |r| r.1 .0),
-                col.u64("count", |r| r.1 .1),
-                col.opt_f64("density", |r| density(&r.0, &r.1)),
-            ]
-        }),
+        RfmHistogramsSummary::batch(
+            &rows
+                .iter()
+                .map(|r| RfmHistogramsSummary {
+                    point_id: r.0 .0,
+                    kind: r.0 .1.clone(),
+                    h: r.0 .2,
+                    lo: f64::from_bits(r.0 .3),
+                    hi: r.1 .0,
+                    count: r.1 .1,
+                    density: density(&r.0, &r.1),
+                })
+                .collect::<Vec<_>>(),
+        ),
     )
 }
 
@@ -224,10 +232,13 @@ fn free_path_moments(c: View) -> Result<(), StoreError> {
     let t = RFM_FREE_PATH_MOMENTS;
     let mut g: Groups<(u32, u32)> = BTreeMap::new();
     for (b, rep) in done_batches(c, t)? {
-        let p = get_u32(&b, t, "point_id")?;
-        let o = get_u32(&b, t, "order")?;
-        let v = get_f64(&b, t, "value")?;
-        let n = get_u64(&b, t, "n_paths")?;
+        let RfmFreePathMomentsCols {
+            point_id: p,
+            order: o,
+            value: v,
+            n_paths: n,
+            ..
+        } = RfmFreePathMomentsCols::read(&b, t)?;
         for (i, r) in rep.iter().enumerate() {
             if let Some(r) = r {
                 g.entry((p.value(i), o.value(i)))
@@ -246,16 +257,19 @@ fn free_path_moments(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_FREE_PATH_MOMENTS_SUMMARY,
-        table(&rows, |col| {
-            vec![
-                col.u32("point_id", |r| r.0 .0),
-                col.u32("order", |r| r.0 .1),
-                col.u32("n_replicas", |r| r.1 .0),
-                col.f64("mean", |r| r.1 .1[0].0),
-                col.opt_f64("sem", |r| r.1 .1[0].1),
-                col.u64("n_paths", |r| r.2),
-            ]
-        }),
+        RfmFreePathMomentsSummary::batch(
+            &rows
+                .iter()
+                .map(|r| RfmFreePathMomentsSummary {
+                    point_id: r.0 .0,
+                    order: r.0 .1,
+                    n_replicas: r.1 .0,
+                    mean: r.1 .1[0].0,
+                    sem: r.1 .1[0].1,
+                    n_paths: r.2,
+                })
+                .collect::<Vec<_>>(),
+        ),
     )
 }
 
@@ -264,10 +278,13 @@ fn neighbour_moments(c: View) -> Result<(), StoreError> {
     let t = RFM_NEIGHBOUR_MOMENTS;
     let mut g: Groups<(u32, u32, u32)> = BTreeMap::new();
     for (b, rep) in done_batches(c, t)? {
-        let p = get_u32(&b, t, "point_id")?;
-        let h = get_u32(&b, t, "h")?;
-        let o = get_u32(&b, t, "order")?;
-        let v = get_f64(&b, t, "value")?;
+        let RfmNeighbourMomentsCols {
+            point_id: p,
+            h,
+            order: o,
+            value: v,
+            ..
+        } = RfmNeighbourMomentsCols::read(&b, t)?;
         for (i, r) in rep.iter().enumerate() {
             if let Some(r) = r {
                 g.entry((p.value(i), h.value(i), o.value(i)))
@@ -280,16 +297,19 @@ fn neighbour_moments(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_NEIGHBOUR_MOMENTS_SUMMARY,
-        table(&rows, |col| {
-            vec![
-                col.u32("point_id", |r| r.0 .0),
-                col.u32("h", |r| r.0 .1),
-                col.u32("order", |r| r.0 .2),
-                col.u32("n_replicas", |r| r.1 .0),
-                col.f64("mean", |r| r.1 .1[0].0),
-                col.opt_f64("sem", |r| r.1 .1[0].1),
-            ]
-        }),
+        RfmNeighbourMomentsSummary::batch(
+            &rows
+                .iter()
+                .map(|r| RfmNeighbourMomentsSummary {
+                    point_id: r.0 .0,
+                    h: r.0 .1,
+                    order: r.0 .2,
+                    n_replicas: r.1 .0,
+                    mean: r.1 .1[0].0,
+                    sem: r.1 .1[0].1,
+                })
+                .collect::<Vec<_>>(),
+        ),
     )
 }
 
@@ -299,11 +319,14 @@ fn structure_factor(c: View) -> Result<(), StoreError> {
     // (point, n2) -> values [k, n_vectors, s].
     let mut g: Groups<(u32, u64)> = BTreeMap::new();
     for (b, rep) in done_batches(c, t)? {
-        let p = get_u32(&b, t, "point_id")?;
-        let n2 = get_u64(&b, t, "n2")?;
-        let k = get_f64(&b, t, "k")?;
-        let nv = get_u64(&b, t, "n_vectors")?;
-        let s = get_f64(&b, t, "s")?;
+        let RfmStructureFactorCols {
+            point_id: p,
+            n2,
+            k,
+            n_vectors: nv,
+            s,
+            ..
+        } = RfmStructureFactorCols::read(&b, t)?;
         for (i, r) in rep.iter().enumerate() {
             if let Some(r) = r {
                 g.entry((p.value(i), n2.value(i)))
@@ -316,17 +339,20 @@ fn structure_factor(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_STRUCTURE_FACTOR_SUMMARY,
-        table(&rows, |col| {
-            vec![
-                col.u32("point_id", |r| r.0 .0),
-                col.u64("n2", |r| r.0 .1),
-                col.f64("k", |r| r.1 .1[0].0),
-                col.u64("n_vectors", |r| r.1 .1[1].0 as u64),
-                col.u32("n_replicas", |r| r.1 .0),
-                col.f64("s_mean", |r| r.1 .1[2].0),
-                col.opt_f64("s_sem", |r| r.1 .1[2].1),
-            ]
-        }),
+        RfmStructureFactorSummary::batch(
+            &rows
+                .iter()
+                .map(|r| RfmStructureFactorSummary {
+                    point_id: r.0 .0,
+                    n2: r.0 .1,
+                    k: r.1 .1[0].0,
+                    n_vectors: r.1 .1[1].0 as u64,
+                    n_replicas: r.1 .0,
+                    s_mean: r.1 .1[2].0,
+                    s_sem: r.1 .1[2].1,
+                })
+                .collect::<Vec<_>>(),
+        ),
     )
 }
 
@@ -337,12 +363,15 @@ fn radial(c: View) -> Result<(), StoreError> {
     // like the values.
     let mut g: Groups<(u32, u64)> = BTreeMap::new();
     for (b, rep) in done_batches(c, t)? {
-        let p = get_u32(&b, t, "point_id")?;
-        let lo = get_f64(&b, t, "r_lo")?;
-        let hi = get_f64(&b, t, "r_hi")?;
-        let n = get_u64(&b, t, "count")?;
-        let gv = get_f64(&b, t, "g")?;
-        let cv = get_f64(&b, t, "c")?;
+        let RfmRadialCols {
+            point_id: p,
+            r_lo: lo,
+            r_hi: hi,
+            count: n,
+            g: gv,
+            c: cv,
+            ..
+        } = RfmRadialCols::read(&b, t)?;
         for (i, r) in rep.iter().enumerate() {
             if let Some(r) = r {
                 let values = vec![
@@ -368,18 +397,21 @@ fn radial(c: View) -> Result<(), StoreError> {
     write_summary(
         c,
         RFM_RADIAL_SUMMARY,
-        table(&rows, |col| {
-            vec![
-                col.u32("point_id", |r| r.0 .0),
-                col.f64("r_lo", |r| r.2 .1[0].0),
-                col.f64("r_hi", |r| r.2 .1[1].0),
-                col.u32("n_replicas", |r| r.2 .0),
-                col.u64("count", |r| r.1),
-                col.f64("g_mean", |r| r.2 .1[3].0),
-                col.opt_f64("g_sem", |r| r.2 .1[3].1),
-                col.f64("c_mean", |r| r.2 .1[4].0),
-                col.opt_f64("c_sem", |r| r.2 .1[4].1),
-            ]
-        }),
+        RfmRadialSummary::batch(
+            &rows
+                .iter()
+                .map(|r| RfmRadialSummary {
+                    point_id: r.0 .0,
+                    r_lo: r.2 .1[0].0,
+                    r_hi: r.2 .1[1].0,
+                    n_replicas: r.2 .0,
+                    count: r.1,
+                    g_mean: r.2 .1[3].0,
+                    g_sem: r.2 .1[3].1,
+                    c_mean: r.2 .1[4].0,
+                    c_sem: r.2 .1[4].1,
+                })
+                .collect::<Vec<_>>(),
+        ),
     )
 }

@@ -15,11 +15,10 @@ use std::collections::BTreeMap;
 use arrow_array::RecordBatch;
 
 use super::params::{FreePathSpec, SpmParams};
-use super::tables::{SPM_SUMMARY, SPM_VELOCITY_HISTOGRAM};
+use super::tables::{SpmSummaryCols, SpmVelocityHistogram, SPM_SUMMARY, SPM_VELOCITY_HISTOGRAM};
 use crate::math::stats::mean_sem;
 use crate::models::{overlay_figures, CampaignView, Overlay, PointCurve};
 use crate::plot::Figure;
-use crate::store::cols::{get_f64, get_u32, get_u64, opt};
 use crate::store::parquet_io::StoreError;
 
 /// One run's bin: (v centre, count, time-weighted density, walk-weighted density).
@@ -32,23 +31,16 @@ pub(crate) fn read_histogram(batches: &[RecordBatch]) -> Result<Runs, StoreError
     let t = SPM_VELOCITY_HISTOGRAM;
     let mut out = Runs::new();
     for b in batches {
-        let (r, p) = (get_u64(b, t, "run_id")?, get_u32(b, t, "point_id")?);
-        let (lo, hi, n) = (
-            get_f64(b, t, "v_lo")?,
-            get_f64(b, t, "v_hi")?,
-            get_u64(b, t, "count")?,
-        );
-        let (d, w) = (get_f64(b, t, "density")?, get_f64(b, t, "density_walk")?);
-        for i in 0..b.num_rows() {
-            out.entry(p.value(i))
+        for r in SpmVelocityHistogram::read_rows(b, t)? {
+            out.entry(r.point_id)
                 .or_default()
-                .entry(r.value(i))
+                .entry(r.run_id)
                 .or_default()
                 .push((
-                    0.5 * (lo.value(i) + hi.value(i)),
-                    n.value(i),
-                    d.value(i),
-                    w.value(i),
+                    0.5 * (r.v_lo + r.v_hi),
+                    r.count,
+                    r.density,
+                    r.density_walk,
                 ));
         }
     }
@@ -89,15 +81,14 @@ fn read_alphas(batches: &[RecordBatch]) -> Result<BTreeMap<u32, Alphas>, StoreEr
     let t = SPM_SUMMARY;
     let mut first: BTreeMap<u32, (u64, Option<f64>, Option<f64>)> = BTreeMap::new();
     for b in batches {
-        let (r, p) = (get_u64(b, t, "run_id")?, get_u32(b, t, "point_id")?);
-        let (m, pr) = (
-            get_f64(b, t, "alpha_measured")?,
-            get_f64(b, t, "alpha_predicted")?,
-        );
-        for i in 0..b.num_rows() {
-            let e = first.entry(p.value(i)).or_insert((u64::MAX, None, None));
-            if r.value(i) < e.0 {
-                *e = (r.value(i), opt(m, i), opt(pr, i));
+        let cols = SpmSummaryCols::read(b, t)?;
+        for i in 0..cols.len() {
+            let e = first
+                .entry(cols.point_id.value(i))
+                .or_insert((u64::MAX, None, None));
+            let r = cols.row(i);
+            if r.run_id < e.0 {
+                *e = (r.run_id, r.alpha_measured, r.alpha_predicted);
             }
         }
     }

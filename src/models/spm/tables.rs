@@ -1,59 +1,110 @@
-//! The tables of the `spm` model: the velocity histogram of each run and its one-row summary
-//! (fits against the predicted tail).
+//! The tables of the `spm` model, each declared once ([`crate::declare_table!`]): the
+//! velocity histogram of each run and its one-row summary (fits against the predicted tail).
 
 use arrow_array::RecordBatch;
 
 use crate::aux_models::spm::{HistRow, SummaryRow};
-use crate::models::{run_batch, RunIds};
+use crate::declare_table;
+use crate::models::RunIds;
+use crate::store::typed::{OptF64, Str, F64, U32, U64};
 
-pub const SPM_VELOCITY_HISTOGRAM: &str = "spm_velocity_histogram";
-pub const SPM_SUMMARY: &str = "spm_summary";
+pub const SPM_VELOCITY_HISTOGRAM: &str = SpmVelocityHistogram::TABLE;
+pub const SPM_SUMMARY: &str = SpmSummary::TABLE;
+
+declare_table! {
+    /// `spm_velocity_histogram`: time- and walk-weighted densities per velocity bin (per run).
+    pub struct SpmVelocityHistogram in "spm_velocity_histogram", read as SpmVelocityHistogramCols {
+        run_id: U64,
+        point_id: U32,
+        v_lo: F64,
+        v_hi: F64,
+        v_scaled_lo: OptF64,
+        v_scaled_hi: OptF64,
+        count: U64,
+        density: F64,
+        density_walk: F64,
+    }
+}
+
+declare_table! {
+    /// `spm_summary`: one row per run, the fits against the predicted tail.
+    pub struct SpmSummary in "spm_summary", read as SpmSummaryCols {
+        run_id: U64,
+        point_id: U32,
+        mode: Str,
+        walks: U64,
+        samples: U64,
+        samples_outside: U64,
+        mean_free_path: F64,
+        mean_walk_time: F64,
+        v_l: OptF64,
+        tau_l: OptF64,
+        gaussian_coefficient: OptF64,
+        gaussian_coefficient_err: OptF64,
+        gaussian_coefficient_thesis: F64,
+        gaussian_tail_si: OptF64,
+        gaussian_tail_si_thesis: OptF64,
+        d_f: OptF64,
+        c: OptF64,
+        b: F64,
+        alpha_predicted: OptF64,
+        k_predicted: OptF64,
+        h_predicted: OptF64,
+        alpha_measured: OptF64,
+        k_measured: OptF64,
+        alpha_measured_h: OptF64,
+        k_measured_h: OptF64,
+        tail_v_lo: OptF64,
+        tail_v_hi: OptF64,
+    }
+}
 
 pub fn histogram_batch(ids: RunIds, v: &[HistRow]) -> RecordBatch {
-    run_batch(ids, v, |c| {
-        vec![
-            c.f64("v_lo", |r| r.v_lo),
-            c.f64("v_hi", |r| r.v_hi),
-            c.opt_f64("v_scaled_lo", |r| r.v_scaled_lo),
-            c.opt_f64("v_scaled_hi", |r| r.v_scaled_hi),
-            c.u64("count", |r| r.count),
-            c.f64("density", |r| r.density),
-            c.f64("density_walk", |r| r.density_walk),
-        ]
-    })
+    let rows: Vec<SpmVelocityHistogram> = v
+        .iter()
+        .map(|r| SpmVelocityHistogram {
+            run_id: ids.run_id,
+            point_id: ids.point_id,
+            v_lo: r.v_lo,
+            v_hi: r.v_hi,
+            v_scaled_lo: r.v_scaled_lo,
+            v_scaled_hi: r.v_scaled_hi,
+            count: r.count,
+            density: r.density,
+            density_walk: r.density_walk,
+        })
+        .collect();
+    SpmVelocityHistogram::batch(&rows)
 }
 
 pub fn summary_batch(ids: RunIds, r: &SummaryRow) -> RecordBatch {
-    let v = std::slice::from_ref(r);
-    run_batch(ids, v, |c| {
-        vec![
-            c.str("mode", |r| &r.mode),
-            c.u64("walks", |r| r.walks),
-            c.u64("samples", |r| r.samples),
-            c.u64("samples_outside", |r| r.samples_outside),
-            c.f64("mean_free_path", |r| r.mean_free_path),
-            c.f64("mean_walk_time", |r| r.mean_walk_time),
-            c.opt_f64("v_l", |r| r.v_l),
-            c.opt_f64("tau_l", |r| r.tau_l),
-            c.opt_f64("gaussian_coefficient", |r| r.gaussian_coefficient),
-            c.opt_f64("gaussian_coefficient_err", |r| r.gaussian_coefficient_err),
-            c.f64("gaussian_coefficient_thesis", |r| {
-                r.gaussian_coefficient_thesis
-            }),
-            c.opt_f64("gaussian_tail_si", |r| r.gaussian_tail_si),
-            c.opt_f64("gaussian_tail_si_thesis", |r| r.gaussian_tail_si_thesis),
-            c.opt_f64("d_f", |r| r.d_f),
-            c.opt_f64("c", |r| r.c),
-            c.f64("b", |r| r.b),
-            c.opt_f64("alpha_predicted", |r| r.alpha_predicted),
-            c.opt_f64("k_predicted", |r| r.k_predicted),
-            c.opt_f64("h_predicted", |r| r.h_predicted),
-            c.opt_f64("alpha_measured", |r| r.alpha_measured),
-            c.opt_f64("k_measured", |r| r.k_measured),
-            c.opt_f64("alpha_measured_h", |r| r.alpha_measured_h),
-            c.opt_f64("k_measured_h", |r| r.k_measured_h),
-            c.opt_f64("tail_v_lo", |r| r.tail_v_lo),
-            c.opt_f64("tail_v_hi", |r| r.tail_v_hi),
-        ]
-    })
+    SpmSummary::batch(&[SpmSummary {
+        run_id: ids.run_id,
+        point_id: ids.point_id,
+        mode: r.mode.clone(),
+        walks: r.walks,
+        samples: r.samples,
+        samples_outside: r.samples_outside,
+        mean_free_path: r.mean_free_path,
+        mean_walk_time: r.mean_walk_time,
+        v_l: r.v_l,
+        tau_l: r.tau_l,
+        gaussian_coefficient: r.gaussian_coefficient,
+        gaussian_coefficient_err: r.gaussian_coefficient_err,
+        gaussian_coefficient_thesis: r.gaussian_coefficient_thesis,
+        gaussian_tail_si: r.gaussian_tail_si,
+        gaussian_tail_si_thesis: r.gaussian_tail_si_thesis,
+        d_f: r.d_f,
+        c: r.c,
+        b: r.b,
+        alpha_predicted: r.alpha_predicted,
+        k_predicted: r.k_predicted,
+        h_predicted: r.h_predicted,
+        alpha_measured: r.alpha_measured,
+        k_measured: r.k_measured,
+        alpha_measured_h: r.alpha_measured_h,
+        k_measured_h: r.k_measured_h,
+        tail_v_lo: r.tail_v_lo,
+        tail_v_hi: r.tail_v_hi,
+    }])
 }

@@ -23,7 +23,6 @@ use crate::analysis::{fig, line, num, replica_stat, slug, Analysis, AnalysisErro
 use crate::math::power;
 use crate::models::{CampaignView, Model};
 use crate::plot::{self, Series};
-use crate::store::cols::{get_f64 as f64s, get_str, get_u32 as u32s, get_u64 as u64s, opt};
 use crate::store::parquet_io::StoreError;
 
 /// Per run: a value and its own (block) error.
@@ -50,47 +49,35 @@ fn load_rfm(c: &CampaignView<'_, RfmParams>) -> Result<RfmData, StoreError> {
     let mut d = RfmData::default();
     let t = rt::RFM_MOMENTS;
     for b in c.read_done(t)? {
-        let (p, o, v, s) = (
-            u32s(&b, t, "point_id")?,
-            u32s(&b, t, "order")?,
-            f64s(&b, t, "value")?,
-            f64s(&b, t, "sem")?,
-        );
-        for i in 0..b.num_rows() {
+        for r in rt::RfmMoments::read_rows(&b, t)? {
             d.moments
-                .entry((p.value(i), o.value(i)))
+                .entry((r.point_id, r.order))
                 .or_default()
-                .push((v.value(i), opt(s, i)));
+                .push((r.value, r.sem));
         }
     }
     let t = rt::RFM_NEIGHBOUR_MOMENTS;
     for b in c.read_done(t)? {
-        let (p, h, o, v, s) = (
-            u32s(&b, t, "point_id")?,
-            u32s(&b, t, "h")?,
-            u32s(&b, t, "order")?,
-            f64s(&b, t, "value")?,
-            f64s(&b, t, "sem")?,
-        );
-        for i in 0..b.num_rows() {
-            if h.value(i) == 1 {
+        for r in rt::RfmNeighbourMoments::read_rows(&b, t)? {
+            if r.h == 1 {
                 d.neighbour
-                    .entry((p.value(i), o.value(i)))
+                    .entry((r.point_id, r.order))
                     .or_default()
-                    .push((v.value(i), opt(s, i)));
+                    .push((r.value, r.sem));
             }
         }
     }
     let t = rt::RFM_HISTOGRAMS;
     for b in c.read_done(t)? {
-        let (p, kind, h, lo, hi, n) = (
-            u32s(&b, t, "point_id")?,
-            get_str(&b, t, "kind")?,
-            u32s(&b, t, "h")?,
-            f64s(&b, t, "lo")?,
-            f64s(&b, t, "hi")?,
-            u64s(&b, t, "count")?,
-        );
+        let rt::RfmHistogramsCols {
+            point_id: p,
+            kind,
+            h,
+            lo,
+            hi,
+            count: n,
+            ..
+        } = rt::RfmHistogramsCols::read(&b, t)?;
         for i in 0..b.num_rows() {
             if h.value(i) > 1 {
                 continue;
@@ -106,34 +93,19 @@ fn load_rfm(c: &CampaignView<'_, RfmParams>) -> Result<RfmData, StoreError> {
     }
     let t = rt::RFM_STRUCTURE_FACTOR;
     for b in c.read_done(t)? {
-        let (p, n2, k, s, sem) = (
-            u32s(&b, t, "point_id")?,
-            u64s(&b, t, "n2")?,
-            f64s(&b, t, "k")?,
-            f64s(&b, t, "s")?,
-            f64s(&b, t, "sem")?,
-        );
-        for i in 0..b.num_rows() {
-            let e =
-                d.sk.entry((p.value(i), n2.value(i)))
-                    .or_insert((k.value(i), Vec::new()));
-            e.1.push((s.value(i), opt(sem, i)));
+        for r in rt::RfmStructureFactor::read_rows(&b, t)? {
+            let e = d.sk.entry((r.point_id, r.n2)).or_insert((r.k, Vec::new()));
+            e.1.push((r.s, r.sem));
         }
     }
     let t = rt::RFM_RADIAL;
     for b in c.read_done(t)? {
-        let (p, lo, hi, cv) = (
-            u32s(&b, t, "point_id")?,
-            f64s(&b, t, "r_lo")?,
-            f64s(&b, t, "r_hi")?,
-            f64s(&b, t, "c")?,
-        );
-        for i in 0..b.num_rows() {
+        for r in rt::RfmRadial::read_rows(&b, t)? {
             let e = d
                 .radial
-                .entry((p.value(i), lo.value(i).to_bits()))
-                .or_insert((lo.value(i), hi.value(i), Vec::new()));
-            e.2.push((cv.value(i), None));
+                .entry((r.point_id, r.r_lo.to_bits()))
+                .or_insert((r.r_lo, r.r_hi, Vec::new()));
+            e.2.push((r.c, None));
         }
     }
     Ok(d)
