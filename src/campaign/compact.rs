@@ -109,10 +109,10 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
     let fresh = Campaign::open(&c.root)?;
     let c = &fresh;
     let mut report = CompactReport {
-        notes: ledger::recover(&c.root, ledger::COMPACT_TAG).map_err(CampaignError::Io)?,
+        notes: ledger::recover(&c.root, ledger::COMPACT_TAG)?,
         ..Default::default()
     };
-    let check = integrity::check(c, integrity::Depth::Full).map_err(CampaignError::Io)?;
+    let check = integrity::check(c, integrity::Depth::Full)?;
     if !check.clean() {
         return Err(CampaignError::Refused(format!(
             "{}; nothing compacted. `granular resume {}` heals it (runs whose rows are damaged are run again)",
@@ -120,7 +120,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
             c.root.display()
         )));
     }
-    let ledger = ledger::read_ledger(&c.root).map_err(CampaignError::Io)?;
+    let ledger = ledger::read_ledger(&c.root)?;
     let old_index = ledger.index.clone().unwrap_or_default();
     let units = ledger.commits;
     let rd = Dir::open(&c.root).map_err(|e| io(&c.root, e))?;
@@ -314,7 +314,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
         &serde_json::to_vec(&journal).expect("journal serialises"),
     )
     .map_err(|e| io(&jp, e))?;
-    ledger::complete_compaction(&c.root, &journal).map_err(CampaignError::Io)?;
+    ledger::complete_compaction(&c.root, &journal)?;
     report.commits_folded = records;
     // The generation before the previous one of each changed table can go now.
     if let Some(all) = rd

@@ -52,14 +52,14 @@ pub fn run(
     let c = &fresh;
     let memory = Memory::of_this_machine();
     if let Some(mem) = memory {
-        resources::check(&c.plan, mem).map_err(CampaignError::TooLarge)?;
+        resources::check(&c.plan, mem)?;
     }
     c.repair_manifest_copy();
     let tag = opts.shard.tag();
     {
         // Dead shards' commits and damage, one shard process at a time.
         let _upkeep = Upkeep::acquire(&c.root)?;
-        for note in ledger::recover(&c.root, &tag).map_err(CampaignError::Io)? {
+        for note in ledger::recover(&c.root, &tag)? {
             reporter.event(&Event::Warning { message: note });
         }
         // The tables against the ledger (sizes), healed before anything is planned.
@@ -127,7 +127,7 @@ pub fn run(
             outcome.interrupted = true;
         }
         // The ledger as it is now; a record damaged meanwhile is healed below.
-        let ledger = ledger::read_ledger(&c.root).map_err(CampaignError::Io)?;
+        let ledger = ledger::read_ledger(&c.root)?;
         let finished = ledger::finished_runs(&ledger.commits);
         outcome.remaining = mine
             .iter()
@@ -206,9 +206,7 @@ pub fn run(
 }
 
 fn finished_runs(c: &Campaign) -> Result<BTreeMap<u64, RunStatus>, CampaignError> {
-    Ok(ledger::finished_runs(
-        &ledger::read_commits(&c.root).map_err(CampaignError::Refused)?,
-    ))
+    Ok(ledger::finished_runs(&ledger::read_commits(&c.root)?))
 }
 
 /// Check the tables against the ledger and heal what is found (each action a warning);
@@ -220,7 +218,7 @@ fn heal(
     tag: &str,
     reporter: &mut dyn Reporter,
 ) -> Result<usize, CampaignError> {
-    let found = integrity::check(c, depth).map_err(CampaignError::Io)?;
+    let found = integrity::check(c, depth)?;
     if found.clean() {
         return Ok(0);
     }
@@ -229,7 +227,7 @@ fn heal(
             message: format!("damage: {p}"),
         });
     }
-    let healed = integrity::heal(c, &found, tag).map_err(CampaignError::Io)?;
+    let healed = integrity::heal(c, &found, tag)?;
     for a in &healed.actions {
         reporter.event(&Event::Warning {
             message: format!("healed: {a}"),
@@ -244,7 +242,7 @@ fn heal(
         });
     }
     // Whatever is still wrong must be a running shard's (left for later), or healing failed.
-    let again = integrity::check(c, integrity::Depth::Quick).map_err(CampaignError::Io)?;
+    let again = integrity::check(c, integrity::Depth::Quick)?;
     if !again.clean() {
         let message = format!(
             "{}: damage left: {}",
