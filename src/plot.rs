@@ -210,11 +210,23 @@ fn log_tick(v: f64) -> String {
     }
 }
 
-fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), String> {
+/// Why a figure could not be drawn or written. The renderer imports nothing of the crate, so
+/// its exit class is said where the command line meets it (`cli`: I/O).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlotError {
+    /// The figure cannot be drawn (no data on its axes, a backend failure).
+    #[error("{0}")]
+    Draw(String),
+    /// The directory of the figures cannot be made.
+    #[error("{0}")]
+    Io(String),
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), PlotError> {
     if let Some(h) = &fig.heatmap {
-        return draw_heatmap(root, fig, h).map_err(|x| x.to_string());
+        return draw_heatmap(root, fig, h).map_err(|x| PlotError::Draw(x.to_string()));
     }
-    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| PlotError::Draw(x.to_string());
     let p = fig;
     root.fill(&WHITE).map_err(e)?;
     // Transformed (x, y, y_lo, y_hi) per series.
@@ -239,7 +251,7 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         .collect();
     let all: Vec<&(f64, f64, f64, f64)> = series.iter().flatten().collect();
     if all.is_empty() {
-        return Err("no data to plot".into());
+        return Err(PlotError::Draw("no data to plot".into()));
     }
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for q in &all {
@@ -634,7 +646,7 @@ fn register_font() {
 
 /// `fig` as an SVG document in memory (`<svg ...>...</svg>`, text as `<text>` elements, no
 /// external references): what `render` writes to `name.svg`.
-pub fn svg_string(fig: &Figure) -> Result<String, String> {
+pub fn svg_string(fig: &Figure) -> Result<String, PlotError> {
     register_font();
     let mut out = String::new();
     draw(
@@ -649,8 +661,8 @@ pub fn svg_string(fig: &Figure) -> Result<String, String> {
 pub fn render(
     figs: &[(String, Figure)],
     dir: &Path,
-) -> Result<(Vec<PathBuf>, Vec<String>), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+) -> Result<(Vec<PathBuf>, Vec<String>), PlotError> {
+    std::fs::create_dir_all(dir).map_err(|e| PlotError::Io(format!("{}: {e}", dir.display())))?;
     register_font();
     let (mut out, mut failed) = (Vec::new(), Vec::new());
     for (name, p) in figs {

@@ -20,9 +20,10 @@ use crate::campaign::history::{self, Accepted};
 use crate::campaign::ledger::{finished_runs, Ledger, RunStatus};
 use crate::campaign::status::{self, CampaignStatus, Counts};
 use crate::campaign::tables::{RunsTableCols, RUNS};
-use crate::campaign::{Campaign, CampaignInfo};
+use crate::campaign::{Campaign, CampaignError, CampaignInfo};
 use crate::plot;
 use crate::store::cols::opt;
+use crate::store::parquet_io::StoreError;
 
 /// A built report.
 pub struct Report {
@@ -73,18 +74,26 @@ pub struct RunsRead {
 }
 
 /// Read the `runs` table (each run counted once, as the ledger's first commit has it).
-pub fn read_runs(c: &Campaign) -> Result<RunsRead, String> {
+pub fn read_runs(c: &Campaign) -> Result<RunsRead, StoreError> {
     let data = c.data();
     let mut out = RunsRead::default();
     let mut seen = std::collections::BTreeSet::new();
-    for f in data.files(RUNS).map_err(|e| e.to_string())? {
+    for f in data.files(RUNS)? {
         let name = f.display().to_string();
-        for b in data.read_file(&f, RUNS).map_err(|e| e.to_string())? {
+        for b in data.read_file(&f, RUNS)? {
             let cols = RunsTableCols::read(&b, &name).map(|c| {
                 let t = c.t_failed;
-                (c.run_id, c.point_id, c.seed, c.status, c.reason, t, c.wall_seconds)
+                (
+                    c.run_id,
+                    c.point_id,
+                    c.seed,
+                    c.status,
+                    c.reason,
+                    t,
+                    c.wall_seconds,
+                )
             });
-            let (run, point, seed, st, reason, t, wall) = cols.map_err(|e| e.to_string())?;
+            let (run, point, seed, st, reason, t, wall) = cols?;
             for i in 0..b.num_rows() {
                 if !seen.insert(run.value(i)) {
                     continue;
@@ -180,9 +189,9 @@ nav{margin:.5em 0 1em}nav a{color:#1f5fa8}
 ";
 
 /// The report of `c`.
-pub fn build(c: &Campaign) -> Result<Report, String> {
+pub fn build(c: &Campaign) -> Result<Report, CampaignError> {
     let st = status::status(c)?;
-    let info = CampaignInfo::read(&c.root).map_err(|e| e.to_string())?;
+    let info = CampaignInfo::read(&c.root)?;
     let mut notes = Vec::new();
     let mut h = String::new();
     let name = escape(&c.manifest.name);
@@ -494,7 +503,7 @@ fn shard_tag(live: &str) -> String {
 /// live shards from their locks) and SLURM submissions.
 fn section_shards(
     h: &mut String,
-    ledger: &Result<Ledger, String>,
+    ledger: &Result<Ledger, CampaignError>,
     st: &CampaignStatus,
     notes: &mut Vec<String>,
 ) {
@@ -576,7 +585,7 @@ fn section_shards(
     }
 }
 
-fn section_failures(h: &mut String, c: &Campaign, runs: &Result<RunsRead, String>) {
+fn section_failures(h: &mut String, c: &Campaign, runs: &Result<RunsRead, StoreError>) {
     h.push_str("<h2 id=\"failures\">Failed runs</h2>\n");
     let fails = match runs {
         Ok(r) => &r.failures,
@@ -584,7 +593,7 @@ fn section_failures(h: &mut String, c: &Campaign, runs: &Result<RunsRead, String
             let _ = writeln!(
                 h,
                 "<p class=\"note\">the runs table could not be read: {}</p>",
-                escape(e)
+                escape(&e.to_string())
             );
             return;
         }
@@ -634,7 +643,7 @@ fn inline_svg(svg: &str) -> &str {
 fn section_figures(
     h: &mut String,
     c: &Campaign,
-    ledger: &Result<Ledger, String>,
+    ledger: &Result<Ledger, CampaignError>,
     st: &CampaignStatus,
     notes: &mut Vec<String>,
 ) -> usize {
@@ -668,7 +677,7 @@ fn section_figures(
                 c.figures_so_far(&finished_runs(&l.commits))
                     .map_err(|e| e.to_string())
             }
-            Err(e) => Err(e.clone()),
+            Err(e) => Err(e.to_string()),
         }
     } else {
         c.figures().map_err(|e| e.to_string())

@@ -58,7 +58,8 @@ use axum::http::{header, request, HeaderValue, Method, StatusCode, Version};
 use axum::response::Response;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 
-use crate::campaign::{status, Campaign};
+use crate::campaign::{status, Campaign, CampaignError};
+use crate::exit_codes::{Classed, ExitClass};
 use crate::report;
 use crate::store::layout::GEN_DIR;
 
@@ -160,7 +161,44 @@ struct Cached<T> {
 }
 
 /// A computed text, or the error that computing it gave.
-type Text = Result<Arc<String>, String>;
+type Text = Result<Arc<String>, Unavailable>;
+
+/// The errors of `bind` and `Server::run`; each says its exit class.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// The address is taken (another server?): refused.
+    #[error(
+        "{0} is in use (another server?); choose another with --addr, e.g. --addr 127.0.0.1:0 for any free port"
+    )]
+    AddrInUse(SocketAddr),
+    /// The address cannot be bound for another reason: I/O.
+    #[error("--addr {addr}: {source}")]
+    Bind { addr: SocketAddr, source: io::Error },
+    /// Serving failed: I/O.
+    #[error("{0}")]
+    Io(#[from] io::Error),
+}
+
+impl Classed for ServeError {
+    fn class(&self) -> ExitClass {
+        match self {
+            ServeError::AddrInUse(_) => ExitClass::Refused,
+            ServeError::Bind { .. } | ServeError::Io(_) => ExitClass::Io,
+        }
+    }
+}
+
+/// Why the page or the status cannot be shown now (answered 503 with this text): the
+/// campaign cannot be read, or its directory has a link out; never the process's exit.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{0}")]
+pub struct Unavailable(String);
+
+impl From<CampaignError> for Unavailable {
+    fn from(e: CampaignError) -> Self {
+        Unavailable(e.to_string())
+    }
+}
 
 /// A cached text, and the lock of its computation.
 #[derive(Default)]
@@ -184,12 +222,20 @@ struct Served {
 
 /// Bind `addr` for the campaign `c` (already opened by the caller, so that its refusals are
 /// the other commands').
-pub fn bind(c: Campaign, addr: SocketAddr, limits: Limits) -> io::Result<Server> {
-    let listener = std::net::TcpListener::bind(addr)?;
-    listener.set_nonblocking(true)?;
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()?;
+pub fn bind(c: Campaign, addr: SocketAddr, limits: Limits) -> Result<Server, ServeError> {
+    let bound = (|| {
+        let listener = std::net::TcpListener::bind(addr)?;
+        listener.set_nonblocking(true)?;
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?;
+        Ok::<_, io::Error>((listener, rt))
+    })();
+    let (listener, rt) = match bound {
+        Ok(x) => x,
+        Err(e) if e.kind() == io::ErrorKind::AddrInUse => return Err(ServeError::AddrInUse(addr)),
+        Err(source) => return Err(ServeError::Bind { addr, source }),
+    };
     let root = c.root.clone();
     let stamp = campaign_stamp(&root);
     Ok(Server {
@@ -210,12 +256,12 @@ pub fn bind(c: Campaign, addr: SocketAddr, limits: Limits) -> io::Result<Server>
 
 impl Server {
     /// The address bound (the actual port when 0 was asked for).
-    pub fn local_addr(&self) -> io::Result<SocketAddr> {
-        self.listener.local_addr()
+    pub fn local_addr(&self) -> Result<SocketAddr, ServeError> {
+        Ok(self.listener.local_addr()?)
     }
 
     /// Serve until the process ends (Ctrl-C/SIGTERM: the command line's handler exits).
-    pub fn run(self) -> io::Result<()> {
+    pub fn run(self) -> Result<(), ServeError> {
         let Server {
             rt,
             listener,
@@ -239,7 +285,8 @@ impl Server {
         rt.block_on(async move {
             let listener = tokio::net::TcpListener::from_std(listener)?;
             accept_loop(listener, state, limits).await
-        })
+        })?;
+        Ok(())
     }
 }
 
@@ -511,11 +558,11 @@ fn campaign_stamp(root: &Path) -> (Option<std::time::SystemTime>, u64) {
 
 impl Served {
     /// The campaign as `campaign.json` now describes it.
-    fn campaign(&self) -> Result<Arc<Campaign>, String> {
+    fn campaign(&self) -> Result<Arc<Campaign>, Unavailable> {
         let stamp = campaign_stamp(&self.root);
         let mut g = self.campaign.lock().unwrap_or_else(|e| e.into_inner());
         if (g.0, g.1) != stamp {
-            let c = Campaign::open(&self.root).map_err(|e| e.to_string())?;
+            let c = Campaign::open(&self.root)?;
             *g = (stamp.0, stamp.1, Arc::new(c));
         }
         Ok(g.2.clone())
@@ -528,7 +575,7 @@ impl Served {
         &self,
         slot: &Slot,
         stale_ok: bool,
-        make: impl FnOnce(&Campaign) -> Result<(String, bool), String>,
+        make: impl FnOnce(&Campaign) -> Result<(String, bool), Unavailable>,
     ) -> Text {
         let lock = |m: &Mutex<Option<Cached<Text>>>| {
             let g = m.lock().unwrap_or_else(|e| e.into_inner());
@@ -552,7 +599,7 @@ impl Served {
         let computed = if links.is_empty() {
             self.campaign().and_then(|c| make(&c))
         } else {
-            Err(links_refusal(&links))
+            Err(Unavailable(links_refusal(&links)))
         };
         let (value, slurm) = match computed {
             Ok((v, slurm)) => (Ok(Arc::new(v)), slurm),
@@ -568,7 +615,7 @@ impl Served {
     }
 
     /// The status JSON; `stale_ok` for requests (the refresher keeps it current).
-    fn status_json(&self, stale_ok: bool) -> Result<Arc<String>, String> {
+    fn status_json(&self, stale_ok: bool) -> Text {
         self.cached(&self.status, stale_ok, |c| {
             let s = status::status(c)?;
             Ok((status::to_json(&s), !s.slurm.is_empty()))
@@ -576,7 +623,7 @@ impl Served {
     }
 
     /// The report page (without the live script), always current.
-    fn page(&self) -> Result<Arc<String>, String> {
+    fn page(&self) -> Text {
         self.cached(&self.page, false, |c| {
             let r = report::build(c)?;
             let slurm = r.html.contains("slurm submission");
@@ -589,11 +636,11 @@ impl Served {
 async fn blocking<T: Send + 'static>(
     s: &Arc<Served>,
     f: impl FnOnce(&Served) -> T + Send + 'static,
-) -> Result<T, String> {
+) -> Result<T, Unavailable> {
     let s = s.clone();
     tokio::task::spawn_blocking(move || f(&s))
         .await
-        .map_err(|e| format!("internal error: {e}"))
+        .map_err(|e| Unavailable(format!("internal error: {e}")))
 }
 
 /// Every request: its `Host`, the method, then the path, decided here; every answer with
@@ -740,7 +787,7 @@ fn json(body: String) -> Response {
     response(StatusCode::OK, "application/json", body)
 }
 
-fn unavailable(e: &str) -> Response {
+fn unavailable(e: &Unavailable) -> Response {
     text(StatusCode::SERVICE_UNAVAILABLE, format!("error: {e}\n"))
 }
 

@@ -257,7 +257,8 @@ impl Analysis {
             .push(out.join(format!("{ANALYSIS_CURVES}.parquet")));
         if self.opts.figures && !self.figs.is_empty() {
             let dir = out.join("figures");
-            let (files, failed) = plot::render(&self.figs, &dir).map_err(AnalysisError::Io)?;
+            let (files, failed) =
+                plot::render(&self.figs, &dir).map_err(|e| AnalysisError::Io(e.to_string()))?;
             self.report.files.extend(files);
             for f in failed {
                 self.warn(f);

@@ -17,6 +17,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::physics::SimError;
 use crate::rng::{RngPosition, RunRng};
 
 /// Resolved settings of a bisection run.
@@ -204,7 +205,7 @@ impl BisectionRun {
         postcard::to_stdvec(&self.st).expect("state serialises")
     }
 
-    pub fn from_state_bytes(cfg: BisectionConfig, bytes: &[u8]) -> Result<Self, String> {
+    pub fn from_state_bytes(cfg: BisectionConfig, bytes: &[u8]) -> Result<Self, SimError> {
         let st: State = postcard::from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         if st.cfg != cfg {

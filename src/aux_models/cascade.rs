@@ -27,6 +27,7 @@ use rustfft::num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
 use serde::{Deserialize, Serialize};
 
+use crate::physics::SimError;
 use crate::rng::{RngPosition, RunRng};
 
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
@@ -382,7 +383,7 @@ impl CascadeRun {
         postcard::to_stdvec(&self.st).expect("state serialises")
     }
 
-    pub fn from_state_bytes(cfg: CascadeConfig, bytes: &[u8]) -> Result<Self, String> {
+    pub fn from_state_bytes(cfg: CascadeConfig, bytes: &[u8]) -> Result<Self, SimError> {
         let st: State = postcard::from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         if st.cfg != cfg {
@@ -553,9 +554,9 @@ impl CascadeRun {
         )
     }
 
-    pub fn finish(self) -> Result<CascadeOutput, String> {
+    pub fn finish(self) -> Result<CascadeOutput, SimError> {
         if let Some(f) = &self.st.failed {
-            return Err(f.clone());
+            return Err(SimError::Failed(f.clone()));
         }
         let c = &self.st.cfg;
         let r = self.st.done;

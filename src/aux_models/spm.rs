@@ -29,6 +29,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::physics::SimError;
 use crate::rng::{RngPosition, RunRng};
 
 /// The coefficient 0.98 of the Gaussian tail of Q(v, l) (5.12).
@@ -279,7 +280,7 @@ impl SpmRun {
         postcard::to_stdvec(&self.st).expect("state serialises")
     }
 
-    pub fn from_state_bytes(cfg: SpmConfig, bytes: &[u8]) -> Result<Self, String> {
+    pub fn from_state_bytes(cfg: SpmConfig, bytes: &[u8]) -> Result<Self, SimError> {
         let st: State = postcard::from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         if st.cfg != cfg {

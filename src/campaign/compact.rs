@@ -109,11 +109,11 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
     let fresh = Campaign::open(&c.root)?;
     let c = &fresh;
     let mut report = CompactReport {
-        notes: ledger::recover(&c.root, ledger::COMPACT_TAG).map_err(CampaignError::Io)?,
+        notes: ledger::recover(&c.root, ledger::COMPACT_TAG)?,
         ..Default::default()
     };
     refuse_damage(c)?;
-    let ledger = ledger::read_ledger(&c.root).map_err(CampaignError::Io)?;
+    let ledger = ledger::read_ledger(&c.root)?;
     let old_index = ledger.index.clone().unwrap_or_default();
     let units = ledger.commits;
     let rd = Dir::open(&c.root).map_err(|e| io(&c.root, e))?;
@@ -149,7 +149,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
         &serde_json::to_vec(&journal).expect("journal serialises"),
     )
     .map_err(|e| io(&jp, e))?;
-    ledger::complete_compaction(&c.root, &journal).map_err(CampaignError::Io)?;
+    ledger::complete_compaction(&c.root, &journal)?;
     report.commits_folded = records;
     remove_older_generations(c, &rd, &gens)?;
     let tables = c.root.join("tables");
@@ -163,7 +163,7 @@ pub fn compact(c: &Campaign, opts: &CompactOptions) -> Result<CompactReport, Cam
 
 /// A compaction runs only on a campaign whose every file checks out (a full scrub).
 fn refuse_damage(c: &Campaign) -> Result<(), CampaignError> {
-    let check = integrity::check(c, integrity::Depth::Full).map_err(CampaignError::Io)?;
+    let check = integrity::check(c, integrity::Depth::Full)?;
     if !check.clean() {
         return Err(CampaignError::Refused(format!(
             "{}; nothing compacted. `granular resume {}` heals it (runs whose rows are damaged are run again)",

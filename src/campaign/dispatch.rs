@@ -39,7 +39,7 @@ pub fn run(
     let c = &fresh;
     let memory = Memory::of_this_machine();
     if let Some(mem) = memory {
-        resources::check(&c.plan, mem).map_err(CampaignError::TooLarge)?;
+        resources::check(&c.plan, mem)?;
     }
     c.repair_manifest_copy();
     let tag = opts.shard.tag();
@@ -58,7 +58,7 @@ pub fn run(
             .collect();
         outcome = run_pending(c, opts, &tag, &mine, threads, outcome, reporter)?;
         // The ledger as it is now; a record damaged meanwhile is healed below.
-        let ledger = ledger::read_ledger(&c.root).map_err(CampaignError::Io)?;
+        let ledger = ledger::read_ledger(&c.root)?;
         let finished = ledger::finished_runs(&ledger.commits);
         tally(&mut outcome, &mine, &finished);
         if outcome.interrupted {
@@ -138,7 +138,7 @@ fn recover_and_heal(
     reporter: &mut dyn Reporter,
 ) -> Result<(), CampaignError> {
     let _upkeep = Upkeep::acquire(&c.root)?;
-    for note in ledger::recover(&c.root, tag).map_err(CampaignError::Io)? {
+    for note in ledger::recover(&c.root, tag)? {
         reporter.event(&Event::Warning { message: note });
     }
     heal(c, integrity::Depth::Quick, tag, reporter)?;
@@ -250,9 +250,7 @@ fn scrub_and_summarise(
 }
 
 fn finished_runs(c: &Campaign) -> Result<BTreeMap<u64, RunStatus>, CampaignError> {
-    Ok(ledger::finished_runs(
-        &ledger::read_commits(&c.root).map_err(CampaignError::Refused)?,
-    ))
+    Ok(ledger::finished_runs(&ledger::read_commits(&c.root)?))
 }
 
 /// Check the tables against the ledger and heal what is found (each action a warning);
@@ -264,7 +262,7 @@ fn heal(
     tag: &str,
     reporter: &mut dyn Reporter,
 ) -> Result<usize, CampaignError> {
-    let found = integrity::check(c, depth).map_err(CampaignError::Io)?;
+    let found = integrity::check(c, depth)?;
     if found.clean() {
         return Ok(0);
     }
@@ -273,7 +271,7 @@ fn heal(
             message: format!("damage: {p}"),
         });
     }
-    let healed = integrity::heal(c, &found, tag).map_err(CampaignError::Io)?;
+    let healed = integrity::heal(c, &found, tag)?;
     for a in &healed.actions {
         reporter.event(&Event::Warning {
             message: format!("healed: {a}"),
@@ -288,7 +286,7 @@ fn heal(
         });
     }
     // Whatever is still wrong must be a running shard's (left for later), or healing failed.
-    let again = integrity::check(c, integrity::Depth::Quick).map_err(CampaignError::Io)?;
+    let again = integrity::check(c, integrity::Depth::Quick)?;
     if !again.clean() {
         let message = format!(
             "{}: damage left: {}",

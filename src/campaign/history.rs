@@ -7,6 +7,7 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 
+use super::error::CampaignError;
 use crate::fsutil;
 use crate::manifest::Manifest;
 
@@ -22,12 +23,18 @@ pub struct Accepted {
 }
 
 /// Keep the `k`-th accepted manifest (its text as given), atomically.
-pub fn write(root: &Path, k: usize, text: &[u8], runs_added: u64) -> Result<Accepted, String> {
+pub fn write(
+    root: &Path,
+    k: usize,
+    text: &[u8],
+    runs_added: u64,
+) -> Result<Accepted, CampaignError> {
     let dir = root.join("manifests");
-    fsutil::create_dir_durable(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let io = |p: &Path, e| CampaignError::Io(format!("{}: {e}", p.display()));
+    fsutil::create_dir_durable(&dir).map_err(|e| io(&dir, e))?;
     let file = format!("manifests/{k}.json");
     let path = root.join(&file);
-    fsutil::write_atomic(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+    fsutil::write_atomic(&path, text).map_err(|e| io(&path, e))?;
     Ok(Accepted {
         file,
         accepted: utc_now(),

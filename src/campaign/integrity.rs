@@ -36,6 +36,7 @@ use std::path::{Path, PathBuf};
 use arrow_array::cast::AsArray;
 use arrow_array::types::UInt64Type;
 
+use super::error::CampaignError;
 use super::ledger::{self, Commit, CommittedRun, PartCommit, RunStatus};
 use super::{tables, Campaign};
 use crate::fsutil::{self, Dir, Kind};
@@ -161,7 +162,7 @@ impl Check {
 /// Check the campaign's tables against its ledger (see the module's text). Commits of live
 /// writers are judged only once their parts are visible; with a compaction running nothing is
 /// checked.
-pub fn check(c: &Campaign, depth: Depth) -> Result<Check, String> {
+pub fn check(c: &Campaign, depth: Depth) -> Result<Check, CampaignError> {
     let mut found = check_once(&c.root, depth)?;
     // A live writer may have committed, or rewritten a table (its sidecar first, then the
     // file), while we looked: look again, a little later each time (a busy machine can take
@@ -178,30 +179,17 @@ pub fn check(c: &Campaign, depth: Depth) -> Result<Check, String> {
     Ok(found)
 }
 
-fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
+fn check_once(root: &Path, depth: Depth) -> Result<Check, CampaignError> {
     let mut out = Check {
         depth,
         ..Default::default()
     };
-    let live_locks = ledger::live_locks(root);
-    let ours = |l: &ledger::LockInfo| l.pid == std::process::id() && l.host == ledger::hostname();
-    if let Some(l) = live_locks
-        .iter()
-        .find(|l| l.shard_tag == ledger::COMPACT_TAG && !ours(l))
-    {
-        out.skipped = Some(format!(
-            "a compaction is running (process {} on {})",
-            l.pid, l.host
-        ));
+    if let Some(why) = live_writers(root, &mut out) {
+        out.skipped = Some(why);
         return Ok(out);
     }
-    out.live = live_locks
-        .into_iter()
-        .filter(|l| !ours(l))
-        .map(|l| l.shard_tag)
-        .collect();
     // The campaign directory as the user named it (a link there is followed, once).
-    let rd = Dir::open(root).map_err(|e| format!("{}: {e}", root.display()))?;
+    let rd = Dir::open(root).map_err(|e| CampaignError::Io(format!("{}: {e}", root.display())))?;
     out.not_own = not_own(&rd);
     let l = ledger::read_ledger(root)?;
     out.bad_ledger = l.bad_records.clone();
@@ -209,8 +197,48 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
         out.bad_ledger.push((ledger::index_path(root), why.clone()));
     }
     out.commits = l.commits;
-    let full = depth == Depth::Full;
-    let at = |rel: &str, e: std::io::Error| format!("{}: {e}", root.join(rel).display());
+    let committed = check_committed(root, &rd, &mut out)?;
+    check_sidecars_have_files(root, &rd, &mut out);
+    check_uncommitted(root, &rd, &committed, &mut out)?;
+    Ok(out)
+}
+
+/// The shards whose writers are live (other than this process) into `out.live`; why the
+/// check is skipped (a compaction running), if it is.
+fn live_writers(root: &Path, out: &mut Check) -> Option<String> {
+    let live_locks = ledger::live_locks(root);
+    let ours = |l: &ledger::LockInfo| l.pid == std::process::id() && l.host == ledger::hostname();
+    if let Some(l) = live_locks
+        .iter()
+        .find(|l| l.shard_tag == ledger::COMPACT_TAG && !ours(l))
+    {
+        return Some(format!(
+            "a compaction is running (process {} on {})",
+            l.pid, l.host
+        ));
+    }
+    out.live = live_locks
+        .into_iter()
+        .filter(|l| !ours(l))
+        .map(|l| l.shard_tag)
+        .collect();
+    None
+}
+
+/// An I/O error reading `rel` of the campaign at `root`.
+fn read_err(root: &Path, rel: &str, e: std::io::Error) -> CampaignError {
+    CampaignError::Io(format!("{}: {e}", root.join(rel).display()))
+}
+
+/// Every committed file against its commit (`out.bad_files`), runs in two commits
+/// (`out.doubled`); the committed files' paths.
+fn check_committed(
+    root: &Path,
+    rd: &Dir,
+    out: &mut Check,
+) -> Result<BTreeSet<String>, CampaignError> {
+    let full = out.depth == Depth::Full;
+    let at = |rel: &str, e| read_err(root, rel, e);
     let mut committed: BTreeSet<String> = BTreeSet::new();
     let mut runs: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
     for (i, c) in out.commits.iter().enumerate() {
@@ -221,7 +249,7 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
         for f in &c.files {
             committed.insert(f.path.clone());
             let (parent, name) = layout::split(&f.path);
-            let dir = match layout::walk(&rd, parent) {
+            let dir = match layout::walk(rd, parent) {
                 Ok(d) => d,
                 // Behind an entry that is not granular's own (named in `not_own`): not judged.
                 Err(e) if fsutil::not_own(&e).is_some() => continue,
@@ -254,9 +282,13 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
         }
     }
     out.doubled = runs.into_iter().filter(|(_, v)| v.len() > 1).collect();
-    // A sidecar without its file: a rebuilt table's file is gone.
+    Ok(committed)
+}
+
+/// A sidecar without its file: a rebuilt table's file is gone (`out.bad_derived`).
+fn check_sidecars_have_files(root: &Path, rd: &Dir, out: &mut Check) {
     for (table, name) in checksum::sidecars(root) {
-        let there = match layout::open_table(&rd, &table) {
+        let there = match layout::open_table(rd, &table) {
             Ok(Some(d)) => d.kind(&name).ok().flatten().is_some(),
             Ok(None) => false,
             // Behind an entry that is not granular's own (named in `not_own`): not judged.
@@ -269,8 +301,22 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
             ));
         }
     }
-    for table in layout::table_names(root).map_err(|e| format!("{}: {e}", root.display()))? {
-        let Ok(Some(dir)) = layout::open_table(&rd, &table) else {
+}
+
+/// The visible entries of the table directories that no commit names: links and special
+/// files (`out.not_own`), what is not a Parquet file (`out.foreign`), parts without a commit
+/// (`out.orphans`), rebuilt tables' files against their sidecars (`out.bad_derived`).
+fn check_uncommitted(
+    root: &Path,
+    rd: &Dir,
+    committed: &BTreeSet<String>,
+    out: &mut Check,
+) -> Result<(), CampaignError> {
+    let full = out.depth == Depth::Full;
+    let tables = layout::table_names(root)
+        .map_err(|e| CampaignError::Io(format!("{}: {e}", root.display())))?;
+    for table in tables {
+        let Ok(Some(dir)) = layout::open_table(rd, &table) else {
             continue;
         };
         let Ok(entries) = dir.entries() else {
@@ -308,7 +354,7 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
                     // Replaced while we looked (a writer rewriting it): looked at next time.
                     Ok(None) => None,
                     Ok(Some(file)) => checksum::check_open(file, &rec, full)
-                        .map_err(|e| at(&rel, e))?
+                        .map_err(|e| read_err(root, &rel, e))?
                         .map(|m| {
                             format!(
                                 "{m}, but its sidecar recorded {} bytes, SHA-256 {}",
@@ -323,7 +369,7 @@ fn check_once(root: &Path, depth: Depth) -> Result<Check, String> {
             }
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 /// The directories granular keeps in a campaign directory.
@@ -503,17 +549,14 @@ impl<'a> Quarantine<'a> {
 
     /// The quarantine directory (made now if need be: a `quarantine` that is a link or a
     /// file is refused, never written through).
-    fn dir(&mut self) -> Result<&Dir, String> {
+    fn dir(&mut self) -> Result<&Dir, CampaignError> {
         if self.dir.is_none() {
             let path = self.path();
             let d = self
                 .root
                 .create_dir("quarantine")
                 .and_then(|q| q.create_dir(&self.stamp))
-                .map_err(|e| match fsutil::not_own(&e) {
-                    Some(n) => n.to_string(),
-                    None => format!("{}: {e}", path.display()),
-                })?;
+                .map_err(|e| CampaignError::at(&path, e))?;
             self.dir = Some(d);
         }
         Ok(self.dir.as_ref().expect("made above"))
@@ -522,12 +565,9 @@ impl<'a> Quarantine<'a> {
     /// Move `rel` (relative to the campaign directory) into the quarantine; a file already
     /// gone is fine. The directories on the way are opened without following a link (but a
     /// table's generation link): one that is not granular's own is an error.
-    fn set_aside(&mut self, rel: &str) -> Result<bool, String> {
+    fn set_aside(&mut self, rel: &str) -> Result<bool, CampaignError> {
         let full = self.root.path().join(rel);
-        let at = |e: std::io::Error| match fsutil::not_own(&e) {
-            Some(n) => n.to_string(),
-            None => format!("{}: {e}", full.display()),
-        };
+        let at = |e: std::io::Error| CampaignError::at(&full, e);
         let (parent, name) = layout::split(rel);
         let Some(from) = layout::walk(self.root, parent).map_err(at)? else {
             return Ok(false);
@@ -546,13 +586,13 @@ impl<'a> Quarantine<'a> {
     }
 
     /// Write `actions.log` into the quarantine.
-    fn log(&mut self, actions: &[String]) -> Result<PathBuf, String> {
+    fn log(&mut self, actions: &[String]) -> Result<PathBuf, CampaignError> {
         let mut text = actions.join("\n");
         text.push('\n');
         let path = self.path().join("actions.log");
         self.dir()?
             .write_atomic("actions.log", text.as_bytes())
-            .map_err(|e| format!("{}: {e}", path.display()))?;
+            .map_err(|e| CampaignError::at(&path, e))?;
         Ok(self.path())
     }
 }
@@ -567,13 +607,13 @@ fn set_aside_not_own(
     found: &Check,
     q: &mut Quarantine,
     h: &mut Healed,
-) -> Result<(), String> {
+) -> Result<(), CampaignError> {
     let mut gone: Vec<String> = Vec::new();
     if let Some((_, what)) = found.not_own.iter().find(|(r, _)| r == "quarantine") {
         let to = format!("quarantine.moved-{}", q.stamp);
         let moved = rd
             .rename("quarantine", rd, &to)
-            .map_err(|e| format!("{}: {e}", rd.path().join("quarantine").display()))?;
+            .map_err(|e| CampaignError::at(&rd.path().join("quarantine"), e))?;
         if moved {
             let _ = rd.sync();
             h.actions.push(format!(
@@ -604,7 +644,7 @@ fn set_aside_not_own(
                 layout::walk(rd, dir).and_then(|d| d.map(|d| d.read(name)).transpose())
             {
                 rd.write_atomic("manifest.json", &text)
-                    .map_err(|e| format!("{}: {e}", rd.path().join("manifest.json").display()))?;
+                    .map_err(|e| CampaignError::at(&rd.path().join("manifest.json"), e))?;
                 h.actions
                     .push(format!("wrote manifest.json again from {}", latest.file));
             }
@@ -616,29 +656,58 @@ fn set_aside_not_own(
 /// Heal what `check` found (see the module's text), for a process holding a shard lock (or
 /// the compaction lock): commits of live shards other than `ours` are left alone. Every
 /// action is returned and logged in the quarantine's `actions.log`.
-pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
+pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, CampaignError> {
     let root = &c.root;
-    let rd = Dir::open(root).map_err(|e| format!("{}: {e}", root.display()))?;
+    let rd = Dir::open(root).map_err(|e| CampaignError::Io(format!("{}: {e}", root.display())))?;
     let mut h = Healed::default();
     let mut q = Quarantine::new(&rd);
     let live: Vec<&String> = found.live.iter().filter(|t| *t != ours).collect();
     let is_live = |shard: &str| live.iter().any(|t| *t == shard);
 
-    // What is not granular's own first; then everything again, without it (what it hid may
-    // be not granular's own in turn: a table's link to a generation under a `.gen` that was
-    // a link, say).
+    let fresh = heal_not_own(c, &rd, found, &mut q, &mut h)?;
+    let found = fresh.as_ref().unwrap_or(found);
+    set_aside_bad_ledger(root, found, &mut q, &mut h)?;
+    undo_commits(root, found, &is_live, &mut q, &mut h)?;
+    // Parts without a commit (including those of records set aside above).
+    let after = check_once(root, Depth::Quick)?;
+    adopt_or_set_aside(c, &rd, &after, &is_live, &mut q, &mut h)?;
+    set_aside_derived(c, found, &after, &mut q, &mut h)?;
+    set_aside_foreign(found, &after, &mut q, &mut h)?;
+    if q.used {
+        h.quarantine = Some(q.log(&h.actions)?);
+    }
+    Ok(h)
+}
+
+/// What is not granular's own first; then everything again, without it (what it hid may be
+/// not granular's own in turn: a table's link to a generation under a `.gen` that was a
+/// link, say). The check after the last round, if there was one.
+fn heal_not_own(
+    c: &Campaign,
+    rd: &Dir,
+    found: &Check,
+    q: &mut Quarantine,
+    h: &mut Healed,
+) -> Result<Option<Check>, CampaignError> {
     let mut fresh: Option<Check> = None;
     for _ in 0..3 {
         let cur = fresh.as_ref().unwrap_or(found);
         if cur.not_own.is_empty() {
             break;
         }
-        set_aside_not_own(c, &rd, cur, &mut q, &mut h)?;
-        fresh = Some(check_once(root, found.depth)?);
+        set_aside_not_own(c, rd, cur, q, h)?;
+        fresh = Some(check_once(&c.root, found.depth)?);
     }
-    let found = fresh.as_ref().unwrap_or(found);
+    Ok(fresh)
+}
 
-    // Unreadable ledger files: set aside; the parts they named become parts without a commit.
+/// Unreadable ledger files: set aside; the parts they named become parts without a commit.
+fn set_aside_bad_ledger(
+    root: &Path,
+    found: &Check,
+    q: &mut Quarantine,
+    h: &mut Healed,
+) -> Result<(), CampaignError> {
     for (p, why) in &found.bad_ledger {
         let rel = p
             .strip_prefix(root)
@@ -650,8 +719,19 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
                 .push(format!("set aside the unreadable {rel} ({why})"));
         }
     }
+    Ok(())
+}
 
-    // Commits to undo: those with a bad file, and the later holders of a doubled run.
+/// Undo the commits with a bad file and the later holders of a doubled run (their files set
+/// aside first, then their records or index groups); their runs, unless committed elsewhere,
+/// into `h.undone_runs`.
+fn undo_commits(
+    root: &Path,
+    found: &Check,
+    is_live: &dyn Fn(&str) -> bool,
+    q: &mut Quarantine,
+    h: &mut Healed,
+) -> Result<(), CampaignError> {
     let mut undo: BTreeSet<usize> = found.bad_files.iter().map(|b| b.commit).collect();
     for cs in found.doubled.values() {
         undo.extend(cs.iter().skip(1));
@@ -698,22 +778,7 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
                 .into_owned();
             q.set_aside(&rel)?;
         }
-        let why: Vec<String> = found
-            .bad_files
-            .iter()
-            .filter(|b| b.commit == i)
-            .map(|b| format!("{} {}", b.file.path, b.found))
-            .collect();
-        h.actions.push(format!(
-            "undid commit {} ({} runs run again; {})",
-            cm.name(),
-            cm.runs.len(),
-            if why.is_empty() {
-                "its runs were committed before".to_string()
-            } else {
-                why.join(", ")
-            }
-        ));
+        h.actions.push(undid(found, i));
         h.undone_runs.extend(cm.runs.iter().map(|r| r.run_id));
     }
     if index_changed {
@@ -730,12 +795,40 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
         .flat_map(|(_, cm)| cm.runs.iter().map(|r| r.run_id))
         .collect();
     h.undone_runs.retain(|r| !kept.contains(r));
+    Ok(())
+}
 
-    // Parts without a commit (including those of records set aside above).
-    let after = check_once(root, Depth::Quick)?;
-    adopt_or_set_aside(c, &rd, &after, &is_live, &mut q, &mut h)?;
+/// The action line of undoing commit `i` of `found`.
+fn undid(found: &Check, i: usize) -> String {
+    let cm = &found.commits[i];
+    let why: Vec<String> = found
+        .bad_files
+        .iter()
+        .filter(|b| b.commit == i)
+        .map(|b| format!("{} {}", b.file.path, b.found))
+        .collect();
+    format!(
+        "undid commit {} ({} runs run again; {})",
+        cm.name(),
+        cm.runs.len(),
+        if why.is_empty() {
+            "its runs were committed before".to_string()
+        } else {
+            why.join(", ")
+        }
+    )
+}
 
-    // Rebuilt tables: damaged ones, and the summaries once runs were undone.
+/// Rebuilt tables: damaged ones, and the summaries once runs were undone, set aside (their
+/// sidecars removed) to be written again.
+fn set_aside_derived(
+    c: &Campaign,
+    found: &Check,
+    after: &Check,
+    q: &mut Quarantine,
+    h: &mut Healed,
+) -> Result<(), CampaignError> {
+    let root = &c.root;
     let mut derived: Vec<(String, String)> = found.bad_derived.clone();
     for d in &after.bad_derived {
         if !derived.iter().any(|(p, _)| *p == d.0) {
@@ -746,11 +839,12 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
         let keep: Vec<&str> = std::iter::once(tables::POINTS)
             .chain(c.theory_tables())
             .collect();
-        for table in layout::table_names(root).map_err(|e| e.to_string())? {
+        let io = |e: &dyn std::fmt::Display| CampaignError::Io(e.to_string());
+        for table in layout::table_names(root).map_err(|e| io(&e))? {
             if keep.contains(&table.as_str()) {
                 continue;
             }
-            for f in c.data().files(&table).map_err(|e| e.to_string())? {
+            for f in c.data().files(&table).map_err(|e| io(&e))? {
                 let name = f.file_name().unwrap().to_string_lossy().into_owned();
                 if !is_part_name(&name) {
                     let rel = format!("tables/{table}/{name}");
@@ -774,6 +868,16 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
             ));
         }
     }
+    Ok(())
+}
+
+/// What does not belong in `tables/`, set aside.
+fn set_aside_foreign(
+    found: &Check,
+    after: &Check,
+    q: &mut Quarantine,
+    h: &mut Healed,
+) -> Result<(), CampaignError> {
     let mut foreign = found.foreign.clone();
     foreign.extend(
         after
@@ -788,38 +892,48 @@ pub fn heal(c: &Campaign, found: &Check, ours: &str) -> Result<Healed, String> {
                 .push(format!("set aside {rel} (not a table file)"));
         }
     }
-    if q.used {
-        h.quarantine = Some(q.log(&h.actions)?);
+    Ok(())
+}
+
+/// Why a part without a commit cannot get one back (it is set aside).
+#[derive(Debug)]
+struct NoCommit(String);
+
+impl std::fmt::Display for NoCommit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
     }
-    Ok(h)
 }
 
 /// A part without a commit: its footer's commit, or why it has none.
-fn part_commit(c: &Campaign, rd: &Dir, rel: &str) -> Result<PartCommit, String> {
+fn part_commit(c: &Campaign, rd: &Dir, rel: &str) -> Result<PartCommit, NoCommit> {
     let path = c.root.join(rel);
+    let no = |e: &dyn std::fmt::Display| NoCommit(e.to_string());
     let file = layout::open_file(rd, rel)
-        .map_err(|e| parquet_io::open_error(&path, e).to_string())?
-        .ok_or_else(|| format!("{rel}: gone"))?;
-    let (info, _) = parquet_io::inspect_file(file, &path).map_err(|e| e.to_string())?;
+        .map_err(|e| no(&parquet_io::open_error(&path, e)))?
+        .ok_or_else(|| NoCommit(format!("{rel}: gone")))?;
+    let (info, _) = parquet_io::inspect_file(file, &path).map_err(|e| no(&e))?;
     let table = table_and_name(rel).0;
-    parquet_io::check_part(&path, &info, table, Some(&c.identity)).map_err(|e| e.to_string())?;
+    parquet_io::check_part(&path, &info, table, Some(&c.identity)).map_err(|e| no(&e))?;
     let Some(json) = info.commit else {
-        return Err(format!(
+        return Err(NoCommit(format!(
             "{rel}: its footer names no commit (written before commits were recorded in parts)"
-        ));
+        )));
     };
-    serde_json::from_str(&json).map_err(|e| format!("{rel}: unreadable granular.commit: {e}"))
+    serde_json::from_str(&json)
+        .map_err(|e| NoCommit(format!("{rel}: unreadable granular.commit: {e}")))
 }
 
 /// Every row of a part, decoded (a damaged page is an error), and its runs if it is `runs`.
-fn read_whole(c: &Campaign, rd: &Dir, rel: &str) -> Result<Vec<CommittedRun>, String> {
+fn read_whole(c: &Campaign, rd: &Dir, rel: &str) -> Result<Vec<CommittedRun>, NoCommit> {
     let table = table_and_name(rel).0;
     let path = c.root.join(rel);
+    let no = |e: &dyn std::fmt::Display| NoCommit(e.to_string());
     let file = layout::open_file(rd, rel)
-        .map_err(|e| parquet_io::open_error(&path, e).to_string())?
-        .ok_or_else(|| format!("{rel}: gone"))?;
-    let batches = parquet_io::read_campaign_opened(file, &path, table, &c.identity)
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| no(&parquet_io::open_error(&path, e)))?
+        .ok_or_else(|| NoCommit(format!("{rel}: gone")))?;
+    let batches =
+        parquet_io::read_campaign_opened(file, &path, table, &c.identity).map_err(|e| no(&e))?;
     if table != tables::RUNS {
         return Ok(Vec::new());
     }
@@ -828,19 +942,23 @@ fn read_whole(c: &Campaign, rd: &Dir, rel: &str) -> Result<Vec<CommittedRun>, St
         let ids = b
             .column_by_name("run_id")
             .and_then(|c| c.as_primitive_opt::<UInt64Type>())
-            .ok_or_else(|| format!("{rel}: no run_id column"))?;
+            .ok_or_else(|| NoCommit(format!("{rel}: no run_id column")))?;
         let status = b
             .column_by_name("status")
             .and_then(|c| c.as_string_opt::<i32>())
-            .ok_or_else(|| format!("{rel}: no status column"))?;
+            .ok_or_else(|| NoCommit(format!("{rel}: no status column")))?;
         for (id, st) in ids.iter().zip(status.iter()) {
             let (Some(run_id), Some(st)) = (id, st) else {
-                return Err(format!("{rel}: a null run_id or status"));
+                return Err(NoCommit(format!("{rel}: a null run_id or status")));
             };
             let status = match st {
                 "done" => RunStatus::Done,
                 "failed" => RunStatus::Failed,
-                other => return Err(format!("{rel}: run {run_id} has status {other:?}")),
+                other => {
+                    return Err(NoCommit(format!(
+                        "{rel}: run {run_id} has status {other:?}"
+                    )))
+                }
             };
             runs.push(CommittedRun { run_id, status });
         }
@@ -848,6 +966,8 @@ fn read_whole(c: &Campaign, rd: &Dir, rel: &str) -> Result<Vec<CommittedRun>, St
     Ok(runs)
 }
 
+/// Parts without a commit: each complete group (see the module's text) gets its commit
+/// record back, anything else is set aside and its runs run again.
 fn adopt_or_set_aside(
     c: &Campaign,
     rd: &Dir,
@@ -855,22 +975,11 @@ fn adopt_or_set_aside(
     is_live: &dyn Fn(&str) -> bool,
     q: &mut Quarantine,
     h: &mut Healed,
-) -> Result<(), String> {
+) -> Result<(), CampaignError> {
     if found.orphans.is_empty() {
         return Ok(());
     }
-    let mut groups: BTreeMap<(String, u64), (PartCommit, Vec<String>)> = BTreeMap::new();
-    let mut loose: Vec<(String, String)> = Vec::new();
-    for rel in &found.orphans {
-        match part_commit(c, rd, rel) {
-            Ok(pc) => groups
-                .entry((pc.shard.clone(), pc.seq))
-                .or_insert_with(|| (pc.clone(), Vec::new()))
-                .1
-                .push(rel.clone()),
-            Err(why) => loose.push((rel.clone(), why)),
-        }
-    }
+    let (groups, loose) = group_orphans(c, rd, found);
     let existing: BTreeSet<(String, u64)> = found
         .commits
         .iter()
@@ -885,89 +994,16 @@ fn adopt_or_set_aside(
         if is_live(&shard) {
             continue;
         }
-        let verdict = (|| -> Result<Vec<CommittedRun>, String> {
-            if shard.is_empty() || shard.starts_with('.') || shard.contains(['/', '\0']) {
-                return Err(format!("its footer names the shard {shard:?}"));
-            }
-            if existing.contains(&(shard.clone(), seq)) {
-                return Err(format!("commit {shard}/{seq} exists and does not name it"));
-            }
-            let mut runs = Vec::new();
-            for t in &pc.tables {
-                let rel = files
-                    .iter()
-                    .find(|f| table_and_name(f).0 == t.as_str())
-                    .ok_or_else(|| format!("its {t} part is missing"))?;
-                let r = read_whole(c, rd, rel)?;
-                if t == tables::RUNS {
-                    runs = r;
-                }
-            }
-            if let Some(f) = files
-                .iter()
-                .find(|f| !pc.tables.iter().any(|t| table_and_name(f).0 == t.as_str()))
-            {
-                return Err(format!("{f} is of a table its commit does not list"));
-            }
-            if runs.is_empty() {
-                return Err("no runs".into());
-            }
-            if let Some(r) = runs.iter().find(|r| taken.contains(&r.run_id)) {
-                return Err(format!("run {} is committed already", r.run_id));
-            }
-            Ok(runs)
-        })();
-        match verdict {
+        let group = Orphans {
+            shard: &shard,
+            seq,
+            pc: &pc,
+            files: &files,
+        };
+        match group.verdict(c, rd, &existing, &taken) {
             Ok(runs) => {
-                let mut sums = Vec::new();
-                for t in &pc.tables {
-                    let rel = files
-                        .iter()
-                        .find(|f| table_and_name(f).0 == t.as_str())
-                        .expect("checked");
-                    let path = c.root.join(rel);
-                    let file = layout::open_file(rd, rel)
-                        .map_err(|e| parquet_io::open_error(&path, e).to_string())?
-                        .ok_or_else(|| format!("{rel}: gone"))?;
-                    let (bytes, sha256) = checksum::sum_reader(file)
-                        .map_err(|e| format!("{}: {e}", path.display()))?;
-                    sums.push(FileSum {
-                        path: rel.clone(),
-                        bytes,
-                        sha256,
-                    });
-                }
-                let n = runs.len();
                 taken.extend(runs.iter().map(|r| r.run_id));
-                let commit = Commit {
-                    format_version: LEDGER_FORMAT,
-                    shard: shard.clone(),
-                    seq,
-                    runs,
-                    files: sums,
-                    in_index: false,
-                };
-                let p = ledger::commit_path(&c.root, &shard, seq);
-                let name = p
-                    .file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_default();
-                rd.create_dir("ledger")
-                    .and_then(|l| l.create_dir(&shard))
-                    .and_then(|d| {
-                        d.write_atomic(
-                            &name,
-                            &serde_json::to_vec(&commit).expect("commit serialises"),
-                        )
-                    })
-                    .map_err(|e| match fsutil::not_own(&e) {
-                        Some(n) => n.to_string(),
-                        None => format!("{}: {e}", p.display()),
-                    })?;
-                h.actions.push(format!(
-                    "rebuilt the commit record of {shard}/{seq} ({n} runs, {} parts) from its parts' footers",
-                    files.len()
-                ));
+                group.rebuild_record(c, rd, runs, h)?;
             }
             Err(why) => {
                 for f in &files {
@@ -987,4 +1023,147 @@ fn adopt_or_set_aside(
         }
     }
     Ok(())
+}
+
+/// The parts without a commit by the commit their footers name ((shard, seq) -> the
+/// footer's commit and the parts), and those whose footer names none (with why).
+#[allow(clippy::type_complexity)]
+fn group_orphans(
+    c: &Campaign,
+    rd: &Dir,
+    found: &Check,
+) -> (
+    BTreeMap<(String, u64), (PartCommit, Vec<String>)>,
+    Vec<(String, NoCommit)>,
+) {
+    let mut groups: BTreeMap<(String, u64), (PartCommit, Vec<String>)> = BTreeMap::new();
+    let mut loose: Vec<(String, NoCommit)> = Vec::new();
+    for rel in &found.orphans {
+        match part_commit(c, rd, rel) {
+            Ok(pc) => groups
+                .entry((pc.shard.clone(), pc.seq))
+                .or_insert_with(|| (pc.clone(), Vec::new()))
+                .1
+                .push(rel.clone()),
+            Err(why) => loose.push((rel.clone(), why)),
+        }
+    }
+    (groups, loose)
+}
+
+/// The parts without a commit whose footers name one commit.
+struct Orphans<'a> {
+    shard: &'a str,
+    seq: u64,
+    pc: &'a PartCommit,
+    files: &'a [String],
+}
+
+impl Orphans<'_> {
+    /// This group's part of `table`.
+    fn part(&self, table: &str) -> Option<&String> {
+        self.files.iter().find(|f| table_and_name(f).0 == table)
+    }
+
+    /// The runs of a complete group (every table its footer lists, all readable, runs
+    /// committed nowhere else), or why it is not one.
+    fn verdict(
+        &self,
+        c: &Campaign,
+        rd: &Dir,
+        existing: &BTreeSet<(String, u64)>,
+        taken: &BTreeSet<u64>,
+    ) -> Result<Vec<CommittedRun>, NoCommit> {
+        let (shard, seq) = (self.shard, self.seq);
+        let no = NoCommit;
+        if shard.is_empty() || shard.starts_with('.') || shard.contains(['/', '\0']) {
+            return Err(no(format!("its footer names the shard {shard:?}")));
+        }
+        if existing.contains(&(shard.to_string(), seq)) {
+            return Err(no(format!(
+                "commit {shard}/{seq} exists and does not name it"
+            )));
+        }
+        let mut runs = Vec::new();
+        for t in &self.pc.tables {
+            let rel = self
+                .part(t)
+                .ok_or_else(|| no(format!("its {t} part is missing")))?;
+            let r = read_whole(c, rd, rel)?;
+            if t == tables::RUNS {
+                runs = r;
+            }
+        }
+        if let Some(f) = self.files.iter().find(|f| {
+            !self
+                .pc
+                .tables
+                .iter()
+                .any(|t| table_and_name(f).0 == t.as_str())
+        }) {
+            return Err(no(format!("{f} is of a table its commit does not list")));
+        }
+        if runs.is_empty() {
+            return Err(no("no runs".into()));
+        }
+        if let Some(r) = runs.iter().find(|r| taken.contains(&r.run_id)) {
+            return Err(no(format!("run {} is committed already", r.run_id)));
+        }
+        Ok(runs)
+    }
+
+    /// Write the commit record of a complete group again, from its parts (sizes and SHA-256
+    /// read now) and its runs.
+    fn rebuild_record(
+        &self,
+        c: &Campaign,
+        rd: &Dir,
+        runs: Vec<CommittedRun>,
+        h: &mut Healed,
+    ) -> Result<(), CampaignError> {
+        let (shard, seq) = (self.shard, self.seq);
+        let mut sums = Vec::new();
+        for t in &self.pc.tables {
+            let rel = self.part(t).expect("checked");
+            let path = c.root.join(rel);
+            let file = layout::open_file(rd, rel)
+                .map_err(|e| CampaignError::Io(parquet_io::open_error(&path, e).to_string()))?
+                .ok_or_else(|| CampaignError::Io(format!("{rel}: gone")))?;
+            let (bytes, sha256) = checksum::sum_reader(file)
+                .map_err(|e| CampaignError::Io(format!("{}: {e}", path.display())))?;
+            sums.push(FileSum {
+                path: rel.clone(),
+                bytes,
+                sha256,
+            });
+        }
+        let n = runs.len();
+        let commit = Commit {
+            format_version: LEDGER_FORMAT,
+            shard: shard.to_string(),
+            seq,
+            runs,
+            files: sums,
+            in_index: false,
+        };
+        let p = ledger::commit_path(&c.root, shard, seq);
+        let name = p
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        rd.create_dir("ledger")
+            .and_then(|l| l.create_dir(shard))
+            .and_then(|d| {
+                d.write_atomic(
+                    &name,
+                    &serde_json::to_vec(&commit).expect("commit serialises"),
+                )
+            })
+            .map_err(|e| CampaignError::at(&p, e))?;
+        h.actions.push(format!(
+            "rebuilt the commit record of {shard}/{seq} ({n} runs, {} parts) from its parts' footers",
+            self.files.len()
+        ));
+        Ok(())
+    }
 }

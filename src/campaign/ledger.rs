@@ -26,7 +26,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::campaign::error::CampaignError;
 use crate::campaign::plan::Shard;
+use crate::exit_codes::{Classed, ExitClass};
 use crate::fsutil::{self, Dir, Kind};
 use crate::store::checksum::FileSum;
 use crate::store::layout;
@@ -198,7 +200,7 @@ pub struct Journal {
 
 pub const JOURNAL_KIND: &str = "granular.compaction_journal";
 
-pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
+pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, CampaignError> {
     let p = index_path(root);
     // Only granular's own files are read: a link (`ledger` or the index) is not followed; it
     // is damage that `integrity` names and `resume` sets aside.
@@ -211,17 +213,18 @@ pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
         Ok(None) => return Ok(None),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) if fsutil::not_own(&e).is_some() => return Ok(None),
-        Err(e) => return Err(format!("{}: {e}", p.display())),
+        Err(e) => return Err(CampaignError::at(&p, e)),
     };
-    let ix: LedgerIndex = serde_json::from_slice(&text)
-        .map_err(|e| format!("{}: corrupt ledger index: {e}", p.display()))?;
+    let ix: LedgerIndex = serde_json::from_slice(&text).map_err(|e| {
+        CampaignError::Refused(format!("{}: corrupt ledger index: {e}", p.display()))
+    })?;
     if ix.kind != INDEX_KIND || ix.format_version != LEDGER_FORMAT {
-        return Err(format!(
+        return Err(CampaignError::Refused(format!(
             "{}: not a ledger index of format {LEDGER_FORMAT} (kind {:?}, format {})",
             p.display(),
             ix.kind,
             ix.format_version
-        ));
+        )));
     }
     if let Some(f) = ix
         .groups
@@ -229,22 +232,21 @@ pub fn read_index(root: &Path) -> Result<Option<LedgerIndex>, String> {
         .flat_map(|g| &g.files)
         .find(|f| !layout::is_table_file(&f.path))
     {
-        return Err(format!(
+        return Err(CampaignError::Refused(format!(
             "{}: a ledger index naming {:?}, not a file of a table (tables/<table>/<name>)",
             p.display(),
             f.path
-        ));
+        )));
     }
     Ok(Some(ix))
 }
 
 /// Write the index atomically.
-pub fn write_index(root: &Path, ix: &LedgerIndex) -> Result<(), String> {
+pub fn write_index(root: &Path, ix: &LedgerIndex) -> Result<(), CampaignError> {
     let p = index_path(root);
-    fsutil::create_dir_durable(&root.join("ledger"))
-        .map_err(|e| format!("{}: {e}", p.display()))?;
+    fsutil::create_dir_durable(&root.join("ledger")).map_err(|e| CampaignError::at(&p, e))?;
     fsutil::write_atomic(&p, &serde_json::to_vec(ix).expect("index serialises"))
-        .map_err(|e| format!("{}: {e}", p.display()))
+        .map_err(|e| CampaignError::at(&p, e))
 }
 
 /// The shard directories of `ledger/`, sorted (none if there is no ledger). Only directories
@@ -268,19 +270,16 @@ pub fn shard_dirs(root: &Path) -> Vec<PathBuf> {
 /// Commit record files (`commit-<seq>.json`, regular files) of a shard's directory with their
 /// sequence numbers, sorted: from the directory's entries, not following a link at `dir`
 /// (refused) or at a record (not listed); `ledger` itself must not be a link.
-pub fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, String> {
-    let err = |e: std::io::Error| match fsutil::not_own(&e) {
-        Some(n) => n.to_string(),
-        None => format!("{}: {e}", dir.display()),
-    };
+pub fn commit_files(dir: &Path) -> Result<Vec<(u64, PathBuf)>, CampaignError> {
+    let err = |e: std::io::Error| CampaignError::at(dir, e);
     if let Some(parent) = dir.parent() {
         if let Ok(Some(k)) = fsutil::kind(parent) {
             if k != Kind::Dir {
-                return Err(format!(
+                return Err(CampaignError::Refused(format!(
                     "{}: {}, where granular keeps its own directory (not followed)",
                     parent.display(),
                     fsutil::describe_kind(k)
-                ));
+                )));
             }
         }
     }
@@ -343,7 +342,7 @@ impl Ledger {
 
 /// Every commit (see `Ledger`). A record that vanishes while being read (a compaction
 /// folding it into the index at that moment) makes the whole read start again.
-pub fn read_ledger(root: &Path) -> Result<Ledger, String> {
+pub fn read_ledger(root: &Path) -> Result<Ledger, CampaignError> {
     let mut last = String::new();
     for _ in 0..20 {
         match read_ledger_once(root) {
@@ -353,34 +352,34 @@ pub fn read_ledger(root: &Path) -> Result<Ledger, String> {
         }
         last = "commit records kept vanishing while being read (a compaction running?)".into();
     }
-    Err(format!("{}: {last}", root.display()))
+    Err(CampaignError::Io(format!("{}: {last}", root.display())))
 }
 
 /// Every commit, or an error naming the damaged ledger files and the command that heals them.
-pub fn read_commits(root: &Path) -> Result<Vec<Commit>, String> {
+pub fn read_commits(root: &Path) -> Result<Vec<Commit>, CampaignError> {
     let l = read_ledger(root)?;
     if l.damaged() {
-        return Err(format!(
+        return Err(CampaignError::Refused(format!(
             "{}; `granular resume {}` sets it aside and rebuilds the commit from its parts",
             l.damage().join("; "),
             root.display()
-        ));
+        )));
     }
     Ok(l.commits)
 }
 
 /// `Ok(None)`: a commit record listed was gone when opened. Only granular's own directories
 /// and files are read (never through a link: a link is damage that `integrity` names).
-fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, String> {
+fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, CampaignError> {
     let mut out = Ledger::default();
     match read_index(root) {
         Ok(ix) => out.index = ix,
-        Err(e) => out.bad_index = Some(e),
+        Err(e) => out.bad_index = Some(e.to_string()),
     }
     if let Some(ix) = &out.index {
         out.commits.extend(ix.groups.iter().map(Group::as_commit));
     }
-    let at = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
+    let at = |p: &Path, e: std::io::Error| CampaignError::Io(format!("{}: {e}", p.display()));
     let ledger = match Dir::open(root).and_then(|d| d.sub("ledger")) {
         Ok(Some(l)) => l,
         Ok(None) => return Ok(Some(out)),
@@ -428,27 +427,28 @@ fn read_ledger_once(root: &Path) -> Result<Option<Ledger>, String> {
                         ),
                     )),
                 },
-                Err(why) => out.bad_records.push((f, why)),
+                Err(why) => out.bad_records.push((f, why.to_string())),
             }
         }
     }
     Ok(Some(out))
 }
 
-fn parse_commit(text: &[u8], tag: &str, seq: u64) -> Result<Commit, String> {
+fn parse_commit(text: &[u8], tag: &str, seq: u64) -> Result<Commit, CampaignError> {
+    let corrupt = CampaignError::Refused;
     let c: Commit =
-        serde_json::from_slice(text).map_err(|e| format!("corrupt commit record: {e}"))?;
+        serde_json::from_slice(text).map_err(|e| corrupt(format!("corrupt commit record: {e}")))?;
     if c.format_version != LEDGER_FORMAT {
-        return Err(format!(
+        return Err(corrupt(format!(
             "a commit record of format {}, this granular reads {LEDGER_FORMAT}",
             c.format_version
-        ));
+        )));
     }
     if c.shard != tag || c.seq != seq {
-        return Err(format!(
+        return Err(corrupt(format!(
             "a commit record of {}/{} under the name of {tag}/{seq}",
             c.shard, c.seq
-        ));
+        )));
     }
     Ok(c)
 }
@@ -479,28 +479,28 @@ pub fn next_seq(root: &Path, tag: &str) -> u64 {
 
 /// Finish a compaction stopped after its journal was written: publish its generations, write
 /// its index, delete the records it folded, remove the journal. Only while no compaction runs.
-pub fn roll_forward_compaction(root: &Path) -> Result<Option<String>, String> {
+pub fn roll_forward_compaction(root: &Path) -> Result<Option<String>, CampaignError> {
     let jp = journal_path(root);
     let text = match fs::read(&jp) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(format!("{}: {e}", jp.display())),
+        Err(e) => return Err(CampaignError::at(&jp, e)),
     };
     let j: Journal = match serde_json::from_slice(&text) {
         Ok(j) => j,
         Err(e) => {
             // The journal is written atomically: unreadable means damaged, not half-written.
-            return Err(format!(
+            return Err(CampaignError::Refused(format!(
                 "{}: corrupt compaction journal ({e}); move it away and run `granular compact` again",
                 jp.display()
-            ));
+            )));
         }
     };
     if j.kind != JOURNAL_KIND || j.format_version != LEDGER_FORMAT {
-        return Err(format!(
+        return Err(CampaignError::Refused(format!(
             "{}: not a compaction journal of format {LEDGER_FORMAT}",
             jp.display()
-        ));
+        )));
     }
     complete_compaction(root, &j)?;
     Ok(Some(format!(
@@ -512,11 +512,8 @@ pub fn roll_forward_compaction(root: &Path) -> Result<Option<String>, String> {
 /// Steps 2-4 of a compaction whose journal is durable (idempotent). Nothing is followed: the
 /// generation links are written in `tables` opened without following a link, and records are
 /// deleted only in shard directories of granular's own (`ledger` a link is refused).
-pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), String> {
-    let at = |p: &Path, e: std::io::Error| match fsutil::not_own(&e) {
-        Some(n) => n.to_string(),
-        None => format!("{}: {e}", p.display()),
-    };
+pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), CampaignError> {
+    let at = CampaignError::at;
     let rd = Dir::open(root).map_err(|e| at(root, e))?;
     rd.sub("ledger").map_err(|e| at(&root.join("ledger"), e))?;
     for (table, gen) in &j.publish {
@@ -525,15 +522,19 @@ pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), String> {
             _ => None,
         };
         if current != Some(*gen) {
-            layout::publish_generation(root, table, *gen)
-                .map_err(|e| format!("{}: {e}", root.join("tables").join(table).display()))?;
+            layout::publish_generation(root, table, *gen).map_err(|e| {
+                CampaignError::Io(format!(
+                    "{}: {e}",
+                    root.join("tables").join(table).display()
+                ))
+            })?;
         }
     }
     write_index(root, &j.index)?;
     let ledger = rd
         .sub("ledger")
         .map_err(|e| at(&root.join("ledger"), e))?
-        .ok_or_else(|| format!("{}: gone", root.join("ledger").display()))?;
+        .ok_or_else(|| CampaignError::Io(format!("{}: gone", root.join("ledger").display())))?;
     for (tag, &upto) in &j.index.folded {
         // A shard directory that is a link is not followed: nothing is deleted through it.
         let Ok(Some(d)) = ledger.sub(tag) else {
@@ -562,12 +563,9 @@ pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), String> {
 /// Where the ledger is not granular's own (`ledger`, a shard's directory or the compaction
 /// journal a link), the commits behind it are unknown: no compaction is rolled forward and no
 /// pending part of those shards is discarded, until `granular resume` has set the link aside.
-pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, String> {
+pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, CampaignError> {
     let mut notes = Vec::new();
-    let at = |p: &Path, e: std::io::Error| match fsutil::not_own(&e) {
-        Some(n) => n.to_string(),
-        None => format!("{}: {e}", p.display()),
-    };
+    let at = CampaignError::at;
     let live: Vec<String> = live_locks(root)
         .into_iter()
         .map(|l| l.shard_tag)
@@ -839,16 +837,21 @@ impl Purpose {
 
 /// Why a lock could not be taken: another live process holds the directory (exit 3), or the
 /// lock file could not be written (no space, read-only file system, permissions: exit 4).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LockError {
+    /// Held by a live process (what it does and its pid in the message): refused.
+    #[error("{0}")]
     Held(String),
+    /// The lock cannot be written or read (disk full, read-only, permissions): I/O.
+    #[error("{0}")]
     Io(String),
 }
 
-impl std::fmt::Display for LockError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+impl Classed for LockError {
+    fn class(&self) -> ExitClass {
         match self {
-            LockError::Held(m) | LockError::Io(m) => f.write_str(m),
+            LockError::Held(_) => ExitClass::Refused,
+            LockError::Io(_) => ExitClass::Io,
         }
     }
 }
@@ -1075,14 +1078,13 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<LockFile, LockError> {
                     .and_then(|f| f.metadata().ok());
                 match read_lock(&locks, &name) {
                     Some(h) if lock_is_live(&locks, &h) => continue,
-                    Some(_) => {
-                        let _ = locks.remove_file(&name);
-                    }
+                    Some(_) => remove_stale(&locks, &name).map_err(io)?,
                     None => {
                         // Unreadable (or a link: removed itself): a lock being written right
                         // now looks the same for a moment; only one older than a few seconds
                         // is taken to be a crash.
-                        let old = match locks.kind(&name) {
+                        let kind = locks.kind(&name);
+                        let old = match kind {
                             Ok(Some(Kind::File)) => seen
                                 .and_then(|m| m.modified().ok())
                                 .and_then(|t| t.elapsed().ok())
@@ -1090,7 +1092,9 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<LockFile, LockError> {
                             Ok(Some(_)) => true,
                             _ => false,
                         };
-                        if old {
+                        if old && matches!(kind, Ok(Some(Kind::File))) {
+                            remove_stale(&locks, &name).map_err(io)?;
+                        } else if old {
                             let _ = locks.remove_file(&name);
                         } else {
                             std::thread::sleep(std::time::Duration::from_millis(100));
@@ -1105,6 +1109,12 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<LockFile, LockError> {
         "{}: could not take the lock (another process keeps taking it); try again",
         path.display()
     )))
+}
+
+/// Remove a stale lock file (gone already is fine): a lock that cannot be removed (a
+/// read-only file system, permissions) is an I/O error at the lock, not a lock held.
+fn remove_stale(locks: &Dir, name: &str) -> std::io::Result<()> {
+    locks.remove_file(name).map(|_| ())
 }
 
 /// Remove a lock file if it is still ours (a lock taken over as stale by another process,

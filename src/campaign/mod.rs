@@ -18,6 +18,7 @@
 
 pub mod compact;
 pub mod dispatch;
+pub mod error;
 pub mod history;
 pub mod integrity;
 pub mod ledger;
@@ -51,24 +52,11 @@ use crate::store::dataset::Dataset;
 use crate::store::parquet_io::Stamp;
 use crate::store::FORMAT_VERSION;
 use crate::CODE_VERSION;
+pub use error::CampaignError;
 use ledger::RunStatus;
 use ledger::{ExclusiveLock, LockError, Purpose};
 use plan::{canonical, Plan, Shard};
 use registry::{Asked, Growth, Registry};
-
-#[derive(Debug, thiserror::Error)]
-pub enum CampaignError {
-    #[error("{0}")]
-    Manifest(#[from] ManifestErrors),
-    /// The directory holds another campaign, is locked, or is not a campaign directory.
-    #[error("{0}")]
-    Refused(String),
-    #[error("{0}")]
-    Io(String),
-    /// A run needs more of the machine than it has (refused before anything is written).
-    #[error("{0}")]
-    TooLarge(String),
-}
 
 /// `campaign.json`: what makes a directory a campaign, written atomically; its registry
 /// changes only when a grown manifest is accepted.
@@ -251,7 +239,7 @@ impl Campaign {
         let (manifest, fresh) = plan::parse(&text, &manifest_path.display().to_string())?;
         let text = text.into_bytes();
         if let Some(mem) = resources::Memory::of_this_machine() {
-            resources::check(&fresh, mem).map_err(CampaignError::TooLarge)?;
+            resources::check(&fresh, mem)?;
         }
         refuse_non_directory(out)?;
         if out.join("campaign.json").exists() {
@@ -346,7 +334,7 @@ impl Campaign {
                 &|b, r| old_plan.seed(b, r),
             )
             .map_err(|errs| CampaignError::Refused(errs.join("; ")))?;
-        let plan = Plan::new(&manifest, expansion, registry).map_err(CampaignError::Refused)?;
+        let plan = Plan::new(&manifest, expansion, registry)?;
         self.refuse_missing_columns(&plan, &growth)?;
         self.plan = plan;
         self.manifest = manifest;
@@ -404,8 +392,7 @@ impl Campaign {
     /// Write the accepted manifest into the history and campaign.json (the commit point: it
     /// alone makes the directory a campaign and holds the registry), then manifest.json.
     fn record(&mut self, text: &[u8], runs_added: u64) -> Result<(), CampaignError> {
-        let entry = history::write(&self.root, self.history.len(), text, runs_added)
-            .map_err(CampaignError::Io)?;
+        let entry = history::write(&self.root, self.history.len(), text, runs_added)?;
         let mut history = self.history.clone();
         history.push(entry);
         let info = CampaignInfo {
@@ -475,7 +462,7 @@ impl Campaign {
         let file = info_path.display().to_string();
         let manifest = crate::manifest::validate::parse(&manifest_text, &file)?;
         let expansion = plan::expand(&manifest).map_err(|e| corrupt(format!("{e:?}")))?;
-        let plan = Plan::new(&manifest, expansion, registry).map_err(corrupt)?;
+        let plan = Plan::new(&manifest, expansion, registry).map_err(|e| corrupt(e.to_string()))?;
         Ok(Campaign {
             root: root.to_path_buf(),
             identity: manifest.identity(),
@@ -605,7 +592,10 @@ impl Campaign {
     {
         let data = self.data();
         let ledger = ledger::read_ledger(&self.root).map_err(|e| {
-            crate::store::parquet_io::StoreError::Corrupt(self.root.display().to_string(), e)
+            crate::store::parquet_io::StoreError::Corrupt(
+                self.root.display().to_string(),
+                e.to_string(),
+            )
         })?;
         let done = self.done_replicas(&ledger::finished_runs(&ledger.commits));
         self.plan.model.figures(&self.view(&data, &done))
@@ -646,7 +636,10 @@ impl Campaign {
     pub fn analyze(&self, out: &Path, opts: &Options) -> Result<AnalysisReport, AnalysisError> {
         let data = self.data();
         let ledger = ledger::read_ledger(&self.root).map_err(|e| {
-            crate::store::parquet_io::StoreError::Corrupt(self.root.display().to_string(), e)
+            crate::store::parquet_io::StoreError::Corrupt(
+                self.root.display().to_string(),
+                e.to_string(),
+            )
         })?;
         let done = self.done_replicas(&ledger::finished_runs(&ledger.commits));
         let total = self.plan.current_runs().count() as u64;

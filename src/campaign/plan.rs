@@ -11,9 +11,10 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha20Rng;
 use serde_json::Value;
 
+use super::error::CampaignError;
 use super::registry::{run_identity, Asked, Registry, RunBlock, SeedSource};
-pub use crate::manifest::sweep::canonical;
 pub use crate::manifest::expand::{expand, Expansion};
+pub use crate::manifest::sweep::canonical;
 use crate::manifest::validate;
 use crate::manifest::validate::ManifestErrors;
 use crate::manifest::{Manifest, RunsPerPoint};
@@ -70,20 +71,22 @@ pub struct Shard {
 impl Shard {
     pub const ALL: Shard = Shard { index: 1, count: 1 };
 
-    pub fn parse(s: &str) -> Result<Shard, String> {
+    /// `I/N` (the `--shard` flag): anything else is invalid input.
+    pub fn parse(s: &str) -> Result<Shard, CampaignError> {
+        let bad = |m: String| CampaignError::Invalid(m);
         let (a, b) = s
             .split_once('/')
-            .ok_or_else(|| format!("expected I/N, got {s:?}"))?;
+            .ok_or_else(|| bad(format!("expected I/N, got {s:?}")))?;
         let index: u32 = a
             .trim()
             .parse()
-            .map_err(|_| format!("expected I/N with integers, got {s:?}"))?;
+            .map_err(|_| bad(format!("expected I/N with integers, got {s:?}")))?;
         let count: u32 = b
             .trim()
             .parse()
-            .map_err(|_| format!("expected I/N with integers, got {s:?}"))?;
+            .map_err(|_| bad(format!("expected I/N with integers, got {s:?}")))?;
         if count == 0 || index == 0 || index > count {
-            return Err(format!("expected 1 <= I <= N in I/N, got {s:?}"));
+            return Err(bad(format!("expected 1 <= I <= N in I/N, got {s:?}")));
         }
         Ok(Shard { index, count })
     }
@@ -107,7 +110,12 @@ impl std::fmt::Display for Shard {
 impl Plan {
     /// The plan of a campaign whose registry is `registry` and latest manifest expanded to
     /// `current` (the points it asks for, registered).
-    pub fn new(m: &Manifest, expansion: Expansion, registry: Registry) -> Result<Plan, String> {
+    /// A registered point that does not parse is refused (a corrupt registry).
+    pub fn new(
+        m: &Manifest,
+        expansion: Expansion,
+        registry: Registry,
+    ) -> Result<Plan, CampaignError> {
         let current: std::collections::BTreeSet<String> = expansion
             .points
             .iter()
@@ -119,7 +127,12 @@ impl Plan {
             let params = m
                 .model
                 .params_from(&rp.params, "", &mut errs)
-                .ok_or_else(|| format!("registered point {} does not parse: {errs:?}", rp.id))?;
+                .ok_or_else(|| {
+                    CampaignError::Refused(format!(
+                        "registered point {} does not parse: {errs:?}",
+                        rp.id
+                    ))
+                })?;
             let value = params.to_value();
             let values = expansion
                 .sweep_keys
@@ -346,12 +359,13 @@ pub fn load(path: &std::path::Path) -> Result<(Manifest, Plan), ManifestErrors> 
 /// campaign of it; `file` names it in errors.
 pub fn parse(text: &str, file: &str) -> Result<(Manifest, Plan), ManifestErrors> {
     let (manifest, expansion) = crate::manifest::check::check(text, file)?;
-    let plan = fresh(&manifest, expansion).map_err(|e| ManifestErrors::whole(file, e))?;
+    let plan =
+        fresh(&manifest, expansion).map_err(|e| ManifestErrors::whole(file, e.to_string()))?;
     Ok((manifest, plan))
 }
 
 /// The plan of a new campaign of `m`: its points and runs registered in sweep order.
-pub fn fresh(m: &Manifest, expansion: Expansion) -> Result<Plan, String> {
+pub fn fresh(m: &Manifest, expansion: Expansion) -> Result<Plan, CampaignError> {
     let mut registry = Registry::default();
     let runs = m.runs_per_point();
     registry
@@ -363,7 +377,7 @@ pub fn fresh(m: &Manifest, expansion: Expansion) -> Result<Plan, String> {
             },
             &|_, _| 0,
         )
-        .map_err(|e| e.join("; "))?;
+        .map_err(|e| CampaignError::Invalid(e.join("; ")))?;
     Plan::new(m, expansion, registry)
 }
 

@@ -163,7 +163,7 @@ pub fn preview(
     let finished = if new_campaign {
         BTreeMap::new()
     } else {
-        ledger::finished_runs(&ledger::read_commits(&c.root).map_err(CampaignError::Refused)?)
+        ledger::finished_runs(&ledger::read_commits(&c.root)?)
     };
     let current: Vec<_> = c.plan.current_runs().collect();
     let kept = current

@@ -2,6 +2,7 @@
 //! from its parameters) against the machine's memory. A run that cannot fit is refused before
 //! anything is written; more runs at once than the free memory holds are run fewer at a time.
 
+use super::error::CampaignError;
 use super::plan::Plan;
 
 /// The machine's memory (bytes), from `/proc/meminfo`.
@@ -52,16 +53,17 @@ pub fn human(bytes: u64) -> String {
     }
 }
 
-/// Refuse a plan whose largest run needs more memory than the machine has.
-pub fn check(plan: &Plan, mem: Memory) -> Result<(), String> {
+/// Refuse a plan whose largest run needs more memory than the machine has (invalid input:
+/// `CampaignError::TooLarge`).
+pub fn check(plan: &Plan, mem: Memory) -> Result<(), CampaignError> {
     match largest_run(plan) {
-        Some((point, need)) if need > mem.total => Err(format!(
+        Some((point, need)) if need > mem.total => Err(CampaignError::TooLarge(format!(
             "a run of point {point}{} needs about {} of memory (estimated from its parameters), \
              more than this machine's {}; make the runs smaller or run them on a larger machine",
             describe(plan, point),
             human(need),
             human(mem.total)
-        )),
+        ))),
         _ => Ok(()),
     }
 }
@@ -119,6 +121,8 @@ mod tests {
         };
         let huge = plan(1_000_000_000);
         let e = check(&huge, mem).unwrap_err();
+        assert!(matches!(e, CampaignError::TooLarge(_)), "{e}");
+        let e = e.to_string();
         assert!(e.contains("point 0") && e.contains("GB"), "{e}");
         let small = plan(1000);
         assert!(check(&small, mem).is_ok());

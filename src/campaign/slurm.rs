@@ -110,26 +110,29 @@ fn record_path(root: &Path) -> PathBuf {
     root.join("slurm").join("submission.json")
 }
 
-pub fn read_record(root: &Path) -> Result<Option<SubmissionRecord>, String> {
+/// The campaign's submission record, if it has one: corrupt or of another format is
+/// refused, unreadable is I/O.
+pub fn read_record(root: &Path) -> Result<Option<SubmissionRecord>, CampaignError> {
     let p = record_path(root);
     let text = match std::fs::read_to_string(&p) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(format!("{}: {e}", p.display())),
+        Err(e) => return Err(CampaignError::at(&p, e)),
     };
-    let r: SubmissionRecord = serde_json::from_str(&text)
-        .map_err(|e| format!("{}: corrupt submission record: {e}", p.display()))?;
+    let r: SubmissionRecord = serde_json::from_str(&text).map_err(|e| {
+        CampaignError::Refused(format!("{}: corrupt submission record: {e}", p.display()))
+    })?;
     if r.kind != SUBMISSION_KIND || r.format_version != SUBMISSION_FORMAT {
-        return Err(format!(
+        return Err(CampaignError::Refused(format!(
             "{}: not a submission record of format {SUBMISSION_FORMAT}",
             p.display()
-        ));
+        )));
     }
     Ok(Some(r))
 }
 
 /// Check a SLURM time limit: `M`, `M:S`, `H:M:S`, `D-H`, `D-H:M`, `D-H:M:S`.
-pub fn check_time(t: &str) -> Result<(), String> {
+pub fn check_time(t: &str) -> Result<(), CampaignError> {
     let num = |s: &str| !s.is_empty() && s.len() <= 4 && s.bytes().all(|b| b.is_ascii_digit());
     let (days, rest) = match t.split_once('-') {
         Some((d, r)) => (Some(d), r),
@@ -145,9 +148,9 @@ pub fn check_time(t: &str) -> Result<(), String> {
     if ok {
         Ok(())
     } else {
-        Err(format!(
+        Err(CampaignError::Invalid(format!(
             "--time {t:?}: expected a SLURM time limit (MM, MM:SS, HH:MM:SS, D-HH, D-HH:MM or D-HH:MM:SS)"
-        ))
+        )))
     }
 }
 
@@ -564,7 +567,7 @@ impl SubmissionStatus {
 }
 
 /// The submissions of a campaign with their jobs' current SLURM states.
-pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, String> {
+pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, CampaignError> {
     let Some(rec) = read_record(root)? else {
         return Ok(Vec::new());
     };
@@ -611,7 +614,7 @@ pub fn plan(
     binary: &str,
     max_array: u64,
 ) -> Result<Plan, CampaignError> {
-    let existing = read_record(root).map_err(CampaignError::Refused)?;
+    let existing = read_record(root)?;
     let mut notes = Vec::new();
     let mut rec = match (&existing, missing) {
         (Some(_), false) => return Err(already_submitted(root)),
@@ -619,7 +622,7 @@ pub fn plan(
         (Some(r), true) => resubmission(r, options, binary),
         (None, false) => first_submission(c, options, binary, max_array, &mut notes),
     };
-    check_time(&rec.options.time).map_err(CampaignError::Refused)?;
+    check_time(&rec.options.time).map_err(|e| CampaignError::Refused(e.to_string()))?;
     // What the scripts would hold (the CLI refuses bad flags before this; here the options of
     // an earlier submission read back from its record, and the directory it was given).
     let dir = scriptable_dir(root, &rec)?;
@@ -743,7 +746,7 @@ fn missing_shards(
 ) -> Result<(Vec<u64>, Vec<String>), CampaignError> {
     let n = rec.shards;
     let mut still_queued_arrays = Vec::new();
-    let commits = ledger::read_commits(root).map_err(CampaignError::Refused)?;
+    let commits = ledger::read_commits(root)?;
     let finished = ledger::finished_runs(&commits);
     let mut unfinished = BTreeSet::new();
     for r in c.plan.current_runs() {
@@ -796,25 +799,27 @@ fn live_shards(root: &Path, n: u64) -> BTreeSet<u64> {
         .collect()
 }
 
-fn sbatch(args: &[&str]) -> Result<String, String> {
+fn sbatch(args: &[&str]) -> Result<String, CampaignError> {
     let cmd = tool("GRANULAR_SBATCH", "sbatch");
     let out = Command::new(&cmd)
         .args(args)
         .output()
-        .map_err(|e| format!("cannot run {cmd}: {e}"))?;
+        .map_err(|e| CampaignError::Io(format!("cannot run {cmd}: {e}")))?;
     if !out.status.success() {
-        return Err(format!(
+        return Err(CampaignError::Io(format!(
             "{cmd} {} failed ({}): {}",
             args.join(" "),
             out.status,
             String::from_utf8_lossy(&out.stderr).trim()
-        ));
+        )));
     }
     let text = String::from_utf8_lossy(&out.stdout);
     // --parsable prints "jobid" or "jobid;cluster".
     let id = text.trim().split(';').next().unwrap_or("").to_string();
     if id.is_empty() || !id.bytes().all(|b| b.is_ascii_digit()) {
-        return Err(format!("{cmd} printed {text:?}, expected a job id"));
+        return Err(CampaignError::Io(format!(
+            "{cmd} printed {text:?}, expected a job id"
+        )));
     }
     Ok(id)
 }
@@ -839,8 +844,7 @@ pub fn submit(root: &Path, mut p: Plan) -> Result<Plan, CampaignError> {
     if p.indices.is_empty() {
         return Ok(p);
     }
-    let array_job =
-        sbatch(&["--parsable", &script_path.display().to_string()]).map_err(CampaignError::Io)?;
+    let array_job = sbatch(&["--parsable", &script_path.display().to_string()])?;
     p.record.submissions.last_mut().expect("sub").array_job = Some(array_job.clone());
     save(&p.record)?;
     if let Some(rel) = &sub.compact_script {
@@ -850,7 +854,7 @@ pub fn submit(root: &Path, mut p: Plan) -> Result<Plan, CampaignError> {
             dep.push_str(&format!(",afterany:{j}"));
         }
         let path = root.join(rel).display().to_string();
-        let job = sbatch(&["--parsable", &dep, &path]).map_err(CampaignError::Io)?;
+        let job = sbatch(&["--parsable", &dep, &path])?;
         p.record.submissions.last_mut().expect("sub").compact_job = Some(job);
         save(&p.record)?;
     }

@@ -7,6 +7,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use super::error::CampaignError;
 use super::ledger::{self, RunStatus};
 use super::{integrity, Campaign};
 use crate::fsutil;
@@ -133,7 +134,7 @@ pub fn fingerprint(root: &Path) -> u64 {
     h.finish()
 }
 
-pub fn status(c: &Campaign) -> Result<CampaignStatus, String> {
+pub fn status(c: &Campaign) -> Result<CampaignStatus, CampaignError> {
     let check = integrity::check(c, integrity::Depth::Quick)?;
     let commits = ledger::read_ledger(&c.root)?.commits;
     let finished = ledger::finished_runs(&commits);

@@ -106,7 +106,7 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
         let registry = format1_registry(&manifest, &expansion);
         let n_runs = registry.n_runs();
         let keys = expansion.sweep_keys.clone();
-        let plan = Plan::new(&manifest, expansion, registry).map_err(CampaignError::Refused)?;
+        let plan = Plan::new(&manifest, expansion, registry)?;
         report.steps.push(format!(
             "registry: {} points, {n_runs} runs, each keeping its seed of format 1",
             plan.points.len()
@@ -121,7 +121,7 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
         ));
         let given =
             fs::read(root.join("manifest.json")).unwrap_or_else(|_| manifest_text.into_bytes());
-        let mut first = history::write(root, 0, &given, n_runs).map_err(CampaignError::Io)?;
+        let mut first = history::write(root, 0, &given, n_runs)?;
         first.accepted = created(&info_path);
         report.steps.push(format!(
             "history: the frozen manifest kept as {}",
@@ -189,7 +189,7 @@ impl AnyFile {
 fn old_records(root: &Path) -> Result<Vec<(PathBuf, AnyCommit)>, CampaignError> {
     let mut out = Vec::new();
     for t in ledger::shard_dirs(root) {
-        let files = ledger::commit_files(&t).map_err(CampaignError::Io)?;
+        let files = ledger::commit_files(&t)?;
         for (_, f) in files {
             let text = fs::read(&f).map_err(|e| io_err(&f, e))?;
             let c: AnyCommit = serde_json::from_slice(&text).map_err(|e| {
@@ -342,7 +342,7 @@ fn checksum_ledger(root: &Path) -> Result<Vec<String>, CampaignError> {
                     files,
                 }],
             };
-            ledger::write_index(root, &index).map_err(CampaignError::Io)?;
+            ledger::write_index(root, &index)?;
             steps.push(format!(
                 "ledger index: its runs and the {n} compacted file(s) no record names, with their sizes and SHA-256, as one group (format 2)"
             ));
@@ -455,8 +455,8 @@ fn rewrite_runs(root: &Path, sweep_cols: &[String], stamp: Stamp) -> Result<Stri
         let batches = batches
             .iter()
             .map(to_current_runs)
-            .collect::<Result<Vec<RecordBatch>, String>>()
-            .map_err(|e| CampaignError::Io(format!("{}: {e}", path.display())))?;
+            .collect::<Result<Vec<RecordBatch>, CampaignError>>()
+            .map_err(|e| e.context(path.display()))?;
         let out = ndir.join(&name);
         if batches.is_empty() {
             continue;
@@ -474,7 +474,7 @@ fn rewrite_runs(root: &Path, sweep_cols: &[String], stamp: Stamp) -> Result<Stri
 
 /// A format-1 `runs` batch in the columns of today's `runs` table: the sweep columns left out
 /// (they are in `points` now), the columns format 1 did not have (`continued_from`) null.
-fn to_current_runs(b: &RecordBatch) -> Result<RecordBatch, String> {
+fn to_current_runs(b: &RecordBatch) -> Result<RecordBatch, CampaignError> {
     let target = tables::runs_batch(&[]).schema();
     let n = b.num_rows();
     let mut columns = Vec::with_capacity(target.fields().len());
@@ -482,18 +482,18 @@ fn to_current_runs(b: &RecordBatch) -> Result<RecordBatch, String> {
         match b.column_by_name(f.name()) {
             Some(c) if c.data_type() == f.data_type() => columns.push(c.clone()),
             Some(c) => {
-                return Err(format!(
+                return Err(CampaignError::Io(format!(
                     "column {} is {}, expected {}",
                     f.name(),
                     c.data_type(),
                     f.data_type()
-                ))
+                )))
             }
             None if f.is_nullable() => columns.push(arrow_array::new_null_array(f.data_type(), n)),
-            None => return Err(format!("no column {}", f.name())),
+            None => return Err(CampaignError::Io(format!("no column {}", f.name()))),
         }
     }
-    RecordBatch::try_new(target, columns).map_err(|e| e.to_string())
+    RecordBatch::try_new(target, columns).map_err(|e| CampaignError::Io(e.to_string()))
 }
 
 /// When the campaign was created (campaign.json's modification time, as near as is known).

@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 use arrow_array::cast::AsArray;
 use arrow_array::types::UInt64Type;
 
+use super::error::CampaignError;
 use super::integrity::{self, Depth};
 use super::{ledger, tables, Campaign};
 use crate::fsutil::{Dir, Kind};
@@ -27,11 +28,14 @@ pub struct VerifyReport {
     pub problems: Vec<String>,
 }
 
-pub fn verify(c: &Campaign, depth: Depth) -> Result<VerifyReport, String> {
+pub fn verify(c: &Campaign, depth: Depth) -> Result<VerifyReport, CampaignError> {
     let mut r = VerifyReport::default();
     let check = integrity::check(c, depth)?;
     if let Some(why) = &check.skipped {
-        return Err(format!("{}: not verified: {why}", c.root.display()));
+        return Err(CampaignError::Refused(format!(
+            "{}: not verified: {why}",
+            c.root.display()
+        )));
     }
     r.problems = check.problems();
     let finished = ledger::finished_runs(&check.commits);
@@ -46,16 +50,33 @@ pub fn verify(c: &Campaign, depth: Depth) -> Result<VerifyReport, String> {
         return Ok(r);
     }
     let live = !ledger::live_locks(&c.root).is_empty();
+    let run_counts = scan_tables(c, live, &mut r)?;
+    runs_against_ledger(c, live, &finished, &run_counts, &mut r);
+    Ok(r)
+}
+
+/// Every file of every table: readable, of this campaign, table and format (rows counted per
+/// table into `r.tables`); uncommitted parts of stopped writers. How often each run appears
+/// in the `runs` table.
+fn scan_tables(
+    c: &Campaign,
+    live: bool,
+    r: &mut VerifyReport,
+) -> Result<BTreeMap<u64, u32>, CampaignError> {
+    let io = |e: &dyn std::fmt::Display| CampaignError::Io(e.to_string());
     let mut run_counts: BTreeMap<u64, u32> = BTreeMap::new();
-    let rd = Dir::open(&c.root).map_err(|e| format!("{}: {e}", c.root.display()))?;
-    for table in layout::table_names(&c.root).map_err(|e| e.to_string())? {
+    let rd =
+        Dir::open(&c.root).map_err(|e| CampaignError::Io(format!("{}: {e}", c.root.display())))?;
+    for table in layout::table_names(&c.root).map_err(|e| io(&e))? {
         let dir = c.root.join("tables").join(&table);
         let mut files = 0;
         let mut rows = 0u64;
-        let Some(d) = layout::open_table(&rd, &table).map_err(|e| e.to_string())? else {
+        let Some(d) = layout::open_table(&rd, &table).map_err(|e| io(&e))? else {
             continue;
         };
-        let entries = d.entries().map_err(|e| format!("{}: {e}", dir.display()))?;
+        let entries = d
+            .entries()
+            .map_err(|e| CampaignError::Io(format!("{}: {e}", dir.display())))?;
         for (name, kind) in entries {
             let path = dir.join(&name);
             if name.ends_with(".pending") {
@@ -74,55 +95,93 @@ pub fn verify(c: &Campaign, depth: Depth) -> Result<VerifyReport, String> {
                 continue; // reported by the integrity check
             }
             files += 1;
-            let open = || -> Result<std::fs::File, parquet_io::StoreError> {
-                d.open_file(&name)
-                    .map_err(|e| parquet_io::open_error(&path, e))?
-                    .ok_or_else(|| {
-                        parquet_io::StoreError::io(&path, std::io::ErrorKind::NotFound.into())
-                    })
+            let file = TableFile {
+                c,
+                d: &d,
+                table: &table,
+                name: &name,
+                path: &path,
             };
-            let checked = open()
-                .and_then(|f| parquet_io::inspect_file(f, &path))
-                .and_then(|(info, _)| {
-                    parquet_io::check_part(&path, &info, &table, Some(&c.identity))?;
-                    Ok(info)
-                });
-            match checked {
-                Ok(info) => rows += info.rows,
+            match file.inspect() {
+                Ok(n) => rows += n,
                 Err(e) => {
                     r.problems.push(e.to_string());
                     continue;
                 }
             }
             if table == tables::RUNS {
-                match open()
-                    .and_then(|f| parquet_io::read_campaign_opened(f, &path, &table, &c.identity))
-                {
-                    Ok(batches) => {
-                        for b in batches {
-                            let Some(col) = b.column_by_name("run_id") else {
-                                r.problems
-                                    .push(format!("{}: no run_id column", path.display()));
-                                break;
-                            };
-                            let Some(ids) = col.as_primitive_opt::<UInt64Type>() else {
-                                r.problems.push(format!(
-                                    "{}: run_id is not an unsigned 64-bit column",
-                                    path.display()
-                                ));
-                                break;
-                            };
-                            for id in ids.iter().flatten() {
-                                *run_counts.entry(id).or_default() += 1;
-                            }
-                        }
-                    }
-                    Err(e) => r.problems.push(e.to_string()),
-                }
+                file.count_runs(&mut run_counts, &mut r.problems);
             }
         }
         r.tables.push((table, files, rows));
     }
+    Ok(run_counts)
+}
+
+/// One Parquet file of a table, opened without following a link.
+struct TableFile<'a> {
+    c: &'a Campaign,
+    d: &'a Dir,
+    table: &'a str,
+    name: &'a str,
+    path: &'a std::path::Path,
+}
+
+impl TableFile<'_> {
+    fn open(&self) -> Result<std::fs::File, parquet_io::StoreError> {
+        self.d
+            .open_file(self.name)
+            .map_err(|e| parquet_io::open_error(self.path, e))?
+            .ok_or_else(|| {
+                parquet_io::StoreError::io(self.path, std::io::ErrorKind::NotFound.into())
+            })
+    }
+
+    /// Its rows, if it is readable and of this campaign, table and format.
+    fn inspect(&self) -> Result<u64, parquet_io::StoreError> {
+        let (info, _) = parquet_io::inspect_file(self.open()?, self.path)?;
+        parquet_io::check_part(self.path, &info, self.table, Some(&self.c.identity))?;
+        Ok(info.rows)
+    }
+
+    /// Count the runs of a `runs` file into `run_counts`; what cannot be read into
+    /// `problems`.
+    fn count_runs(&self, run_counts: &mut BTreeMap<u64, u32>, problems: &mut Vec<String>) {
+        let read = self.open().and_then(|f| {
+            parquet_io::read_campaign_opened(f, self.path, self.table, &self.c.identity)
+        });
+        let batches = match read {
+            Ok(b) => b,
+            Err(e) => return problems.push(e.to_string()),
+        };
+        for b in batches {
+            let Some(col) = b.column_by_name("run_id") else {
+                problems.push(format!("{}: no run_id column", self.path.display()));
+                break;
+            };
+            let Some(ids) = col.as_primitive_opt::<UInt64Type>() else {
+                problems.push(format!(
+                    "{}: run_id is not an unsigned 64-bit column",
+                    self.path.display()
+                ));
+                break;
+            };
+            for id in ids.iter().flatten() {
+                *run_counts.entry(id).or_default() += 1;
+            }
+        }
+    }
+}
+
+/// The `runs` table against the ledger: no run twice, no committed run missing, no run
+/// outside every commit record.
+fn runs_against_ledger(
+    c: &Campaign,
+    live: bool,
+    finished: &BTreeMap<u64, ledger::RunStatus>,
+    run_counts: &BTreeMap<u64, u32>,
+    r: &mut VerifyReport,
+) {
     let doubled: Vec<u64> = run_counts
         .iter()
         .filter(|(_, &n)| n > 1)
@@ -177,5 +236,4 @@ pub fn verify(c: &Campaign, depth: Depth) -> Result<VerifyReport, String> {
             show(&extra)
         ));
     }
-    Ok(r)
 }

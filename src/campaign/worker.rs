@@ -10,7 +10,7 @@ use std::time::Instant;
 use super::ledger::RunStatus;
 use super::plan::RunSpec;
 use super::{Campaign, Event, RunOptions};
-use crate::models::{Engine, ModelParams, RunIds, RunRows, WORK_CHUNK};
+use crate::models::{Engine, ModelError, ModelParams, RunIds, RunRows, WORK_CHUNK};
 use crate::store::checkpoint::{self, CheckpointHeader};
 use crate::CODE_VERSION;
 
@@ -57,8 +57,9 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
         ),
         None => match start(c, spec, params, tx, &warn) {
             Ok(started) => started,
-            Err(reason) => {
-                return finish(tx, spec, RunEnd::Failed { reason, t: 0.0 }, 0.0, None, None)
+            Err(e) => {
+                let reason = e.to_string();
+                return finish(tx, spec, RunEnd::Failed { reason, t: 0.0 }, 0.0, None, None);
             }
         },
     };
@@ -153,7 +154,7 @@ fn start(
     params: &ModelParams,
     tx: &mut Tx,
     warn: &dyn Fn(&mut Tx, String),
-) -> Result<(Engine, From), String> {
+) -> Result<(Engine, From), ModelError> {
     if let Some(old) = spec.continues {
         let why = match checkpoint::load_final(&c.finals_dir(), old, spec.seed) {
             Ok(Some((h, payload))) if h.state_format == params.state_format() => {
@@ -165,7 +166,7 @@ fn start(
                         };
                         return Ok((e, from));
                     }
-                    Err(e) => e,
+                    Err(e) => e.to_string(),
                 }
             }
             Ok(Some((h, _))) => format!(
@@ -174,7 +175,7 @@ fn start(
                 params.state_format()
             ),
             Ok(None) => "it has no final state".into(),
-            Err(e) => e,
+            Err(e) => e.to_string(),
         };
         warn(
             tx,
@@ -208,12 +209,12 @@ impl Running<'_> {
     }
 
     /// Write the finished run's final state, if its model keeps one.
-    fn keep_final(&mut self, c: &Campaign) -> Result<(), String> {
+    fn keep_final(&mut self, c: &Campaign) -> std::io::Result<()> {
         let Some(payload) = self.engine.final_state() else {
             return Ok(());
         };
         let header = self.header();
-        checkpoint::write_final(&c.finals_dir(), &header, &payload).map_err(|e| e.to_string())
+        checkpoint::write_final(&c.finals_dir(), &header, &payload)
     }
 
     /// The header of the run's checkpoint or final state, as of now.
@@ -229,10 +230,10 @@ impl Running<'_> {
         }
     }
 
-    fn save(&mut self) -> Result<(), String> {
+    fn save(&mut self) -> std::io::Result<()> {
         let header = self.header();
         let payload = self.engine.state_bytes();
-        checkpoint::write(self.dir, &header, &payload).map_err(|e| e.to_string())?;
+        checkpoint::write(self.dir, &header, &payload)?;
         self.last_ckpt_t = Some(header.t);
         Ok(())
     }
@@ -320,7 +321,7 @@ fn restore(
         );
     }
     let restored = if loaded.header.state_format == params.state_format() {
-        params.restore(&loaded.payload)
+        params.restore(&loaded.payload).map_err(|e| e.to_string())
     } else {
         Err(format!(
             "state format {:?}, this granular writes {:?}",

@@ -4,10 +4,11 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::{fail, flags, report_error};
+use super::{exit_code, fail, failed, flags, report_error};
 use crate::analysis::{AnalysisError, Options};
 use crate::campaign::Campaign;
 use crate::exit_codes;
+use crate::exit_codes::Classed;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -60,11 +61,10 @@ pub fn run(a: Args) -> i32 {
             print_fits(&c, &out, &r);
             exit_codes::OK
         }
-        Err(AnalysisError::NotAnalysable(m)) => fail(
-            exit_codes::DIRECTORY_REFUSED,
-            format!("{}: {m}", c.root.display()),
-        ),
-        Err(e) => fail(exit_codes::IO_ERROR, e),
+        Err(e @ AnalysisError::NotAnalysable(_)) => {
+            fail(exit_code(e.class()), format!("{}: {e}", c.root.display()))
+        }
+        Err(e) => failed(&e),
     }
 }
 

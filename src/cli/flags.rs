@@ -7,6 +7,7 @@ use std::time::Duration;
 use clap::Args;
 
 use crate::campaign::plan::Shard;
+use crate::exit_codes::{Classed, ExitClass};
 
 /// Default of `--checkpoint-every` (seconds), for `run`, `resume`, `slurm-task` and `submit`.
 pub const DEFAULT_CHECKPOINT_EVERY: f64 = 300.0;
@@ -110,24 +111,38 @@ fn duration(seconds: f64) -> Duration {
     Duration::try_from_secs_f64(seconds.clamp(0.0, MAX_SECONDS)).unwrap_or(Duration::ZERO)
 }
 
+/// A flag's value that is not what it should be (clap prints it with the flag's name): invalid
+/// input.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct FlagError(pub String);
+
+impl Classed for FlagError {
+    fn class(&self) -> ExitClass {
+        ExitClass::InvalidInput
+    }
+}
+
 /// A float in a range; `what` says what was expected.
-fn float_in(s: &str, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, String> {
+fn float_in(s: &str, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, FlagError> {
     match s.parse::<f64>() {
         Ok(x) if x.is_finite() && ok(x) => Ok(x),
-        _ => Err(format!("expected {what}")),
+        _ => Err(FlagError(format!("expected {what}"))),
     }
 }
 
 /// An unsigned integer in `lo..=hi`; `what` says what it counts.
-fn int_in(s: &str, lo: u64, hi: u64, what: &str) -> Result<u64, String> {
+fn int_in(s: &str, lo: u64, hi: u64, what: &str) -> Result<u64, FlagError> {
     match s.parse::<u64>() {
         Ok(x) if (lo..=hi).contains(&x) => Ok(x),
-        _ => Err(format!("expected {what}, an integer from {lo} to {hi}")),
+        _ => Err(FlagError(format!(
+            "expected {what}, an integer from {lo} to {hi}"
+        ))),
     }
 }
 
 /// `--checkpoint-every`: seconds, > 0 and <= 1e7.
-pub fn checkpoint_seconds(s: &str) -> Result<f64, String> {
+pub fn checkpoint_seconds(s: &str) -> Result<f64, FlagError> {
     float_in(
         s,
         |x| x > 0.0 && x <= MAX_SECONDS,
@@ -136,7 +151,7 @@ pub fn checkpoint_seconds(s: &str) -> Result<f64, String> {
 }
 
 /// `--flush-every`: seconds, >= 0 (0 = commit every finished run at once) and <= 1e7.
-pub fn flush_seconds(s: &str) -> Result<f64, String> {
+pub fn flush_seconds(s: &str) -> Result<f64, FlagError> {
     float_in(
         s,
         |x| (0.0..=MAX_SECONDS).contains(&x),
@@ -145,42 +160,44 @@ pub fn flush_seconds(s: &str) -> Result<f64, String> {
 }
 
 /// `--threads`: 0 (all cores) to 1024.
-pub fn threads(s: &str) -> Result<usize, String> {
+pub fn threads(s: &str) -> Result<usize, FlagError> {
     int_in(s, 0, MAX_THREADS as u64, "worker threads (0 = all cores)").map(|n| n as usize)
 }
 
 /// `submit --cpus-per-task`: 1 to 1024.
-pub fn cpus(s: &str) -> Result<u32, String> {
+pub fn cpus(s: &str) -> Result<u32, FlagError> {
     int_in(s, 1, MAX_THREADS as u64, "CPUs per task").map(|n| n as u32)
 }
 
 /// `submit --tasks`: 1 to SLURM's largest array.
-pub fn tasks(s: &str) -> Result<u32, String> {
+pub fn tasks(s: &str) -> Result<u32, FlagError> {
     int_in(s, 1, MAX_ARRAY, "a number of array tasks").map(|n| n as u32)
 }
 
 /// `slurm-task --shards`: 1 to SLURM's largest array.
-pub fn shards(s: &str) -> Result<u32, String> {
+pub fn shards(s: &str) -> Result<u32, FlagError> {
     int_in(s, 1, MAX_ARRAY, "a number of shards").map(|n| n as u32)
 }
 
 /// `slurm-task --index`: 0 to SLURM's largest array index.
-pub fn array_index(s: &str) -> Result<u32, String> {
+pub fn array_index(s: &str) -> Result<u32, FlagError> {
     int_in(s, 0, MAX_ARRAY - 1, "an array index").map(|n| n as u32)
 }
 
 /// `submit --per-task-runs`: 1 to 1e9.
-pub fn per_task_runs(s: &str) -> Result<u64, String> {
+pub fn per_task_runs(s: &str) -> Result<u64, FlagError> {
     int_in(s, 1, MAX_PER_TASK_RUNS, "runs per task")
 }
 
 /// `submit --time`: a SLURM time limit (the library's check and message).
-pub fn slurm_time(s: &str) -> Result<String, String> {
-    crate::campaign::slurm::check_time(s).map(|()| s.to_string())
+pub fn slurm_time(s: &str) -> Result<String, FlagError> {
+    crate::campaign::slurm::check_time(s)
+        .map(|()| s.to_string())
+        .map_err(|e| FlagError(e.to_string()))
 }
 
 /// `analyze --n-min`: 0 to 1e9 particles.
-pub fn n_min(s: &str) -> Result<f64, String> {
+pub fn n_min(s: &str) -> Result<f64, FlagError> {
     float_in(
         s,
         |x| (0.0..=1e9).contains(&x),
@@ -189,12 +206,12 @@ pub fn n_min(s: &str) -> Result<f64, String> {
 }
 
 /// `analyze --count-error-factor`: > 0 and <= 100.
-pub fn count_error_factor(s: &str) -> Result<f64, String> {
+pub fn count_error_factor(s: &str) -> Result<f64, FlagError> {
     float_in(s, |x| x > 0.0 && x <= 100.0, "a factor > 0 and <= 100")
 }
 
 /// `analyze --chi2-accept`: > 0 and <= 1000.
-pub fn chi2_accept(s: &str) -> Result<f64, String> {
+pub fn chi2_accept(s: &str) -> Result<f64, FlagError> {
     float_in(
         s,
         |x| x > 0.0 && x <= 1000.0,
@@ -203,7 +220,7 @@ pub fn chi2_accept(s: &str) -> Result<f64, String> {
 }
 
 /// `analyze --fixed-df`: a fractal dimension > 0 and <= 2.
-pub fn fixed_df(s: &str) -> Result<f64, String> {
+pub fn fixed_df(s: &str) -> Result<f64, FlagError> {
     float_in(
         s,
         |x| x > 0.0 && x <= 2.0,
@@ -213,7 +230,7 @@ pub fn fixed_df(s: &str) -> Result<f64, String> {
 
 /// `compact --target-size`: `100MB`, `1GB`, `500kB`, `4096` (bytes; powers of 1024), from 1 B
 /// to 1 TiB.
-pub fn size(s: &str) -> Result<u64, String> {
+pub fn size(s: &str) -> Result<u64, FlagError> {
     let t = s.trim();
     let split = t
         .find(|c: char| !(c.is_ascii_digit() || c == '.'))
@@ -221,21 +238,25 @@ pub fn size(s: &str) -> Result<u64, String> {
     let (num, unit) = t.split_at(split);
     let x: f64 = num
         .parse()
-        .map_err(|_| format!("{s:?}: expected a size such as 100MB"))?;
+        .map_err(|_| FlagError(format!("{s:?}: expected a size such as 100MB")))?;
     let mult = match unit.trim().to_ascii_lowercase().as_str() {
         "" | "b" => 1u64,
         "k" | "kb" | "kib" => 1 << 10,
         "m" | "mb" | "mib" => 1 << 20,
         "g" | "gb" | "gib" => 1 << 30,
-        u => return Err(format!("{s:?}: unknown unit {u:?} (use B, kB, MB or GB)")),
+        u => {
+            return Err(FlagError(format!(
+                "{s:?}: unknown unit {u:?} (use B, kB, MB or GB)"
+            )))
+        }
     };
     let bytes = x * mult as f64;
     if !(bytes.is_finite() && bytes <= MAX_TARGET_SIZE as f64) {
-        return Err(format!("{s:?}: expected at most 1 TiB (1024GB)"));
+        return Err(FlagError(format!("{s:?}: expected at most 1 TiB (1024GB)")));
     }
     let v = bytes as u64;
     if v == 0 {
-        return Err(format!("{s:?}: must be positive"));
+        return Err(FlagError(format!("{s:?}: must be positive")));
     }
     Ok(v)
 }

@@ -47,8 +47,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::{Parser, Subcommand, ValueEnum};
 
+use crate::analysis::AnalysisError;
 use crate::campaign::CampaignError;
-use crate::exit_codes;
+use crate::exit_codes::{self, Classed, ExitClass};
+use crate::plot::PlotError;
+use crate::store::parquet_io::StoreError;
 
 #[derive(Parser)]
 #[command(
@@ -250,10 +253,7 @@ pub(crate) fn tables_checked(
     c: &crate::campaign::Campaign,
     depth: crate::campaign::integrity::Depth,
 ) -> Result<(), i32> {
-    let found = match crate::campaign::integrity::check(c, depth) {
-        Ok(f) => f,
-        Err(e) => return Err(fail(exit_codes::DIRECTORY_REFUSED, e)),
-    };
+    let found = crate::campaign::integrity::check(c, depth).map_err(report_error)?;
     if found.clean() {
         return Ok(());
     }
@@ -270,17 +270,61 @@ pub(crate) fn tables_checked(
     ))
 }
 
-/// Print a campaign error and return its exit code.
+/// The exit code of an error's class: the one place where errors become exit codes (README
+/// "Exit codes").
+pub(crate) fn exit_code(class: ExitClass) -> i32 {
+    match class {
+        ExitClass::RunFailed => exit_codes::RUNS_FAILED,
+        ExitClass::InvalidInput => exit_codes::INVALID_INPUT,
+        ExitClass::Refused => exit_codes::DIRECTORY_REFUSED,
+        ExitClass::Io => exit_codes::IO_ERROR,
+    }
+}
+
+/// The classes of the errors of the layers below that say none themselves (the renderer
+/// imports nothing of the crate; the store's and the analysis's errors are classed here, next
+/// to the one conversion to exit codes).
+impl Classed for StoreError {
+    fn class(&self) -> ExitClass {
+        match self {
+            // A table that is not what this campaign's table should be.
+            StoreError::Corrupt(..) => ExitClass::Refused,
+            StoreError::Io { .. } | StoreError::Parquet(..) | StoreError::Arrow(_) => ExitClass::Io,
+        }
+    }
+}
+
+impl Classed for PlotError {
+    fn class(&self) -> ExitClass {
+        ExitClass::Io
+    }
+}
+
+impl Classed for AnalysisError {
+    fn class(&self) -> ExitClass {
+        match self {
+            AnalysisError::NotAnalysable(_) => ExitClass::Refused,
+            AnalysisError::Store(e) => e.class(),
+            AnalysisError::Io(_) => ExitClass::Io,
+        }
+    }
+}
+
+/// Print a campaign error and return the exit code of its class (a manifest's errors are
+/// printed as they are, one per line with its JSON pointer).
 fn report_error(e: CampaignError) -> i32 {
-    match e {
+    match &e {
         CampaignError::Manifest(m) => {
             eprint!("{m}");
-            exit_codes::INVALID_INPUT
+            exit_code(e.class())
         }
-        CampaignError::Refused(m) => fail(exit_codes::DIRECTORY_REFUSED, m),
-        CampaignError::Io(m) => fail(exit_codes::IO_ERROR, m),
-        CampaignError::TooLarge(m) => fail(exit_codes::INVALID_INPUT, m),
+        _ => failed(&e),
     }
+}
+
+/// Print `error: {e}` and return the exit code of its class.
+fn failed(e: &dyn Classed) -> i32 {
+    fail(exit_code(e.class()), e)
 }
 
 /// Print `error: {message}` and return `code`.

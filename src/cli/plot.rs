@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use super::{fail, report_error};
+use super::{fail, failed, report_error};
 use crate::campaign::Campaign;
 use crate::exit_codes;
 
@@ -35,7 +35,7 @@ pub fn run(a: Args) -> i32 {
                 ),
             )
         }
-        Err(e) => return fail(exit_codes::IO_ERROR, e),
+        Err(e) => return failed(&e),
     };
     match crate::plot::render(&figs, &out) {
         Ok((files, failed)) => {
@@ -45,6 +45,6 @@ pub fn run(a: Args) -> i32 {
             outln!("wrote {} files to {}", files.len(), out.display());
             exit_codes::OK
         }
-        Err(e) => fail(exit_codes::IO_ERROR, e),
+        Err(e) => failed(&e),
     }
 }

@@ -23,7 +23,7 @@ pub fn run(a: Args) -> i32 {
     };
     let r = match crate::report::build(&c) {
         Ok(r) => r,
-        Err(e) => return fail(exit_codes::DIRECTORY_REFUSED, e),
+        Err(e) => return report_error(e),
     };
     for n in &r.notes {
         tracing::warn!("{n}");

@@ -10,7 +10,8 @@
 use std::net::{Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
 
-use super::{fail, report_error};
+use super::flags::FlagError;
+use super::{fail, failed, report_error};
 use crate::campaign::Campaign;
 use crate::exit_codes;
 use crate::serve;
@@ -25,19 +26,22 @@ pub struct Args {
 }
 
 /// `--addr`: a socket address, or `localhost:PORT`.
-fn parse_addr(s: &str) -> Result<SocketAddr, String> {
+fn parse_addr(s: &str) -> Result<SocketAddr, FlagError> {
     if let Some(port) = s.strip_prefix("localhost:") {
         let port: u16 = port
             .parse()
-            .map_err(|_| format!("{port:?} is not a port (0 to 65535)"))?;
+            .map_err(|_| FlagError(format!("{port:?} is not a port (0 to 65535)")))?;
         return Ok(SocketAddr::from((Ipv4Addr::LOCALHOST, port)));
     }
-    s.parse()
-        .map_err(|_| format!("{s:?} is not an address: IP:PORT, e.g. 127.0.0.1:8080 or [::1]:8080"))
+    s.parse().map_err(|_| {
+        FlagError(format!(
+            "{s:?} is not an address: IP:PORT, e.g. 127.0.0.1:8080 or [::1]:8080"
+        ))
+    })
 }
 
 /// The test-only settings of the environment, over the defaults; every bad one named.
-fn limits_from_env() -> Result<serve::Limits, String> {
+fn limits_from_env() -> Result<serve::Limits, FlagError> {
     let mut l = serve::Limits::for_this_process();
     let mut errors = Vec::new();
     let mut number = |var: &str| -> Option<u64> {
@@ -65,14 +69,14 @@ fn limits_from_env() -> Result<serve::Limits, String> {
     if errors.is_empty() {
         Ok(l)
     } else {
-        Err(errors.join("\nerror: "))
+        Err(FlagError(errors.join("\nerror: ")))
     }
 }
 
 pub fn run(a: Args) -> i32 {
     let limits = match limits_from_env() {
         Ok(l) => l,
-        Err(e) => return fail(exit_codes::INVALID_INPUT, e),
+        Err(e) => return failed(&e),
     };
     // campaign.json is read through no link (the campaign directory is a closed world).
     let info = a.dir.join("campaign.json");
@@ -92,20 +96,11 @@ pub fn run(a: Args) -> i32 {
     let links = serve::links_out(&c.root);
     let server = match serve::bind(c, a.addr, limits) {
         Ok(s) => s,
-        Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => {
-            return fail(
-                exit_codes::DIRECTORY_REFUSED,
-                format!(
-                    "{} is in use (another server?); choose another with --addr, e.g. --addr 127.0.0.1:0 for any free port",
-                    a.addr
-                ),
-            )
-        }
-        Err(e) => return fail(exit_codes::IO_ERROR, format!("--addr {}: {e}", a.addr)),
+        Err(e) => return failed(&e),
     };
     let addr = match server.local_addr() {
         Ok(x) => x,
-        Err(e) => return fail(exit_codes::IO_ERROR, e),
+        Err(e) => return failed(&e),
     };
     for l in &links {
         eprintln!(
@@ -125,7 +120,7 @@ pub fn run(a: Args) -> i32 {
     }
     match server.run() {
         Ok(()) => exit_codes::OK,
-        Err(e) => fail(exit_codes::IO_ERROR, e),
+        Err(e) => failed(&e),
     }
 }
 

@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use super::{fail, report_error};
+use super::report_error;
 use crate::campaign::status::CampaignStatus;
 use crate::campaign::{self, Campaign};
 use crate::exit_codes;
@@ -24,7 +24,7 @@ pub fn run(a: Args) -> i32 {
     };
     let s = match campaign::status::status(&c) {
         Ok(s) => s,
-        Err(e) => return fail(exit_codes::DIRECTORY_REFUSED, e),
+        Err(e) => return report_error(e),
     };
     // A closed pipe (`| head`) ends the printing quietly (super::print_out).
     let mut out = super::Stdout;

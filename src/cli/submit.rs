@@ -75,7 +75,7 @@ fn submit(a: &Args) -> Result<i32, Stop> {
         new_campaign(a)?
     };
     let resubmit = a.missing || grown;
-    let previous = slurm::read_record(&root).map_err(|e| fail(exit_codes::DIRECTORY_REFUSED, e))?;
+    let previous = slurm::read_record(&root).map_err(report_error)?;
     let options = options(a, resubmit, previous.map(|r| r.options));
     let (max_array, note) = slurm::max_array_size();
     if let Some(n) = note {

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use super::{fail, report_error};
+use super::{fail, failed, report_error};
 use crate::campaign::ledger::{ExclusiveLock, Purpose};
 use crate::campaign::Campaign;
 use crate::exit_codes;
@@ -54,6 +54,6 @@ pub fn run(a: Args) -> i32 {
             );
             exit_codes::OK
         }
-        Err(e) => fail(exit_codes::IO_ERROR, e),
+        Err(e) => failed(&e),
     }
 }

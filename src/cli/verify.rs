@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use super::{fail, report_error};
+use super::report_error;
 use crate::campaign::{self, Campaign};
 use crate::exit_codes;
 
@@ -29,7 +29,7 @@ pub fn run(a: Args) -> i32 {
     let t0 = std::time::Instant::now();
     let r = match campaign::verify::verify(&c, depth) {
         Ok(r) => r,
-        Err(e) => return fail(exit_codes::DIRECTORY_REFUSED, e),
+        Err(e) => return report_error(e),
     };
     for (t, files, rows) in &r.tables {
         outln!("{t:<34} {files:>6} files {rows:>12} rows");

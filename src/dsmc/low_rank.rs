@@ -30,6 +30,7 @@ use super::system::Method;
 use super::{
     drift, prefetch, Candidate, DsmcSim, DsmcState, DsmcSystem, PhysicsError, RAISE_SLACK,
 };
+use crate::physics::SimError;
 
 /// The three static tables over k: weights N_k, N_k sigma_k, N_k sigma_k^2.
 pub fn static_tables(sys: &DsmcSystem) -> [Alias; 3] {
@@ -160,7 +161,7 @@ pub fn dynamic_weights(
 }
 
 /// Consistency of a checkpoint's speed groups and particle ids with the run.
-pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), String> {
+pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), SimError> {
     if sys.method != Method::LowRank {
         return if st.groups.is_empty() && st.ids.is_empty() {
             Ok(())
@@ -181,7 +182,7 @@ pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), String> {
                 && g.thr.windows(2).all(|w| w[0] <= w[1])
                 && (g.split() || g.n[..GROUPS - 1].iter().all(|&n| n == 0));
             if !ok {
-                return Err(format!("inconsistent groups {g:?}"));
+                return Err(SimError::State(format!("inconsistent groups {g:?}")));
             }
         }
     }

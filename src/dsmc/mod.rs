@@ -22,7 +22,7 @@ pub mod viscoelastic;
 
 use serde::{Deserialize, Serialize};
 
-use crate::physics::PhysicsError;
+use crate::physics::{PhysicsError, SimError};
 use crate::rng::{RngPosition, RunRng};
 use alias::Alias;
 pub use system::{DsmcSystem, Method, RestitutionModel, SpeciesInfo, VdistPlan};
@@ -446,7 +446,7 @@ impl DsmcSim {
     }
 
     /// Rebuild a simulation from a checkpoint payload.
-    pub fn from_state_bytes(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
+    pub fn from_state_bytes(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, SimError> {
         let (mut st, rest): (DsmcState, &[u8]) = postcard::take_from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         if sys.vdist.is_some() {
@@ -505,9 +505,9 @@ impl DsmcSim {
             return Err("checkpoint's candidate pipeline does not match the run".into());
         }
         if let Err(e) = low_rank::check_groups(&sys, &st) {
-            return Err(format!(
+            return Err(SimError::State(format!(
                 "checkpoint's speed groups do not match the run: {e}"
-            ));
+            )));
         }
         if st.disp.len() != if sys.displacements() { st.vel.len() } else { 0 } {
             return Err("checkpoint does not match the run's observables (displacements)".into());
@@ -564,7 +564,7 @@ impl DsmcSim {
     /// straight to `sys.t_end`: the stopping collision is applied with the rest of its batch,
     /// then the run goes on (see [`continuable`]; the time-averaged MSD, recorded on a grid
     /// that spans [0, t_end], cannot be continued).
-    pub fn continue_from(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, String> {
+    pub fn continue_from(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, SimError> {
         let f: FinalState =
             postcard::from_bytes(bytes).map_err(|e| format!("final state does not decode: {e}"))?;
         if sys.tamsd.is_some() {
@@ -1071,19 +1071,21 @@ impl EpsModel {
 /// with end `new_end` and output times `new`: a later end, and output times that begin with
 /// exactly `old` (the decisions of the shorter run, which depend on its next output time, are
 /// then those of the longer one). Err says why not.
-pub fn continuable(t_end: f64, old: &[f64], new_end: f64, new: &[f64]) -> Result<(), String> {
+pub fn continuable(t_end: f64, old: &[f64], new_end: f64, new: &[f64]) -> Result<(), SimError> {
     if new_end <= t_end || new_end.is_nan() {
-        return Err(format!("t_end {new_end} is not past the run's end {t_end}"));
+        return Err(SimError::State(format!(
+            "t_end {new_end} is not past the run's end {t_end}"
+        )));
     }
     let differs = |j: usize| new.get(j).map(|x| x.to_bits()) != Some(old[j].to_bits());
     if let Some(j) = (0..old.len()).find(|&j| differs(j)) {
         let n = new.get(j).copied().unwrap_or(f64::NAN);
-        return Err(format!(
+        return Err(SimError::State(format!(
             "the new output times differ from the run's before its end t = {t_end} (the \
              run's output {j} is at t = {}, the new one at t = {n}); listing {t_end} in \
              `output_times.list` keeps the old end on the grid",
             old[j]
-        ));
+        )));
     }
     Ok(())
 }

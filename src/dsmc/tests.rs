@@ -114,7 +114,10 @@ fn continuation_refusals() {
         20.0,
         &[0.0, 0.5, 1.0, 3.5, 7.0],
     );
-    let err = DsmcSim::continue_from(other_grid, &fin).err().unwrap();
+    let err = DsmcSim::continue_from(other_grid, &fin)
+        .err()
+        .unwrap()
+        .to_string();
     assert!(err.contains("output 3"), "{err}");
     let no_old_end = system(
         Method::LowRank,
@@ -123,7 +126,10 @@ fn continuation_refusals() {
         20.0,
         &[0.0, 0.5, 1.0, 3.0, 12.0],
     );
-    let err = DsmcSim::continue_from(no_old_end, &fin).err().unwrap();
+    let err = DsmcSim::continue_from(no_old_end, &fin)
+        .err()
+        .unwrap()
+        .to_string();
     assert!(err.contains("listing 7"), "{err}");
     let same = system(Method::LowRank, false, false, 7.0, TIMES);
     assert!(DsmcSim::continue_from(same, &fin).is_err());
@@ -137,6 +143,7 @@ fn continuation_refusals() {
     assert!(DsmcSim::continue_from(tamsd, &fin)
         .err()
         .unwrap()
+        .to_string()
         .contains("time-averaged"));
     let longer = || system(Method::LowRank, false, false, 20.0, TIMES);
     assert!(DsmcSim::continue_from(longer(), &fin[..fin.len() / 2]).is_err());

@@ -16,8 +16,7 @@ use super::Manifest;
 /// JSON path; on success the manifest and its sweep expanded into typed points.
 pub fn check(text: &str, file: &str) -> Result<(Manifest, Expansion), ManifestErrors> {
     let manifest = parse(text, file).map_err(|e| with_checks_beside(text, e))?;
-    let expansion =
-        expand(&manifest).map_err(|errs| ManifestErrors::of_pairs(file, errs))?;
+    let expansion = expand(&manifest).map_err(|errs| ManifestErrors::of_pairs(file, errs))?;
     Ok((manifest, expansion))
 }
 

@@ -47,6 +47,28 @@ pub struct TheoryEstimate {
     pub bytes: f64,
 }
 
+/// Why a model's run cannot start, restore or continue. A run that cannot start is recorded
+/// as failed; a state that does not restore or continue makes it run from t = 0, with a
+/// warning (`campaign::worker`): never the process's exit.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    /// The params do not make the simulator's configuration.
+    #[error("{0}")]
+    Params(String),
+    /// The simulator refused the configuration or the state.
+    #[error(transparent)]
+    Sim(#[from] crate::physics::SimError),
+    /// The model keeps no final states.
+    #[error("the model cannot continue a finished run")]
+    NoContinuation,
+}
+
+impl crate::exit_codes::Classed for ModelError {
+    fn class(&self) -> crate::exit_codes::ExitClass {
+        crate::exit_codes::ExitClass::RunFailed
+    }
+}
+
 /// Everything granular needs of a model.
 pub trait Model {
     /// The manifest's `params` of this model (`deny_unknown_fields` serde types; the JSON
@@ -80,9 +102,9 @@ pub trait Model {
     fn check(p: &Self::Params, path: &str, errors: &mut ParamErrors);
     /// An estimate of the memory (bytes) one run of these parameters holds at its peak.
     fn memory(p: &Self::Params) -> u64;
-    fn start(p: &Self::Params, seed: u64) -> Result<Self::Sim, String>;
+    fn start(p: &Self::Params, seed: u64) -> Result<Self::Sim, ModelError>;
     /// Continue from `Simulation::state_bytes` (of layout `STATE_FORMAT`).
-    fn restore(p: &Self::Params, state: &[u8]) -> Result<Self::Sim, String>;
+    fn restore(p: &Self::Params, state: &[u8]) -> Result<Self::Sim, ModelError>;
     /// The rows of a finished run.
     fn finish(sim: Self::Sim, ids: RunIds) -> RunRows;
     /// What becomes of the finished runs of `old` when a manifest asks for `new`, two params
@@ -97,8 +119,8 @@ pub trait Model {
     }
     /// A run of `new` continuing, bit for bit as a run made straight to the new end, from a
     /// finished run's `final_state` (of a point that `carry_over` said `Continue` for).
-    fn continue_from(_new: &Self::Params, _state: &[u8]) -> Result<Self::Sim, String> {
-        Err("the model cannot continue a finished run".into())
+    fn continue_from(_new: &Self::Params, _state: &[u8]) -> Result<Self::Sim, ModelError> {
+        Err(ModelError::NoContinuation)
     }
     /// Every table a campaign of these points has (raw, summaries, theory), in the order the
     /// parts of a commit are written.
@@ -423,7 +445,7 @@ macro_rules! models {
                 }
             }
 
-            pub fn start(&self, seed: u64) -> Result<Engine, String> {
+            pub fn start(&self, seed: u64) -> Result<Engine, ModelError> {
                 match self {
                     $(ModelParams::$variant(p) => {
                         Ok(Engine::$variant(Box::new(<$model as Model>::start(p, seed)?)))
@@ -443,7 +465,7 @@ macro_rules! models {
             }
 
             /// See [`Model::continue_from`].
-            pub fn continue_from(&self, state: &[u8]) -> Result<Engine, String> {
+            pub fn continue_from(&self, state: &[u8]) -> Result<Engine, ModelError> {
                 match self {
                     $(ModelParams::$variant(p) => Ok(Engine::$variant(Box::new(
                         <$model as Model>::continue_from(p, state)?,
@@ -451,7 +473,7 @@ macro_rules! models {
                 }
             }
 
-            pub fn restore(&self, state: &[u8]) -> Result<Engine, String> {
+            pub fn restore(&self, state: &[u8]) -> Result<Engine, ModelError> {
                 match self {
                     $(ModelParams::$variant(p) => {
                         Ok(Engine::$variant(Box::new(<$model as Model>::restore(p, state)?)))
@@ -524,9 +546,10 @@ pub fn run_in_memory(
     seed: u64,
     ids: RunIds,
 ) -> Result<RunRows, PhysicsError> {
-    let mut e = params
-        .start(seed)
-        .map_err(|reason| PhysicsError { t: 0.0, reason })?;
+    let mut e = params.start(seed).map_err(|e| PhysicsError {
+        t: 0.0,
+        reason: e.to_string(),
+    })?;
     while !e.advance(u64::MAX)? {}
     Ok(e.finish(ids))
 }

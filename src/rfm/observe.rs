@@ -20,7 +20,7 @@ use super::structure::{
     NeighbourAcc, NeighbourMomentRow, RadialAcc, RadialRow, SkAcc, SkRow, SkWork,
 };
 use super::structure::{NeighbourConfig, RadialConfig, SkConfig};
-use crate::physics::PhysicsError;
+use crate::physics::{PhysicsError, SimError};
 
 /// Bins of a velocity histogram (m/s); values outside are counted in two extra rows.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -225,7 +225,7 @@ impl RfmRun {
         }
     }
 
-    pub fn new(rc: &RunConfig, seed: u64) -> Result<Self, String> {
+    pub fn new(rc: &RunConfig, seed: u64) -> Result<Self, SimError> {
         let sampler = Self::sampler_for(rc);
         let mut sim = RfmSim::new(rc.sim.clone(), seed)?;
         if let Some(fc) = &rc.free_paths {
@@ -242,7 +242,7 @@ impl RfmRun {
         postcard::to_stdvec(&st).expect("state serialises")
     }
 
-    pub fn from_state_bytes(rc: &RunConfig, bytes: &[u8]) -> Result<Self, String> {
+    pub fn from_state_bytes(rc: &RunConfig, bytes: &[u8]) -> Result<Self, SimError> {
         let st: RunState = postcard::from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
         let fresh = Self::sampler_for(rc);
@@ -265,7 +265,7 @@ impl RfmRun {
     /// The run `rc` (a longer duration) continued from a finished run's `final_state`: the
     /// samples taken stay, the blocks are formed from them with the new number of samples at
     /// the end, and the simulation goes on; bit for bit the run made straight to the new end.
-    pub fn continue_from(rc: &RunConfig, bytes: &[u8]) -> Result<Self, String> {
+    pub fn continue_from(rc: &RunConfig, bytes: &[u8]) -> Result<Self, SimError> {
         let st: RunState =
             postcard::from_bytes(bytes).map_err(|e| format!("final state does not decode: {e}"))?;
         let fresh = Self::sampler_for(rc);
@@ -277,10 +277,10 @@ impl RfmRun {
             return Err("final state is not that of a finished run".into());
         }
         if fresh.samples_total < sampler.samples_total {
-            return Err(format!(
+            return Err(SimError::State(format!(
                 "{} samples, fewer than the finished run's {}",
                 fresh.samples_total, sampler.samples_total
-            ));
+            )));
         }
         let sim = RfmSim::from_state_bytes(rc.sim.clone(), &st.sim)?;
         if sim.free_path_config() != rc.free_paths.as_ref() {

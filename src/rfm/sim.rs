@@ -15,6 +15,7 @@ use super::integrate::PairPropagator;
 use super::neighbours::{wrap, NeighbourList};
 use super::noise::Kicks;
 use super::params::{InitialLayout, RfmConfig};
+use crate::physics::SimError;
 use crate::rng::stream::WordStream;
 use crate::rng::{RngPosition, RunRng};
 
@@ -414,8 +415,8 @@ fn unflatten<const D: usize>(a: &[f64]) -> Vec<[f64; D]> {
 impl RfmSim {
     /// A new run: validated config, the initial layout and velocities (spec 1.9: each
     /// component 0.1 U(-0.5, 0.5) m/s, mean removed) drawn from the run's stream.
-    pub fn new(cfg: RfmConfig, seed: u64) -> Result<Self, String> {
-        cfg.validate().map_err(|e| e.join("; "))?;
+    pub fn new(cfg: RfmConfig, seed: u64) -> Result<Self, SimError> {
+        cfg.validate().map_err(|e| SimError::Config(e.join("; ")))?;
         for w in cfg.warnings() {
             tracing::warn!("{w}");
         }
@@ -435,16 +436,23 @@ impl RfmSim {
 
     /// A run from explicit positions and velocities (flat, particle-major; 1D positions must
     /// be increasing within one period). For tests and special set-ups.
-    pub fn from_parts(cfg: RfmConfig, seed: u64, x: Vec<f64>, v: Vec<f64>) -> Result<Self, String> {
-        cfg.validate().map_err(|e| e.join("; "))?;
+    pub fn from_parts(
+        cfg: RfmConfig,
+        seed: u64,
+        x: Vec<f64>,
+        v: Vec<f64>,
+    ) -> Result<Self, SimError> {
+        cfg.validate().map_err(|e| SimError::Config(e.join("; ")))?;
         let n = cfg.n_particles * cfg.dim as usize;
         if x.len() != n || v.len() != n {
-            return Err("from_parts: positions and velocities must have N * dim entries".into());
+            return Err(SimError::Config(
+                "from_parts: positions and velocities must have N * dim entries".into(),
+            ));
         }
         Self::assemble(cfg, x, v, RunRng::new(seed))
     }
 
-    fn assemble(cfg: RfmConfig, x: Vec<f64>, v: Vec<f64>, rng: RunRng) -> Result<Self, String> {
+    fn assemble(cfg: RfmConfig, x: Vec<f64>, v: Vec<f64>, rng: RunRng) -> Result<Self, SimError> {
         let inner = match cfg.dim {
             1 => Inner::D1(Core::new(&cfg, unflatten(&x), unflatten(&v), rng)),
             _ => Inner::D2(Core::new(&cfg, unflatten(&x), unflatten(&v), rng)),
@@ -579,7 +587,7 @@ impl RfmSim {
     }
 
     /// Rebuild a run from its config and a checkpoint payload.
-    pub fn from_state_bytes(cfg: RfmConfig, bytes: &[u8]) -> Result<Self, String> {
+    pub fn from_state_bytes(cfg: RfmConfig, bytes: &[u8]) -> Result<Self, SimError> {
         cfg.validate().map_err(|e| e.join("; "))?;
         let st: RfmState = postcard::from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
@@ -618,7 +626,7 @@ impl RfmSim {
 }
 
 /// Initial positions (flat) for the configured layout (spec 1.9).
-fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, String> {
+fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, SimError> {
     let n = cfg.n_particles;
     let l = cfg.box_length();
     let d = cfg.diameter();
@@ -638,10 +646,10 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, Stri
             let sites = cfg.lattice_sites().unwrap_or(0);
             let rows = sites.checked_div(per_row).unwrap_or(0);
             if sites < n {
-                return Err(format!(
+                return Err(SimError::Config(format!(
                     "initial_layout: {n} particles do not fit a {:?} bed ({sites} sites)",
                     cfg.initial_layout,
-                ));
+                )));
             }
             let mut count = 0;
             'outer: for r in 0..rows {
@@ -656,7 +664,9 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, Stri
                 }
             }
             if count < n {
-                return Err(format!("initial_layout: {n} particles do not fit the bed"));
+                return Err(SimError::Config(format!(
+                    "initial_layout: {n} particles do not fit the bed"
+                )));
             }
         }
         InitialLayout::Uniform => {

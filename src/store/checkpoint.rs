@@ -11,9 +11,43 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::CHECKPOINT_FORMAT;
+use crate::exit_codes::{Classed, ExitClass};
 use crate::fsutil;
 
 const MAGIC: &[u8; 8] = b"GRNLCKPT";
+
+/// Why a checkpoint or a final state cannot be used. The worker warns and runs the run from
+/// t = 0 (a checkpoint), or continues nothing (a final state): never the process's exit.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CheckpointError {
+    /// Not a checkpoint of this format, damaged, or another run's: refused.
+    #[error("{0}")]
+    Corrupt(String),
+    /// Cannot be read (its path and why): I/O.
+    #[error("{0}")]
+    Io(String),
+}
+
+impl CheckpointError {
+    /// The same error, its message led by `path`.
+    fn at(self, path: &Path) -> CheckpointError {
+        match self {
+            CheckpointError::Corrupt(m) => {
+                CheckpointError::Corrupt(format!("{}: {m}", path.display()))
+            }
+            CheckpointError::Io(m) => CheckpointError::Io(format!("{}: {m}", path.display())),
+        }
+    }
+}
+
+impl Classed for CheckpointError {
+    fn class(&self) -> ExitClass {
+        match self {
+            CheckpointError::Corrupt(_) => ExitClass::Refused,
+            CheckpointError::Io(_) => ExitClass::Io,
+        }
+    }
+}
 
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct CheckpointHeader {
@@ -56,36 +90,39 @@ pub fn encode(header: &CheckpointHeader, payload: &[u8]) -> Vec<u8> {
     out
 }
 
-pub fn decode(bytes: &[u8]) -> Result<(CheckpointHeader, &[u8]), String> {
+pub fn decode(bytes: &[u8]) -> Result<(CheckpointHeader, &[u8]), CheckpointError> {
+    let corrupt = CheckpointError::Corrupt;
     if bytes.len() < 28 || &bytes[..8] != MAGIC {
-        return Err("not a granular checkpoint (bad magic or too short)".into());
+        return Err(corrupt(
+            "not a granular checkpoint (bad magic or too short)".into(),
+        ));
     }
     let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().expect("4 bytes"));
     let format = u32_at(8);
     if format != CHECKPOINT_FORMAT {
-        return Err(format!(
+        return Err(corrupt(format!(
             "checkpoint format {format}, this granular reads {CHECKPOINT_FORMAT}"
-        ));
+        )));
     }
     let hlen = u32_at(12) as usize;
     let plen = u64::from_le_bytes(bytes[16..24].try_into().expect("8 bytes")) as usize;
     let crc = u32_at(24);
     if bytes.len() != 28 + hlen + plen {
-        return Err(format!(
+        return Err(corrupt(format!(
             "truncated or padded: {} bytes, expected {}",
             bytes.len(),
             28 + hlen + plen
-        ));
+        )));
     }
     let (h, p) = bytes[28..].split_at(hlen);
     let mut hasher = crc32fast::Hasher::new();
     hasher.update(h);
     hasher.update(p);
     if hasher.finalize() != crc {
-        return Err("checksum mismatch".into());
+        return Err(corrupt("checksum mismatch".into()));
     }
     let header: CheckpointHeader =
-        serde_json::from_slice(h).map_err(|e| format!("bad header: {e}"))?;
+        serde_json::from_slice(h).map_err(|e| corrupt(format!("bad header: {e}")))?;
     Ok((header, p))
 }
 
@@ -176,21 +213,21 @@ pub fn load_final(
     dir: &Path,
     run_id: u64,
     seed: u64,
-) -> Result<Option<(CheckpointHeader, Vec<u8>)>, String> {
+) -> Result<Option<(CheckpointHeader, Vec<u8>)>, CheckpointError> {
     let p = final_path(dir, run_id);
     let bytes = match fs::read(&p) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(format!("{}: {e}", p.display())),
+        Err(e) => return Err(CheckpointError::Io(format!("{}: {e}", p.display()))),
     };
-    let (header, payload) = decode(&bytes).map_err(|e| format!("{}: {e}", p.display()))?;
+    let (header, payload) = decode(&bytes).map_err(|e| e.at(&p))?;
     if header.run_id != run_id || header.seed != seed {
-        return Err(format!(
+        return Err(CheckpointError::Corrupt(format!(
             "{}: belongs to run {} seed {}, expected run {run_id} seed {seed}",
             p.display(),
             header.run_id,
             header.seed
-        ));
+        )));
     }
     Ok(Some((header, payload.to_vec())))
 }
@@ -244,12 +281,18 @@ mod tests {
         write_final(&finals, &header(), b"end").unwrap();
         let (h, p) = load_final(&finals, 3, 9).unwrap().unwrap();
         assert_eq!((h, p.as_slice()), (header(), &b"end"[..]));
-        assert!(load_final(&finals, 3, 10).unwrap_err().contains("seed 9"));
+        assert!(load_final(&finals, 3, 10)
+            .unwrap_err()
+            .to_string()
+            .contains("seed 9"));
         let f = final_path(&finals, 3);
         let mut b = fs::read(&f).unwrap();
         b[30] ^= 1;
         fs::write(&f, b).unwrap();
-        assert!(load_final(&finals, 3, 9).unwrap_err().contains("checksum"));
+        assert!(load_final(&finals, 3, 9)
+            .unwrap_err()
+            .to_string()
+            .contains("checksum"));
         remove_final(&finals, 3);
         assert_eq!(load_final(&finals, 3, 9), Ok(None));
     }

@@ -167,7 +167,8 @@ pub fn join_after_key(
     lookup: &RecordBatch,
 ) -> Result<RecordBatch, StoreError> {
     let keys = U32::read(batch, key).map_err(|e| StoreError::Corrupt(table.into(), e))?;
-    let lookup_keys = U32::read(lookup, key).map_err(|e| StoreError::Corrupt("lookup".into(), e))?;
+    let lookup_keys =
+        U32::read(lookup, key).map_err(|e| StoreError::Corrupt("lookup".into(), e))?;
     let row_of: std::collections::HashMap<u32, u32> = lookup_keys
         .iter()
         .enumerate()

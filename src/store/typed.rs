@@ -449,13 +449,23 @@ mod tests {
     fn a_table_written_is_read_back() {
         let rows = rows();
         let b = Every::batch(&rows);
-        let names: Vec<&str> = b.schema_ref().fields().iter().map(|f| f.name().as_str()).collect();
+        let names: Vec<&str> = b
+            .schema_ref()
+            .fields()
+            .iter()
+            .map(|f| f.name().as_str())
+            .collect();
         assert_eq!(names, Every::COLUMNS);
         assert_eq!(
             names,
             ["id", "x", "y", "n", "m", "k", "name", "note", "ok", "list", "late"]
         );
-        let nullable: Vec<bool> = b.schema_ref().fields().iter().map(|f| f.is_nullable()).collect();
+        let nullable: Vec<bool> = b
+            .schema_ref()
+            .fields()
+            .iter()
+            .map(|f| f.is_nullable())
+            .collect();
         assert_eq!(
             nullable,
             [false, false, true, false, true, true, false, true, false, false, true]
@@ -509,7 +519,10 @@ mod tests {
         fields[10] = Field::new("late", DataType::Utf8, true);
         arrays[10] = Arc::new(StringArray::from(vec![Some("a"), None]));
         let bad = RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).unwrap();
-        let e = Every::read_rows(&bad, "f.parquet").err().unwrap().to_string();
+        let e = Every::read_rows(&bad, "f.parquet")
+            .err()
+            .unwrap()
+            .to_string();
         assert_eq!(
             e,
             "f.parquet column x is UInt64, expected Float64; column late is Utf8, expected Float64"

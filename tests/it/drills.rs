@@ -498,3 +498,111 @@ fn compaction_mid_campaign_keeps_tables_and_ledger_exact() {
     );
     util::assert_tables_identical(&want, &read_tables(&c), "resumed after compaction");
 }
+
+/// `granular ARGS` as a process that cannot write the campaign directory `c` (a read-only
+/// file system or no permission, as far as granular can tell): as root (whom permissions do
+/// not stop) it runs as `nobody`, else `c` and its `locks` are made read-only. Returns the
+/// exit code and stderr.
+fn without_write_permission(args: &[&str], c: &Path, log: &Path) -> (Option<i32>, String) {
+    use std::os::unix::fs::PermissionsExt;
+    // SAFETY: geteuid has no preconditions.
+    let root = unsafe { libc::geteuid() } == 0;
+    let mode = |p: &Path, m: u32| fs::set_permissions(p, fs::Permissions::from_mode(m)).unwrap();
+    if root {
+        // `nobody` must reach the campaign: every directory above it readable and searchable.
+        let mut p = c.parent();
+        while let Some(d) = p {
+            if d.starts_with(std::env::temp_dir()) && d != std::env::temp_dir() {
+                mode(d, 0o755);
+            }
+            p = d.parent();
+        }
+    } else {
+        mode(&c.join("locks"), 0o555);
+        mode(c, 0o555);
+    }
+    let mut cmd = granular(args, log);
+    if root {
+        // SAFETY: async-signal-safe calls between fork and exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                if libc::setgroups(0, std::ptr::null()) != 0
+                    || libc::setresgid(65534, 65534, 65534) != 0
+                    || libc::setresuid(65534, 65534, 65534) != 0
+                {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
+    let before = log_text(log).len();
+    let code = wait_limited(&mut cmd.spawn().unwrap(), LIMIT, &args.join(" "), log).code();
+    if !root {
+        mode(c, 0o755);
+        mode(&c.join("locks"), 0o755);
+    }
+    (code, log_text(log)[before..].to_string())
+}
+
+/// A lock that cannot be written (a read-only campaign directory, no permission) is an I/O
+/// error (exit 4, README "Exit codes"), never "locked" (3): at a shard's lock (`resume`),
+/// also where a stale lock of a dead process must be removed first, and at the exclusive
+/// lock (`compact`).
+#[test]
+fn an_unwritable_lock_is_an_io_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let m = dir.path().join("m.json");
+    write_json(
+        &m,
+        &json!({
+            "name": "ro",
+            "model": "dsmc",
+            "seed": 3,
+            "replicas": 1,
+            "params": {
+                "method": "low_rank",
+                "species": {"power_law": {"n1": 0.1, "N1": 1000, "theta": 3}},
+                "restitution": {"constant": 0.5},
+                "t_end": 2.0,
+                "output_times": {"list": [1.0]},
+                "observables": ["temperature"]
+            }
+        }),
+    );
+    let c = dir.path().join("c");
+    assert_eq!(
+        run_granular(&["run", s(&m), "--out", s(&c), "--quiet"], &log, LIMIT),
+        Some(0),
+        "{}",
+        log_text(&log)
+    );
+    let lock = c.join("locks").join("s1of1.lock");
+    for (what, args, stale) in [
+        ("resume", ["resume", s(&c)], false),
+        ("resume over a stale lock", ["resume", s(&c)], true),
+        ("compact", ["compact", s(&c)], false),
+    ] {
+        if stale {
+            let info = json!({
+                "pid": util::dead_pid(),
+                "host": granular::campaign::ledger::hostname(),
+                "shard": "1/1",
+                "shard_tag": "s1of1",
+                "shard_count": 1
+            });
+            fs::write(&lock, info.to_string()).unwrap();
+            // Left by an earlier takeover of a stale lock (a campaign resumed after a kill):
+            // the takeover itself is then possible, only the stale lock cannot be removed.
+            fs::write(c.join("locks").join("takeover.flock"), "").unwrap();
+        }
+        let (code, err) = without_write_permission(&args, &c, &log);
+        assert_eq!(code, Some(4), "{what}:\n{err}");
+        assert!(err.contains("locks/"), "{what}: the lock is named:\n{err}");
+        assert!(
+            !err.contains("try again"),
+            "{what}: not a lock held:\n{err}"
+        );
+    }
+}

@@ -55,9 +55,10 @@ fn finish(e: Engine) -> RunOutput {
 
 /// Run to the end in memory.
 fn run_in_memory(params: &ModelParams, seed: u64) -> Result<RunOutput, PhysicsError> {
-    let mut e = params
-        .start(seed)
-        .map_err(|reason| PhysicsError { t: 0.0, reason })?;
+    let mut e = params.start(seed).map_err(|e| PhysicsError {
+        t: 0.0,
+        reason: e.to_string(),
+    })?;
     while !e.advance(u64::MAX)? {}
     Ok(finish(e))
 }

@@ -6,7 +6,7 @@ pub mod params;
 pub mod tables;
 
 use crate::aux_models::bisection::BisectionRun;
-use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{CampaignView, Model, ModelError, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
 use crate::store::parquet_io::StoreError;
@@ -37,12 +37,12 @@ impl Model for Bisection {
             .saturating_add(8 << 20)
     }
 
-    fn start(p: &BisectionParams, seed: u64) -> Result<BisectionRun, String> {
+    fn start(p: &BisectionParams, seed: u64) -> Result<BisectionRun, ModelError> {
         Ok(BisectionRun::new(p.config(), seed))
     }
 
-    fn restore(p: &BisectionParams, state: &[u8]) -> Result<BisectionRun, String> {
-        BisectionRun::from_state_bytes(p.config(), state)
+    fn restore(p: &BisectionParams, state: &[u8]) -> Result<BisectionRun, ModelError> {
+        Ok(BisectionRun::from_state_bytes(p.config(), state)?)
     }
 
     fn finish(run: BisectionRun, ids: RunIds) -> RunRows {

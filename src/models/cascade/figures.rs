@@ -37,9 +37,11 @@ pub(crate) fn read_summary(batches: &[RecordBatch]) -> Result<Sk, StoreError> {
     let mut out = Sk::new();
     for b in batches {
         for r in CascadeStructureFactorSummary::read_rows(b, t)? {
-            out.entry((r.point_id, r.source))
-                .or_default()
-                .push((r.k, r.s_mean, r.s_sem.unwrap_or(0.0)));
+            out.entry((r.point_id, r.source)).or_default().push((
+                r.k,
+                r.s_mean,
+                r.s_sem.unwrap_or(0.0),
+            ));
         }
     }
     for v in out.values_mut() {

@@ -9,7 +9,9 @@ pub mod summary;
 pub mod tables;
 
 use crate::aux_models::cascade::{CascadeOutput, CascadeRun};
-use crate::models::{AnalyzeFn, CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{
+    AnalyzeFn, CampaignView, Model, ModelError, ParamErrors, RunIds, RunRows, Simulation,
+};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
 use crate::store::parquet_io::StoreError;
@@ -46,12 +48,12 @@ impl Model for Cascade {
             .saturating_add(8 << 20)
     }
 
-    fn start(p: &CascadeParams, seed: u64) -> Result<CascadeRun, String> {
+    fn start(p: &CascadeParams, seed: u64) -> Result<CascadeRun, ModelError> {
         Ok(CascadeRun::new(p.config(), seed))
     }
 
-    fn restore(p: &CascadeParams, state: &[u8]) -> Result<CascadeRun, String> {
-        CascadeRun::from_state_bytes(p.config(), state)
+    fn restore(p: &CascadeParams, state: &[u8]) -> Result<CascadeRun, ModelError> {
+        Ok(CascadeRun::from_state_bytes(p.config(), state)?)
     }
 
     fn finish(run: CascadeRun, ids: RunIds) -> RunRows {

@@ -20,7 +20,8 @@ pub mod theory;
 
 use crate::dsmc::DsmcSim;
 use crate::models::{
-    CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation, TheoryEstimate,
+    CampaignView, CarryOver, Model, ModelError, ParamErrors, RunIds, RunRows, Simulation,
+    TheoryEstimate,
 };
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
@@ -59,12 +60,13 @@ impl Model for Dsmc {
         p.memory_estimate()
     }
 
-    fn start(p: &DsmcParams, seed: u64) -> Result<DsmcSim, String> {
-        Ok(DsmcSim::new(p.system()?, seed))
+    fn start(p: &DsmcParams, seed: u64) -> Result<DsmcSim, ModelError> {
+        Ok(DsmcSim::new(p.system().map_err(ModelError::Params)?, seed))
     }
 
-    fn restore(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, String> {
-        DsmcSim::from_state_bytes(p.system()?, state)
+    fn restore(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, ModelError> {
+        let sys = p.system().map_err(ModelError::Params)?;
+        Ok(DsmcSim::from_state_bytes(sys, state)?)
     }
 
     fn carry_over(old: &DsmcParams, new: &DsmcParams) -> CarryOver {
@@ -98,7 +100,7 @@ impl Model for Dsmc {
         }
         match crate::dsmc::continuable(old.t_end, &a, new.t_end, &b) {
             Ok(()) => CarryOver::Continue,
-            Err(why) => CarryOver::Rerun(why),
+            Err(why) => CarryOver::Rerun(why.to_string()),
         }
     }
 
@@ -106,8 +108,9 @@ impl Model for Dsmc {
         sim.final_state()
     }
 
-    fn continue_from(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, String> {
-        DsmcSim::continue_from(p.system()?, state)
+    fn continue_from(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, ModelError> {
+        let sys = p.system().map_err(ModelError::Params)?;
+        Ok(DsmcSim::continue_from(sys, state)?)
     }
 
     fn finish(mut sim: DsmcSim, ids: RunIds) -> RunRows {

@@ -87,9 +87,12 @@ fn write_species_summary(c: View) -> Result<(), StoreError> {
                     let (Some(&replica), true) = (replica, p >= p0 && p < p1) else {
                         continue;
                     };
-                    acc.entry((p, r.t.to_bits(), r.species))
-                        .or_default()
-                        .push((replica, r.temperature, r.msd, r.a2));
+                    acc.entry((p, r.t.to_bits(), r.species)).or_default().push((
+                        replica,
+                        r.temperature,
+                        r.msd,
+                        r.a2,
+                    ));
                 }
             }
         }

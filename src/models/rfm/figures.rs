@@ -77,11 +77,9 @@ pub(crate) fn moments(batches: &[RecordBatch]) -> Result<PerPoint, StoreError> {
     let mut out = PerPoint::new();
     for b in batches {
         for r in RfmMomentsSummary::read_rows(b, t)? {
-            out.entry(r.point_id).or_default().push((
-                r.order as f64,
-                r.mean,
-                r.sem.unwrap_or(0.0),
-            ));
+            out.entry(r.point_id)
+                .or_default()
+                .push((r.order as f64, r.mean, r.sem.unwrap_or(0.0)));
         }
     }
     Ok(sorted(out))
@@ -151,9 +149,13 @@ pub(crate) fn histograms(batches: &[RecordBatch]) -> Result<Histograms, StoreErr
             } else {
                 0.5 * (a + z)
             };
-            out.entry((cols.point_id.value(i), kind.value(i).to_string(), cols.h.value(i)))
-                .or_default()
-                .push((x, dens, dens / (count as f64).sqrt()));
+            out.entry((
+                cols.point_id.value(i),
+                kind.value(i).to_string(),
+                cols.h.value(i),
+            ))
+            .or_default()
+            .push((x, dens, dens / (count as f64).sqrt()));
         }
     }
     for v in out.values_mut() {

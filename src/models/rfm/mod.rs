@@ -16,7 +16,7 @@ pub mod tables;
 mod tests;
 
 use crate::models::{
-    AnalyzeFn, CampaignView, CarryOver, Model, ParamErrors, RunIds, RunRows, Simulation,
+    AnalyzeFn, CampaignView, CarryOver, Model, ModelError, ParamErrors, RunIds, RunRows, Simulation,
 };
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
@@ -61,12 +61,12 @@ impl Model for Rfm {
         p.memory_estimate()
     }
 
-    fn start(p: &RfmParams, seed: u64) -> Result<RfmRun, String> {
-        RfmRun::new(&p.run_config(), seed)
+    fn start(p: &RfmParams, seed: u64) -> Result<RfmRun, ModelError> {
+        Ok(RfmRun::new(&p.run_config(), seed)?)
     }
 
-    fn restore(p: &RfmParams, state: &[u8]) -> Result<RfmRun, String> {
-        RfmRun::from_state_bytes(&p.run_config(), state)
+    fn restore(p: &RfmParams, state: &[u8]) -> Result<RfmRun, ModelError> {
+        Ok(RfmRun::from_state_bytes(&p.run_config(), state)?)
     }
 
     fn carry_over(old: &RfmParams, new: &RfmParams) -> CarryOver {
@@ -84,8 +84,8 @@ impl Model for Rfm {
         run.final_state()
     }
 
-    fn continue_from(p: &RfmParams, state: &[u8]) -> Result<RfmRun, String> {
-        RfmRun::continue_from(&p.run_config(), state)
+    fn continue_from(p: &RfmParams, state: &[u8]) -> Result<RfmRun, ModelError> {
+        Ok(RfmRun::continue_from(&p.run_config(), state)?)
     }
 
     fn finish(run: RfmRun, ids: RunIds) -> RunRows {

@@ -36,12 +36,7 @@ pub(crate) fn read_histogram(batches: &[RecordBatch]) -> Result<Runs, StoreError
                 .or_default()
                 .entry(r.run_id)
                 .or_default()
-                .push((
-                    0.5 * (r.v_lo + r.v_hi),
-                    r.count,
-                    r.density,
-                    r.density_walk,
-                ));
+                .push((0.5 * (r.v_lo + r.v_hi), r.count, r.density, r.density_walk));
         }
     }
     Ok(out)

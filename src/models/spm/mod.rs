@@ -6,7 +6,7 @@ pub mod params;
 pub mod tables;
 
 use crate::aux_models::spm::SpmRun;
-use crate::models::{CampaignView, Model, ParamErrors, RunIds, RunRows, Simulation};
+use crate::models::{CampaignView, Model, ModelError, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
 use crate::store::parquet_io::StoreError;
@@ -40,12 +40,12 @@ impl Model for Spm {
         bins.saturating_mul(8 * 6).saturating_add(8 << 20)
     }
 
-    fn start(p: &SpmParams, seed: u64) -> Result<SpmRun, String> {
+    fn start(p: &SpmParams, seed: u64) -> Result<SpmRun, ModelError> {
         Ok(SpmRun::new(p.config(), seed))
     }
 
-    fn restore(p: &SpmParams, state: &[u8]) -> Result<SpmRun, String> {
-        SpmRun::from_state_bytes(p.config(), state)
+    fn restore(p: &SpmParams, state: &[u8]) -> Result<SpmRun, ModelError> {
+        Ok(SpmRun::from_state_bytes(p.config(), state)?)
     }
 
     fn finish(run: SpmRun, ids: RunIds) -> RunRows {

@@ -101,10 +101,11 @@ fn load_rfm(c: &CampaignView<'_, RfmParams>) -> Result<RfmData, StoreError> {
     let t = rt::RFM_RADIAL;
     for b in c.read_done(t)? {
         for r in rt::RfmRadial::read_rows(&b, t)? {
-            let e = d
-                .radial
-                .entry((r.point_id, r.r_lo.to_bits()))
-                .or_insert((r.r_lo, r.r_hi, Vec::new()));
+            let e = d.radial.entry((r.point_id, r.r_lo.to_bits())).or_insert((
+                r.r_lo,
+                r.r_hi,
+                Vec::new(),
+            ));
             e.2.push((r.c, None));
         }
     }
