@@ -33,9 +33,6 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use arrow_array::cast::AsArray;
-use arrow_array::types::UInt64Type;
-
 use super::error::CampaignError;
 use super::ledger::{self, Commit, CommittedRun, PartCommit, RunStatus};
 use super::{tables, Campaign};
@@ -939,14 +936,8 @@ fn read_whole(c: &Campaign, rd: &Dir, rel: &str) -> Result<Vec<CommittedRun>, No
     }
     let mut runs = Vec::new();
     for b in &batches {
-        let ids = b
-            .column_by_name("run_id")
-            .and_then(|c| c.as_primitive_opt::<UInt64Type>())
-            .ok_or_else(|| NoCommit(format!("{rel}: no run_id column")))?;
-        let status = b
-            .column_by_name("status")
-            .and_then(|c| c.as_string_opt::<i32>())
-            .ok_or_else(|| NoCommit(format!("{rel}: no status column")))?;
+        let cols = tables::RunsTableCols::read(b, rel).map_err(|e| no(&e))?;
+        let (ids, status) = (cols.run_id, cols.status);
         for (id, st) in ids.iter().zip(status.iter()) {
             let (Some(run_id), Some(st)) = (id, st) else {
                 return Err(NoCommit(format!("{rel}: a null run_id or status")));

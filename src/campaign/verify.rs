@@ -8,9 +8,6 @@
 
 use std::collections::BTreeMap;
 
-use arrow_array::cast::AsArray;
-use arrow_array::types::UInt64Type;
-
 use super::error::CampaignError;
 use super::integrity::{self, Depth};
 use super::{ledger, tables, Campaign};
@@ -155,16 +152,12 @@ impl TableFile<'_> {
             Err(e) => return problems.push(e.to_string()),
         };
         for b in batches {
-            let Some(col) = b.column_by_name("run_id") else {
-                problems.push(format!("{}: no run_id column", self.path.display()));
-                break;
-            };
-            let Some(ids) = col.as_primitive_opt::<UInt64Type>() else {
-                problems.push(format!(
-                    "{}: run_id is not an unsigned 64-bit column",
-                    self.path.display()
-                ));
-                break;
+            let ids = match tables::RunsTableCols::read(&b, &self.path.display().to_string()) {
+                Ok(cols) => cols.run_id,
+                Err(e) => {
+                    problems.push(e.to_string());
+                    break;
+                }
             };
             for id in ids.iter().flatten() {
                 *run_counts.entry(id).or_default() += 1;
