@@ -8,7 +8,7 @@ use arrow_array::builder::{Float64Builder, ListBuilder};
 use arrow_array::{ArrayRef, RecordBatch};
 
 use crate::dsmc::predict::{TamsdTheoryRow, TheoryRow};
-use crate::dsmc::{HistRow, SpeciesRow, TamsdRow};
+use crate::dsmc::{HistRow, RowValue, SpeciesRow, TamsdRow};
 use crate::models::{run_batch, RunIds};
 use crate::store::cols::table;
 
@@ -34,7 +34,7 @@ pub fn species_batch(ids: RunIds, rows: &[SpeciesRow]) -> RecordBatch {
             c.f64("temperature", |r| r.temperature),
             c.opt_f64("msd", |r| r.msd),
             c.u64("collisions", |r| r.collisions),
-            c.opt_f64("a2", |r| r.a2),
+            c.opt_f64("a2", |r| r.value(RowValue::A2)),
         ]
     })
 }
