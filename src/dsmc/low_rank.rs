@@ -187,7 +187,7 @@ pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), SimError> {
         }
     }
     let n = st.vel.len();
-    match (&sys.tamsd, st.ids.len()) {
+    match (&sys.observe.tamsd, st.ids.len()) {
         (None, 0) => Ok(()),
         (Some(_), len) if len == n => {
             let mut seen = vec![false; n];
@@ -574,7 +574,7 @@ impl DsmcSim {
 
     /// The tracer number of a particle (by original index), if it is a tracer.
     fn tracer_number(&self, id: u32) -> Option<usize> {
-        let plan = self.sys.tamsd.as_ref()?;
+        let plan = self.sys.observe.tamsd.as_ref()?;
         let id = id as usize;
         let s = self.off.partition_point(|&o| o <= id) - 1;
         let t = id - self.off[s];
@@ -583,7 +583,7 @@ impl DsmcSim {
 
     /// Positions of the tracers, in tracer order (from `st.ids`).
     pub(super) fn tracer_positions(&self) -> Vec<u32> {
-        let Some(plan) = &self.sys.tamsd else {
+        let Some(plan) = &self.sys.observe.tamsd else {
             return Vec::new();
         };
         if self.st.ids.is_empty() {
@@ -912,9 +912,11 @@ mod tests {
             restitution: RestitutionModel::Constant(0.3),
             t_end: 40.0,
             output_times: vec![0.0, 40.0],
-            msd: true,
-            tamsd,
-            vdist: None,
+            observe: crate::dsmc::Observed {
+                msd: true,
+                tamsd,
+                ..Default::default()
+            },
             refresh_every: 0.3,
             rate_scale: std::f64::consts::PI / (4.0 * volume),
         };

@@ -16,6 +16,7 @@ pub mod bird;
 pub mod collision;
 pub mod low_rank;
 pub mod predict;
+pub mod row_values;
 pub mod system;
 pub mod vdist;
 pub mod viscoelastic;
@@ -25,7 +26,8 @@ use serde::{Deserialize, Serialize};
 use crate::physics::{PhysicsError, SimError};
 use crate::rng::{RngPosition, RunRng};
 use alias::Alias;
-pub use system::{DsmcSystem, Method, RestitutionModel, SpeciesInfo, VdistPlan};
+pub use row_values::{RowValue, RowValueSet, RowValues};
+pub use system::{DsmcSystem, Method, Observed, RestitutionModel, SpeciesInfo, VdistPlan};
 
 /// One row of the `dsmc_species` table (without the run's ids).
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -40,13 +42,20 @@ pub struct SpeciesRow {
     pub temperature: f64,
     /// <R_k^2(t)>, when displacements are recorded.
     pub msd: Option<f64>,
-    /// The Sonine coefficient 3 <v^4>_k / (5 <v^2>_k^2) - 1, when the velocity distribution
-    /// is recorded. Not in the row's own layout: saved after the state (see
-    /// [`DsmcSim::state_bytes`]), so a state without the observable is a dsmc/5 one.
+    /// The optional per-row values (a2 of `velocity_distribution`, ...; see [`row_values`]),
+    /// None where not recorded. Not in the row's own layout: saved after the state (see
+    /// [`DsmcSim::state_bytes`]), so a state without such observables is a dsmc/5 one.
     #[serde(skip)]
-    pub a2: Option<f64>,
+    pub values: RowValues,
     /// Collisions that species-k particles took part in up to t (a k-k collision counts twice).
     pub collisions: u64,
+}
+
+impl SpeciesRow {
+    /// Per-row value `v` (None where it is not recorded).
+    pub fn value(&self, v: RowValue) -> Option<f64> {
+        self.values.get(v)
+    }
 }
 
 /// One row of the `dsmc_tamsd` table (without the run's ids): the time-averaged MSD (26) of
@@ -100,7 +109,9 @@ pub const PIPELINE_DEPTH: usize = 32;
 /// Layout version of [`DsmcState`] in checkpoints (5: the low-rank queue holds two batches
 /// and collisions are applied when accepted, so a dsmc/4 pipeline would resume differently;
 /// with the observable `velocity_distribution` the payload goes on after the state with a
-/// [`VdistExtra`], which a state without it lacks, so dsmc/5 payloads still decode).
+/// [`VdistExtra`], which a state without it lacks, so dsmc/5 payloads still decode; then,
+/// only where a run records per-row values other than a2, one
+/// [`row_values::RowValuesExtra`], which no older build wrote).
 pub const STATE_FORMAT: &str = "dsmc/5";
 /// Layout version of a finished run's [`FinalState`] (it embeds a [`STATE_FORMAT`] state).
 pub const FINAL_FORMAT: &str = "dsmc/5+final/1";
@@ -317,7 +328,7 @@ impl DsmcSim {
             },
             vmax: vec![0.0; m],
             groups: Vec::new(),
-            ids: if sys.method == Method::LowRank && sys.tamsd.is_some() {
+            ids: if sys.method == Method::LowRank && sys.observe.tamsd.is_some() {
                 (0..n as u32).collect()
             } else {
                 Vec::new()
@@ -331,7 +342,7 @@ impl DsmcSim {
             bound_raises: 0,
             next_output: 0,
             next_grid: 0,
-            tracks: match &sys.tamsd {
+            tracks: match &sys.observe.tamsd {
                 Some(plan) => Vec::with_capacity(plan.n_tracers() * (plan.grid as usize + 1)),
                 None => Vec::new(),
             },
@@ -435,34 +446,43 @@ impl DsmcSim {
             Method::Bird => self.ring.to_vec(),
         };
         let mut bytes = postcard::to_stdvec(&self.st).expect("state serialises");
-        if self.sys.vdist.is_some() {
+        if self.sys.observe.vdist.is_some() {
             let extra = VdistExtra {
-                a2: self.st.rows.iter().map(|r| r.a2).collect(),
+                a2: self.st.rows.iter().map(|r| r.value(RowValue::A2)).collect(),
                 hist: self.st.hist.clone(),
             };
             bytes.extend(postcard::to_stdvec(&extra).expect("a2 and histograms serialise"));
         }
+        row_values::save(
+            self.sys.observe.values,
+            &self.st.rows,
+            |r| &r.values,
+            &mut bytes,
+        );
         bytes
     }
 
     /// Rebuild a simulation from a checkpoint payload.
     pub fn from_state_bytes(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, SimError> {
-        let (mut st, rest): (DsmcState, &[u8]) = postcard::take_from_bytes(bytes)
+        let (mut st, mut rest): (DsmcState, &[u8]) = postcard::take_from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
-        if sys.vdist.is_some() {
-            let extra: VdistExtra = postcard::from_bytes(rest).map_err(|e| {
+        if sys.observe.vdist.is_some() {
+            let (extra, after): (VdistExtra, &[u8]) = postcard::take_from_bytes(rest).map_err(|e| {
                 format!("checkpoint has no velocity distribution (observable velocity_distribution): {e}")
             })?;
             if extra.a2.len() != st.rows.len() {
                 return Err("checkpoint's a2 values do not match its rows".into());
             }
             for (r, a) in st.rows.iter_mut().zip(extra.a2) {
-                r.a2 = a;
+                r.values.set(RowValue::A2, a);
             }
             st.hist = extra.hist;
-        } else if !rest.is_empty() {
+            rest = after;
+        }
+        rest = row_values::restore(sys.observe.values, &mut st.rows, |r| &mut r.values, rest)?;
+        if !rest.is_empty() {
             return Err(
-                "checkpoint does not match the run's observables (velocity_distribution)".into(),
+                "checkpoint does not match the run's observables (velocity_distribution or per-row values)".into(),
             );
         }
         if st.vel.len() != sys.n_particles()
@@ -512,7 +532,7 @@ impl DsmcSim {
         if st.disp.len() != if sys.displacements() { st.vel.len() } else { 0 } {
             return Err("checkpoint does not match the run's observables (displacements)".into());
         }
-        let tracks_ok = match &sys.tamsd {
+        let tracks_ok = match &sys.observe.tamsd {
             Some(plan) => {
                 st.next_grid <= plan.grid + 1
                     && st.tracks.len() as u64 == st.next_grid * plan.n_tracers() as u64
@@ -522,12 +542,12 @@ impl DsmcSim {
         if !tracks_ok {
             return Err("checkpoint does not match the run's observables (tamsd)".into());
         }
-        let vdist_ok = match &sys.vdist {
+        let vdist_ok = match &sys.observe.vdist {
             Some(plan) => st
                 .hist
                 .iter()
                 .all(|h| h.bin < plan.bins && plan.times.contains(&h.t)),
-            None => st.hist.is_empty() && st.rows.iter().all(|r| r.a2.is_none()),
+            None => st.hist.is_empty(),
         };
         if !vdist_ok {
             return Err(
@@ -537,7 +557,7 @@ impl DsmcSim {
         let rng = RunRng::restore(&st.rng);
         st.vel = crate::memory::huge_copy(&st.vel);
         st.disp = crate::memory::huge_copy(&st.disp);
-        if let Some(plan) = &sys.tamsd {
+        if let Some(plan) = &sys.observe.tamsd {
             // The trajectories grow to their final size without reallocating.
             let total = plan.n_tracers() * (plan.grid as usize + 1);
             st.tracks.reserve_exact(total - st.tracks.len());
@@ -567,7 +587,7 @@ impl DsmcSim {
     pub fn continue_from(sys: DsmcSystem, bytes: &[u8]) -> Result<Self, SimError> {
         let f: FinalState =
             postcard::from_bytes(bytes).map_err(|e| format!("final state does not decode: {e}"))?;
-        if sys.tamsd.is_some() {
+        if sys.observe.tamsd.is_some() {
             return Err("the time-averaged MSD is recorded on a grid that spans [0, t_end]".into());
         }
         continuable(f.t_end, &f.output_times, sys.t_end, &sys.output_times)?;
@@ -647,7 +667,7 @@ impl DsmcSim {
     /// |R(t_{j+l}) - R(t_j)|^2 for the lag Delta = l h, averaged over the species' tracers;
     /// summed in a fixed order (deterministic).
     pub fn tamsd_rows(&self) -> Vec<TamsdRow> {
-        let Some(plan) = &self.sys.tamsd else {
+        let Some(plan) = &self.sys.observe.tamsd else {
             return Vec::new();
         };
         if self.st.next_grid != plan.grid + 1 {
@@ -799,25 +819,26 @@ impl DsmcSim {
         let mut energy = 0.0;
         for (s, sp) in self.sys.species.iter().enumerate() {
             let range = self.off[s]..self.off[s + 1];
+            let vel = &self.st.vel[range.clone()];
             let mut v2 = 0.0;
-            let mut a2 = None;
-            if let Some(plan) = &self.sys.vdist {
-                // The same sum of |v|^2 as below (so T_k is the same bits), with |v|^4.
-                let mut v4 = 0.0;
-                for v in &self.st.vel[range.clone()] {
-                    let w = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-                    v2 += w;
-                    v4 += w * w;
-                }
-                a2 = vdist::sonine_a2(sp.count, v2, v4);
+            for v in vel {
+                v2 += v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            }
+            let values = RowValues::compute(
+                self.sys.observe.values,
+                &row_values::SpeciesSample {
+                    t,
+                    mass: sp.mass,
+                    diameter: sp.diameter,
+                    count: sp.count,
+                    vel,
+                    v2,
+                },
+            );
+            if let Some(plan) = &self.sys.observe.vdist {
                 let scale = (2.0 * v2 / (3.0 * sp.count as f64)).sqrt();
                 if plan.times.contains(&t) && scale > 0.0 && scale.is_finite() {
-                    let counts = vdist::speed_histogram(
-                        &self.st.vel[range.clone()],
-                        scale,
-                        plan.bins,
-                        plan.c_max,
-                    );
+                    let counts = vdist::speed_histogram(vel, scale, plan.bins, plan.c_max);
                     let dc = plan.c_max / plan.bins as f64;
                     for (b, &count) in counts.iter().enumerate() {
                         self.st.hist.push(HistRow {
@@ -831,12 +852,8 @@ impl DsmcSim {
                         });
                     }
                 }
-            } else {
-                for v in &self.st.vel[range.clone()] {
-                    v2 += v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-                }
             }
-            let msd = if self.sys.msd {
+            let msd = if self.sys.observe.msd {
                 let mut r2 = 0.0;
                 for (v, d) in self.st.vel[range.clone()]
                     .iter()
@@ -866,7 +883,7 @@ impl DsmcSim {
                 count: sp.count,
                 temperature,
                 msd,
-                a2,
+                values,
                 collisions: self.st.species_collisions[s],
             });
         }
@@ -892,7 +909,7 @@ impl DsmcSim {
             .get(self.st.next_output)
             .copied()
             .unwrap_or(f64::INFINITY);
-        let grid = match &self.sys.tamsd {
+        let grid = match &self.sys.observe.tamsd {
             Some(plan) if self.st.next_grid <= plan.grid => {
                 plan.time(self.sys.t_end, self.st.next_grid)
             }
@@ -937,7 +954,9 @@ impl DsmcSim {
     /// Append the tracers' displacements at grid time `t` (extrapolated like `record`, without
     /// modifying the stored ones).
     fn record_tracks(&mut self, t: f64) {
-        let Some(plan) = &self.sys.tamsd else { return };
+        let Some(plan) = &self.sys.observe.tamsd else {
+            return;
+        };
         if !self.st.ids.is_empty() {
             for &p in &self.tracer_pos {
                 let (v, d) = (self.st.vel[p as usize], self.st.disp[p as usize]);
@@ -966,7 +985,13 @@ impl DsmcSim {
         if !self.disp_pending.is_empty() {
             self.flush_displacements();
         }
-        if let Some((grid, t_end)) = self.sys.tamsd.as_ref().map(|p| (p.grid, self.sys.t_end)) {
+        if let Some((grid, t_end)) = self
+            .sys
+            .observe
+            .tamsd
+            .as_ref()
+            .map(|p| (p.grid, self.sys.t_end))
+        {
             while self.st.next_grid <= grid {
                 let t = system::grid_time(t_end, grid, self.st.next_grid);
                 if t > t_next {

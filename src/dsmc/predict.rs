@@ -98,12 +98,12 @@ pub fn predict(sys: &DsmcSystem) -> Result<Prediction, TheoryError> {
     } else {
         None
     };
-    let msds_sonine = if small && sys.msd {
+    let msds_sonine = if small && sys.observe.msd {
         sonine_or_note("MSD", sonine::msd_sonine(&species, &r, &t0, times))
     } else {
         None
     };
-    let msds = if sys.msd {
+    let msds = if sys.observe.msd {
         Some(msd::msd_numeric(&species, &r, &t0, times)?)
     } else {
         None
@@ -124,7 +124,7 @@ pub fn predict(sys: &DsmcSystem) -> Result<Prediction, TheoryError> {
             });
         }
     }
-    let tamsd = match &sys.tamsd {
+    let tamsd = match &sys.observe.tamsd {
         Some(plan) => predict_tamsd(&species, &r, &t0, sys.t_end, &plan.lags),
         None => Vec::new(),
     };
@@ -203,9 +203,10 @@ mod tests {
             restitution: crate::dsmc::system::RestitutionModel::Constant(0.7),
             t_end: 10.0,
             output_times: vec![0.0, 1.0, 10.0],
-            msd: true,
-            tamsd: None,
-            vdist: None,
+            observe: crate::dsmc::Observed {
+                msd: true,
+                ..Default::default()
+            },
             refresh_every: 1.0,
             rate_scale: std::f64::consts::PI / (4.0 * volume),
         }

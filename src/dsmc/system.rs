@@ -2,6 +2,7 @@
 //! diameter, count, initial temperature), volume, restitution, output schedule. The `dsmc`
 //! model (`models::dsmc`) resolves it from the manifest's parameters.
 
+use super::row_values::RowValueSet;
 use crate::rng::RunRng;
 
 /// The collision-pair selection.
@@ -39,17 +40,29 @@ pub struct DsmcSystem {
     pub t_end: f64,
     /// Sorted output times, 0 and t_end included.
     pub output_times: Vec<f64>,
-    /// Report <R_k^2(t)> (observable `msd`).
-    pub msd: bool,
-    /// The time-averaged MSD's tracers, grid and lags (observable `tamsd`).
-    pub tamsd: Option<TamsdPlan>,
-    /// The velocity distribution: a2 at every output, speed histograms at some (observable
-    /// `velocity_distribution`).
-    pub vdist: Option<VdistPlan>,
+    /// What the run records beyond temperatures and collision counts.
+    pub observe: Observed,
     /// Refresh bounds every `refresh_every * N` collisions.
     pub refresh_every: f64,
     /// pi / (4 V): the low-rank rate constant of (43).
     pub rate_scale: f64,
+}
+
+/// What a run records beyond temperatures and collision counts (its observables), apart from
+/// the rest of the configuration so that a system built by hand (tests, benches) names only
+/// the observables it turns on (`Observed { msd: true, ..Default::default() }`) and does not
+/// change when an observable is added.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Observed {
+    /// Report <R_k^2(t)> (observable `msd`).
+    pub msd: bool,
+    /// The time-averaged MSD's tracers, grid and lags (observable `tamsd`).
+    pub tamsd: Option<TamsdPlan>,
+    /// The speed histograms at some output times (observable `velocity_distribution`).
+    pub vdist: Option<VdistPlan>,
+    /// The per-row values of `dsmc_species` recorded at every output (a2 of
+    /// `velocity_distribution`, ...; see [`super::row_values`]).
+    pub values: RowValueSet,
 }
 
 /// The time-averaged MSD of a run, resolved: which particles are tracers, the recording grid,
@@ -78,8 +91,9 @@ impl TamsdPlan {
     }
 }
 
-/// The velocity distribution of a run, resolved: the Sonine coefficient a2 of every species
-/// at every output time, and the histogram of the scaled speed at `times`.
+/// The velocity distribution of a run, resolved: the histogram of the scaled speed at `times`
+/// (the Sonine coefficient a2 of every species at every output time is the per-row value
+/// [`super::RowValue::A2`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct VdistPlan {
     /// Output times (the very values of `output_times`) at which the histogram is recorded.
@@ -170,7 +184,7 @@ impl DsmcSystem {
 
     /// Whether per-particle displacements are kept (for `msd` and `tamsd`).
     pub fn displacements(&self) -> bool {
-        self.msd || self.tamsd.is_some()
+        self.observe.msd || self.observe.tamsd.is_some()
     }
 
     pub fn n_particles(&self) -> usize {

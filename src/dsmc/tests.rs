@@ -21,9 +21,10 @@ fn system(method: Method, msd: bool, viscoelastic: bool, t_end: f64, times: &[f6
         },
         t_end,
         output_times,
-        msd,
-        tamsd: None,
-        vdist: None,
+        observe: Observed {
+            msd,
+            ..Default::default()
+        },
         refresh_every: 0.3,
         rate_scale: std::f64::consts::PI / (4.0 * volume),
     }
@@ -134,7 +135,7 @@ fn continuation_refusals() {
     let same = system(Method::LowRank, false, false, 7.0, TIMES);
     assert!(DsmcSim::continue_from(same, &fin).is_err());
     let mut tamsd = system(Method::LowRank, true, false, 20.0, TIMES);
-    tamsd.tamsd = Some(system::TamsdPlan {
+    tamsd.observe.tamsd = Some(system::TamsdPlan {
         grid: 10,
         tracers: tamsd.species.iter().map(|_| 1).collect(),
         lag_steps: vec![1],
@@ -162,11 +163,12 @@ fn velocity_distribution_leaves_the_trajectory_alone() {
     for method in [Method::LowRank, Method::Bird] {
         let plain = system(method, false, false, 12.0, TIMES);
         let mut with = plain.clone();
-        with.vdist = Some(system::VdistPlan {
+        with.observe.vdist = Some(system::VdistPlan {
             times: vec![3.0, 12.0],
             bins: 40,
             c_max: 4.0,
         });
+        with.observe.values.insert(RowValue::A2);
         let mut a = DsmcSim::new(plain.clone(), 9);
         let mut b = DsmcSim::new(with.clone(), 9);
         run(&mut a, u64::MAX);
@@ -192,8 +194,8 @@ fn velocity_distribution_leaves_the_trajectory_alone() {
         for (x, y) in a.st.rows.iter().zip(&b.st.rows) {
             assert_eq!(x.temperature.to_bits(), y.temperature.to_bits());
             assert_eq!((x.t, x.collisions), (y.t, y.collisions));
-            assert!(x.a2.is_none());
-            let a2 = y.a2.expect("a2 recorded");
+            assert!(x.value(RowValue::A2).is_none());
+            let a2 = y.value(RowValue::A2).expect("a2 recorded");
             assert!(a2.is_finite() && a2 > -1.0, "{a2}");
         }
         let hist = b.take_hist();
@@ -212,5 +214,108 @@ fn velocity_distribution_leaves_the_trajectory_alone() {
             assert!((integral - n as f64 / count as f64).abs() < 1e-12);
         }
         assert!(a.take_hist().is_empty());
+    }
+}
+
+/// The per-row values other than a2 (here the test-only `Probe`, the mean x velocity) go
+/// through the one generic mechanism: computed per species at every output without touching
+/// the trajectory, saved in the generic section after the state (after the a2 section when
+/// both are on) and restored bit for bit; a payload without the section is refused for a run
+/// that records one and vice versa, and a payload with a section of other values too.
+#[test]
+fn generic_row_values_are_recorded_and_checkpointed() {
+    for method in [Method::LowRank, Method::Bird] {
+        let plain = system(method, false, false, 12.0, TIMES);
+        let mut probe = plain.clone();
+        probe.observe.values.insert(RowValue::Probe);
+        let mut both = probe.clone();
+        both.observe.vdist = Some(system::VdistPlan {
+            times: vec![12.0],
+            bins: 10,
+            c_max: 4.0,
+        });
+        both.observe.values.insert(RowValue::A2);
+        let mut a = DsmcSim::new(plain.clone(), 5);
+        run(&mut a, u64::MAX);
+        for sys in [&probe, &both] {
+            let mut b = DsmcSim::new(sys.clone(), 5);
+            run(&mut b, 1_000);
+            assert_eq!(a.st.vel, b.st.vel, "{method:?}");
+            assert_eq!(a.rng.position(), b.rng.position());
+            assert_eq!(a.st.rows.len(), b.st.rows.len());
+            for (x, y) in a.st.rows.iter().zip(&b.st.rows) {
+                assert_eq!(x.temperature.to_bits(), y.temperature.to_bits());
+                assert_eq!(x.value(RowValue::Probe), None);
+                let p = y.value(RowValue::Probe).expect("probe recorded");
+                assert!(p.is_finite());
+                assert_eq!(y.value(RowValue::A2).is_some(), sys.observe.vdist.is_some());
+            }
+            // The last output is at the end, where the velocities still are.
+            let m = b.sys.species.len();
+            for (s, row) in b.st.rows[b.st.rows.len() - m..].iter().enumerate() {
+                let range = b.off[s]..b.off[s + 1];
+                let mean = b.st.vel[range].iter().map(|v| v[0]).sum::<f64>()
+                    / b.sys.species[s].count as f64;
+                assert_eq!(row.value(RowValue::Probe), Some(mean), "species {}", s + 1);
+            }
+            // Restored from a checkpoint taken midway: the same rows, values included.
+            let mut c = DsmcSim::new(sys.clone(), 5);
+            while c.st.rows.len() < 4 * m {
+                c.advance(500).unwrap();
+            }
+            let mut c = DsmcSim::from_state_bytes(sys.clone(), &c.state_bytes()).unwrap();
+            run(&mut c, 700);
+            assert_eq!((&c.st.rows, &c.st.hist), (&b.st.rows, &b.st.hist));
+            assert!(c.st.rows.iter().all(|r| r.value(RowValue::Probe).is_some()));
+            // Mismatched payloads are refused.
+            assert!(DsmcSim::from_state_bytes(sys.clone(), &a.state_bytes()).is_err());
+            assert!(DsmcSim::from_state_bytes(plain.clone(), &b.state_bytes()).is_err());
+        }
+        let mut p = DsmcSim::new(probe.clone(), 5);
+        let mut v = DsmcSim::new(both.clone(), 5);
+        p.advance(3_000).unwrap();
+        v.advance(3_000).unwrap();
+        assert!(DsmcSim::from_state_bytes(both.clone(), &p.state_bytes()).is_err());
+        assert!(DsmcSim::from_state_bytes(probe.clone(), &v.state_bytes()).is_err());
+        // A section naming another value is refused.
+        let mut bytes = postcard::to_stdvec(&p.st).unwrap();
+        let other = row_values::RowValuesExtra {
+            columns: vec![("other".into(), vec![None; p.st.rows.len()])],
+        };
+        bytes.extend(postcard::to_stdvec(&other).unwrap());
+        let err = DsmcSim::from_state_bytes(probe.clone(), &bytes)
+            .err()
+            .unwrap();
+        assert!(err.to_string().contains("per-row values"), "{err}");
+    }
+}
+
+/// Without per-row values other than a2 the payload is the dsmc/5 state (and the
+/// `VdistExtra` with `velocity_distribution`), nothing after it: the layout that builds
+/// before the generic section wrote, so their checkpoints and final states still load.
+#[test]
+fn payload_without_generic_values_is_the_dsmc5_layout() {
+    let plain = system(Method::LowRank, true, false, 12.0, TIMES);
+    let mut vd = plain.clone();
+    vd.observe.vdist = Some(system::VdistPlan {
+        times: vec![3.0],
+        bins: 8,
+        c_max: 4.0,
+    });
+    vd.observe.values.insert(RowValue::A2);
+    for sys in [plain, vd] {
+        let mut sim = DsmcSim::new(sys.clone(), 3);
+        sim.advance(20_000).unwrap();
+        let bytes = sim.state_bytes();
+        let mut want = postcard::to_stdvec(&sim.st).unwrap();
+        if sys.observe.vdist.is_some() {
+            let extra = VdistExtra {
+                a2: sim.st.rows.iter().map(|r| r.value(RowValue::A2)).collect(),
+                hist: sim.st.hist.clone(),
+            };
+            assert!(extra.a2.iter().all(|a| a.is_some()));
+            want.extend(postcard::to_stdvec(&extra).unwrap());
+        }
+        assert_eq!(bytes, want);
     }
 }

@@ -677,7 +677,7 @@ fn tamsd_grid_records_the_state_like_outputs() {
         let sys = params.system().unwrap();
         let mut sim = DsmcSim::new(sys, 31);
         while !sim.advance(100_000).unwrap() {}
-        let plan = sim.sys.tamsd.clone().expect("tamsd plan");
+        let plan = sim.sys.observe.tamsd.clone().expect("tamsd plan");
         let nt = plan.n_tracers();
         assert_eq!(
             nt,

@@ -131,13 +131,13 @@ impl Model for Dsmc {
         }
     }
 
-    /// `a2` of `dsmc_species` (granular before issue 16 wrote the table without it).
+    /// The per-row values of `dsmc_species` the point records (`a2`: granular before issue 16
+    /// wrote the table without it).
     fn valued_columns(p: &DsmcParams) -> Vec<(&'static str, &'static str)> {
-        if p.wants_vdist() {
-            vec![(DSMC_SPECIES, "a2")]
-        } else {
-            Vec::new()
-        }
+        p.row_values()
+            .iter()
+            .map(|v| (DSMC_SPECIES, v.column()))
+            .collect()
     }
 
     fn tables(points: &[&DsmcParams]) -> Vec<&'static str> {
@@ -213,5 +213,73 @@ impl Simulation for DsmcSim {
     }
     fn state_bytes(&mut self) -> Vec<u8> {
         DsmcSim::state_bytes(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dsmc::{RowValue, SpeciesRow};
+
+    /// The example's params with these observables.
+    fn params(observables: &str) -> DsmcParams {
+        let mut v: serde_json::Value = serde_json::from_str(Dsmc::EXAMPLE).expect("example");
+        v["observables"] = serde_json::from_str(observables).expect("observables");
+        serde_json::from_value(v).expect("params")
+    }
+
+    /// The valued columns are those of the observables' per-row values: `a2` with
+    /// `velocity_distribution` (in any position of the list), none without.
+    #[test]
+    fn valued_columns_follow_the_observables() {
+        assert!(Dsmc::valued_columns(&params(r#"["msd", "tamsd"]"#)).is_empty());
+        assert_eq!(
+            Dsmc::valued_columns(&params(r#"["msd", "velocity_distribution"]"#)),
+            vec![(DSMC_SPECIES, "a2")]
+        );
+    }
+
+    /// Every per-row value of the library has its column in `dsmc_species`, a nullable
+    /// double filled from the row's value (a value added without its column fails here).
+    #[test]
+    fn every_row_value_has_its_column() {
+        let mut row = SpeciesRow {
+            t: 0.0,
+            species: 1,
+            mass: 1.0,
+            diameter: 1.0,
+            count: 1,
+            temperature: 1.0,
+            msd: None,
+            values: Default::default(),
+            collisions: 0,
+        };
+        let library = RowValue::ALL.iter().filter(|v| **v != RowValue::Probe);
+        for (i, v) in library.clone().enumerate() {
+            row.values.set(*v, Some(i as f64 + 0.5));
+        }
+        let batch = tables::species_batch(
+            RunIds {
+                run_id: 1,
+                point_id: 1,
+            },
+            &[row],
+        );
+        for (i, v) in library.enumerate() {
+            let (_, field) = batch
+                .schema()
+                .column_with_name(v.column())
+                .map(|(j, f)| (j, f.clone()))
+                .unwrap_or_else(|| panic!("no column {} in dsmc_species", v.column()));
+            assert!(field.is_nullable());
+            let col = batch
+                .column_by_name(v.column())
+                .unwrap()
+                .as_any()
+                .downcast_ref::<arrow_array::Float64Array>()
+                .expect("a double column")
+                .value(0);
+            assert_eq!(col, i as f64 + 0.5, "{}", v.column());
+        }
     }
 }

@@ -10,7 +10,7 @@ use crate::dsmc::system::{
     grid_time, power_law_species, theory_restitution, Method, RestitutionModel, SpeciesInfo,
     TamsdPlan, VdistPlan, MAX_PARTICLES,
 };
-use crate::dsmc::DsmcSystem;
+use crate::dsmc::{DsmcSystem, Observed, RowValue, RowValueSet, SpeciesRow};
 use crate::models::{ParamErrors, SCALE_MAX, SCALE_MIN};
 use crate::theory::cost::{self, Cost, Workload};
 
@@ -272,6 +272,17 @@ pub enum DsmcObservable {
     /// the histogram of the scaled speed c = v / sqrt(2 T_k / m_k) at chosen output times
     /// (settings in the `velocity_distribution` object). Draws no random numbers.
     VelocityDistribution,
+}
+
+impl DsmcObservable {
+    /// The per-row value of `dsmc_species` it records at every output time, if any (its
+    /// computation and column name are in [`crate::dsmc::row_values`]).
+    pub fn row_value(self) -> Option<RowValue> {
+        match self {
+            DsmcObservable::VelocityDistribution => Some(RowValue::A2),
+            DsmcObservable::Temperature | DsmcObservable::Msd | DsmcObservable::Tamsd => None,
+        }
+    }
 }
 
 /// Settings of the observable `velocity_distribution`.
@@ -587,9 +598,12 @@ impl DsmcParams {
             restitution,
             t_end: p.t_end,
             output_times,
-            msd: p.wants_msd(),
-            tamsd,
-            vdist,
+            observe: Observed {
+                msd: p.wants_msd(),
+                tamsd,
+                vdist,
+                values: p.row_values(),
+            },
             refresh_every: p.refresh_every,
             rate_scale: std::f64::consts::PI / (4.0 * volume),
         })
@@ -628,9 +642,11 @@ impl DsmcParams {
         } else {
             0
         };
+        // A row holds a slot for every per-row value (88 bytes with a2 alone).
+        let row_bytes = std::mem::size_of::<SpeciesRow>() as u64;
         let rows = m
             .saturating_mul(self.output_times.count_bound())
-            .saturating_mul(88)
+            .saturating_mul(row_bytes)
             .saturating_add(hist);
         n.saturating_mul(per_particle)
             .saturating_add(tracks)
@@ -646,6 +662,14 @@ impl DsmcParams {
 
     pub fn wants_tamsd(&self) -> bool {
         self.observables.contains(&DsmcObservable::Tamsd)
+    }
+
+    /// The per-row values of `dsmc_species` a run records (see [`DsmcObservable::row_value`]).
+    pub fn row_values(&self) -> RowValueSet {
+        self.observables
+            .iter()
+            .filter_map(|o| o.row_value())
+            .collect()
     }
 
     pub fn wants_vdist(&self) -> bool {

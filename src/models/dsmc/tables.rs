@@ -6,7 +6,7 @@
 
 use crate::declare_table;
 use crate::dsmc::predict::{TamsdTheoryRow, TheoryRow};
-use crate::dsmc::{HistRow, SpeciesRow, TamsdRow};
+use crate::dsmc::{HistRow, RowValue, SpeciesRow, TamsdRow};
 use crate::models::RunIds;
 use crate::store::typed::{Absent, ListF64, OptF64, F64, U32, U64};
 use arrow_array::RecordBatch;
@@ -180,7 +180,7 @@ pub fn species_batch(ids: RunIds, rows: &[SpeciesRow]) -> RecordBatch {
             temperature: r.temperature,
             msd: r.msd,
             collisions: r.collisions,
-            a2: r.a2,
+            a2: r.value(RowValue::A2),
         })
         .collect();
     DsmcSpecies::batch(&rows)
