@@ -5,7 +5,8 @@
 #   - every table (tables/<t>/*.parquet) with scripts/compare_tables.py ("all tables identical"),
 #   - the analysis tables (analysis/*.parquet) the same way, as one-table campaigns,
 #   - the figures (figures/, analysis/figures/) byte for byte (diff -r),
-#   - the report page with its clock readings (wall seconds, dates, versions) taken out.
+#   - the report page with its clock readings (wall seconds, dates, versions) and each shard's
+#     number of commits (the flushes follow the clock) taken out.
 #
 # Usage: scripts/jobs-identical.sh OLD_BIN NEW_BIN OUT_DIR [JOB ...]
 #   OUT_DIR/old/<job> and OUT_DIR/new/<job> are kept (an existing OUT_DIR/old/<job> with a
@@ -45,7 +46,8 @@ side() { # side BIN DIR JOB
 scrub() {
     sed -E -e "s#$2#<dir>#g" -e 's/([0-9]+(\.[0-9]+)? ?(h|min|ms|s)\b ?)+/<time>/g' \
         -e 's/20[0-9]{2}-[0-9]{2}-[0-9]{2}[T ][0-9:.Z+-]+/<date>/g' \
-        -e 's/granular [0-9]+\.[0-9]+\.[0-9]+[^ <"]*/granular <version>/g' "$1"
+        -e 's/granular [0-9]+\.[0-9]+\.[0-9]+[^ <"]*/granular <version>/g' \
+        -e 's#(<td>s[0-9]+of[0-9]+</td>[[:space:]]*<td class="n">)[0-9]+#\1<commits>#g' "$1"
 }
 
 mkdir -p "$out/old" "$out/new"

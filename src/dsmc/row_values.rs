@@ -14,6 +14,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::vdist;
+use crate::physics::SimError;
 
 /// One species at one output time: what a per-row value is computed from.
 pub struct SpeciesSample<'a> {
@@ -200,7 +201,7 @@ pub(super) fn restore<'a, R>(
     rows: &mut [R],
     values: impl Fn(&mut R) -> &mut RowValues,
     rest: &'a [u8],
-) -> Result<&'a [u8], String> {
+) -> Result<&'a [u8], SimError> {
     let want: Vec<RowValue> = on.generic().collect();
     if want.is_empty() {
         return Ok(rest);
@@ -211,8 +212,12 @@ pub(super) fn restore<'a, R>(
             .collect::<Vec<_>>()
             .join(", ")
     };
-    let (extra, after): (RowValuesExtra, &[u8]) = postcard::take_from_bytes(rest)
-        .map_err(|e| format!("checkpoint has no per-row values ({}): {e}", names()))?;
+    let (extra, after): (RowValuesExtra, &[u8]) = postcard::take_from_bytes(rest).map_err(|e| {
+        SimError::State(format!(
+            "checkpoint has no per-row values ({}): {e}",
+            names()
+        ))
+    })?;
     let same = extra.columns.len() == want.len()
         && extra
             .columns
@@ -220,10 +225,10 @@ pub(super) fn restore<'a, R>(
             .zip(&want)
             .all(|((name, values), v)| name == v.column() && values.len() == rows.len());
     if !same {
-        return Err(format!(
+        return Err(SimError::State(format!(
             "checkpoint's per-row values do not match the run's observables ({})",
             names()
-        ));
+        )));
     }
     for ((_, column), v) in extra.columns.into_iter().zip(want) {
         for (r, x) in rows.iter_mut().zip(column) {

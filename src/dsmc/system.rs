@@ -3,6 +3,7 @@
 //! model (`models::dsmc`) resolves it from the manifest's parameters.
 
 use super::row_values::RowValueSet;
+use crate::physics::SimError;
 use crate::rng::RunRng;
 
 /// The collision-pair selection.
@@ -153,7 +154,7 @@ pub fn power_law_species(
     n1_count: u64,
     theta: f64,
     temperature: f64,
-) -> Result<Vec<SpeciesInfo>, String> {
+) -> Result<Vec<SpeciesInfo>, SimError> {
     let mut species = Vec::new();
     for k in 1u64.. {
         let count = (n1_count as f64 * (k as f64).powf(-theta)).round();
@@ -167,7 +168,9 @@ pub fn power_law_species(
             initial_temperature: temperature,
         });
         if species.len() > 1_000_000 {
-            return Err("power_law gives more than 1e6 species".into());
+            return Err(SimError::Config(
+                "power_law gives more than 1e6 species".into(),
+            ));
         }
     }
     Ok(species)

@@ -11,6 +11,11 @@
 
 #![allow(clippy::needless_range_loop)] // index loops read best in dense linear algebra
 
+/// Why [`integrate`] stopped: unsorted abscissae, too many steps, a step size underflow.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct OdeError(pub String);
+
 /// An ODE system y' = f(s, y) with optional quadrature components q' = g(s, y).
 pub(crate) trait OdeSystem {
     /// Dimension of y.
@@ -486,7 +491,7 @@ pub(crate) fn integrate<S: OdeSystem>(
     s_out: &[f64],
     tol: Tolerances,
     h0: f64,
-) -> Result<Vec<Solution>, String> {
+) -> Result<Vec<Solution>, OdeError> {
     let n = sys.dim();
     assert_eq!(y0.len(), n);
     assert_eq!(q0.len(), sys.quad_dim());
@@ -501,9 +506,9 @@ pub(crate) fn integrate<S: OdeSystem>(
     let mut steps = 0usize;
     for &target in s_out {
         if target < s {
-            return Err(format!(
+            return Err(OdeError(format!(
                 "output abscissae must be sorted and >= 0 (got {target} after {s})"
-            ));
+            )));
         }
         while s < target {
             let remaining = target - s;
@@ -539,10 +544,10 @@ pub(crate) fn integrate<S: OdeSystem>(
             loop {
                 steps += 1;
                 if steps > 10_000_000 {
-                    return Err("too many steps".into());
+                    return Err(OdeError("too many steps".into()));
                 }
                 if h < 1e-14 * s.abs().max(1.0) {
-                    return Err(format!("step size underflow at s = {s}"));
+                    return Err(OdeError(format!("step size underflow at s = {s}")));
                 }
                 let last = h >= remaining;
                 let (Some(lu_h), Some(lu_h2)) = (

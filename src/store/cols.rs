@@ -166,9 +166,9 @@ pub fn join_after_key(
     key: &str,
     lookup: &RecordBatch,
 ) -> Result<RecordBatch, StoreError> {
-    let keys = U32::read(batch, key).map_err(|e| StoreError::Corrupt(table.into(), e))?;
+    let keys = U32::read(batch, key).map_err(|e| StoreError::Corrupt(table.into(), e.0))?;
     let lookup_keys =
-        U32::read(lookup, key).map_err(|e| StoreError::Corrupt("lookup".into(), e))?;
+        U32::read(lookup, key).map_err(|e| StoreError::Corrupt("lookup".into(), e.0))?;
     let row_of: std::collections::HashMap<u32, u32> = lookup_keys
         .iter()
         .enumerate()

@@ -53,21 +53,25 @@ pub trait Kind {
     where
         Self::Value: 'r;
     /// The column `name` of `b`; the error is the text after the file's name.
-    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<Self::Array<'a>, String>;
+    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<Self::Array<'a>, ColumnProblem>;
     /// Row `i` of a column as read.
     fn get(a: Self::Array<'_>, i: usize) -> Self::Value;
 }
 
 /// The column `name` of `b`, of type `want`.
-fn column<'a>(b: &'a RecordBatch, name: &str, want: &DataType) -> Result<&'a ArrayRef, String> {
+fn column<'a>(
+    b: &'a RecordBatch,
+    name: &str,
+    want: &DataType,
+) -> Result<&'a ArrayRef, ColumnProblem> {
     let c = b
         .column_by_name(name)
-        .ok_or_else(|| format!("has no column {name}"))?;
+        .ok_or_else(|| ColumnProblem(format!("has no column {name}")))?;
     if c.data_type() != want {
-        return Err(format!(
+        return Err(ColumnProblem(format!(
             "column {name} is {}, expected {want}",
             c.data_type()
-        ));
+        )));
     }
     Ok(c)
 }
@@ -88,7 +92,7 @@ macro_rules! primitive_kinds {
             fn build<'r>(values: impl Iterator<Item = &'r $native>) -> ArrayRef {
                 Arc::new(values.copied().collect::<$array>())
             }
-            fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a $array, String> {
+            fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a $array, ColumnProblem> {
                 Ok(column(b, name, &$dt)?.as_primitive::<$arrow>())
             }
             fn get(a: &$array, i: usize) -> $native {
@@ -105,7 +109,7 @@ macro_rules! primitive_kinds {
             fn build<'r>(values: impl Iterator<Item = &'r Option<$native>>) -> ArrayRef {
                 Arc::new(values.copied().collect::<$array>())
             }
-            fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a $array, String> {
+            fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a $array, ColumnProblem> {
                 Ok(column(b, name, &$dt)?.as_primitive::<$arrow>())
             }
             fn get(a: &$array, i: usize) -> Option<$native> {
@@ -141,7 +145,7 @@ impl Kind for Str {
     fn build<'r>(values: impl Iterator<Item = &'r String>) -> ArrayRef {
         Arc::new(values.map(|s| Some(s.as_str())).collect::<StringArray>())
     }
-    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a StringArray, String> {
+    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a StringArray, ColumnProblem> {
         Ok(column(b, name, &DataType::Utf8)?.as_string::<i32>())
     }
     fn get(a: &StringArray, i: usize) -> String {
@@ -159,7 +163,7 @@ impl Kind for OptStr {
     fn build<'r>(values: impl Iterator<Item = &'r Option<String>>) -> ArrayRef {
         Arc::new(values.map(|s| s.as_deref()).collect::<StringArray>())
     }
-    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a StringArray, String> {
+    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a StringArray, ColumnProblem> {
         Ok(column(b, name, &DataType::Utf8)?.as_string::<i32>())
     }
     fn get(a: &StringArray, i: usize) -> Option<String> {
@@ -178,7 +182,7 @@ impl Kind for Bool {
     fn build<'r>(values: impl Iterator<Item = &'r bool>) -> ArrayRef {
         Arc::new(values.map(|b| Some(*b)).collect::<BooleanArray>())
     }
-    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a BooleanArray, String> {
+    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a BooleanArray, ColumnProblem> {
         Ok(column(b, name, &DataType::Boolean)?.as_boolean())
     }
     fn get(a: &BooleanArray, i: usize) -> bool {
@@ -201,7 +205,7 @@ impl Kind for ListF64 {
         }
         Arc::new(b.finish())
     }
-    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a ListArray, String> {
+    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<&'a ListArray, ColumnProblem> {
         let a = column(b, name, &Self::data_type())?;
         Ok(a.as_list::<i32>())
     }
@@ -234,7 +238,7 @@ where
     {
         K::build(values)
     }
-    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<Option<K::Array<'a>>, String> {
+    fn read<'a>(b: &'a RecordBatch, name: &str) -> Result<Option<K::Array<'a>>, ColumnProblem> {
         match b.column_by_name(name) {
             None => Ok(None),
             Some(_) => K::read(b, name).map(Some),
@@ -245,9 +249,14 @@ where
     }
 }
 
+/// What is wrong with one column of a batch (the text after the file's name).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ColumnProblem(pub String);
+
 /// The error of reading a batch of `file` whose columns `problems` describe.
-pub fn columns_error(file: &str, problems: Vec<String>) -> StoreError {
-    StoreError::Corrupt(file.to_string(), problems.join("; "))
+pub fn columns_error(file: &str, problems: Vec<ColumnProblem>) -> StoreError {
+    let texts: Vec<String> = problems.into_iter().map(|p| p.0).collect();
+    StoreError::Corrupt(file.to_string(), texts.join("; "))
 }
 
 /// Whether `name` is one of `columns` (a `const fn`: [`declare_table!`]'s `column`).
@@ -358,7 +367,7 @@ macro_rules! declare_table {
                 b: &'a arrow_array::RecordBatch,
                 file: &str,
             ) -> Result<Self, $crate::store::typed::StoreError> {
-                let mut problems: Vec<String> = Vec::new();
+                let mut problems: Vec<$crate::store::typed::ColumnProblem> = Vec::new();
                 $(
                     let $field = match <$kind as $crate::store::typed::Kind>::read(b, stringify!($field)) {
                         Ok(a) => Some(a),

@@ -266,7 +266,7 @@ pub(crate) fn integrate_from_start<S: OdeSystem>(
     q0: &[f64],
     s_out: &[f64],
     tol: Tolerances,
-) -> Result<Vec<(Vec<f64>, Vec<f64>)>, String> {
+) -> Result<Vec<(Vec<f64>, Vec<f64>)>, crate::math::ode::OdeError> {
     let tiny = s_out.partition_point(|&s| s < TINY_S);
     let mut out = Vec::with_capacity(s_out.len());
     if tiny > 0 {

@@ -61,11 +61,11 @@ impl Model for Dsmc {
     }
 
     fn start(p: &DsmcParams, seed: u64) -> Result<DsmcSim, ModelError> {
-        Ok(DsmcSim::new(p.system().map_err(ModelError::Params)?, seed))
+        Ok(DsmcSim::new(p.system()?, seed))
     }
 
     fn restore(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, ModelError> {
-        let sys = p.system().map_err(ModelError::Params)?;
+        let sys = p.system()?;
         Ok(DsmcSim::from_state_bytes(sys, state)?)
     }
 
@@ -109,7 +109,7 @@ impl Model for Dsmc {
     }
 
     fn continue_from(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, ModelError> {
-        let sys = p.system().map_err(ModelError::Params)?;
+        let sys = p.system()?;
         Ok(DsmcSim::continue_from(sys, state)?)
     }
 

@@ -11,7 +11,7 @@ use crate::dsmc::system::{
     TamsdPlan, VdistPlan, MAX_PARTICLES,
 };
 use crate::dsmc::{DsmcSystem, Observed, RowValue, RowValueSet, SpeciesRow};
-use crate::models::{ParamErrors, SCALE_MAX, SCALE_MIN};
+use crate::models::{ModelError, ParamErrors, SCALE_MAX, SCALE_MIN};
 use crate::theory::cost::{self, Cost, Workload};
 
 /// Parameters of a DSMC run (homogeneous cooling state of a polydisperse granular gas).
@@ -495,7 +495,7 @@ impl OutputTimes {
 impl DsmcParams {
     /// The engine's configuration of a run with these parameters (species resolved, the HCS
     /// temperatures computed, output times and TAMSD lags resolved).
-    pub fn system(&self) -> Result<DsmcSystem, String> {
+    pub fn system(&self) -> Result<DsmcSystem, ModelError> {
         let p = self;
         let base_t = match p.initial_temperature {
             InitialTemperature::Value(t) => t,
@@ -521,7 +521,9 @@ impl DsmcParams {
                     (Some(v), _) => v,
                     (None, Some(d)) => n as f64 / d,
                     (None, None) => {
-                        return Err("species.list needs volume or number_density".into())
+                        return Err(ModelError::Params(
+                            "species.list needs volume or number_density".into(),
+                        ))
                     }
                 };
                 (species, volume)
@@ -529,9 +531,9 @@ impl DsmcParams {
         };
         let n: u64 = species.iter().fold(0u64, |a, s| a.saturating_add(s.count));
         if n > MAX_PARTICLES {
-            return Err(format!(
+            return Err(ModelError::Params(format!(
                 "{n} particles is more than the supported {MAX_PARTICLES}"
-            ));
+            )));
         }
         let restitution = match &p.restitution {
             Restitution::Constant(e) => RestitutionModel::Constant(*e),
@@ -544,13 +546,14 @@ impl DsmcParams {
                 .map(|s| crate::theory::Species::new(s.mass, s.diameter, s.count as f64 / volume))
                 .collect();
             let r = theory_restitution(&restitution, &species);
-            let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean)
-                .map_err(|e| format!("no homogeneous cooling state found: {e}"))?;
+            let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean).map_err(|e| {
+                ModelError::Params(format!("no homogeneous cooling state found: {e}"))
+            })?;
             for (s, t) in species.iter_mut().zip(t0) {
                 if !(t.is_finite() && t > 0.0) {
-                    return Err(format!(
+                    return Err(ModelError::Params(format!(
                         "no homogeneous cooling state found (temperature {t})"
-                    ));
+                    )));
                 }
                 s.initial_temperature = t;
             }
@@ -580,9 +583,11 @@ impl DsmcParams {
         let output_times = p.output_times.resolve(p.t_end);
         let vdist = if p.wants_vdist() {
             let spec = p.velocity_distribution.clone().unwrap_or_default();
-            let times = spec
-                .resolve_times(&output_times)
-                .map_err(|i| format!("velocity_distribution.times[{i}] is not an output time"))?;
+            let times = spec.resolve_times(&output_times).map_err(|i| {
+                ModelError::Params(format!(
+                    "velocity_distribution.times[{i}] is not an output time"
+                ))
+            })?;
             Some(VdistPlan {
                 times,
                 bins: spec.bins,

@@ -70,6 +70,7 @@ pub fn write(c: &CampaignView<'_, DsmcParams>) -> Result<(), StoreError> {
         .map(|p| {
             p.params
                 .system()
+                .map_err(|e| e.to_string())
                 .and_then(|sys| predict(&sys).map_err(|e| e.to_string()))
                 .map(|pred| (p.point_id, pred))
                 .map_err(|e| {
