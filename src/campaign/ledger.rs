@@ -565,15 +565,30 @@ pub fn complete_compaction(root: &Path, j: &Journal) -> Result<(), CampaignError
 /// pending part of those shards is discarded, until `granular resume` has set the link aside.
 pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, CampaignError> {
     let mut notes = Vec::new();
-    let at = CampaignError::at;
     let live: Vec<String> = live_locks(root)
         .into_iter()
         .map(|l| l.shard_tag)
         .filter(|t| t != ours)
         .collect();
-    let rd = Dir::open(root).map_err(|e| at(root, e))?;
-    // The shards whose commits cannot be known (`None`: none of them can).
-    let unknown: Option<Vec<String>> = match rd.sub("ledger") {
+    let rd = Dir::open(root).map_err(|e| CampaignError::at(root, e))?;
+    let unknown = unknown_shards(root, &rd)?;
+    if unknown.is_some() && !live.iter().any(|t| t == COMPACT_TAG) {
+        notes.extend(roll_forward_compaction(root)?);
+    }
+    let referenced = roll_forward_commits(root, &rd, &live, &mut notes)?;
+    notes.extend(remove_stale_temporaries(root));
+    let Some(unknown) = unknown else {
+        return Ok(notes);
+    };
+    roll_back_pending(root, &rd, &live, &unknown, &referenced, &mut notes)?;
+    Ok(notes)
+}
+
+/// The shards whose commits cannot be known, because their ledger directory is not
+/// granular's own (`None`: none of them can, the ledger or the compaction journal is not).
+fn unknown_shards(root: &Path, rd: &Dir) -> Result<Option<Vec<String>>, CampaignError> {
+    let at = CampaignError::at;
+    Ok(match rd.sub("ledger") {
         Ok(None) => Some(Vec::new()),
         Ok(Some(l)) => {
             let entries = l.entries().map_err(|e| at(&root.join("ledger"), e))?;
@@ -596,10 +611,19 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, CampaignError> {
         }
         Err(e) if fsutil::not_own(&e).is_some() => None,
         Err(e) => return Err(at(&root.join("ledger"), e)),
-    };
-    if unknown.is_some() && !live.iter().any(|t| t == COMPACT_TAG) {
-        notes.extend(roll_forward_compaction(root)?);
-    }
+    })
+}
+
+/// Roll forward: the pending parts that a commit of a shard not `live` references are renamed
+/// to their final names. Returns every pending name (`<table dir>/.<part>.pending`) that a
+/// commit references, live shards' included.
+fn roll_forward_commits(
+    root: &Path,
+    rd: &Dir,
+    live: &[String],
+    notes: &mut Vec<String>,
+) -> Result<std::collections::HashSet<String>, CampaignError> {
+    let at = CampaignError::at;
     // Unreadable records are left to `integrity` (they are set aside there); their pending
     // parts, if any, are rolled back below like those of a commit that never happened.
     let commits = read_ledger(root)?.commits;
@@ -613,7 +637,7 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, CampaignError> {
                 continue;
             }
             // A table behind a link that is not granular's own is not touched.
-            let Ok(Some(d)) = layout::walk(&rd, dir) else {
+            let Ok(Some(d)) = layout::walk(rd, dir) else {
                 continue;
             };
             let here = |n: &str| d.kind(n).map_err(|e| at(&root.join(dir).join(n), e));
@@ -628,12 +652,22 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, CampaignError> {
             }
         }
     }
-    notes.extend(remove_stale_temporaries(root));
-    let Some(unknown) = unknown else {
-        return Ok(notes);
-    };
+    Ok(referenced)
+}
+
+/// Roll back: the pending parts in granular's own table directories that no commit references
+/// are deleted, except those of `live` shards and of shards whose commits are `unknown`.
+fn roll_back_pending(
+    root: &Path,
+    rd: &Dir,
+    live: &[String],
+    unknown: &[String],
+    referenced: &std::collections::HashSet<String>,
+    notes: &mut Vec<String>,
+) -> Result<(), CampaignError> {
+    let at = CampaignError::at;
     let Ok(Some(tables)) = rd.sub("tables") else {
-        return Ok(notes);
+        return Ok(());
     };
     for (t, _) in tables.entries().map_err(|e| at(&root.join("tables"), e))? {
         if t.starts_with('.') {
@@ -674,7 +708,7 @@ pub fn recover(root: &Path, ours: &str) -> Result<Vec<String>, CampaignError> {
             let _ = d.sync();
         }
     }
-    Ok(notes)
+    Ok(())
 }
 
 /// Delete temporary files (`.NAME.<pid>-<nanos>@<host>.tmp`, see `fsutil::temp_path`) left by

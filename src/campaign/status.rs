@@ -139,8 +139,32 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, CampaignError> {
     let commits = ledger::read_ledger(&c.root)?.commits;
     let finished = ledger::finished_runs(&commits);
     let live = ledger::live_locks(&c.root);
+    let running = running_runs(c, &live);
+    let ckpts = checkpointed_runs(c);
+    let mut points = point_rows(c);
+    let (total, current, current_runs) = count_runs(c, &finished, &running, &ckpts, &mut points);
+    Ok(CampaignStatus {
+        name: c.manifest.name.clone(),
+        runs: c.plan.n_runs(),
+        counts: total,
+        current_runs,
+        current,
+        manifests: c.history.len(),
+        live_shards: live
+            .iter()
+            .map(|l| format!("{} (pid {} on {})", l.shard, l.pid, l.host))
+            .collect(),
+        points,
+        slurm: super::slurm::submission_status(&c.root)?,
+        damage: check.problems(),
+    })
+}
+
+/// The runs that the heartbeats of the `live` shards name as running (a heartbeat that is
+/// missing or unreadable names none).
+fn running_runs(c: &Campaign, live: &[ledger::LockInfo]) -> BTreeSet<u64> {
     let mut running = BTreeSet::new();
-    for l in &live {
+    for l in live {
         let p = c
             .root
             .join("locks")
@@ -152,7 +176,12 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, CampaignError> {
             running.extend(hb.running);
         }
     }
-    let ckpts: BTreeSet<u64> = std::fs::read_dir(c.checkpoint_dir())
+    running
+}
+
+/// The runs that have a checkpoint (`checkpoints/run-<id>.ckpt`).
+fn checkpointed_runs(c: &Campaign) -> BTreeSet<u64> {
+    std::fs::read_dir(c.checkpoint_dir())
         .map(|it| {
             it.filter_map(|e| e.ok())
                 .filter_map(|e| {
@@ -164,9 +193,12 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, CampaignError> {
                 })
                 .collect()
         })
-        .unwrap_or_default();
-    let mut points: Vec<PointStatus> = c
-        .plan
+        .unwrap_or_default()
+}
+
+/// One row per registered point, in the plan's order, with its swept values and zero counts.
+fn point_rows(c: &Campaign) -> Vec<PointStatus> {
+    c.plan
         .points
         .iter()
         .map(|p| PointStatus {
@@ -182,7 +214,18 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, CampaignError> {
             in_manifest: p.current,
             counts: Counts::default(),
         })
-        .collect();
+        .collect()
+}
+
+/// Count every run into its point's row and the campaign's totals; returns the totals, the
+/// counts of the runs the latest manifest asks for, and how many runs it asks for.
+fn count_runs(
+    c: &Campaign,
+    finished: &std::collections::BTreeMap<u64, RunStatus>,
+    running: &BTreeSet<u64>,
+    ckpts: &BTreeSet<u64>,
+    points: &mut [PointStatus],
+) -> (Counts, Counts, u64) {
     let mut total = Counts::default();
     let mut current = Counts::default();
     let mut current_runs = 0;
@@ -229,19 +272,5 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, CampaignError> {
             }
         }
     }
-    Ok(CampaignStatus {
-        name: c.manifest.name.clone(),
-        runs: c.plan.n_runs(),
-        counts: total,
-        current_runs,
-        current,
-        manifests: c.history.len(),
-        live_shards: live
-            .iter()
-            .map(|l| format!("{} (pid {} on {})", l.shard, l.pid, l.host))
-            .collect(),
-        points,
-        slurm: super::slurm::submission_status(&c.root)?,
-        damage: check.problems(),
-    })
+    (total, current, current_runs)
 }

@@ -51,19 +51,7 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     // format has nothing to upgrade and nothing is written, but while another process holds it
     // (a shard runs, a compaction) that is said (exit 3), as for any other directory.
     if CampaignInfo::read(root)?.format_version == FORMAT_VERSION {
-        if let Some(l) = ledger::live_locks(root).into_iter().find(|l| !l.is_ours()) {
-            return Err(CampaignError::Refused(format!(
-                "cannot upgrade: {} is in use: {} is being run by {}",
-                root.display(),
-                l.doing(),
-                l.by()
-            )));
-        }
-        return Ok(UpgradeReport {
-            from: FORMAT_VERSION,
-            to: FORMAT_VERSION,
-            steps: Vec::new(),
-        });
+        return already_current(root);
     }
     // Decided under the lock on what is read under it (a shard running, another upgrade).
     let _lock =
@@ -97,45 +85,16 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     };
     let data = Dataset::new(root, &identity, &manifest_json);
     let next_info = if info.format_version == 1 {
-        let expansion = plan::expand(&manifest).map_err(|errs| {
-            CampaignError::Refused(format!(
-                "{}: frozen manifest: {errs:?}",
-                info_path.display()
-            ))
-        })?;
-        let registry = format1_registry(&manifest, &expansion);
-        let n_runs = registry.n_runs();
-        let keys = expansion.sweep_keys.clone();
-        let plan = Plan::new(&manifest, expansion, registry)?;
-        report.steps.push(format!(
-            "registry: {} points, {n_runs} runs, each keeping its seed of format 1",
-            plan.points.len()
-        ));
-        let sweep_cols: Vec<String> = keys.iter().map(|k| Plan::sweep_column(k)).collect();
-        report.steps.push(rewrite_runs(root, &sweep_cols, stamp)?);
-        data.write_whole(POINTS, "points.parquet", &tables::points_batch(&plan))
-            .map_err(|e| CampaignError::Io(e.to_string()))?;
-        report.steps.push(format!(
-            "points: rewritten ({} points, in_manifest)",
-            plan.points.len()
-        ));
-        let given =
-            fs::read(root.join("manifest.json")).unwrap_or_else(|_| manifest_text.into_bytes());
-        let mut first = history::write(root, 0, &given, n_runs)?;
-        first.accepted = created(&info_path);
-        report.steps.push(format!(
-            "history: the frozen manifest kept as {}",
-            first.file
-        ));
-        CampaignInfo {
-            format_version: FORMAT_VERSION,
-            code_version: CODE_VERSION.into(),
-            name: info.name.clone(),
-            n_runs: plan.registry.n_runs(),
-            manifest: info.manifest.clone(),
-            registry: Some(plan.registry),
-            history: vec![first],
-        }
+        upgrade_format1(
+            root,
+            &info_path,
+            &info,
+            &manifest,
+            manifest_text,
+            stamp,
+            &data,
+            &mut report,
+        )?
     } else {
         CampaignInfo {
             format_version: FORMAT_VERSION,
@@ -145,18 +104,100 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     };
     report.steps.extend(checksum_ledger(root)?);
     report.steps.push(sidecars(root)?);
+    commit_info(root, &next_info, &mut report)?;
+    log(root, &report)?;
+    Ok(report)
+}
+
+/// A directory already of this format: nothing to do, but refused (exit 3) while another
+/// process holds it (a shard runs, a compaction), as for any other directory.
+fn already_current(root: &Path) -> Result<UpgradeReport, CampaignError> {
+    if let Some(l) = ledger::live_locks(root).into_iter().find(|l| !l.is_ours()) {
+        return Err(CampaignError::Refused(format!(
+            "cannot upgrade: {} is in use: {} is being run by {}",
+            root.display(),
+            l.doing(),
+            l.by()
+        )));
+    }
+    Ok(UpgradeReport {
+        from: FORMAT_VERSION,
+        to: FORMAT_VERSION,
+        steps: Vec::new(),
+    })
+}
+
+/// Steps 1-4 of format 1 -> 2: the registry built from the frozen manifest, the `runs` and
+/// `points` tables rewritten, the frozen manifest kept as the first history entry; returns the
+/// `campaign.json` of this format to write (step 5), each step logged in `report`.
+#[allow(clippy::too_many_arguments)]
+fn upgrade_format1(
+    root: &Path,
+    info_path: &Path,
+    info: &CampaignInfo,
+    manifest: &crate::manifest::Manifest,
+    manifest_text: String,
+    stamp: Stamp,
+    data: &Dataset,
+    report: &mut UpgradeReport,
+) -> Result<CampaignInfo, CampaignError> {
+    let expansion = plan::expand(manifest).map_err(|errs| {
+        CampaignError::Refused(format!(
+            "{}: frozen manifest: {errs:?}",
+            info_path.display()
+        ))
+    })?;
+    let registry = format1_registry(manifest, &expansion);
+    let n_runs = registry.n_runs();
+    let keys = expansion.sweep_keys.clone();
+    let plan = Plan::new(manifest, expansion, registry)?;
+    report.steps.push(format!(
+        "registry: {} points, {n_runs} runs, each keeping its seed of format 1",
+        plan.points.len()
+    ));
+    let sweep_cols: Vec<String> = keys.iter().map(|k| Plan::sweep_column(k)).collect();
+    report.steps.push(rewrite_runs(root, &sweep_cols, stamp)?);
+    data.write_whole(POINTS, "points.parquet", &tables::points_batch(&plan))
+        .map_err(|e| CampaignError::Io(e.to_string()))?;
+    report.steps.push(format!(
+        "points: rewritten ({} points, in_manifest)",
+        plan.points.len()
+    ));
+    let given = fs::read(root.join("manifest.json")).unwrap_or_else(|_| manifest_text.into_bytes());
+    let mut first = history::write(root, 0, &given, n_runs)?;
+    first.accepted = created(info_path);
+    report.steps.push(format!(
+        "history: the frozen manifest kept as {}",
+        first.file
+    ));
+    Ok(CampaignInfo {
+        format_version: FORMAT_VERSION,
+        code_version: CODE_VERSION.into(),
+        name: info.name.clone(),
+        n_runs: plan.registry.n_runs(),
+        manifest: info.manifest.clone(),
+        registry: Some(plan.registry),
+        history: vec![first],
+    })
+}
+
+/// Step 5, the commit point: `campaign.json` of this format written atomically.
+fn commit_info(
+    root: &Path,
+    next_info: &CampaignInfo,
+    report: &mut UpgradeReport,
+) -> Result<(), CampaignError> {
     let path = root.join("campaign.json");
     fsutil::write_atomic(
         &path,
-        &serde_json::to_vec_pretty(&next_info).expect("serialises"),
+        &serde_json::to_vec_pretty(next_info).expect("serialises"),
     )
     .map_err(|e| io_err(&path, e))?;
     report.steps.push(format!(
         "campaign.json: format {} -> {FORMAT_VERSION}",
         report.from
     ));
-    log(root, &report)?;
-    Ok(report)
+    Ok(())
 }
 
 /// A commit record of ledger format 1 (files without sizes or checksums), or one this upgrade

@@ -5,6 +5,8 @@
 //! sweep value alone and on every point of the sweep, every error with its JSON path, each once.
 //! Its result, the [`Expansion`], is what `campaign::plan` numbers and seeds.
 
+use std::collections::HashSet;
+
 use serde_json::Value;
 
 use super::sweep::{path_exists, pointer_escape, set_path, sweep_key_errors};
@@ -43,8 +45,7 @@ pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
     let mut base_errors = Vec::new();
     let base_typed = typed(m.model, &base, "/params", &mut base_errors);
     // An error of the base params is reported once, not again with each sweep value.
-    let of_base: std::collections::HashSet<(String, String)> =
-        base_errors.iter().cloned().collect();
+    let of_base: HashSet<(String, String)> = base_errors.iter().cloned().collect();
     errors.extend(base_errors);
 
     let keys: Vec<String> = m.sweep.keys().cloned().collect();
@@ -58,48 +59,84 @@ pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
     let size = size_errors(m, &lists);
     let too_large = !size.is_empty();
     errors.extend(size);
-    for (key, list) in keys.iter().zip(&lists) {
-        let kp = format!("/sweep/{}", pointer_escape(key));
-        let parts: Vec<&str> = key.split('.').collect();
-        let ok = path_exists(&base, &parts);
-        // Each value alone must make valid params; report at the sweep value.
-        if ok && base_typed.is_some() && !too_large {
-            for (i, v) in list.iter().enumerate() {
-                let mut p = base.clone();
-                set_path(&mut p, &parts, v.clone());
-                let mut errs = Vec::new();
-                typed(m.model, &p, "/params", &mut errs);
-                let at = format!(
-                    "/params/{}",
-                    parts
-                        .iter()
-                        .map(|s| pointer_escape(s))
-                        .collect::<Vec<_>>()
-                        .join("/")
-                );
-                for (path, msg) in errs {
-                    if of_base.contains(&(path.clone(), msg.clone())) {
-                        continue;
-                    }
-                    let mapped = match path.strip_prefix(&at) {
-                        Some(rest) => format!("{kp}/{i}{rest}"),
-                        None => format!("{kp}/{i}"),
-                    };
-                    let msg = if path.starts_with(&at) {
-                        msg
-                    } else {
-                        format!("with this value, {path}: {msg}")
-                    };
-                    errors.push((mapped, msg));
-                }
-            }
+    if base_typed.is_some() && !too_large {
+        for (key, list) in keys.iter().zip(&lists) {
+            errors.extend(sweep_value_errors(m, &base, key, list, &of_base));
         }
     }
-    if !errors.is_empty() || base_typed.is_none() {
+    let Some(base_typed) = base_typed.filter(|_| errors.is_empty()) else {
+        return Err(errors);
+    };
+    let (points, swept) = cartesian_product(m, &base, base_typed, &keys, &lists, &mut errors);
+    if !errors.is_empty() {
         return Err(errors);
     }
+    Ok(Expansion {
+        sweep_keys: keys,
+        points,
+        values: swept,
+    })
+}
 
-    // Cartesian product, first key outermost.
+/// The sweep values of `key` each checked alone on the base params (the key's path must exist
+/// there), every error reported at the sweep value, less those of the base params (`of_base`).
+fn sweep_value_errors(
+    m: &Manifest,
+    base: &Value,
+    key: &str,
+    list: &[Value],
+    of_base: &HashSet<(String, String)>,
+) -> Vec<(String, String)> {
+    let mut errors = Vec::new();
+    let kp = format!("/sweep/{}", pointer_escape(key));
+    let parts: Vec<&str> = key.split('.').collect();
+    if !path_exists(base, &parts) {
+        return errors;
+    }
+    // Each value alone must make valid params; report at the sweep value.
+    for (i, v) in list.iter().enumerate() {
+        let mut p = base.clone();
+        set_path(&mut p, &parts, v.clone());
+        let mut errs = Vec::new();
+        typed(m.model, &p, "/params", &mut errs);
+        let at = format!(
+            "/params/{}",
+            parts
+                .iter()
+                .map(|s| pointer_escape(s))
+                .collect::<Vec<_>>()
+                .join("/")
+        );
+        for (path, msg) in errs {
+            if of_base.contains(&(path.clone(), msg.clone())) {
+                continue;
+            }
+            let mapped = match path.strip_prefix(&at) {
+                Some(rest) => format!("{kp}/{i}{rest}"),
+                None => format!("{kp}/{i}"),
+            };
+            let msg = if path.starts_with(&at) {
+                msg
+            } else {
+                format!("with this value, {path}: {msg}")
+            };
+            errors.push((mapped, msg));
+        }
+    }
+    errors
+}
+
+/// The cartesian product of the sweep `lists`, first key outermost: each point's typed params
+/// and swept values (the base params alone when nothing is swept). A point whose params do not
+/// check is left out, its errors pushed to `errors` with the point named.
+fn cartesian_product(
+    m: &Manifest,
+    base: &Value,
+    base_typed: ModelParams,
+    keys: &[String],
+    lists: &[Vec<Value>],
+    errors: &mut Vec<(String, String)>,
+) -> (Vec<ModelParams>, Vec<Vec<Value>>) {
     let n_points: usize = lists.iter().map(|l| l.len()).product();
     let mut points = Vec::with_capacity(n_points);
     let mut swept = Vec::with_capacity(n_points);
@@ -116,38 +153,43 @@ pub fn expand(m: &Manifest) -> Result<Expansion, Vec<(String, String)>> {
             .map(|(j, &i)| lists[j][i].clone())
             .collect();
         let params = if keys.is_empty() {
-            base_typed.clone()
+            Some(base_typed.clone())
         } else {
-            let mut p = base.clone();
-            for (key, v) in keys.iter().zip(&values) {
-                let parts: Vec<&str> = key.split('.').collect();
-                set_path(&mut p, &parts, v.clone());
-            }
-            let mut errs = Vec::new();
-            let t = typed(m.model, &p, "/params", &mut errs);
-            for (path, msg) in errs {
-                let desc: Vec<String> = keys
-                    .iter()
-                    .zip(&values)
-                    .map(|(k, v)| format!("{k}={v}"))
-                    .collect();
-                errors.push((path, format!("{msg} (at sweep point {})", desc.join(", "))));
-            }
-            t
+            point_params(m, base, keys, &values, errors)
         };
         if let Some(params) = params {
             points.push(params);
             swept.push(values);
         }
     }
-    if !errors.is_empty() {
-        return Err(errors);
+    (points, swept)
+}
+
+/// The typed params of one sweep point (the base params with the point's `values` set at the
+/// `keys`), or `None` with its errors pushed to `errors`, each naming the point.
+fn point_params(
+    m: &Manifest,
+    base: &Value,
+    keys: &[String],
+    values: &[Value],
+    errors: &mut Vec<(String, String)>,
+) -> Option<ModelParams> {
+    let mut p = base.clone();
+    for (key, v) in keys.iter().zip(values) {
+        let parts: Vec<&str> = key.split('.').collect();
+        set_path(&mut p, &parts, v.clone());
     }
-    Ok(Expansion {
-        sweep_keys: keys,
-        points,
-        values: swept,
-    })
+    let mut errs = Vec::new();
+    let t = typed(m.model, &p, "/params", &mut errs);
+    for (path, msg) in errs {
+        let desc: Vec<String> = keys
+            .iter()
+            .zip(values)
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        errors.push((path, format!("{msg} (at sweep point {})", desc.join(", "))));
+    }
+    t
 }
 
 /// Most sweep points a manifest may ask for (the thesis's largest sweep has 154).

@@ -497,6 +497,40 @@ impl DsmcParams {
     /// temperatures computed, output times and TAMSD lags resolved).
     pub fn system(&self) -> Result<DsmcSystem, ModelError> {
         let p = self;
+        let (mut species, volume) = p.resolved_species()?;
+        let restitution = match &p.restitution {
+            Restitution::Constant(e) => RestitutionModel::Constant(*e),
+            Restitution::Viscoelastic(v) => RestitutionModel::Viscoelastic { a_kappa: v.a_kappa },
+        };
+        if let InitialTemperature::Hcs { mean } = p.initial_temperature {
+            hcs_start_temperatures(&mut species, volume, &restitution, mean)?;
+        }
+        let tamsd = p.tamsd_plan(&species);
+        let output_times = p.output_times.resolve(p.t_end);
+        let vdist = p.vdist_plan(&output_times)?;
+        Ok(DsmcSystem {
+            method: p.method.engine(),
+            species,
+            volume,
+            restitution,
+            t_end: p.t_end,
+            output_times,
+            observe: Observed {
+                msd: p.wants_msd(),
+                tamsd,
+                vdist,
+                values: p.row_values(),
+            },
+            refresh_every: p.refresh_every,
+            rate_scale: std::f64::consts::PI / (4.0 * volume),
+        })
+    }
+
+    /// The species (each starting at its own temperature, else the initial one: the mean of
+    /// an HCS start) and the volume, from the power law or the list (with `volume` or
+    /// `number_density`); refused beyond `MAX_PARTICLES` particles.
+    fn resolved_species(&self) -> Result<(Vec<SpeciesInfo>, f64), ModelError> {
+        let p = self;
         let base_t = match p.initial_temperature {
             InitialTemperature::Value(t) => t,
             InitialTemperature::Hcs { mean } => mean,
@@ -535,30 +569,14 @@ impl DsmcParams {
                 "{n} particles is more than the supported {MAX_PARTICLES}"
             )));
         }
-        let restitution = match &p.restitution {
-            Restitution::Constant(e) => RestitutionModel::Constant(*e),
-            Restitution::Viscoelastic(v) => RestitutionModel::Viscoelastic { a_kappa: v.a_kappa },
-        };
-        let mut species = species;
-        if let InitialTemperature::Hcs { mean } = p.initial_temperature {
-            let th: Vec<crate::theory::Species> = species
-                .iter()
-                .map(|s| crate::theory::Species::new(s.mass, s.diameter, s.count as f64 / volume))
-                .collect();
-            let r = theory_restitution(&restitution, &species);
-            let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean).map_err(|e| {
-                ModelError::Params(format!("no homogeneous cooling state found: {e}"))
-            })?;
-            for (s, t) in species.iter_mut().zip(t0) {
-                if !(t.is_finite() && t > 0.0) {
-                    return Err(ModelError::Params(format!(
-                        "no homogeneous cooling state found (temperature {t})"
-                    )));
-                }
-                s.initial_temperature = t;
-            }
-        }
-        let tamsd = match (&p.tamsd, p.wants_tamsd()) {
+        Ok((species, volume))
+    }
+
+    /// The TAMSD plan (grid, tracers per species, lags on the grid below it), when a TAMSD is
+    /// asked for.
+    fn tamsd_plan(&self, species: &[SpeciesInfo]) -> Option<TamsdPlan> {
+        let p = self;
+        match (&p.tamsd, p.wants_tamsd()) {
             (Some(tm), true) => {
                 let lag_steps: Vec<u64> = tm
                     .resolve(p.t_end)
@@ -579,39 +597,26 @@ impl DsmcParams {
                 })
             }
             _ => None,
-        };
-        let output_times = p.output_times.resolve(p.t_end);
-        let vdist = if p.wants_vdist() {
-            let spec = p.velocity_distribution.clone().unwrap_or_default();
-            let times = spec.resolve_times(&output_times).map_err(|i| {
-                ModelError::Params(format!(
-                    "velocity_distribution.times[{i}] is not an output time"
-                ))
-            })?;
-            Some(VdistPlan {
-                times,
-                bins: spec.bins,
-                c_max: spec.c_max,
-            })
-        } else {
-            None
-        };
-        Ok(DsmcSystem {
-            method: p.method.engine(),
-            species,
-            volume,
-            restitution,
-            t_end: p.t_end,
-            output_times,
-            observe: Observed {
-                msd: p.wants_msd(),
-                tamsd,
-                vdist,
-                values: p.row_values(),
-            },
-            refresh_every: p.refresh_every,
-            rate_scale: std::f64::consts::PI / (4.0 * volume),
-        })
+        }
+    }
+
+    /// The velocity-distribution plan, when one is asked for: its times (each one of the
+    /// `output_times`, else refused), bins and range.
+    fn vdist_plan(&self, output_times: &[f64]) -> Result<Option<VdistPlan>, ModelError> {
+        if !self.wants_vdist() {
+            return Ok(None);
+        }
+        let spec = self.velocity_distribution.clone().unwrap_or_default();
+        let times = spec.resolve_times(output_times).map_err(|i| {
+            ModelError::Params(format!(
+                "velocity_distribution.times[{i}] is not an output time"
+            ))
+        })?;
+        Ok(Some(VdistPlan {
+            times,
+            bins: spec.bins,
+            c_max: spec.c_max,
+        }))
     }
 
     /// An estimate of the bytes a run holds at its peak: the particle arrays (velocities,
@@ -1277,6 +1282,32 @@ impl DsmcParams {
             ),
         ));
     }
+}
+
+/// An HCS start: every species' initial temperature set to its share in the homogeneous
+/// cooling state of mean temperature `mean` (refused where none is found).
+fn hcs_start_temperatures(
+    species: &mut [SpeciesInfo],
+    volume: f64,
+    restitution: &RestitutionModel,
+    mean: f64,
+) -> Result<(), ModelError> {
+    let th: Vec<crate::theory::Species> = species
+        .iter()
+        .map(|s| crate::theory::Species::new(s.mass, s.diameter, s.count as f64 / volume))
+        .collect();
+    let r = theory_restitution(restitution, species);
+    let t0 = crate::theory::hcs::hcs_temperatures(&th, &r, mean)
+        .map_err(|e| ModelError::Params(format!("no homogeneous cooling state found: {e}")))?;
+    for (s, t) in species.iter_mut().zip(t0) {
+        if !(t.is_finite() && t > 0.0) {
+            return Err(ModelError::Params(format!(
+                "no homogeneous cooling state found (temperature {t})"
+            )));
+        }
+        s.initial_temperature = t;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
