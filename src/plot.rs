@@ -222,59 +222,18 @@ pub enum PlotError {
     Io(String),
 }
 
+/// A point as drawn: (x, y, y_lo, y_hi) on the chart's axes (log10 of the data on a log axis).
+type Drawn = (f64, f64, f64, f64);
+
+/// Draws a figure: a heatmap, or the series on their axes and the legend beside them.
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), PlotError> {
     if let Some(h) = &fig.heatmap {
         return draw_heatmap(root, fig, h).map_err(|x| PlotError::Draw(x.to_string()));
     }
     let e = |x: DrawingAreaErrorKind<DB::ErrorType>| PlotError::Draw(x.to_string());
-    let p = fig;
     root.fill(&WHITE).map_err(e)?;
-    // Transformed (x, y, y_lo, y_hi) per series.
-    let series: Vec<Vec<(f64, f64, f64, f64)>> = fig
-        .series
-        .iter()
-        .map(|s| {
-            s.points
-                .iter()
-                .filter_map(|&(x, y, err)| {
-                    let (tx, ty) = (tr(x, p.log_x)?, tr(y, p.log_y)?);
-                    let lo = tr(
-                        (y - err).max(if p.log_y { y * 1e-3 } else { f64::MIN }),
-                        p.log_y,
-                    )
-                    .unwrap_or(ty);
-                    let hi = tr(y + err, p.log_y).unwrap_or(ty);
-                    Some((tx, ty, lo, hi))
-                })
-                .collect()
-        })
-        .collect();
-    let all: Vec<&(f64, f64, f64, f64)> = series.iter().flatten().collect();
-    if all.is_empty() {
-        return Err(PlotError::Draw("no data to plot".into()));
-    }
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for q in &all {
-        x0 = x0.min(q.0);
-        x1 = x1.max(q.0);
-        // Error bars inside the plot (on a log axis at most a decade beyond their point).
-        let (lo, hi) = if p.log_y {
-            (q.2.max(q.1 - 1.0), q.3.min(q.1 + 1.0))
-        } else {
-            (q.2, q.3)
-        };
-        y0 = y0.min(q.1).min(lo);
-        y1 = y1.max(q.1).max(hi);
-    }
-    let pad = |a: f64, b: f64| {
-        let w = if b > a {
-            0.05 * (b - a)
-        } else {
-            0.5 * a.abs().max(0.1)
-        };
-        (a - w, b + w)
-    };
-    let ((x0, x1), (y0, y1)) = (pad(x0, x1), pad(y0, y1));
+    let series = transformed_series(fig);
+    let ((x0, x1), (y0, y1)) = data_ranges(&series, fig.log_y)?;
     let (width, _) = root.dim_in_pixel();
     let (plot_area, legend_area) = root.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
     let mut chart = ChartBuilder::on(&plot_area)
@@ -284,7 +243,7 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         .y_label_area_size(70)
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(e)?;
-    let (lx, ly) = (p.log_x, p.log_y);
+    let (lx, ly) = (fig.log_x, fig.log_y);
     // A linear tick at zero computed as a sum of steps may come out as -1e-17: it is 0.
     let (sx, sy) = ((x1 - x0).abs() * 1e-9, (y1 - y0).abs() * 1e-9);
     let snap = |v: f64, eps: f64| if v.abs() < eps { 0.0 } else { v };
@@ -302,10 +261,85 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         .y_label_formatter(&fy)
         .draw()
         .map_err(e)?;
+    let legend = draw_curves(&mut chart, fig, &series).map_err(e)?;
+    draw_legend(&legend_area, &legend, fig.legend_low).map_err(e)?;
+    root.present().map_err(e)?;
+    Ok(())
+}
+
+/// The points of each series transformed onto the chart's axes, with their error bars'
+/// ends (on a log y axis the lower end at least 1e-3 of the value); points a log axis
+/// cannot show are left out.
+fn transformed_series(fig: &Figure) -> Vec<Vec<Drawn>> {
+    let p = fig;
+    fig.series
+        .iter()
+        .map(|s| {
+            s.points
+                .iter()
+                .filter_map(|&(x, y, err)| {
+                    let (tx, ty) = (tr(x, p.log_x)?, tr(y, p.log_y)?);
+                    let lo = tr(
+                        (y - err).max(if p.log_y { y * 1e-3 } else { f64::MIN }),
+                        p.log_y,
+                    )
+                    .unwrap_or(ty);
+                    let hi = tr(y + err, p.log_y).unwrap_or(ty);
+                    Some((tx, ty, lo, hi))
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The x and y ranges of the chart: the transformed points with their error bars (on a log
+/// axis at most a decade beyond their point), padded by 5% on each side (a single value by
+/// half of itself, at least 0.05); an error when there is nothing to draw.
+fn data_ranges(series: &[Vec<Drawn>], log_y: bool) -> Result<((f64, f64), (f64, f64)), PlotError> {
+    let all: Vec<&Drawn> = series.iter().flatten().collect();
+    if all.is_empty() {
+        return Err(PlotError::Draw("no data to plot".into()));
+    }
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for q in &all {
+        x0 = x0.min(q.0);
+        x1 = x1.max(q.0);
+        // Error bars inside the plot (on a log axis at most a decade beyond their point).
+        let (lo, hi) = if log_y {
+            (q.2.max(q.1 - 1.0), q.3.min(q.1 + 1.0))
+        } else {
+            (q.2, q.3)
+        };
+        y0 = y0.min(q.1).min(lo);
+        y1 = y1.max(q.1).max(hi);
+    }
+    let pad = |a: f64, b: f64| {
+        let w = if b > a {
+            0.05 * (b - a)
+        } else {
+            0.5 * a.abs().max(0.1)
+        };
+        (a - w, b + w)
+    };
+    Ok((pad(x0, x1), pad(y0, y1)))
+}
+
+/// Draws each non-empty series on the chart, as a line or as markers with error bars, in
+/// its colour (a line right after a data series, not a reference, takes that series'
+/// colour); returns the legend's entries (label, colour, drawn as a line) of the labelled.
+fn draw_curves<'f, DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    fig: &'f Figure,
+    series: &[Vec<Drawn>],
+) -> Result<Vec<(&'f str, RGBColor, bool)>, DrawingAreaErrorKind<DB::ErrorType>> {
+    let p = fig;
     let mut colour_index = 0usize;
-    // (label, colour, drawn as a line) of each series drawn, for the legend.
     let mut legend: Vec<(&str, RGBColor, bool)> = Vec::new();
-    for (j, (s, data)) in fig.series.iter().zip(&series).enumerate() {
+    for (j, (s, data)) in fig.series.iter().zip(series).enumerate() {
         if data.is_empty() {
             continue;
         }
@@ -317,34 +351,26 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
         }
         let colour = rgb(colour_index);
         if s.line {
-            chart
-                .draw_series(LineSeries::new(
-                    data.iter().map(|q| (q.0, q.1)),
-                    colour.stroke_width(2),
-                ))
-                .map_err(e)?;
+            chart.draw_series(LineSeries::new(
+                data.iter().map(|q| (q.0, q.1)),
+                colour.stroke_width(2),
+            ))?;
         } else {
-            chart
-                .draw_series(
-                    data.iter()
-                        .filter(|q| q.3 > q.2)
-                        .map(|q| ErrorBar::new_vertical(q.0, q.2, q.1, q.3, colour.filled(), 4)),
-                )
-                .map_err(e)?;
-            chart
-                .draw_series(
-                    data.iter()
-                        .map(|q| Circle::new((q.0, q.1), 2, colour.filled())),
-                )
-                .map_err(e)?;
+            chart.draw_series(
+                data.iter()
+                    .filter(|q| q.3 > q.2)
+                    .map(|q| ErrorBar::new_vertical(q.0, q.2, q.1, q.3, colour.filled(), 4)),
+            )?;
+            chart.draw_series(
+                data.iter()
+                    .map(|q| Circle::new((q.0, q.1), 2, colour.filled())),
+            )?;
         }
         if !s.label.is_empty() {
             legend.push((&s.label, colour, s.line));
         }
     }
-    draw_legend(&legend_area, &legend, fig.legend_low).map_err(e)?;
-    root.present().map_err(e)?;
-    Ok(())
+    Ok(legend)
 }
 
 /// The diverging colour of `v` on a scale clamped at +-`limit`: white at 0, blue (33, 102,
@@ -443,28 +469,75 @@ fn cell_text(v: f64) -> String {
     }
 }
 
+/// The grid of a heatmap in pixels: its top-left corner, a cell's size, rows and columns.
+#[derive(Clone, Copy)]
+struct HeatGrid {
+    x0: i32,
+    y0: i32,
+    cw: i32,
+    ch: i32,
+    nr: i32,
+    nc: i32,
+}
+
+/// A text position from its horizontal and vertical anchors.
+fn anchor(
+    hp: plotters::style::text_anchor::HPos,
+    vp: plotters::style::text_anchor::VPos,
+) -> plotters::style::text_anchor::Pos {
+    plotters::style::text_anchor::Pos::new(hp, vp)
+}
+
+/// Draws a heatmap: the title, the cells, the labels and the colour bar (see
+/// `heat_layout` for where each goes).
 fn draw_heatmap<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     fig: &Figure,
     h: &Heatmap,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    use plotters::style::text_anchor::{HPos, Pos, VPos};
+    use plotters::style::text_anchor::{HPos, VPos};
     let lay = heat_layout(&fig.title, h);
     let (w, _) = lay.size;
-    let (cw, ch) = (lay.cell.0 as i32, lay.cell.1 as i32);
-    let (x0, y0) = (lay.left as i32, HEAT_TOP as i32);
-    let (nr, nc) = (h.rows.len() as i32, h.cols.len() as i32);
+    let g = HeatGrid {
+        x0: lay.left as i32,
+        y0: HEAT_TOP as i32,
+        cw: lay.cell.0 as i32,
+        ch: lay.cell.1 as i32,
+        nr: h.rows.len() as i32,
+        nc: h.cols.len() as i32,
+    };
     root.fill(&WHITE)?;
-    let at = |hp, vp| Pos::new(hp, vp);
     root.draw(&Text::new(
         fig.title.clone(),
         (w as i32 / 2, 12),
         ("sans-serif", 18)
             .into_font()
             .color(&BLACK)
-            .pos(at(HPos::Center, VPos::Top)),
+            .pos(anchor(HPos::Center, VPos::Top)),
     ))?;
-    // The cells, and their values when they fit.
+    draw_heat_cells(&root, h, g)?;
+    draw_heat_labels(&root, fig, h, g)?;
+    draw_heat_colour_bar(&root, h, g)?;
+    root.present()?;
+    Ok(())
+}
+
+/// Draws the cells of a heatmap in their diverging colours (missing values grey), and their
+/// values in them when the grid is small and its cells large enough.
+fn draw_heat_cells<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    h: &Heatmap,
+    g: HeatGrid,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    use plotters::style::text_anchor::{HPos, VPos};
+    let HeatGrid {
+        x0,
+        y0,
+        cw,
+        ch,
+        nr,
+        nc,
+    } = g;
     let cells = (nr * nc) as usize;
     let write_values = cells <= HEAT_MAX_CELL_LABELS && cw >= 34 && ch >= 14;
     let value_font = ("sans-serif", 11).into_font();
@@ -490,12 +563,32 @@ fn draw_heatmap<DB: DrawingBackend>(
                     value_font
                         .clone()
                         .color(if dark { &WHITE } else { &BLACK })
-                        .pos(at(HPos::Center, VPos::Center)),
+                        .pos(anchor(HPos::Center, VPos::Center)),
                 ))?;
             }
         }
     }
-    // Row labels (smaller in small rows), right-aligned against the grid.
+    Ok(())
+}
+
+/// Draws a heatmap's row labels (right-aligned against the grid, smaller in small rows), its
+/// column labels below the grid (every `step`-th one when they would overlap) and the two
+/// axis descriptions.
+fn draw_heat_labels<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &Figure,
+    h: &Heatmap,
+    g: HeatGrid,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    use plotters::style::text_anchor::{HPos, VPos};
+    let HeatGrid {
+        x0,
+        y0,
+        cw,
+        ch,
+        nr,
+        nc,
+    } = g;
     let row_font = ("sans-serif", (ch - 1).clamp(8, 13) as u32).into_font();
     for (i, label) in h.rows.iter().enumerate() {
         root.draw(&Text::new(
@@ -504,10 +597,9 @@ fn draw_heatmap<DB: DrawingBackend>(
             row_font
                 .clone()
                 .color(&BLACK)
-                .pos(at(HPos::Right, VPos::Center)),
+                .pos(anchor(HPos::Right, VPos::Center)),
         ))?;
     }
-    // Column labels below the grid, every `step`-th one when they would overlap.
     let col_font = ("sans-serif", 12).into_font();
     let widest = h
         .cols
@@ -527,23 +619,41 @@ fn draw_heatmap<DB: DrawingBackend>(
             col_font
                 .clone()
                 .color(&BLACK)
-                .pos(at(HPos::Center, VPos::Top)),
+                .pos(anchor(HPos::Center, VPos::Top)),
         ))?;
     }
     let desc = ("sans-serif", 16).into_font().color(&BLACK);
     root.draw(&Text::new(
         fig.x_label.clone(),
         (x0 + nc * cw / 2, y1 + 32),
-        desc.clone().pos(at(HPos::Center, VPos::Top)),
+        desc.clone().pos(anchor(HPos::Center, VPos::Top)),
     ))?;
     root.draw(&Text::new(
         fig.y_label.clone(),
         (14, y0 + nr * ch / 2),
         desc.clone()
             .transform(FontTransform::Rotate270)
-            .pos(at(HPos::Center, VPos::Center)),
+            .pos(anchor(HPos::Center, VPos::Center)),
     ))?;
-    // The colour bar: the scale from +limit (top) to -limit, ticks at the ends, halves and 0.
+    Ok(())
+}
+
+/// Draws a heatmap's colour bar right of the grid: the scale from +limit (top) to -limit,
+/// ticks at the ends, halves and 0, and the scale's label.
+fn draw_heat_colour_bar<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    h: &Heatmap,
+    g: HeatGrid,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    use plotters::style::text_anchor::{HPos, VPos};
+    let HeatGrid {
+        x0,
+        y0,
+        cw,
+        ch,
+        nr,
+        nc,
+    } = g;
     let bx = x0 + nc * cw + 20;
     let bh = (nr * ch).clamp(180, 360); // room for the rotated scale label
     let steps = 48;
@@ -570,7 +680,7 @@ fn draw_heatmap<DB: DrawingBackend>(
         root.draw(&Text::new(
             format!("{prefix}{}", tick(f * h.limit)),
             (bx + 23, y),
-            tick_font.clone().pos(at(HPos::Left, VPos::Center)),
+            tick_font.clone().pos(anchor(HPos::Left, VPos::Center)),
         ))?;
     }
     root.draw(&Text::new(
@@ -580,9 +690,8 @@ fn draw_heatmap<DB: DrawingBackend>(
             .into_font()
             .color(&BLACK)
             .transform(FontTransform::Rotate270)
-            .pos(at(HPos::Center, VPos::Center)),
+            .pos(anchor(HPos::Center, VPos::Center)),
     ))?;
-    root.present()?;
     Ok(())
 }
 

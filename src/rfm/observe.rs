@@ -187,6 +187,113 @@ pub struct RfmOutput {
     pub free_path_moments: Vec<FreePathMomentRow>,
 }
 
+/// The rows made of a finished run's accumulators (`RfmRun::finish`).
+impl Sampler {
+    /// Block means (2.20) of the temperature series, in the moments' blocks (`BLOCKS` blocks
+    /// of the planned samples; empty blocks left out).
+    fn temperature_block_rows(&self) -> Vec<TemperatureBlockRow> {
+        let s = self;
+        let mut temperature_blocks = Vec::new();
+        let total = s.samples_total.max(1) as usize;
+        let mut acc: Vec<(f64, f64, u32, f64)> = vec![(f64::NAN, f64::NAN, 0, 0.0); BLOCKS];
+        for (j, r) in s.series.iter().enumerate() {
+            let b = ((j * BLOCKS) / total).min(BLOCKS - 1);
+            let a = &mut acc[b];
+            if a.2 == 0 {
+                a.0 = r.t;
+            }
+            a.1 = r.t;
+            a.2 += 1;
+            a.3 += r.temperature;
+        }
+        for (b, a) in acc.into_iter().enumerate() {
+            if a.2 > 0 {
+                temperature_blocks.push(TemperatureBlockRow {
+                    block: b as u32,
+                    t_from: a.0,
+                    t_to: a.1,
+                    n_samples: a.2,
+                    temperature: a.3 / a.2 as f64,
+                });
+            }
+        }
+        temperature_blocks
+    }
+
+    /// The moments <|v_c|^m>, m = 1..=`MAX_ORDER`, over every sampled component, with the
+    /// sem of their block means (at least two blocks); none without the moments observable.
+    fn moment_rows(&self) -> Vec<MomentRow> {
+        let s = self;
+        let mut moments = Vec::new();
+        if s.moments {
+            let (block_sums, block_samples) = super::blocks::group(&s.moment_sums, s.samples_total);
+            let block_counts: Vec<u64> =
+                block_samples.iter().map(|n| n * s.moment_values).collect();
+            let total: u64 = block_counts.iter().sum();
+            for m in 0..MAX_ORDER {
+                let value = block_sums.iter().map(|b| b[m]).sum::<f64>() / total.max(1) as f64;
+                let blocks: Vec<f64> = block_sums
+                    .iter()
+                    .zip(&block_counts)
+                    .filter(|(_, &c)| c > 0)
+                    .map(|(b, &c)| b[m] / c as f64)
+                    .collect();
+                let sem = (blocks.len() >= 2).then(|| {
+                    let k = blocks.len() as f64;
+                    let mean = blocks.iter().sum::<f64>() / k;
+                    (blocks.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (k - 1.0) / k)
+                        .sqrt()
+                });
+                moments.push(MomentRow {
+                    order: m as u32 + 1,
+                    value,
+                    sem,
+                });
+            }
+        }
+        moments
+    }
+
+    /// The velocity-component histogram's rows (densities over every count), then its two
+    /// out-of-range rows (below, above; no density); none without the histogram observable.
+    fn velocity_histogram_rows(&self) -> Vec<HistRow> {
+        let s = self;
+        let mut histograms = Vec::new();
+        if let Some(h) = &s.hist {
+            let total: u64 = s.counts.iter().sum();
+            let width = (h.range[1] - h.range[0]) / h.bins as f64;
+            for j in 0..h.bins as usize {
+                let lo = h.range[0] + j as f64 * width;
+                histograms.push(HistRow {
+                    kind: "velocity".into(),
+                    h: 0,
+                    lo,
+                    hi: lo + width,
+                    count: s.counts[j],
+                    density: Some(s.counts[j] as f64 / (total.max(1) as f64 * width)),
+                });
+            }
+            histograms.push(HistRow {
+                kind: "velocity".into(),
+                h: 0,
+                lo: f64::NEG_INFINITY,
+                hi: h.range[0],
+                count: s.counts[h.bins as usize],
+                density: None,
+            });
+            histograms.push(HistRow {
+                kind: "velocity".into(),
+                h: 0,
+                lo: h.range[1],
+                hi: f64::INFINITY,
+                count: s.counts[h.bins as usize + 1],
+                density: None,
+            });
+        }
+        histograms
+    }
+}
+
 impl RfmRun {
     fn sampler_for(rc: &RunConfig) -> Sampler {
         let total = rc.sim.duration_steps() / rc.sim.sample_every;
@@ -418,92 +525,9 @@ impl RfmRun {
     /// The rows of a finished run.
     pub fn finish(self) -> RfmOutput {
         let s = self.sampler;
-        // Block means (2.20) of the temperature series, in the moments' blocks.
-        let mut temperature_blocks = Vec::new();
-        {
-            let total = s.samples_total.max(1) as usize;
-            let mut acc: Vec<(f64, f64, u32, f64)> = vec![(f64::NAN, f64::NAN, 0, 0.0); BLOCKS];
-            for (j, r) in s.series.iter().enumerate() {
-                let b = ((j * BLOCKS) / total).min(BLOCKS - 1);
-                let a = &mut acc[b];
-                if a.2 == 0 {
-                    a.0 = r.t;
-                }
-                a.1 = r.t;
-                a.2 += 1;
-                a.3 += r.temperature;
-            }
-            for (b, a) in acc.into_iter().enumerate() {
-                if a.2 > 0 {
-                    temperature_blocks.push(TemperatureBlockRow {
-                        block: b as u32,
-                        t_from: a.0,
-                        t_to: a.1,
-                        n_samples: a.2,
-                        temperature: a.3 / a.2 as f64,
-                    });
-                }
-            }
-        }
-        let mut moments = Vec::new();
-        if s.moments {
-            let (block_sums, block_samples) = super::blocks::group(&s.moment_sums, s.samples_total);
-            let block_counts: Vec<u64> =
-                block_samples.iter().map(|n| n * s.moment_values).collect();
-            let total: u64 = block_counts.iter().sum();
-            for m in 0..MAX_ORDER {
-                let value = block_sums.iter().map(|b| b[m]).sum::<f64>() / total.max(1) as f64;
-                let blocks: Vec<f64> = block_sums
-                    .iter()
-                    .zip(&block_counts)
-                    .filter(|(_, &c)| c > 0)
-                    .map(|(b, &c)| b[m] / c as f64)
-                    .collect();
-                let sem = (blocks.len() >= 2).then(|| {
-                    let k = blocks.len() as f64;
-                    let mean = blocks.iter().sum::<f64>() / k;
-                    (blocks.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (k - 1.0) / k)
-                        .sqrt()
-                });
-                moments.push(MomentRow {
-                    order: m as u32 + 1,
-                    value,
-                    sem,
-                });
-            }
-        }
-        let mut histograms = Vec::new();
-        if let Some(h) = &s.hist {
-            let total: u64 = s.counts.iter().sum();
-            let width = (h.range[1] - h.range[0]) / h.bins as f64;
-            for j in 0..h.bins as usize {
-                let lo = h.range[0] + j as f64 * width;
-                histograms.push(HistRow {
-                    kind: "velocity".into(),
-                    h: 0,
-                    lo,
-                    hi: lo + width,
-                    count: s.counts[j],
-                    density: Some(s.counts[j] as f64 / (total.max(1) as f64 * width)),
-                });
-            }
-            histograms.push(HistRow {
-                kind: "velocity".into(),
-                h: 0,
-                lo: f64::NEG_INFINITY,
-                hi: h.range[0],
-                count: s.counts[h.bins as usize],
-                density: None,
-            });
-            histograms.push(HistRow {
-                kind: "velocity".into(),
-                h: 0,
-                lo: h.range[1],
-                hi: f64::INFINITY,
-                count: s.counts[h.bins as usize + 1],
-                density: None,
-            });
-        }
+        let temperature_blocks = s.temperature_block_rows();
+        let moments = s.moment_rows();
+        let mut histograms = s.velocity_histogram_rows();
         let mut neighbour_moments = Vec::new();
         if let Some(a) = &s.neighbours {
             let (h, m) = a.rows(s.samples_total);

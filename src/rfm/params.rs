@@ -258,7 +258,22 @@ impl RfmConfig {
     /// Every violated rule, each message starting with the field's name.
     pub fn validate(&self) -> Result<(), Vec<String>> {
         let mut e = Vec::new();
-        let pos = |x: f64| x.is_finite() && x > 0.0;
+        self.check_particles(&mut e);
+        self.check_box(&mut e);
+        if e.is_empty() {
+            self.check_initial_bed(&mut e);
+        }
+        self.check_run(&mut e);
+        if e.is_empty() {
+            Ok(())
+        } else {
+            Err(e)
+        }
+    }
+
+    /// The rules of the dimension, the particles and their contacts (radius, mass, spring,
+    /// noise, restitution, friction), into `e`.
+    fn check_particles(&self, e: &mut Vec<String>) {
         if self.dim != 1 && self.dim != 2 {
             e.push(format!("dim: must be 1 or 2, got {}", self.dim));
         }
@@ -270,18 +285,17 @@ impl RfmConfig {
             ("mass", self.mass),
             ("spring_constant", self.spring_constant),
         ] {
-            if !pos(v) {
+            if !positive(v) {
                 e.push(format!("{name}: must be finite and > 0, got {v}"));
             }
         }
         if !(self.noise_strength.is_finite() && self.noise_strength >= 0.0) {
             e.push("noise_strength: must be finite and >= 0".into());
         }
-        let eps_ok = |x: f64| x > 0.0 && x <= 1.0;
-        if !eps_ok(self.restitution_normal) {
+        if !restitution_ok(self.restitution_normal) {
             e.push("restitution_normal: must lie in (0, 1]".into());
         }
-        if !eps_ok(self.restitution_tangential) {
+        if !restitution_ok(self.restitution_tangential) {
             e.push("restitution_tangential: must lie in (0, 1]".into());
         }
         if self.dim == 1 && self.restitution_tangential != 1.0 {
@@ -295,6 +309,11 @@ impl RfmConfig {
                 e.push("friction: not used in 1D".into());
             }
         }
+    }
+
+    /// The rules of the box: exactly one of box_length, packing_fraction (2D) and
+    /// reduced_length (1D), each in its range, into `e`.
+    fn check_box(&self, e: &mut Vec<String>) {
         let given = [
             self.box_length.is_some(),
             self.packing_fraction.is_some(),
@@ -322,44 +341,51 @@ impl RfmConfig {
             }
         }
         if let Some(lr) = self.reduced_length {
-            if !pos(lr) {
+            if !positive(lr) {
                 e.push("reduced_length: must be > 0".into());
             }
         }
         if let Some(l) = self.box_length {
-            if !pos(l) {
+            if !positive(l) {
                 e.push("box_length: must be > 0".into());
             }
         }
-        if e.is_empty() {
-            let l = self.box_length();
-            if self.dim == 1 && l <= self.n_particles as f64 * self.diameter() {
-                e.push("box_length: 1D ring shorter than N d".into());
-            }
-            if self.dim == 2 && l < 3.0 * self.diameter() {
-                e.push("box_length: must be at least 3 diameters".into());
-            }
-            // The initial layout must hold the discs (the run's start fails otherwise).
-            let field = if self.packing_fraction.is_some() {
-                "packing_fraction"
-            } else {
-                "box_length"
-            };
-            let phi =
-                self.n_particles as f64 * std::f64::consts::PI * self.radius.powi(2) / (l * l);
-            if let Some(sites) = self.lattice_sites() {
-                if sites < self.n_particles {
-                    e.push(format!(
-                        "{field}: {} discs do not fit the {:?} bed of this box ({sites} sites at spacing d (1 + 1e-3); packing fraction {phi:.3})",
-                        self.n_particles, self.initial_layout
-                    ));
-                }
-            } else if self.dim == 2 && phi > UNIFORM_MAX_PACKING {
+    }
+
+    /// With every other rule of the particles and the box met: the box holds the particles
+    /// (1D ring longer than N d, 2D box at least 3 diameters) and their initial layout, into `e`.
+    fn check_initial_bed(&self, e: &mut Vec<String>) {
+        let l = self.box_length();
+        if self.dim == 1 && l <= self.n_particles as f64 * self.diameter() {
+            e.push("box_length: 1D ring shorter than N d".into());
+        }
+        if self.dim == 2 && l < 3.0 * self.diameter() {
+            e.push("box_length: must be at least 3 diameters".into());
+        }
+        // The initial layout must hold the discs (the run's start fails otherwise).
+        let field = if self.packing_fraction.is_some() {
+            "packing_fraction"
+        } else {
+            "box_length"
+        };
+        let phi = self.n_particles as f64 * std::f64::consts::PI * self.radius.powi(2) / (l * l);
+        if let Some(sites) = self.lattice_sites() {
+            if sites < self.n_particles {
                 e.push(format!(
-                    "{field}: packing fraction {phi:.3} is more than the uniform (random sequential) layout can reach ({UNIFORM_MAX_PACKING}: it jams at ~0.547): use initial_layout square or hexagonal"
+                    "{field}: {} discs do not fit the {:?} bed of this box ({sites} sites at spacing d (1 + 1e-3); packing fraction {phi:.3})",
+                    self.n_particles, self.initial_layout
                 ));
             }
+        } else if self.dim == 2 && phi > UNIFORM_MAX_PACKING {
+            e.push(format!(
+                "{field}: packing fraction {phi:.3} is more than the uniform (random sequential) layout can reach ({UNIFORM_MAX_PACKING}: it jams at ~0.547): use initial_layout square or hexagonal"
+            ));
         }
+    }
+
+    /// The rules of the run: the particle count's bound, the time step (below half the
+    /// contact time), warmup, duration, sampling and the 1D layout, into `e`.
+    fn check_run(&self, e: &mut Vec<String>) {
         if self.n_particles > MAX_PARTICLES {
             e.push(format!(
                 "n_particles: at most {MAX_PARTICLES} (particle indices are 32-bit), got {}",
@@ -367,9 +393,11 @@ impl RfmConfig {
             ));
         }
         if let Some(dt) = self.dt {
-            if !pos(dt) {
+            if !positive(dt) {
                 e.push("dt: must be > 0".into());
-            } else if pos(self.spring_constant) && pos(self.mass) && eps_ok(self.restitution_normal)
+            } else if positive(self.spring_constant)
+                && positive(self.mass)
+                && restitution_ok(self.restitution_normal)
             {
                 if dt >= 0.5 * self.damped_contact_time() {
                     e.push("dt: must be below half the contact time pi/omega_d".into());
@@ -388,12 +416,17 @@ impl RfmConfig {
         if self.dim == 1 && self.initial_layout != InitialLayout::Uniform {
             e.push("initial_layout: 1D supports only uniform (evenly spaced)".into());
         }
-        if e.is_empty() {
-            Ok(())
-        } else {
-            Err(e)
-        }
     }
+}
+
+/// Finite and > 0.
+fn positive(x: f64) -> bool {
+    x.is_finite() && x > 0.0
+}
+
+/// A restitution coefficient: in (0, 1].
+fn restitution_ok(x: f64) -> bool {
+    x > 0.0 && x <= 1.0
 }
 
 #[cfg(test)]

@@ -183,77 +183,112 @@ fn time_figures(
 ) -> Vec<(String, Figure)> {
     let all: Vec<u32> = species.keys().copied().collect();
     let shown = shown_species(&all);
-    let mut figs = Vec::new();
     let mut temp = Vec::new();
     let mut msd = Vec::new();
     for k in &shown {
-        let rows = &species[k];
-        temp.push(Series {
-            label: format!("T_{k} (DSMC)"),
-            points: rows
-                .iter()
-                .filter(|r| r.t > 0.0)
-                .map(|r| (r.t, r.temperature, r.temperature_sem))
-                .collect(),
-            line: false,
-        });
-        if rows.iter().any(|r| r.msd.is_some()) {
-            msd.push(Series {
-                label: format!("<R_{k}^2> (DSMC)"),
-                points: rows
-                    .iter()
-                    .filter(|r| r.t > 0.0 && r.msd.is_some_and(|m| m > 0.0))
-                    .map(|r| (r.t, r.msd.unwrap_or(0.0), r.msd_sem))
-                    .collect(),
-                line: false,
-            });
-        }
+        let (t, m) = measured_time_series(*k, &species[k]);
+        temp.push(t);
+        msd.extend(m);
         if let Some(tr) = th.and_then(|m| m.get(k)) {
-            temp.push(Series {
-                label: format!("T_{k} (theory)"),
-                points: tr
-                    .iter()
-                    .filter(|r| r.t > 0.0)
-                    .map(|r| (r.t, r.temperature, 0.0))
-                    .collect(),
-                line: true,
-            });
-            if tr.iter().any(|r| r.temperature_sonine.is_some()) {
-                temp.push(Series {
-                    label: format!("T_{k} (Sonine)"),
-                    points: tr
-                        .iter()
-                        .filter(|r| r.t > 0.0 && r.temperature_sonine.is_some_and(|x| x > 0.0))
-                        .map(|r| (r.t, r.temperature_sonine.unwrap_or(0.0), 0.0))
-                        .collect(),
-                    line: true,
-                });
-            }
-            if tr.iter().any(|r| r.msd.is_some()) && !msd.is_empty() {
-                msd.push(Series {
-                    label: format!("<R_{k}^2> (theory)"),
-                    points: tr
-                        .iter()
-                        .filter(|r| r.t > 0.0 && r.msd.is_some_and(|m| m > 0.0))
-                        .map(|r| (r.t, r.msd.unwrap_or(0.0), 0.0))
-                        .collect(),
-                    line: true,
-                });
-                if tr.iter().any(|r| r.msd_sonine.is_some()) {
-                    msd.push(Series {
-                        label: format!("<R_{k}^2> (Sonine)"),
-                        points: tr
-                            .iter()
-                            .filter(|r| r.t > 0.0 && r.msd_sonine.is_some_and(|m| m > 0.0))
-                            .map(|r| (r.t, r.msd_sonine.unwrap_or(0.0), 0.0))
-                            .collect(),
-                        line: true,
-                    });
-                }
+            temp.extend(theory_temperature_series(*k, tr));
+            // Theory MSD lines only once some shown species has measured MSD.
+            if !msd.is_empty() {
+                msd.extend(theory_msd_series(*k, tr));
             }
         }
     }
-    figs.push((
+    time_figure_pair(point, temp, msd, title)
+}
+
+/// The measured series of species `k` (times t > 0): T_k with its sem, and <R_k^2> with its
+/// sem (positive values only) where the rows have MSD.
+fn measured_time_series(k: u32, rows: &[SummaryPoint]) -> (Series, Option<Series>) {
+    let temp = Series {
+        label: format!("T_{k} (DSMC)"),
+        points: rows
+            .iter()
+            .filter(|r| r.t > 0.0)
+            .map(|r| (r.t, r.temperature, r.temperature_sem))
+            .collect(),
+        line: false,
+    };
+    let msd = rows.iter().any(|r| r.msd.is_some()).then(|| Series {
+        label: format!("<R_{k}^2> (DSMC)"),
+        points: rows
+            .iter()
+            .filter(|r| r.t > 0.0 && r.msd.is_some_and(|m| m > 0.0))
+            .map(|r| (r.t, r.msd.unwrap_or(0.0), r.msd_sem))
+            .collect(),
+        line: false,
+    });
+    (temp, msd)
+}
+
+/// The theory lines of T_k(t) of species `k` (times t > 0): the Maxwellian one, and the
+/// Sonine one (positive values) where the theory rows have it.
+fn theory_temperature_series(k: u32, tr: &[TheoryPoint]) -> Vec<Series> {
+    let mut out = vec![Series {
+        label: format!("T_{k} (theory)"),
+        points: tr
+            .iter()
+            .filter(|r| r.t > 0.0)
+            .map(|r| (r.t, r.temperature, 0.0))
+            .collect(),
+        line: true,
+    }];
+    if tr.iter().any(|r| r.temperature_sonine.is_some()) {
+        out.push(Series {
+            label: format!("T_{k} (Sonine)"),
+            points: tr
+                .iter()
+                .filter(|r| r.t > 0.0 && r.temperature_sonine.is_some_and(|x| x > 0.0))
+                .map(|r| (r.t, r.temperature_sonine.unwrap_or(0.0), 0.0))
+                .collect(),
+            line: true,
+        });
+    }
+    out
+}
+
+/// The theory lines of <R_k^2(t)> of species `k` (times t > 0, positive values): none where
+/// the theory rows have no MSD, else the Maxwellian one and the Sonine one where they have it.
+fn theory_msd_series(k: u32, tr: &[TheoryPoint]) -> Vec<Series> {
+    let mut out = Vec::new();
+    if !tr.iter().any(|r| r.msd.is_some()) {
+        return out;
+    }
+    out.push(Series {
+        label: format!("<R_{k}^2> (theory)"),
+        points: tr
+            .iter()
+            .filter(|r| r.t > 0.0 && r.msd.is_some_and(|m| m > 0.0))
+            .map(|r| (r.t, r.msd.unwrap_or(0.0), 0.0))
+            .collect(),
+        line: true,
+    });
+    if tr.iter().any(|r| r.msd_sonine.is_some()) {
+        out.push(Series {
+            label: format!("<R_{k}^2> (Sonine)"),
+            points: tr
+                .iter()
+                .filter(|r| r.t > 0.0 && r.msd_sonine.is_some_and(|m| m > 0.0))
+                .map(|r| (r.t, r.msd_sonine.unwrap_or(0.0), 0.0))
+                .collect(),
+            line: true,
+        });
+    }
+    out
+}
+
+/// The log-log figures `point-<point>-temperature` of `temp` and, when there is any,
+/// `point-<point>-msd` of `msd` (legend at the bottom: growing curves).
+fn time_figure_pair(
+    point: u32,
+    temp: Vec<Series>,
+    msd: Vec<Series>,
+    title: &dyn Fn(&str) -> String,
+) -> Vec<(String, Figure)> {
+    let mut figs = vec![(
         format!("point-{point:04}-temperature"),
         Figure {
             title: title("temperatures"),
@@ -266,7 +301,7 @@ fn time_figures(
             references_from: None,
             heatmap: None,
         },
-    ));
+    )];
     if !msd.is_empty() {
         figs.push((
             format!("point-{point:04}-msd"),

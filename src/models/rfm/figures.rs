@@ -237,11 +237,18 @@ type LineOf<'a> = dyn Fn(u32, &[(f64, f64, f64)]) -> Option<(String, Rows)> + 'a
 const NO_LINE: &LineOf<'static> = &|_, _| None;
 const NO_REFS: &dyn Fn(f64, f64) -> Vec<Series> = &|_, _| Vec::new();
 
-/// The standard figures of a campaign (data only; `plot` draws them).
-pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
-    let name = c.name;
-    let mut figs = Vec::new();
-    let overlay = |id, what, x_label, y_label, (log_x, log_y)| Overlay {
+/// The figures of a campaign's points, as `Vec<(id, figure)>`.
+type Figs = Vec<(String, Figure)>;
+
+/// An overlay's description with a legend at the top.
+fn overlay<'a>(
+    id: &'a str,
+    what: &'a str,
+    x_label: &'a str,
+    y_label: &'a str,
+    (log_x, log_y): (bool, bool),
+) -> Overlay<'a> {
+    Overlay {
         id,
         what,
         x_label,
@@ -249,8 +256,12 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         log_x,
         log_y,
         legend_low: false,
-    };
+    }
+}
 
+/// The standard figures of a campaign (data only; `plot` draws them).
+pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
+    let mut figs = Vec::new();
     let ts = timeseries(&c.data.read(RFM_TIMESERIES_SUMMARY)?)?;
     // <T> per point: the mean of the series (what the Gaussian references use).
     let mean_t: BTreeMap<u32, f64> = ts
@@ -258,9 +269,18 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         .filter(|(_, v)| !v.is_empty())
         .map(|(&p, v)| (p, v.iter().map(|r| r.1).sum::<f64>() / v.len() as f64))
         .collect();
+    figs.extend(temperature_figures(c, &ts));
+    figs.extend(moment_figures(c)?);
+    figs.extend(histogram_figures(c, &mean_t)?);
+    figs.extend(structure_figures(c)?);
+    Ok(figs)
+}
+
+/// `temperature`: T(t) of each point, at most `MAX_TIMES` times shown.
+fn temperature_figures(c: View, ts: &PerPoint) -> Figs {
     let shown: PerPoint = ts.iter().map(|(&p, v)| (p, thin(v, MAX_TIMES))).collect();
-    figs.extend(overlay_figures(
-        name,
+    overlay_figures(
+        c.name,
         &overlay(
             "temperature",
             "granular temperature T(t)",
@@ -270,12 +290,15 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         ),
         curves(c, &shown, NO_LINE),
         NO_REFS,
-    ));
+    )
+}
 
+/// `velocity-moments`: the moments over the Gaussian's against m, reference line 1.
+fn moment_figures(c: View) -> Result<Figs, StoreError> {
     let mo = moments(&c.data.read(RFM_MOMENTS_SUMMARY)?)?;
     let ratios: PerPoint = mo.iter().map(|(&p, v)| (p, moment_ratios(v))).collect();
-    figs.extend(overlay_figures(
-        name,
+    Ok(overlay_figures(
+        c.name,
         &overlay(
             "velocity-moments",
             "velocity moments over the Gaussian's",
@@ -285,8 +308,14 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         ),
         curves(c, &ratios, NO_LINE),
         &|x0, x1| level("Gaussian", 1.0, x0, x1),
-    ));
+    ))
+}
 
+/// The figures of the histogram summary: P(v) with the Gaussian of variance <T>/d (`mean_t`:
+/// <T> per point), P(v_0), P_l(l) and G_1(R).
+fn histogram_figures(c: View, mean_t: &BTreeMap<u32, f64>) -> Result<Figs, StoreError> {
+    let name = c.name;
+    let mut figs = Vec::new();
     let hist = histograms(&c.data.read(RFM_HISTOGRAMS_SUMMARY)?)?;
     let kind = |k: &str, h: u32| -> PerPoint {
         hist.iter()
@@ -315,43 +344,52 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         curves(c, &kind("velocity", 0), &gauss),
         NO_REFS,
     ));
-    figs.extend(overlay_figures(
-        name,
-        &overlay(
+    // The other histograms, drawn without a line: (kind, histogram, id, title, x, y, log x).
+    let plain = [
+        (
+            "post_collision_velocity",
+            0,
             "post-collision-velocity-distribution",
             "post-collision velocity P(v_0)",
             "v_0 (m/s)",
             "P(v_0) (s/m)",
-            (false, true),
+            false,
         ),
-        curves(c, &kind("post_collision_velocity", 0), NO_LINE),
-        NO_REFS,
-    ));
-    figs.extend(overlay_figures(
-        name,
-        &overlay(
+        (
+            "free_path",
+            0,
             "free-path-distribution",
             "free paths P_l(l)",
             "l (m)",
             "P_l (1/m)",
-            (true, true),
+            true,
         ),
-        curves(c, &kind("free_path", 0), NO_LINE),
-        NO_REFS,
-    ));
-    figs.extend(overlay_figures(
-        name,
-        &overlay(
+        (
+            "neighbour_distance",
+            1,
             "neighbour-distance-distribution",
             "nearest-neighbour distances G_1(R)",
             "R (m, reduced)",
             "G_1(R) (1/m)",
-            (true, true),
+            true,
         ),
-        curves(c, &kind("neighbour_distance", 1), NO_LINE),
-        NO_REFS,
-    ));
+    ];
+    for (k, h, id, what, x_label, y_label, log_x) in plain {
+        figs.extend(overlay_figures(
+            name,
+            &overlay(id, what, x_label, y_label, (log_x, true)),
+            curves(c, &kind(k, h), NO_LINE),
+            NO_REFS,
+        ));
+    }
+    Ok(figs)
+}
 
+/// `structure-factor` S(k) (log-binned for display, reference S = 1) and
+/// `radial-distribution` g(R) (reference g = 1).
+fn structure_figures(c: View) -> Result<Figs, StoreError> {
+    let name = c.name;
+    let mut figs = Vec::new();
     let sk = structure_factor(&c.data.read(RFM_STRUCTURE_FACTOR_SUMMARY)?)?;
     let sk_shown: PerPoint = sk
         .iter()
