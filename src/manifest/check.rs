@@ -3,10 +3,8 @@
 //! models' own checks among them), every error at once, each once, with its JSON path.
 //! `validate`, `plan`, `run`, `theory`, `submit` and growth all go through [`check`].
 
-use std::path::Path;
-
 use super::expand::{expand, Expansion};
-use super::validate::{parse, pruned, read, ManifestError, ManifestErrors};
+use super::validate::{parse, pruned, ManifestError, ManifestErrors};
 use super::Manifest;
 
 /// The one validation pass of a manifest, shared by `validate`, `plan`, `run` and every
@@ -18,11 +16,6 @@ pub fn check(text: &str, file: &str) -> Result<(Manifest, Expansion), ManifestEr
     let manifest = parse(text, file).map_err(|e| with_checks_beside(text, e))?;
     let expansion = expand(&manifest).map_err(|errs| ManifestErrors::of_pairs(file, errs))?;
     Ok((manifest, expansion))
-}
-
-/// [`check`] of the manifest file at `path`.
-pub fn load(path: &Path) -> Result<(Manifest, Expansion), ManifestErrors> {
-    check(&read(path)?, &path.display().to_string())
 }
 
 /// Every error at once: where the schema found errors in `params`, the checks it cannot
