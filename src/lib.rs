@@ -21,6 +21,7 @@ pub mod analysis;
 pub mod aux_models;
 pub mod campaign;
 pub mod cli;
+pub mod derived;
 pub mod dsmc;
 pub mod exit_codes;
 pub mod fsutil;

@@ -258,5 +258,111 @@ fn runs_errors(m: &Manifest) -> Vec<(String, String)> {
             }
         }
     }
+    errors.extend(target_errors(m));
+    errors
+}
+
+/// A derived quantity's name: it becomes column names (`NAME`, `NAME_mean`, ...).
+fn valid_derived_name(name: &str) -> bool {
+    let mut chars = name.chars();
+    matches!(chars.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && name.len() <= 64
+}
+
+/// `derived` names, `target` against `derived`, the replica bounds and what goes with a
+/// target (not `replicas` or `seeds`), `min_replicas`/`max_replicas`/`max_core_hours`
+/// only with a target.
+fn target_errors(m: &Manifest) -> Vec<(String, String)> {
+    let mut errors = Vec::new();
+    for name in m.derived.keys() {
+        if !valid_derived_name(name) {
+            errors.push((
+                format!("/derived/{}", super::sweep::pointer_escape(name)),
+                format!("derived quantity name {name:?}: expected letters, digits and `_` (not starting with a digit, at most 64 characters)"),
+            ));
+        }
+    }
+    if m.target.is_empty() {
+        for (key, given) in [
+            ("min_replicas", m.min_replicas.is_some()),
+            ("max_replicas", m.max_replicas.is_some()),
+            ("max_core_hours", m.max_core_hours.is_some()),
+        ] {
+            if given {
+                errors.push((
+                    format!("/{key}"),
+                    format!("`{key}` goes with `target` (error targets), which this manifest does not have"),
+                ));
+            }
+        }
+        return errors;
+    }
+    for (key, given) in [("replicas", m.replicas.is_some()), ("seeds", m.seeds.is_some())] {
+        if given {
+            errors.push((
+                format!("/{key}"),
+                format!("a campaign with `target` decides its replicas (from `min_replicas` up to `max_replicas`); leave out `{key}`"),
+            ));
+        }
+    }
+    if m.min_replicas() > m.max_replicas() {
+        errors.push((
+            "/max_replicas".into(),
+            format!(
+                "max_replicas {} is below min_replicas {}",
+                m.max_replicas(),
+                m.min_replicas()
+            ),
+        ));
+    }
+    if let Some(h) = m.max_core_hours {
+        if !(h.is_finite() && h > 0.0) {
+            errors.push(("/max_core_hours".into(), format!("expected a positive number of core-hours, got {h}")));
+        }
+    }
+    let mut seen = HashSet::new();
+    for (i, t) in m.target.iter().enumerate() {
+        let at = |k: &str| format!("/target/{i}/{k}");
+        if !m.derived.contains_key(&t.quantity) {
+            let known: Vec<&str> = m.derived.keys().map(String::as_str).collect();
+            errors.push((
+                at("quantity"),
+                if known.is_empty() {
+                    format!("unknown quantity {:?}: a target is set on a derived quantity, and `derived` declares none", t.quantity)
+                } else {
+                    format!("unknown quantity {:?}: expected one of the derived quantities {known:?}", t.quantity)
+                },
+            ));
+        }
+        if t.sem_rel.is_none() && t.sem_abs.is_none() {
+            errors.push((
+                format!("/target/{i}"),
+                "give the goal: `sem_rel` (standard error relative to |mean|) or `sem_abs` (absolute), or both".into(),
+            ));
+        }
+        for (k, v) in [("sem_rel", t.sem_rel), ("sem_abs", t.sem_abs)] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v > 0.0) {
+                    errors.push((at(k), format!("expected a positive number, got {v}")));
+                }
+            }
+        }
+        match t.t {
+            crate::manifest::TargetTime::At(x) | crate::manifest::TargetTime::After(x)
+                if !x.is_finite() =>
+            {
+                errors.push((at("t"), format!("expected a finite time, got {x}")));
+            }
+            _ => {}
+        }
+        let key = format!("{}\u{1f}{:?}", t.quantity, t.t);
+        if !seen.insert(key) {
+            errors.push((
+                format!("/target/{i}"),
+                format!("a second target on {:?} at the same time: give one, with both goals if need be", t.quantity),
+            ));
+        }
+    }
     errors
 }

@@ -49,7 +49,76 @@ pub struct Manifest {
     #[serde(default)]
     #[schemars(with = "std::collections::BTreeMap<String, SweepValues>")]
     pub sweep: Map<String, Value>,
+    /// Derived quantities: a name (letters, digits, `_`) -> an expression over the columns of
+    /// the model's run tables, computed per run from that run's rows (`derived`: one column
+    /// per quantity; `derived_summary`: mean, standard error and n over the replicas), e.g.
+    /// `"gamma": "temperature[species=1] / temperature[species=0]"`. See README "Derived
+    /// quantities".
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub derived: std::collections::BTreeMap<String, String>,
+    /// Error targets on derived quantities: replicas are added in rounds until every target
+    /// is met (or `max_replicas`/`max_core_hours` stops it). Not with `replicas` or `seeds`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub target: Vec<Target>,
+    /// With `target`: the pilot replicas of every point (default 4, at least 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u32", range(min = 2))]
+    pub min_replicas: Option<u32>,
+    /// With `target`: the most replicas of any point (default 10000).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u32", range(min = 2))]
+    pub max_replicas: Option<u32>,
+    /// With `target`: the campaign's budget in estimated core-hours (the models' cost
+    /// estimates): no round is started that would exceed it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "f64", range(min = 0.0))]
+    pub max_core_hours: Option<f64>,
 }
+
+/// An error target on a derived quantity.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Target {
+    /// A derived quantity (a key of `derived`).
+    pub quantity: String,
+    /// Where the target holds: `"t_end"` (the last output time, the default; a quantity
+    /// without time: its one value), `{"at": t}` (the output time t), `{"after": t0}` (every
+    /// output time at or after t0).
+    #[serde(default, skip_serializing_if = "TargetTime::is_end")]
+    pub t: TargetTime,
+    /// The goal for the standard error of the mean over the replicas, relative to |mean|.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "f64", range(min = 0.0))]
+    pub sem_rel: Option<f64>,
+    /// The goal for the standard error of the mean, absolute.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "f64", range(min = 0.0))]
+    pub sem_abs: Option<f64>,
+}
+
+/// Where a target holds.
+#[derive(Serialize, Deserialize, JsonSchema, Clone, Copy, Debug, PartialEq, Default)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum TargetTime {
+    /// The last output time.
+    #[default]
+    TEnd,
+    /// The output time t.
+    At(f64),
+    /// Every output time at or after t0.
+    After(f64),
+}
+
+impl TargetTime {
+    pub fn is_end(&self) -> bool {
+        matches!(self, TargetTime::TEnd)
+    }
+}
+
+/// Default pilot replicas of a target campaign.
+pub const DEFAULT_MIN_REPLICAS: u32 = 4;
+/// Default most replicas per point of a target campaign.
+pub const DEFAULT_MAX_REPLICAS: u32 = 10_000;
 
 /// A non-empty list of values for one swept parameter.
 #[derive(JsonSchema)]
@@ -58,11 +127,28 @@ struct SweepValues(#[schemars(length(min = 1))] Vec<Value>);
 
 impl Manifest {
     /// The runs each point asks for: `replicas` (default 1) or the given `seeds`.
+    /// With `target`: `min_replicas` (the pilot), the rounds add more per point.
     pub fn runs_per_point(&self) -> RunsPerPoint {
         match &self.seeds {
             Some(s) => RunsPerPoint::Seeds(s.clone()),
+            None if self.has_targets() => RunsPerPoint::Replicas(self.min_replicas()),
             None => RunsPerPoint::Replicas(self.replicas.unwrap_or(1)),
         }
+    }
+
+    /// Whether the campaign adds replicas in rounds until its error targets are met.
+    pub fn has_targets(&self) -> bool {
+        !self.target.is_empty()
+    }
+
+    /// The pilot replicas of a target campaign.
+    pub fn min_replicas(&self) -> u32 {
+        self.min_replicas.unwrap_or(DEFAULT_MIN_REPLICAS)
+    }
+
+    /// The most replicas per point of a target campaign.
+    pub fn max_replicas(&self) -> u32 {
+        self.max_replicas.unwrap_or(DEFAULT_MAX_REPLICAS)
     }
 
     /// The campaign's identity: what a campaign directory keeps for ever (name, model, seed),

@@ -132,6 +132,19 @@ pub trait Model {
     fn valued_columns(_p: &Self::Params) -> Vec<(&'static str, &'static str)> {
         Vec::new()
     }
+    /// Every run table the model can write (name and Arrow schema, from its declarations),
+    /// whatever the observables: what a derived quantity of the manifest may read. None by
+    /// default (no derived quantity).
+    fn run_tables() -> Vec<(&'static str, arrow_schema::SchemaRef)> {
+        Vec::new()
+    }
+    /// The CPU seconds one run of `p` is expected to take on the reference machine (the
+    /// model's cost model from its parameters: DSMC particles x collisions x time, MD
+    /// particles x steps, ...; a deterministic function of `p`, so that decisions taken from
+    /// it are the same on every machine). 1 by default.
+    fn cost(_p: &Self::Params) -> f64 {
+        1.0
+    }
     /// The model's kinetic-theory tables (they depend only on the manifest); none by default.
     fn theory_tables(_points: &[&Self::Params]) -> Vec<&'static str> {
         Vec::new()
@@ -331,6 +344,13 @@ macro_rules! models {
                 }
             }
 
+            /// See [`Model::run_tables`].
+            pub fn run_tables(self) -> Vec<(&'static str, arrow_schema::SchemaRef)> {
+                match self {
+                    $(ModelKind::$variant => <$model as Model>::run_tables(),)+
+                }
+            }
+
             /// See [`Model::theory_tables`].
             pub fn theory_tables(self, points: &[&ModelParams]) -> Vec<&'static str> {
                 match self {
@@ -421,6 +441,13 @@ macro_rules! models {
             pub fn memory(&self) -> u64 {
                 match self {
                     $(ModelParams::$variant(p) => <$model as Model>::memory(p),)+
+                }
+            }
+
+            /// See [`Model::cost`].
+            pub fn cost(&self) -> f64 {
+                match self {
+                    $(ModelParams::$variant(p) => <$model as Model>::cost(p),)+
                 }
             }
 
