@@ -856,6 +856,8 @@ pub enum Purpose {
     Upgrade,
     /// `granular theory` writing kinetic-theory tables.
     Theory,
+    /// The next round of replicas of an error-target campaign being decided.
+    Round,
 }
 
 impl Purpose {
@@ -865,6 +867,7 @@ impl Purpose {
             Purpose::Growth => "a change of the campaign's manifest (`granular run` or `submit` with a new manifest)",
             Purpose::Upgrade => "an upgrade (`granular upgrade`)",
             Purpose::Theory => "the kinetic-theory tables (`granular theory`)",
+            Purpose::Round => "the decision of the next round of replicas (error targets)",
         }
     }
 }

@@ -29,6 +29,7 @@ pub mod resources;
 pub mod slurm;
 pub mod status;
 pub mod tables;
+pub mod targets;
 pub mod upgrade;
 pub mod verify;
 pub mod worker;
@@ -74,6 +75,9 @@ pub struct CampaignInfo {
     /// Every accepted manifest (the latest last).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub history: Vec<history::Accepted>,
+    /// The rounds of a campaign with error targets (`targets`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rounds: Option<targets::Rounds>,
 }
 
 impl From<LockError> for CampaignError {
@@ -128,6 +132,8 @@ pub struct Campaign {
     pub identity: String,
     /// Every accepted manifest.
     pub history: Vec<history::Accepted>,
+    /// The rounds decided (error targets; empty otherwise).
+    pub rounds: targets::Rounds,
 }
 
 /// `--out` must be a directory or not exist: a regular file, a dangling symbolic link or a
@@ -287,6 +293,7 @@ impl Campaign {
             manifest,
             plan,
             history: Vec::new(),
+            rounds: targets::Rounds::default(),
         }
     }
 
@@ -334,7 +341,8 @@ impl Campaign {
                 &|b, r| old_plan.seed(b, r),
             )
             .map_err(|errs| CampaignError::Refused(errs.join("; ")))?;
-        let plan = Plan::new(&manifest, expansion, registry)?;
+        let mut plan = Plan::new(&manifest, expansion, registry)?;
+        plan.decided = self.rounds.replicas.clone();
         self.refuse_missing_columns(&plan, &growth)?;
         self.plan = plan;
         self.manifest = manifest;
@@ -393,8 +401,18 @@ impl Campaign {
     /// alone makes the directory a campaign and holds the registry), then manifest.json.
     fn record(&mut self, text: &[u8], runs_added: u64) -> Result<(), CampaignError> {
         let entry = history::write(&self.root, self.history.len(), text, runs_added)?;
-        let mut history = self.history.clone();
-        history.push(entry);
+        self.history.push(entry);
+        if let Err(e) = self.write_info() {
+            self.history.pop();
+            return Err(e);
+        }
+        fsutil::write_atomic(&self.root.join("manifest.json"), text)
+            .map_err(|e| io_err(&self.root, e))
+    }
+
+    /// Write `campaign.json` (atomically: the commit point of the registry, the history and
+    /// the rounds) from this campaign as it is in memory. The caller holds the exclusive lock.
+    pub(crate) fn write_info(&self) -> Result<(), CampaignError> {
         let info = CampaignInfo {
             format_version: FORMAT_VERSION,
             code_version: CODE_VERSION.into(),
@@ -402,14 +420,12 @@ impl Campaign {
             n_runs: self.plan.n_runs(),
             manifest: serde_json::to_value(&self.manifest).expect("manifest serialises"),
             registry: Some(self.plan.registry.clone()),
-            history: history.clone(),
+            history: self.history.clone(),
+            rounds: (self.rounds != targets::Rounds::default()).then(|| self.rounds.clone()),
         };
         let info_path = self.root.join("campaign.json");
         let bytes = serde_json::to_vec_pretty(&info).expect("info serialises");
-        fsutil::write_atomic(&info_path, &bytes).map_err(|e| io_err(&info_path, e))?;
-        self.history = history;
-        fsutil::write_atomic(&self.root.join("manifest.json"), text)
-            .map_err(|e| io_err(&self.root, e))
+        fsutil::write_atomic(&info_path, &bytes).map_err(|e| io_err(&info_path, e))
     }
 
     /// `manifest.json` is written after campaign.json: a crash between the two leaves the
@@ -462,8 +478,19 @@ impl Campaign {
         let file = info_path.display().to_string();
         let manifest = crate::manifest::validate::parse(&manifest_text, &file)?;
         let expansion = plan::expand(&manifest).map_err(|e| corrupt(format!("{e:?}")))?;
-        let plan = Plan::new(&manifest, expansion, registry).map_err(|e| corrupt(e.to_string()))?;
+        let mut plan =
+            Plan::new(&manifest, expansion, registry).map_err(|e| corrupt(e.to_string()))?;
+        let rounds = info.rounds.unwrap_or_default();
+        if rounds != targets::Rounds::default() && rounds.format != targets::ROUNDS_FORMAT {
+            return Err(corrupt(format!(
+                "rounds of format {}, this granular reads {}",
+                rounds.format,
+                targets::ROUNDS_FORMAT
+            )));
+        }
+        plan.decided = rounds.replicas.clone();
         Ok(Campaign {
+            rounds,
             root: root.to_path_buf(),
             identity: manifest.identity(),
             manifest,
@@ -758,6 +785,11 @@ pub enum Event {
         seq: u64,
     },
     Warning {
+        message: String,
+    },
+    /// A round of an error-target campaign decided (`targets`): what it added, or why the
+    /// campaign ends.
+    Round {
         message: String,
     },
 }

@@ -47,6 +47,9 @@ pub struct Plan {
     /// Every registered point, indexed by `point_id`.
     pub points: Vec<Point>,
     pub registry: Registry,
+    /// A campaign with error targets: the replicas its rounds have decided per point (a
+    /// point not in it has the pilot, `runs_per_point`); empty otherwise.
+    pub decided: std::collections::BTreeMap<u32, u32>,
 }
 
 /// One run of the campaign.
@@ -154,6 +157,7 @@ impl Plan {
             sweep_keys: expansion.sweep_keys,
             points,
             registry,
+            decided: Default::default(),
         })
     }
 
@@ -205,11 +209,24 @@ impl Plan {
         }
     }
 
+    /// The replicas asked of a point with `replicas` (or error targets: the pilot, or what the
+    /// rounds decided), None with `seeds`.
+    pub fn replicas_of(&self, point_id: u32) -> Option<u32> {
+        match &self.runs_per_point {
+            RunsPerPoint::Replicas(n) => {
+                Some(self.decided.get(&point_id).copied().unwrap_or(*n).max(*n))
+            }
+            RunsPerPoint::Seeds(_) => None,
+        }
+    }
+
     /// Whether the latest manifest asks for this run.
     pub fn is_current(&self, r: &RunSpec) -> bool {
         self.points[r.point_id as usize].current
             && match &self.runs_per_point {
-                RunsPerPoint::Replicas(n) => r.replica < *n,
+                RunsPerPoint::Replicas(_) => {
+                    r.replica < self.replicas_of(r.point_id).unwrap_or(0)
+                }
                 RunsPerPoint::Seeds(s) => s.contains(&r.seed),
             }
     }
@@ -222,15 +239,24 @@ impl Plan {
             return None;
         }
         match &self.runs_per_point {
-            RunsPerPoint::Replicas(n) => (r.replica < *n).then_some(r.replica),
+            RunsPerPoint::Replicas(_) => {
+                (r.replica < self.replicas_of(r.point_id).unwrap_or(0)).then_some(r.replica)
+            }
             RunsPerPoint::Seeds(s) => s.iter().position(|x| *x == r.seed).map(|i| i as u32),
         }
     }
 
     /// The runs the latest manifest asks for per point (`replicas`, or the number of `seeds`).
+    /// (With error targets: the most any current point has.)
     pub fn runs_asked_per_point(&self) -> u32 {
         match &self.runs_per_point {
-            RunsPerPoint::Replicas(n) => *n,
+            RunsPerPoint::Replicas(n) => self
+                .points
+                .iter()
+                .filter(|p| p.current)
+                .filter_map(|p| self.replicas_of(p.point_id))
+                .max()
+                .unwrap_or(*n),
             RunsPerPoint::Seeds(s) => s.len() as u32,
         }
     }

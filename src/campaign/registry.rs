@@ -344,6 +344,36 @@ impl Registry {
             .collect()
     }
 
+    /// Register replicas `0..upto` of `point` that it lacks (a round of an error-target
+    /// campaign), after every existing run, with derived seeds (`SeedSource::Params`) and the
+    /// point's continuation (a longer point continues the same replicas of the shorter one
+    /// where that has them). The runs registered, in order, into `growth`.
+    pub fn add_replicas(&mut self, point: u32, upto: u32, growth: &mut Growth) {
+        let continues = self.blocks_of(point).find_map(|b| b.continues);
+        let mut r = 0;
+        while r < upto {
+            if self.run_of(point, r).is_some() {
+                r += 1;
+                continue;
+            }
+            let first = r;
+            while r < upto && self.run_of(point, r).is_none() {
+                r += 1;
+            }
+            self.push_block(
+                RunBlock {
+                    point,
+                    first_run: 0,
+                    first_replica: first,
+                    count: r - first,
+                    seeds: SeedSource::Params,
+                    continues,
+                },
+                growth,
+            );
+        }
+    }
+
     /// The run of `point` with replica `replica`.
     pub fn run_of(&self, point: u32, replica: u32) -> Option<u64> {
         self.blocks_of(point)

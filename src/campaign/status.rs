@@ -61,6 +61,9 @@ pub struct CampaignStatus {
     /// counts above are the ledger's. `granular resume` heals it.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub damage: Vec<String>,
+    /// A campaign with error targets: each target's error against its goal per point.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub targets: Option<super::targets::TargetsStatus>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -156,6 +159,11 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, CampaignError> {
             .collect(),
         points,
         slurm: super::slurm::submission_status(&c.root)?,
+        targets: if check.problems().is_empty() {
+            super::targets::status(c, &finished)
+        } else {
+            None
+        },
         damage: check.problems(),
     })
 }

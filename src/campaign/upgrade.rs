@@ -178,6 +178,7 @@ fn upgrade_format1(
         manifest: info.manifest.clone(),
         registry: Some(plan.registry),
         history: vec![first],
+        rounds: None,
     })
 }
 

@@ -60,6 +60,8 @@ impl Reporter for CliReporter {
                 pending,
             } => {
                 tracing::info!(total, already_finished = already, pending, "shard plan");
+                // Each round of an error-target campaign plans anew.
+                self.finished = 0;
                 if let Some(b) = &self.bar {
                     b.set_length(pending * 1000);
                     b.set_style(
@@ -112,6 +114,10 @@ impl Reporter for CliReporter {
                 tracing::info!(run_id, "run checkpointed and stopped");
             }
             Event::Committed { runs, seq } => tracing::debug!(runs, seq, "committed"),
+            Event::Round { message } => match &self.bar {
+                Some(b) => b.suspend(|| tracing::info!("{message}")),
+                None => tracing::info!("{message}"),
+            },
             Event::Warning { message } => match &self.bar {
                 Some(b) => b.suspend(|| tracing::warn!("{message}")),
                 None => tracing::warn!("{message}"),

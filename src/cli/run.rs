@@ -51,7 +51,7 @@ pub fn run(a: RunArgs) -> i32 {
             for n in &growth.notes {
                 tracing::warn!("{n}");
             }
-            execute(&c, opts, a.runtime.quiet)
+            execute(&c, opts, a.runtime.quiet, true)
         }
         Err(e) => report_error(e),
     }
@@ -63,7 +63,7 @@ pub fn resume(a: ResumeArgs) -> i32 {
     match Campaign::open(&a.dir) {
         Ok(c) => {
             crate::campaign::test_hook::pause("resume-opened");
-            execute(&c, opts, a.runtime.quiet)
+            execute(&c, opts, a.runtime.quiet, true)
         }
         Err(e) => report_error(e),
     }
@@ -81,11 +81,12 @@ pub(super) fn options(exec: &Execution, default_threads: usize, shard: Shard) ->
     }
 }
 
-/// Run the shard `opts.shard` of `c` to its end or an interruption; the exit code.
-pub(super) fn execute(c: &Campaign, opts: RunOptions, quiet: bool) -> i32 {
+/// Run the shard `opts.shard` of `c` to its end or an interruption, with the rounds of an
+/// error-target campaign where `decide` (`campaign::targets::run`); the exit code.
+pub(super) fn execute(c: &Campaign, opts: RunOptions, quiet: bool, decide: bool) -> i32 {
     tracing::info!(campaign = %c.manifest.name, dir = %c.root.display(), shard = %opts.shard, "starting");
     let mut reporter = CliReporter::new(quiet);
-    let result = campaign::dispatch::run(c, &opts, &mut reporter);
+    let result = campaign::targets::run(c, &opts, &mut reporter, decide);
     reporter.finish();
     match result {
         Ok(o) => summarise(c, &o),

@@ -91,5 +91,56 @@ fn write_text(out: &mut impl Write, s: &CampaignStatus) -> std::io::Result<()> {
         }
         writeln!(out)?;
     }
+    if let Some(t) = &s.targets {
+        write_targets(out, t)?;
+    }
     Ok(())
+}
+
+/// Per target and point: the error now against the goal, replicas done and expected.
+fn write_targets(
+    out: &mut impl Write,
+    t: &campaign::targets::TargetsStatus,
+) -> std::io::Result<()> {
+    let verdict = match t.verdict {
+        None => "pilot replicas running".to_string(),
+        Some(v) => format!("{v:?}").to_lowercase(),
+    };
+    writeln!(
+        out,
+        "  targets: {} round(s) decided, {verdict}{}",
+        t.rounds,
+        if t.why.is_empty() { String::new() } else { format!(": {}", t.why) }
+    )?;
+    if let Some(p) = &t.problem {
+        writeln!(out, "  targets cannot be judged: {p}")?;
+    }
+    for r in &t.rows {
+        let num = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.4e}"));
+        writeln!(
+            out,
+            "  point {:>4} {:<30} {}: n {:>4}/{:<4} (expected {:>4})  mean {}  sem {}  goal {}  {}{}",
+            r.point_id,
+            r.point,
+            r.target,
+            r.state.n,
+            r.replicas,
+            r.expected,
+            num(r.state.mean),
+            num(r.state.sem),
+            num(r.state.goal),
+            if r.state.met { "met" } else { "not met" },
+            r.state
+                .problem
+                .as_deref()
+                .map(|p| format!(" ({p})"))
+                .unwrap_or_default()
+        )?;
+    }
+    writeln!(
+        out,
+        "  estimated core-hours: {:.3} done, {:.3} left (the models' cost estimates)",
+        t.core_seconds_done / 3600.0,
+        t.core_seconds_left / 3600.0
+    )
 }

@@ -1,0 +1,771 @@
+//! Error targets: a campaign whose manifest has `target` runs its points' pilot replicas
+//! (`min_replicas`), then in rounds estimates each point's variance of every targeted derived
+//! quantity and its cost per run, and adds replicas where they are needed, until every target
+//! is met or `max_replicas`/`max_core_hours` stops it.
+//!
+//! **Deterministic and durable.** A round is decided only when every run the campaign asks
+//! for is committed, from those runs' committed rows alone (replica order), under the
+//! campaign's exclusive lock on `campaign.json` as read under it; the decision (the runs it
+//! adds to the registry, and the record of what it saw) is written with `campaign.json`
+//! atomically. So the replicas decided and every table are the same whatever the thread
+//! count, the sharding, an interruption (kill -9 at any moment: an unwritten decision is
+//! taken again, identically, from the same rows) or the machine. The costs are the models'
+//! estimates ([`crate::models::ModelParams::cost`], a function of the params), never a clock.
+//!
+//! **The rule.** For a point with n values of a quantity (sample standard deviation s), the
+//! goal g (`sem_abs`, `sem_rel` x |mean|, the smaller where both are given) is met when
+//! s / sqrt(n) <= g; the replicas it implies are n* = ceil(s^2 / g^2). An unmet point goes to
+//! min(4 n, ceil(0.95 n*)) (at least n + 1, at most `max_replicas`): at most four times as many
+//! per round while the variance is known from few replicas, and a little short of the
+//! estimate, so that the last round tops up rather than overshoots. Under a budget, the
+//! replicas that fit are given one at a time to the point where one more replica reduces the
+//! error (in units of its goal) most per estimated core-second.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use arrow_array::{Array, BooleanArray, RecordBatch, UInt64Array};
+use serde::{Deserialize, Serialize};
+
+use super::ledger::RunStatus;
+use super::registry::Growth;
+use super::{Campaign, CampaignError};
+use crate::derived::{self, Quantities, Series};
+use crate::manifest::{Target, TargetTime};
+
+/// Layout version of the [`Rounds`] record in `campaign.json`.
+pub const ROUNDS_FORMAT: u32 = 1;
+
+/// Growth of an unmet point per round, at most (times its replicas).
+const MAX_GROWTH_PER_ROUND: u32 = 4;
+/// An unmet point goes to this fraction of the replicas its variance implies (see the module).
+const AIM: f64 = 0.95;
+
+/// The rounds of an error-target campaign, in `campaign.json`.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
+pub struct Rounds {
+    pub format: u32,
+    /// The replicas decided per point (a point not here has the pilot).
+    pub replicas: BTreeMap<u32, u32>,
+    /// Every decision, in order.
+    pub decisions: Vec<Decision>,
+}
+
+/// One decision: what the committed runs showed, and what was added.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct Decision {
+    /// 1 for the decision after the pilot.
+    pub round: u32,
+    /// Runs registered by this decision.
+    pub runs_added: u64,
+    /// Their estimated cost (core-seconds of the models' cost estimates).
+    pub core_seconds_added: f64,
+    /// Estimated core-seconds of every run the campaign asks for after this decision.
+    pub core_seconds_total: f64,
+    pub points: Vec<PointState>,
+    /// `continue`, `met` (every target met), `stopped` (some not met, and nothing added).
+    pub verdict: Verdict,
+    /// Why it stopped, or what it added, in words.
+    pub why: String,
+}
+
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    Continue,
+    Met,
+    Stopped,
+}
+
+/// A point's targets as its committed runs show them.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct PointState {
+    pub point_id: u32,
+    /// Replicas asked when seen; `next`: after the decision.
+    pub replicas: u32,
+    pub next: u32,
+    /// Estimated core-seconds of one run.
+    pub cost: f64,
+    pub targets: Vec<TargetState>,
+}
+
+/// One target of one point: at the output time where it is furthest from its goal.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct TargetState {
+    /// Index into the manifest's `target`.
+    pub target: usize,
+    pub quantity: String,
+    /// The time (None: a quantity without time).
+    pub t: Option<f64>,
+    /// Values (replicas with a value there).
+    pub n: u32,
+    pub mean: Option<f64>,
+    pub sem: Option<f64>,
+    /// The standard error asked for (None: not known yet, e.g. `sem_rel` of no value).
+    pub goal: Option<f64>,
+    pub met: bool,
+    /// Replicas the variance implies (None with fewer than 2 values).
+    pub needed: Option<u32>,
+    /// Why it cannot be judged (no value, a run whose quantity could not be evaluated).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub problem: Option<String>,
+}
+
+impl TargetState {
+    /// sem / goal (1 = just met); None where either is unknown.
+    pub fn ratio(&self) -> Option<f64> {
+        match (self.sem, self.goal) {
+            (Some(s), Some(g)) if g > 0.0 => Some(s / g),
+            _ => None,
+        }
+    }
+}
+
+/// The derived quantities of a campaign, compiled against its model's run tables (the
+/// manifest was validated with them, so an error here is a corrupt campaign).
+pub fn quantities(c: &Campaign) -> Result<Quantities, CampaignError> {
+    derived::compile(&c.manifest.derived, &c.plan.model.run_tables()).map_err(|errs| {
+        CampaignError::Refused(format!(
+            "{}: the campaign's derived quantities do not compile: {errs:?}",
+            c.root.display()
+        ))
+    })
+}
+
+/// Per current point, per target, the state its finished runs show (`finished`: the
+/// ledger's finished runs). Runs not finished count as not there.
+pub fn evaluate(
+    c: &Campaign,
+    finished: &BTreeMap<u64, RunStatus>,
+) -> Result<Vec<PointState>, CampaignError> {
+    let m = &c.manifest;
+    let q = quantities(c)?;
+    // The finished (done) current runs, by point, in replica order.
+    let mut runs_of: BTreeMap<u32, Vec<(u32, u64)>> = BTreeMap::new();
+    let mut keep: BTreeSet<u64> = BTreeSet::new();
+    for r in c.plan.current_runs() {
+        if finished.get(&r.run_id) == Some(&RunStatus::Done) {
+            runs_of
+                .entry(r.point_id)
+                .or_default()
+                .push((r.replica, r.run_id));
+            keep.insert(r.run_id);
+        }
+    }
+    let data = c.data();
+    let mut rows: BTreeMap<&str, Vec<RecordBatch>> = BTreeMap::new();
+    for table in q.tables() {
+        let batches = if keep.is_empty() {
+            Vec::new()
+        } else {
+            data.read(table)
+                .map_err(|e| CampaignError::Io(e.to_string()))?
+                .iter()
+                .map(|b| only_runs(b, &keep))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| CampaignError::Refused(format!("{table}: {e}")))?
+        };
+        rows.insert(table, batches);
+    }
+    let (values, problem) = match q.eval(&rows) {
+        Ok(v) => (v, None),
+        Err(e) => (BTreeMap::new(), Some(e.to_string())),
+    };
+    let index: BTreeMap<&str, usize> = q
+        .list
+        .iter()
+        .enumerate()
+        .map(|(i, x)| (x.name.as_str(), i))
+        .collect();
+    let mut out = Vec::new();
+    for p in c.plan.points.iter().filter(|p| p.current) {
+        let replicas = c.plan.replicas_of(p.point_id).unwrap_or(0);
+        let runs = runs_of.get(&p.point_id).cloned().unwrap_or_default();
+        let targets = m
+            .target
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                let series: Vec<&Series> = runs
+                    .iter()
+                    .filter_map(|(_, run)| values.get(run))
+                    .filter_map(|per_q| index.get(t.quantity.as_str()).and_then(|&k| per_q.get(k)))
+                    .collect();
+                let mut s = target_state(i, t, &series);
+                if s.problem.is_none() && problem.is_some() && !runs.is_empty() {
+                    s.problem = problem.clone();
+                    s.met = false;
+                }
+                s
+            })
+            .collect();
+        out.push(PointState {
+            point_id: p.point_id,
+            replicas,
+            next: replicas,
+            cost: p.params.cost(),
+            targets,
+        });
+    }
+    Ok(out)
+}
+
+/// The rows of `b` (with a `run_id` column) of the runs in `keep`.
+fn only_runs(b: &RecordBatch, keep: &BTreeSet<u64>) -> Result<RecordBatch, String> {
+    let runs = b
+        .column_by_name("run_id")
+        .and_then(|c| c.as_any().downcast_ref::<UInt64Array>())
+        .ok_or("no run_id column of 64-bit unsigned integers")?;
+    let mask: BooleanArray = (0..runs.len())
+        .map(|i| Some(!runs.is_null(i) && keep.contains(&runs.value(i))))
+        .collect();
+    arrow_select::filter::filter_record_batch(b, &mask).map_err(|e| e.to_string())
+}
+
+/// The values of each run at the target's times, grouped by time (in replica order).
+fn at_times(t: &Target, series: &[&Series]) -> Vec<(Option<f64>, Vec<f64>)> {
+    let mut by_time: BTreeMap<Option<u64>, (Option<f64>, Vec<f64>)> = BTreeMap::new();
+    for s in series {
+        let chosen: Vec<&(Option<f64>, f64)> = match t.t {
+            TargetTime::TEnd => s.last().into_iter().collect(),
+            TargetTime::At(x) => s
+                .iter()
+                .filter(|(tt, _)| tt.is_some_and(|tt| same_time(tt, x)))
+                .collect(),
+            TargetTime::After(x) => s
+                .iter()
+                .filter(|(tt, _)| tt.is_none_or(|tt| tt >= x || same_time(tt, x)))
+                .collect(),
+        };
+        for (tt, v) in chosen {
+            // Times of replicas of one point are the same bits; a total order on them.
+            let key = tt.map(|x| x.to_bits() ^ (((x.to_bits() as i64) >> 63) as u64 >> 1));
+            by_time.entry(key).or_insert((*tt, Vec::new())).1.push(*v);
+        }
+    }
+    by_time.into_values().collect()
+}
+
+fn same_time(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(f64::MIN_POSITIVE)
+}
+
+/// One target's state from the series of a point's runs (replica order).
+fn target_state(i: usize, t: &Target, series: &[&Series]) -> TargetState {
+    let mut worst: Option<TargetState> = None;
+    for (time, values) in at_times(t, series) {
+        let n = values.len() as u32;
+        let (mean, sem) = crate::math::stats::mean_sem(&values);
+        let mean = (n > 0).then_some(mean);
+        let goal = goal_of(t, mean);
+        let met = matches!((sem, goal), (Some(s), Some(g)) if s <= g);
+        let needed = match (sem, goal) {
+            (Some(s), Some(g)) if g > 0.0 => {
+                let var = s * s * n as f64;
+                Some(((var / (g * g)).ceil().min(u32::MAX as f64) as u32).max(2))
+            }
+            _ => None,
+        };
+        let state = TargetState {
+            target: i,
+            quantity: t.quantity.clone(),
+            t: time,
+            n,
+            mean,
+            sem,
+            goal,
+            met,
+            needed,
+            problem: None,
+        };
+        let worse = match &worst {
+            None => true,
+            Some(w) => badness(&state) > badness(w),
+        };
+        if worse {
+            worst = Some(state);
+        }
+    }
+    worst.unwrap_or(TargetState {
+        target: i,
+        quantity: t.quantity.clone(),
+        t: None,
+        n: 0,
+        mean: None,
+        sem: None,
+        goal: None,
+        met: false,
+        needed: None,
+        problem: Some(match t.t {
+            TargetTime::At(x) => format!("no value at t = {x} (not an output time?)"),
+            _ => "no value yet".into(),
+        }),
+    })
+}
+
+/// How far a state is from its goal (unknown counts as furthest).
+fn badness(s: &TargetState) -> f64 {
+    match (s.ratio(), s.needed) {
+        (Some(r), _) => r,
+        _ => f64::INFINITY,
+    }
+}
+
+/// The standard error a target asks for, given the mean.
+fn goal_of(t: &Target, mean: Option<f64>) -> Option<f64> {
+    let rel = match (t.sem_rel, mean) {
+        (Some(r), Some(m)) => Some(r * m.abs()),
+        (Some(_), None) => return None,
+        (None, _) => None,
+    };
+    match (rel, t.sem_abs) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// The decision of a round from the states of every current point: replicas per point
+/// (changed ones only) and the record.
+pub fn decide(
+    c: &Campaign,
+    mut points: Vec<PointState>,
+    spent_core_seconds: f64,
+) -> (BTreeMap<u32, u32>, Decision) {
+    let m = &c.manifest;
+    let max = m.max_replicas();
+    let mut stops: Vec<String> = Vec::new();
+    // What each unmet point would like.
+    let mut want: BTreeMap<u32, u32> = BTreeMap::new();
+    for p in &points {
+        let unmet: Vec<&TargetState> = p.targets.iter().filter(|t| !t.met).collect();
+        if unmet.is_empty() {
+            continue;
+        }
+        if let Some(t) = unmet.iter().find(|t| t.problem.is_some()) {
+            stops.push(format!(
+                "point {}: {} cannot be judged: {}",
+                p.point_id,
+                t.quantity,
+                t.problem.as_deref().unwrap_or_default()
+            ));
+            continue;
+        }
+        if unmet.iter().any(|t| t.n < 2 || t.needed.is_none()) {
+            if unmet.iter().any(|t| t.n + 1 < p.replicas) {
+                stops.push(format!(
+                    "point {}: fewer than 2 values from {} replicas (runs failed?)",
+                    p.point_id, p.replicas
+                ));
+                continue;
+            }
+            // A quantity of zero mean with only `sem_rel`, or one value: one more round.
+            want.insert(p.point_id, (p.replicas + 1).min(max));
+        } else {
+            let needed = unmet.iter().filter_map(|t| t.needed).max().unwrap_or(p.replicas + 1);
+            let aim = (AIM * needed as f64).ceil() as u32;
+            let next = aim
+                .min(p.replicas.saturating_mul(MAX_GROWTH_PER_ROUND))
+                .max(p.replicas + 1)
+                .min(max);
+            want.insert(p.point_id, next);
+        }
+        if p.replicas >= max {
+            want.remove(&p.point_id);
+            stops.push(format!(
+                "point {}: max_replicas ({max}) reached",
+                p.point_id
+            ));
+        }
+    }
+    // The budget: what fits, given to the best error reduction per core-second.
+    let mut next: BTreeMap<u32, u32> = points.iter().map(|p| (p.point_id, p.replicas)).collect();
+    let budget = m.max_core_hours.map(|h| h * 3600.0);
+    let cost_of: BTreeMap<u32, f64> = points.iter().map(|p| (p.point_id, p.cost)).collect();
+    let wanted: f64 = want
+        .iter()
+        .map(|(p, n)| (n - next[p]) as f64 * cost_of[p])
+        .sum();
+    match budget {
+        Some(b) if spent_core_seconds + wanted > b => {
+            let mut left = b - spent_core_seconds;
+            let spread: BTreeMap<u32, f64> = points
+                .iter()
+                .map(|p| {
+                    let r = p
+                        .targets
+                        .iter()
+                        .filter_map(|t| t.ratio().map(|r| r * (t.n as f64).sqrt()))
+                        .fold(0.0, f64::max);
+                    (p.point_id, r)
+                })
+                .collect();
+            loop {
+                let best = want
+                    .iter()
+                    .filter(|(p, n)| next[p] < **n && cost_of[p] <= left)
+                    .map(|(p, _)| {
+                        let k = next[p] as f64;
+                        let gain = spread[p] * (1.0 / k.sqrt() - 1.0 / (k + 1.0).sqrt());
+                        (*p, gain / cost_of[p].max(1e-12))
+                    })
+                    .fold(None, |acc: Option<(u32, f64)>, x| match acc {
+                        Some(a) if a.1 >= x.1 => Some(a),
+                        _ => Some(x),
+                    });
+                let Some((p, _)) = best else { break };
+                *next.get_mut(&p).unwrap() += 1;
+                left -= cost_of[&p];
+            }
+            for (p, n) in &want {
+                if next[p] < *n {
+                    stops.push(format!(
+                        "point {p}: max_core_hours ({}) does not allow {} more replica(s)",
+                        m.max_core_hours.unwrap_or_default(),
+                        n - next[p]
+                    ));
+                }
+            }
+        }
+        _ => {
+            for (p, n) in &want {
+                next.insert(*p, *n);
+            }
+        }
+    }
+    let mut changed = BTreeMap::new();
+    let mut runs_added = 0u64;
+    let mut added = 0.0;
+    for p in points.iter_mut() {
+        p.next = next[&p.point_id];
+        if p.next > p.replicas {
+            changed.insert(p.point_id, p.next);
+            runs_added += (p.next - p.replicas) as u64;
+            added += (p.next - p.replicas) as f64 * p.cost;
+        }
+    }
+    let all_met = points.iter().all(|p| p.targets.iter().all(|t| t.met));
+    let (verdict, why) = if runs_added > 0 {
+        let per: Vec<String> = changed
+            .iter()
+            .map(|(p, n)| format!("point {p}: {} -> {n}", next_before(&points, *p)))
+            .collect();
+        (
+            Verdict::Continue,
+            format!("{runs_added} replica(s) added ({})", per.join(", ")),
+        )
+    } else if all_met {
+        (Verdict::Met, "every target is met".to_string())
+    } else {
+        (Verdict::Stopped, stops.join("; "))
+    };
+    let decision = Decision {
+        round: 0,
+        runs_added,
+        core_seconds_added: added,
+        core_seconds_total: spent_core_seconds + added,
+        points,
+        verdict,
+        why,
+    };
+    (changed, decision)
+}
+
+fn next_before(points: &[PointState], p: u32) -> u32 {
+    points
+        .iter()
+        .find(|x| x.point_id == p)
+        .map_or(0, |x| x.replicas)
+}
+
+/// Estimated core-seconds of every run the campaign asks for now.
+pub fn asked_core_seconds(c: &Campaign) -> f64 {
+    c.plan
+        .points
+        .iter()
+        .filter(|p| p.current)
+        .map(|p| c.plan.replicas_of(p.point_id).unwrap_or(0) as f64 * p.params.cost())
+        .sum()
+}
+
+/// What deciding a round did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Decided {
+    /// Runs were added (the campaign asks for more): run them.
+    More(u64),
+    /// Nothing more to run: every target met, or stopped (the decision says why).
+    Final(Verdict, String),
+    /// The runs asked for are not all committed yet (other shards' runs).
+    Incomplete,
+}
+
+/// Decide the next round of the campaign at `c.root`, under its exclusive lock on the
+/// campaign as read under it (see the module). Nothing is written when the decision equals
+/// the latest recorded one.
+pub fn decide_round(c: &Campaign) -> Result<Decided, CampaignError> {
+    let _lock = super::ledger::ExclusiveLock::acquire(&c.root, super::ledger::Purpose::Round)
+        .map_err(|e| e.context("cannot decide the next round of replicas"))?;
+    super::test_hook::pause("round-locked");
+    let mut c = Campaign::open(&c.root)?;
+    if !c.manifest.has_targets() {
+        return Ok(Decided::Final(Verdict::Met, "no targets".into()));
+    }
+    let ledger = super::ledger::read_ledger(&c.root)?;
+    let finished = super::ledger::finished_runs(&ledger.commits);
+    if !c
+        .plan
+        .current_runs()
+        .all(|r| finished.contains_key(&r.run_id))
+    {
+        return Ok(Decided::Incomplete);
+    }
+    let states = evaluate(&c, &finished)?;
+    let spent = asked_core_seconds(&c);
+    let (changed, mut decision) = decide(&c, states, spent);
+    decision.round = c.rounds.decisions.len() as u32 + 1;
+    if changed.is_empty() {
+        let same = c.rounds.decisions.last().is_some_and(|d| {
+            d.verdict == decision.verdict && d.why == decision.why && d.points == decision.points
+        });
+        let out = Decided::Final(decision.verdict, decision.why.clone());
+        if !same {
+            c.rounds.format = ROUNDS_FORMAT;
+            c.rounds.decisions.push(decision);
+            c.write_info()?;
+        }
+        return Ok(out);
+    }
+    let mut growth = Growth::default();
+    let mut registry = c.plan.registry.clone();
+    for (&p, &n) in &changed {
+        registry.add_replicas(p, n, &mut growth);
+    }
+    c.rounds.format = ROUNDS_FORMAT;
+    c.rounds.replicas.extend(changed);
+    c.rounds.decisions.push(decision);
+    c.plan.registry = registry;
+    c.plan.decided = c.rounds.replicas.clone();
+    super::test_hook::pause("round-decided");
+    c.write_info()?;
+    Ok(Decided::More(growth.new_runs.len() as u64))
+}
+
+/// How long a shard that finished its runs of a round waits before it looks again whether
+/// the other shards have finished theirs.
+const WAIT: std::time::Duration = std::time::Duration::from_millis(500);
+
+/// Run this shard of the campaign with its rounds (without targets: `dispatch::run`).
+///
+/// After the shard's runs, once every run the campaign asks for is committed, the next round
+/// is decided ([`decide_round`]) and its runs of this shard are run, until every target is
+/// met or the campaign stops. A shard that finishes its runs of a round before the others
+/// waits while another shard runs, and leaves the round to the others when none runs (it is
+/// then decided by the last shard to finish, or by `resume`). With `decide` false (the tasks
+/// of a SLURM array: the chained round job decides) the shard runs its runs and returns.
+pub fn run(
+    c: &Campaign,
+    opts: &super::RunOptions,
+    reporter: &mut dyn super::Reporter,
+    decide: bool,
+) -> Result<super::Outcome, CampaignError> {
+    let mut total = super::Outcome::default();
+    loop {
+        let o = dispatch_when_free(c, opts, reporter)?;
+        total.done += o.done;
+        total.failed += o.failed;
+        total.failed_in_shard = o.failed_in_shard;
+        total.remaining = o.remaining;
+        total.interrupted = o.interrupted;
+        total.complete = o.complete;
+        if !decide || o.interrupted || o.remaining > 0 {
+            return Ok(total);
+        }
+        loop {
+            if opts.interrupt.load(std::sync::atomic::Ordering::Relaxed) > 0 {
+                total.interrupted = true;
+                return Ok(total);
+            }
+            let fresh = Campaign::open(&c.root)?;
+            if !fresh.manifest.has_targets() {
+                return Ok(total);
+            }
+            match decide_round(&fresh) {
+                Ok(Decided::More(n)) => {
+                    let d = Campaign::open(&c.root)?;
+                    let round = d.rounds.decisions.len();
+                    let why = d.rounds.decisions.last().map(|d| d.why.clone()).unwrap_or_default();
+                    reporter.event(&super::Event::Round {
+                        message: format!("round {}: {n} run(s) added: {why}", round + 1),
+                    });
+                    total.complete = false;
+                    break;
+                }
+                Ok(Decided::Final(verdict, why)) => {
+                    reporter.event(&super::Event::Round {
+                        message: match verdict {
+                            Verdict::Met => format!("targets: {why}"),
+                            _ => format!("targets not all met, stopped: {why}"),
+                        },
+                    });
+                    return Ok(total);
+                }
+                Ok(Decided::Incomplete) => {
+                    if !others_running(c) {
+                        reporter.event(&super::Event::Round {
+                            message: "this shard's runs of the round are done; the round is decided when the other shards' runs are (by the last shard to finish, or `granular resume`)".into(),
+                        });
+                        return Ok(total);
+                    }
+                    std::thread::sleep(WAIT);
+                }
+                Err(CampaignError::Refused(m)) if others_running(c) || round_being_decided(c) => {
+                    tracing::debug!("waiting to decide the round: {m}");
+                    std::thread::sleep(WAIT);
+                }
+                Err(e) => return Err(e),
+            }
+        }
+    }
+}
+
+/// `dispatch::run`, waiting while another process decides a round (its exclusive lock keeps
+/// shards out for a moment).
+fn dispatch_when_free(
+    c: &Campaign,
+    opts: &super::RunOptions,
+    reporter: &mut dyn super::Reporter,
+) -> Result<super::Outcome, CampaignError> {
+    let mut tries = 0;
+    loop {
+        match super::dispatch::run(c, opts, reporter) {
+            Err(CampaignError::Refused(_)) if round_being_decided(c) && tries < 600 => {
+                tries += 1;
+                std::thread::sleep(WAIT / 5);
+            }
+            r => return r,
+        }
+    }
+}
+
+/// Whether a shard process (another than this one) holds its lock.
+fn others_running(c: &Campaign) -> bool {
+    let me = std::process::id();
+    super::ledger::live_locks(&c.root)
+        .iter()
+        .any(|l| !l.is_exclusive() && l.pid != me)
+}
+
+/// Whether a process decides a round now.
+fn round_being_decided(c: &Campaign) -> bool {
+    super::ledger::live_locks(&c.root)
+        .iter()
+        .any(|l| l.is_exclusive() && l.purpose == Some(super::ledger::Purpose::Round))
+}
+
+/// Where a target campaign stands (for `status`, the report and the live page).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct TargetsStatus {
+    /// Rounds decided so far.
+    pub rounds: u32,
+    /// The latest decision's verdict and why (None before the first decision).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
+    #[serde(default)]
+    pub why: String,
+    /// Per current point and target, from the runs committed so far.
+    pub rows: Vec<TargetRow>,
+    /// Estimated core-seconds (the models' cost estimates) of the runs done, and of the runs
+    /// still expected (asked and not done, and those the variances imply beyond them).
+    pub core_seconds_done: f64,
+    pub core_seconds_left: f64,
+    /// Can the committed rows be read? (why not, else None).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub problem: Option<String>,
+}
+
+/// One target of one point, now.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct TargetRow {
+    pub point_id: u32,
+    pub point: String,
+    /// The target in words: `gamma at t_end: sem_rel 0.001`.
+    pub target: String,
+    #[serde(flatten)]
+    pub state: TargetState,
+    /// Replicas done (with a value), asked now, and expected in the end (from the variance).
+    pub replicas: u32,
+    pub expected: u32,
+}
+
+/// A target in words.
+pub fn describe(t: &Target) -> String {
+    let at = match t.t {
+        TargetTime::TEnd => "t_end".to_string(),
+        TargetTime::At(x) => format!("t = {x}"),
+        TargetTime::After(x) => format!("every t >= {x}"),
+    };
+    let mut goals = Vec::new();
+    if let Some(r) = t.sem_rel {
+        goals.push(format!("sem_rel {r}"));
+    }
+    if let Some(a) = t.sem_abs {
+        goals.push(format!("sem_abs {a}"));
+    }
+    format!("{} at {at}: {}", t.quantity, goals.join(", "))
+}
+
+/// The targets' status of `c` from its finished runs (None without targets).
+pub fn status(
+    c: &Campaign,
+    finished: &BTreeMap<u64, RunStatus>,
+) -> Option<TargetsStatus> {
+    if !c.manifest.has_targets() {
+        return None;
+    }
+    let last = c.rounds.decisions.last();
+    let (states, problem) = match evaluate(c, finished) {
+        Ok(s) => (s, None),
+        Err(e) => (Vec::new(), Some(e.to_string())),
+    };
+    let max = c.manifest.max_replicas();
+    let mut rows = Vec::new();
+    let mut done_cs = 0.0;
+    let mut left_cs = 0.0;
+    for p in &states {
+        let done = c
+            .plan
+            .current_runs()
+            .filter(|r| r.point_id == p.point_id && finished.contains_key(&r.run_id))
+            .count() as u32;
+        let expected = p
+            .targets
+            .iter()
+            .filter_map(|t| if t.met { Some(p.replicas) } else { t.needed })
+            .max()
+            .unwrap_or(p.replicas)
+            .clamp(p.replicas, max.max(p.replicas));
+        done_cs += done as f64 * p.cost;
+        left_cs += expected.saturating_sub(done) as f64 * p.cost;
+        for t in &p.targets {
+            rows.push(TargetRow {
+                point_id: p.point_id,
+                point: c.plan.label(p.point_id),
+                target: describe(&c.manifest.target[t.target]),
+                state: t.clone(),
+                replicas: p.replicas,
+                expected,
+            });
+        }
+    }
+    // Once decided final, nothing is left.
+    if last.is_some_and(|d| d.verdict != Verdict::Continue) && c.plan.current_runs().all(|r| finished.contains_key(&r.run_id)) {
+        left_cs = 0.0;
+    }
+    Some(TargetsStatus {
+        rounds: c.rounds.decisions.len() as u32,
+        verdict: last.map(|d| d.verdict),
+        why: last.map(|d| d.why.clone()).unwrap_or_default(),
+        rows,
+        core_seconds_done: done_cs,
+        core_seconds_left: left_cs,
+        problem,
+    })
+}
