@@ -15,9 +15,9 @@
 //! **The rule.** For a point with n values of a quantity (sample standard deviation s), the
 //! goal g (`sem_abs`, `sem_rel` x |mean|, the smaller where both are given) is met when
 //! s / sqrt(n) <= g; the replicas it implies are n* = ceil(s^2 / g^2). An unmet point goes to
-//! min(4 n, ceil(0.95 n*)) (at least n + 1, at most `max_replicas`): at most four times as many
-//! per round while the variance is known from few replicas, and a little short of the
-//! estimate, so that the last round tops up rather than overshoots. Under a budget, the
+//! n*, at least n + ceil(n / 10) (no tail of rounds adding one replica each), at most 4 n (while
+//! the variance is known from few replicas, an estimate too high is not followed at once) and
+//! `max_replicas`. Under a budget, the
 //! replicas that fit are given one at a time to the point where one more replica reduces the
 //! error (in units of its goal) most per estimated core-second.
 
@@ -37,8 +37,8 @@ pub const ROUNDS_FORMAT: u32 = 1;
 
 /// Growth of an unmet point per round, at most (times its replicas).
 const MAX_GROWTH_PER_ROUND: u32 = 4;
-/// An unmet point goes to this fraction of the replicas its variance implies (see the module).
-const AIM: f64 = 0.95;
+/// Growth of an unmet point per round, at least (a fraction of its replicas, and 1).
+const MIN_GROWTH_PER_ROUND: f64 = 0.1;
 
 /// The rounds of an error-target campaign, in `campaign.json`.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
@@ -166,10 +166,8 @@ pub fn evaluate(
         };
         rows.insert(table, batches);
     }
-    let (values, problem) = match q.eval(&rows) {
-        Ok(v) => (v, None),
-        Err(e) => (BTreeMap::new(), Some(e.to_string())),
-    };
+    let run_ids: Vec<u64> = keep.iter().copied().collect();
+    let values = q.eval_each(&rows, Some(&run_ids));
     let index: BTreeMap<&str, usize> = q
         .list
         .iter()
@@ -185,14 +183,18 @@ pub fn evaluate(
             .iter()
             .enumerate()
             .map(|(i, t)| {
-                let series: Vec<&Series> = runs
+                let k = index.get(t.quantity.as_str()).copied();
+                let results: Vec<&Result<Series, derived::EvalError>> = runs
                     .iter()
                     .filter_map(|(_, run)| values.get(run))
-                    .filter_map(|per_q| index.get(t.quantity.as_str()).and_then(|&k| per_q.get(k)))
+                    .filter_map(|per_q| k.and_then(|k| per_q.get(k)))
                     .collect();
+                let series: Vec<&Series> =
+                    results.iter().filter_map(|r| r.as_ref().ok()).collect();
                 let mut s = target_state(i, t, &series);
-                if s.problem.is_none() && problem.is_some() && !runs.is_empty() {
-                    s.problem = problem.clone();
+                // A run whose quantity cannot be evaluated: the target cannot be judged.
+                if let Some(Err(e)) = results.iter().find(|r| r.is_err()) {
+                    s.problem = Some(e.to_string());
                     s.met = false;
                 }
                 s
@@ -361,10 +363,10 @@ pub fn decide(
             want.insert(p.point_id, (p.replicas + 1).min(max));
         } else {
             let needed = unmet.iter().filter_map(|t| t.needed).max().unwrap_or(p.replicas + 1);
-            let aim = (AIM * needed as f64).ceil() as u32;
-            let next = aim
+            let least = p.replicas + ((MIN_GROWTH_PER_ROUND * p.replicas as f64).ceil() as u32).max(1);
+            let next = needed
+                .max(least)
                 .min(p.replicas.saturating_mul(MAX_GROWTH_PER_ROUND))
-                .max(p.replicas + 1)
                 .min(max);
             want.insert(p.point_id, next);
         }
@@ -567,8 +569,9 @@ pub fn run(
     decide: bool,
 ) -> Result<super::Outcome, CampaignError> {
     let mut total = super::Outcome::default();
+    let mut current: Option<Campaign> = None;
     loop {
-        let o = dispatch_when_free(c, opts, reporter)?;
+        let o = dispatch_when_free(current.as_ref().unwrap_or(c), opts, reporter)?;
         total.done += o.done;
         total.failed += o.failed;
         total.failed_in_shard = o.failed_in_shard;
@@ -596,6 +599,7 @@ pub fn run(
                         message: format!("round {}: {n} run(s) added: {why}", round + 1),
                     });
                     total.complete = false;
+                    current = Some(d);
                     break;
                 }
                 Ok(Decided::Final(verdict, why)) => {
@@ -676,6 +680,10 @@ pub struct TargetsStatus {
     /// still expected (asked and not done, and those the variances imply beyond them).
     pub core_seconds_done: f64,
     pub core_seconds_left: f64,
+    /// Replicas asked of the current points, and the fewest that the variances seen so far
+    /// imply (per point the most any of its targets needs, at least `min_replicas`).
+    pub replicas_asked: u64,
+    pub replicas_implied: u64,
     /// Can the committed rows be read? (why not, else None).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub problem: Option<String>,
@@ -727,6 +735,7 @@ pub fn status(
     };
     let max = c.manifest.max_replicas();
     let mut rows = Vec::new();
+    let (mut asked, mut implied) = (0u64, 0u64);
     let mut done_cs = 0.0;
     let mut left_cs = 0.0;
     for p in &states {
@@ -742,6 +751,14 @@ pub fn status(
             .max()
             .unwrap_or(p.replicas)
             .clamp(p.replicas, max.max(p.replicas));
+        asked += p.replicas as u64;
+        implied += p
+            .targets
+            .iter()
+            .filter_map(|t| t.needed)
+            .max()
+            .unwrap_or(p.replicas)
+            .max(c.manifest.min_replicas()) as u64;
         done_cs += done as f64 * p.cost;
         left_cs += expected.saturating_sub(done) as f64 * p.cost;
         for t in &p.targets {
@@ -766,6 +783,8 @@ pub fn status(
         rows,
         core_seconds_done: done_cs,
         core_seconds_left: left_cs,
+        replicas_asked: asked,
+        replicas_implied: implied,
         problem,
     })
 }

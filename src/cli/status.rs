@@ -139,6 +139,13 @@ fn write_targets(
     }
     writeln!(
         out,
+        "  replicas: {} asked; the variances seen imply at least {} ({:.2}x)",
+        t.replicas_asked,
+        t.replicas_implied,
+        t.replicas_asked as f64 / t.replicas_implied.max(1) as f64
+    )?;
+    writeln!(
+        out,
         "  estimated core-hours: {:.3} done, {:.3} left (the models' cost estimates)",
         t.core_seconds_done / 3600.0,
         t.core_seconds_left / 3600.0
