@@ -45,6 +45,9 @@
 //!   (fewer replicas, switched to seeds), a commit record lost during a run.
 //! - `vdist`: the DSMC observable `velocity_distribution` swept on and off: `a2` where
 //!   observed (null elsewhere), the speed histograms and their summary with sweep columns.
+//! - `targets`: error targets: a campaign that adds replicas in rounds until every target is
+//!   met decides the same replicas and writes the same tables with 1 or 2 threads, 2 shards and
+//!   kill -9 + resume, and equals a direct campaign of the replicas decided.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
@@ -71,6 +74,7 @@ mod it {
     pub mod serve;
     pub mod slurm;
     pub mod sweep_columns;
+    pub mod targets;
     pub mod util;
     pub mod vdist;
 }
