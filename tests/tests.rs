@@ -35,6 +35,9 @@
 //!   refused, a running campaign followed.
 //! - `sweep_columns`: every summary table of DSMC, RFM and cascade campaigns carries its
 //!   point's sweep columns after `point_id`, as in `points`.
+//! - `derived`: derived quantities (manifest `derived`): bad expressions refused with their
+//!   paths; the `derived` and `derived_summary` tables of DSMC and RFM campaigns against values
+//!   computed from the run tables; the same with one thread; their figures.
 //! - `figures`: the standard figures of tiny rfm, bisection, cascade and SPM campaigns, the
 //!   same in `plot` and `report`; analyze's outputs in the report; overlays split beyond 12
 //!   points.
@@ -58,6 +61,7 @@ mod it {
     pub mod aux_models;
     pub mod cli_flags;
     pub mod damage;
+    pub mod derived;
     pub mod drills;
     pub mod figures;
     pub mod growth;

@@ -17,6 +17,7 @@
 //! ```
 
 pub mod compact;
+pub mod derived_tables;
 pub mod dispatch;
 pub mod error;
 pub mod history;
@@ -570,7 +571,42 @@ impl Campaign {
         let points: Vec<&ModelParams> = self.plan.points.iter().map(|p| &p.params).collect();
         let mut t = vec![tables::RUNS, tables::POINTS, tables::REGISTERED_RUNS];
         t.extend(self.plan.model.tables(&points));
+        if !self.manifest.derived.is_empty() {
+            t.extend([derived_tables::DERIVED, derived_tables::DERIVED_SUMMARY]);
+        }
         t
+    }
+
+    /// The manifest's derived quantities, compiled against the model's run tables (none
+    /// without `derived`; the manifest was checked, so they compile).
+    pub fn derived(&self) -> crate::derived::Quantities {
+        crate::derived::compile(&self.manifest.derived, &self.plan.model.run_tables())
+            .unwrap_or_default()
+    }
+
+    /// Write the derived quantities' tables (`derived`, `derived_summary`) of the view's
+    /// runs, if the manifest declares any.
+    fn write_derived(&self, view: &CampaignView<'_, ModelParams>) -> Result<(), crate::store::parquet_io::StoreError> {
+        let q = self.derived();
+        if q.is_empty() {
+            return Ok(());
+        }
+        derived_tables::write(view, &q, &|r| self.plan.run(r).point_id)
+    }
+
+    /// The model's figures followed by those of the derived quantities.
+    fn with_derived_figures(
+        &self,
+        view: &CampaignView<'_, ModelParams>,
+        model: Option<Vec<(String, crate::plot::Figure)>>,
+    ) -> Result<Option<Vec<(String, crate::plot::Figure)>>, crate::store::parquet_io::StoreError> {
+        let q = self.derived();
+        if q.is_empty() {
+            return Ok(model);
+        }
+        let mut figs = model.unwrap_or_default();
+        figs.extend(derived_tables::figures(view, &q)?);
+        Ok(Some(figs))
     }
 
     /// Write the replica summaries of the runs finished so far.
@@ -580,7 +616,9 @@ impl Campaign {
     ) -> Result<(), crate::store::parquet_io::StoreError> {
         let done = self.done_replicas(finished);
         let data = self.data();
-        self.plan.model.write_summaries(&self.view(&data, &done))
+        let view = self.view(&data, &done);
+        self.plan.model.write_summaries(&view)?;
+        self.write_derived(&view)
     }
 
     /// The runs of the latest manifest finished with status done, with their replica numbers
@@ -625,7 +663,9 @@ impl Campaign {
             )
         })?;
         let done = self.done_replicas(&ledger::finished_runs(&ledger.commits));
-        self.plan.model.figures(&self.view(&data, &done))
+        let view = self.view(&data, &done);
+        let figs = self.plan.model.figures(&view)?;
+        self.with_derived_figures(&view, figs)
     }
 
     /// The model's figures of the runs finished so far (`finished`, from the ledger): the
@@ -654,7 +694,9 @@ impl Campaign {
         let data = self.data().overlay(&scratch.0);
         let view = self.view(&data, &done);
         self.plan.model.write_summaries(&view)?;
-        self.plan.model.figures(&self.view(&data, &done))
+        self.write_derived(&view)?;
+        let figs = self.plan.model.figures(&view)?;
+        self.with_derived_figures(&view, figs)
     }
 
     /// `granular analyze`: the model's analysis ([`crate::models::Model::analyze`]) of the

@@ -52,7 +52,7 @@ pub struct Manifest {
     /// Derived quantities: a name (letters, digits, `_`) -> an expression over the columns of
     /// the model's run tables, computed per run from that run's rows (`derived`: one column
     /// per quantity; `derived_summary`: mean, standard error and n over the replicas), e.g.
-    /// `"gamma": "temperature[species=1] / temperature[species=0]"`. See README "Derived
+    /// `"gamma": "temperature[species=2] / temperature[species=1]"`. See README "Derived
     /// quantities".
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub derived: std::collections::BTreeMap<String, String>,
