@@ -375,7 +375,7 @@ pub fn read_table(dir: &Path, table: &str) -> Table {
 }
 
 /// The tables of a campaign and the key columns that identify a row.
-pub const TABLES: [(&str, &[&str]); 10] = [
+pub const TABLES: [(&str, &[&str]); 12] = [
     ("runs", &["run_id"]),
     ("registered_runs", &["run_id"]),
     ("dsmc_species", &["run_id", "t", "species"]),
@@ -386,6 +386,8 @@ pub const TABLES: [(&str, &[&str]); 10] = [
     ("dsmc_theory", &["point_id", "t", "species"]),
     ("dsmc_theory_point", &["point_id"]),
     ("dsmc_theory_tamsd", &["point_id", "species", "lag"]),
+    ("derived", &["run_id", "t"]),
+    ("derived_summary", &["point_id", "t"]),
 ];
 
 /// Tables that have no part file in a campaign that does not record them (`dsmc_tamsd`
@@ -393,7 +395,13 @@ pub const TABLES: [(&str, &[&str]); 10] = [
 pub const MAY_BE_EMPTY: [&str; 1] = ["dsmc_tamsd"];
 
 /// Tables that exist only when their observable is recorded (absent = empty).
-pub const OPTIONAL: [&str; 3] = ["dsmc_tamsd", "dsmc_tamsd_summary", "dsmc_theory_tamsd"];
+pub const OPTIONAL: [&str; 5] = [
+    "dsmc_tamsd",
+    "dsmc_tamsd_summary",
+    "dsmc_theory_tamsd",
+    "derived",
+    "derived_summary",
+];
 
 pub type Tables = BTreeMap<String, Table>;
 
