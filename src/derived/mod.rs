@@ -47,6 +47,11 @@ pub struct EvalError {
     pub message: String,
 }
 
+/// The longest expression accepted (bytes).
+pub const MAX_EXPRESSION_BYTES: usize = 4096;
+/// The deepest nesting of brackets accepted.
+pub const MAX_NESTING: i64 = 64;
+
 /// Column names a quantity may not take: the key columns of the `derived` tables.
 pub const RESERVED: &[&str] = &["run_id", "point_id", "replica", "t"];
 
@@ -296,6 +301,25 @@ fn compile_one(
         return Err(vec![format!(
             "`{name}` is a column of the derived tables: name the quantity otherwise (not one of {})",
             RESERVED.join(", ")
+        )]);
+    }
+    // Bounded, so that no expression can exhaust the stack of evalexpr's recursive parser.
+    let depth = text
+        .chars()
+        .scan(0i64, |d, c| {
+            *d += match c {
+                '(' | '[' => 1,
+                ')' | ']' => -1,
+                _ => 0,
+            };
+            Some(*d)
+        })
+        .max()
+        .unwrap_or(0);
+    if text.len() > MAX_EXPRESSION_BYTES || depth > MAX_NESTING {
+        return Err(vec![format!(
+            "an expression of {} bytes nested {depth} deep: at most {MAX_EXPRESSION_BYTES} bytes and {MAX_NESTING} levels of brackets",
+            text.len()
         )]);
     }
     let (rewritten, pieces) = parse::rewrite(text)?;

@@ -181,3 +181,14 @@ fn compile_refuses_everything_at_once_with_paths() {
     assert!(at("i")[0].contains("unknown table `nosuch`"), "{e:?}");
     assert!(at("t")[0].contains("is a column of the derived tables"), "{e:?}");
 }
+
+#[test]
+fn huge_or_deeply_nested_expressions_are_refused_not_overflowing_the_stack() {
+    let deep = format!("{}temperature[species=1]{}", "(".repeat(100_000), ")".repeat(100_000));
+    let long = vec!["temperature[species=1]"; 400].join(" + ");
+    let e = compile(&q(&[("deep", &deep), ("long", &long)]), &tables()).unwrap_err();
+    assert_eq!(e.len(), 2, "{e:?}");
+    assert!(e.iter().all(|x| x.1.contains("at most 4096 bytes and 64 levels")), "{e:?}");
+    let ok = format!("{}temperature[species=1]{}", "(".repeat(60), ")".repeat(60));
+    assert!(compile(&q(&[("ok", &ok)]), &tables()).is_ok());
+}
