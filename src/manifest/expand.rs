@@ -259,6 +259,10 @@ fn runs_errors(m: &Manifest) -> Vec<(String, String)> {
         }
     }
     errors.extend(target_errors(m));
+    // The derived quantities' expressions, against the model's run tables.
+    if let Err(e) = crate::derived::compile(&m.derived, &m.model.run_tables()) {
+        errors.extend(e);
+    }
     errors
 }
 

@@ -5,6 +5,8 @@
 //! - the simulators (`dsmc`, `rfm`, `aux_models`, `physics`, and any new top-level module not
 //!   listed as another layer) import no manifest, store, campaign, model home, command line,
 //!   analysis or figures: a simulator hands rows and checkpoint bytes to whoever drives it;
+//! - `derived` (the derived quantities' expressions) imports nothing but itself and `math`:
+//!   no campaign, model, manifest, store or command line (it sees schemas and batches);
 //! - `theory` imports nothing but itself and `math`; `math` nothing but itself; the basic
 //!   utilities (`rng`, `fsutil`, `memory`, `exit_codes`) import no other layer;
 //! - `store` imports no physics, theory, model, manifest or campaign: it knows no physics;
@@ -361,6 +363,7 @@ const NOT_SIMULATORS: &[&str] = &[
     "serve",
     "analysis",
     "theory",
+    "derived",
     "math",
     "rng",
     "fsutil",
@@ -382,6 +385,12 @@ fn forbidden(from: &str, to: &str) -> Option<&'static str> {
     }
     if f == "theory" && !matches!(t, "theory" | "math") {
         return Some("theory imports nothing but theory and math");
+    }
+    if f == "derived" && !matches!(t, "derived" | "math") {
+        return Some(
+            "derived quantities are pure: derived imports nothing but itself and math (Arrow and \
+             evalexpr from outside)",
+        );
     }
     if f == "math" && t != "math" {
         return Some("math imports nothing but math");
@@ -563,6 +572,11 @@ fn the_checker_sees_what_it_should() {
     assert!(forbidden("campaign::writer", "models").is_none());
     assert!(forbidden("theory::hcs", "math::ode").is_none());
     assert!(forbidden("theory::hcs", "dsmc").is_some());
+    assert!(forbidden("manifest::expand", "derived").is_none());
+    assert!(forbidden("campaign::derived_tables", "derived").is_none());
+    assert!(forbidden("derived", "store::dataset").is_some());
+    assert!(forbidden("derived", "models").is_some());
+    assert!(forbidden("derived::parse", "derived").is_none());
     assert!(forbidden("walk::sim", "store::dataset").is_some());
     assert!(forbidden("rng", "dsmc").is_some());
     assert!(forbidden("models::view", "models::rfm").is_some());

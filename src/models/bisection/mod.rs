@@ -64,6 +64,14 @@ impl Model for Bisection {
         }
     }
 
+    /// The run tables a derived quantity may read (all of them, whatever the observables).
+    fn run_tables() -> Vec<(&'static str, arrow_schema::SchemaRef)> {
+        vec![
+            (BisectionHistogram::TABLE, BisectionHistogram::schema()),
+            (BisectionMoments::TABLE, BisectionMoments::schema()),
+        ]
+    }
+
     fn tables(_points: &[&BisectionParams]) -> Vec<&'static str> {
         vec![BISECTION_HISTOGRAM, BISECTION_MOMENTS]
     }

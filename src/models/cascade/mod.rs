@@ -84,6 +84,15 @@ impl Model for Cascade {
         }
     }
 
+    /// The run tables a derived quantity may read (all of them, whatever the observables).
+    fn run_tables() -> Vec<(&'static str, arrow_schema::SchemaRef)> {
+        vec![
+            (CascadeStructureFactor::TABLE, CascadeStructureFactor::schema()),
+            (CascadeFit::TABLE, CascadeFit::schema()),
+            (CascadePlacement::TABLE, CascadePlacement::schema()),
+        ]
+    }
+
     fn tables(points: &[&CascadeParams]) -> Vec<&'static str> {
         let mut v = vec![
             CASCADE_STRUCTURE_FACTOR,

@@ -140,6 +140,15 @@ impl Model for Dsmc {
             .collect()
     }
 
+    /// The run tables a derived quantity may read (all of them, whatever the observables).
+    fn run_tables() -> Vec<(&'static str, arrow_schema::SchemaRef)> {
+        vec![
+            (DsmcSpecies::TABLE, DsmcSpecies::schema()),
+            (DsmcTamsd::TABLE, DsmcTamsd::schema()),
+            (DsmcSpeedHistogram::TABLE, DsmcSpeedHistogram::schema()),
+        ]
+    }
+
     fn tables(points: &[&DsmcParams]) -> Vec<&'static str> {
         let mut t = vec![
             DSMC_SPECIES,

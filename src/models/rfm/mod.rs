@@ -97,6 +97,21 @@ impl Model for Rfm {
         }
     }
 
+    /// The run tables a derived quantity may read (all of them, whatever the observables).
+    fn run_tables() -> Vec<(&'static str, arrow_schema::SchemaRef)> {
+        vec![
+            (RfmTimeseries::TABLE, RfmTimeseries::schema()),
+            (RfmMoments::TABLE, RfmMoments::schema()),
+            (RfmHistograms::TABLE, RfmHistograms::schema()),
+            (RfmNeighbourMoments::TABLE, RfmNeighbourMoments::schema()),
+            (RfmStructureFactor::TABLE, RfmStructureFactor::schema()),
+            (RfmRadial::TABLE, RfmRadial::schema()),
+            (RfmTemperatureBlocks::TABLE, RfmTemperatureBlocks::schema()),
+            (RfmSnapshots::TABLE, RfmSnapshots::schema()),
+            (RfmFreePathMoments::TABLE, RfmFreePathMoments::schema()),
+        ]
+    }
+
     fn tables(points: &[&RfmParams]) -> Vec<&'static str> {
         use RfmObservable as O;
         let wants = |o: O| points.iter().any(|p| p.wants(o));

@@ -62,6 +62,14 @@ impl Model for Spm {
         }
     }
 
+    /// The run tables a derived quantity may read (all of them, whatever the observables).
+    fn run_tables() -> Vec<(&'static str, arrow_schema::SchemaRef)> {
+        vec![
+            (SpmVelocityHistogram::TABLE, SpmVelocityHistogram::schema()),
+            (SpmSummary::TABLE, SpmSummary::schema()),
+        ]
+    }
+
     fn tables(_points: &[&SpmParams]) -> Vec<&'static str> {
         vec![SPM_VELOCITY_HISTOGRAM, SPM_SUMMARY]
     }
