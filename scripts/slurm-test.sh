@@ -4,8 +4,10 @@
 # runs, `granular submit --missing` resubmits the unfinished shard, the chained compaction job
 # merges the parts, and the final tables must equal those of a single-machine `granular run`
 # of the same manifest (scripts/compare_tables.py; only runs.wall_seconds differs); the campaign
-# directory's name holds spaces, quotes, $(), backticks, ;, # and % (quoting). Stops the
-# daemons it started. Needs target/release/granular and .venv (scripts/setup.sh).
+# directory's name holds spaces, quotes, $(), backticks, ;, # and % (quoting). Then an
+# error-target campaign runs its rounds as chained arrays (each array followed by a round job,
+# afterany, that submits the next round's array) until every target is met, and its tables
+# must equal a local `granular run` of the same manifest. Stops the daemons it started. Needs target/release/granular and .venv (scripts/setup.sh).
 # ~1-2 min on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,6 +21,9 @@ chmod 755 "$work"
 cleanup() {
     scancel --name=granular-slurm-ci >/dev/null 2>&1 || true
     scancel --name=granular-slurm-ci-compact >/dev/null 2>&1 || true
+    for n in granular-slurm-ci-target granular-slurm-ci-target-round granular-slurm-ci-target-compact; do
+        scancel --name="$n" >/dev/null 2>&1 || true
+    done
     bash "$root/scripts/slurm-local.sh" stop || true
     rm -rf "$work"
 }
@@ -106,4 +111,61 @@ echo "== single-machine reference"
 if find "$work" "$root" -maxdepth 3 -name PWNED | grep -q .; then
     echo "FAIL: a command injected through the directory name ran"; exit 1
 fi
+
+echo "== error targets: the rounds as chained arrays"
+cat > "$work/t.json" <<'JSON'
+{
+  "name": "slurm-ci-target",
+  "description": "SLURM test: a binary mixture (500 + 500 particles), gamma = T_2/T_1 at t_end to 0.5 % at two mass ratios, 3 pilot replicas, more in rounds",
+  "model": "dsmc",
+  "seed": 31,
+  "min_replicas": 3,
+  "max_replicas": 200,
+  "params": {
+    "method": "low_rank",
+    "species": {"list": [
+      {"mass": 1, "diameter": 1, "count": 500},
+      {"mass": 2, "diameter": 1, "count": 500}
+    ]},
+    "volume": 10000,
+    "restitution": {"constant": 0.8},
+    "initial_temperature": {"hcs": {"mean": 1.0}},
+    "t_end": 2,
+    "output_times": {"list": [1, 2]},
+    "observables": ["temperature"]
+  },
+  "sweep": {"species.list.1.mass": [2, 8]},
+  "derived": {"gamma": "temperature[species=2] / temperature[species=1]"},
+  "target": [{"quantity": "gamma", "t": "t_end", "sem_rel": 0.005}]
+}
+JSON
+tout=$work/target
+"$bin" submit "$work/t.json" --out "$tout" --slurm --tasks 2 --per-task-runs 2 --time 00:10:00 | tee "$work/tsubmit.txt"
+grep -q "round 1 job" "$work/tsubmit.txt" || { echo "FAIL: no round job chained after the pilot array"; exit 1; }
+record() { "$py" -c 'import json,sys; r=json.load(open(sys.argv[1])); print(eval(sys.argv[2]))' "$tout/slurm/submission.json" "$1"; }
+verdict=
+for _ in $(seq 900); do
+    verdict=$(record '(r.get("outcome") or {}).get("verdict", "")')
+    [ -n "$verdict" ] && break
+    sleep 1
+done
+"$bin" status "$tout" | tee "$work/tstatus.txt"
+if [ "$verdict" != met ]; then
+    echo "FAIL: the chain of round jobs ended with ${verdict:-nothing} (expected every target met)"
+    cat "$tout"/slurm/logs/round-*.out 2>/dev/null || true
+    exit 1
+fi
+arrays=$(record 'len(r["submissions"])')
+[ "$arrays" -ge 2 ] || { echo "FAIL: the pilot met the targets; no chained round was run"; exit 1; }
+compact_job=$(record 'r["submissions"][-1]["compact_job"]')
+for _ in $(seq 900); do
+    squeue -h -j "$compact_job" 2>/dev/null | grep -q . || break
+    sleep 1
+done
+cat "$tout"/slurm/logs/round-*.out
+[ -f "$tout/ledger/index.json" ] || { echo "FAIL: the compaction job after the last round did not run"; exit 1; }
+"$bin" verify "$tout"
+"$bin" run "$work/t.json" --out "$work/treference" --threads 2 --quiet
+"$py" scripts/compare_tables.py "$work/treference" "$tout"
+echo "error targets: $arrays chained arrays, every target met, tables equal a local run's"
 echo "slurm-test: passed"

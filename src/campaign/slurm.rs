@@ -4,11 +4,24 @@
 //! their checkpoints, the shard lock refuses a second process. A compaction job follows the
 //! array with `afterok`.
 //!
+//! **Error targets** (a manifest with `target`): the rounds run as chained arrays. Each array
+//! (the pilot first) is followed by a ROUND job (`--dependency=afterany:<array>`: a failed
+//! task does not stall the campaign) that runs `granular slurm-round DIR --submission K`
+//! ([`round_step`]): it decides the next round ([`crate::campaign::targets::decide_round`],
+//! under the campaign's lock, from the committed runs only) and, when runs were added,
+//! submits the next array of the shards with pending runs (the same layout `N` and options)
+//! and the next round job after it; when the runs asked for are not all committed it
+//! resubmits their shards once more, then gives up (its message in the job's log, in the
+//! record and in `status`); when every target is met or the campaign stopped, it submits the
+//! compaction job (if asked for) and records the verdict. At most [`MAX_ROUNDS`] rounds. The
+//! decisions come from the committed runs alone, so the tables are those of a local `run`.
+//!
 //! Files (under the campaign directory):
 //! ```text
 //! slurm/submission.json         the shard layout, the options, every submission's job ids
 //! slurm/array-<k>.sh            the k-th array script (readable, resubmittable with sbatch)
-//! slurm/compact-<k>.sh          its compaction job
+//! slurm/compact-<k>.sh          its compaction job (error targets: after the final round)
+//! slurm/round-<k>.sh            error targets: the round job after array k
 //! slurm/logs/<job>_<task>.out   task output
 //! ```
 //! The commands `sbatch`, `squeue` and `scontrol` can be replaced through the environment
@@ -37,6 +50,13 @@ pub const SUBMISSION_KIND: &str = "granular.slurm_submission";
 
 /// SLURM's default `MaxArraySize` (indices 0..=1000).
 pub const DEFAULT_MAX_ARRAY_SIZE: u64 = 1001;
+
+/// Rounds a chain of round jobs decides at most (it never loops).
+pub const MAX_ROUNDS: u32 = 100;
+
+/// Arrays a round job submits for one round: the round's array and one resubmission of the
+/// shards whose runs were not committed.
+pub const ATTEMPTS_PER_ROUND: u32 = 2;
 
 /// The options of `granular submit` (all but the first submission's may be overridden by
 /// `--missing`).
@@ -78,6 +98,31 @@ pub struct Submission {
     pub compact_job: Option<String>,
     /// Array indices (shard index - 1) of this submission.
     pub indices: Vec<u64>,
+    /// Error targets: the round whose runs this array runs (1: the pilot; its round job takes
+    /// decision `round`), and which try of that round it is (1, or 2 for the resubmission of
+    /// shards whose runs were not committed). None without targets (and in older records).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attempt: Option<u32>,
+    /// Error targets: the round job chained after the array (afterany).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round_script: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round_job: Option<String>,
+}
+
+/// How the chain of round jobs ended (error targets).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RoundsOutcome {
+    /// The submission whose round job ended the chain.
+    pub submission: u32,
+    /// The round it decided.
+    pub round: u32,
+    /// `met`, `stopped` (the campaign's verdict) or `gave_up` (the chain stopped: runs not
+    /// committed after a resubmission, [`MAX_ROUNDS`], an error).
+    pub verdict: String,
+    pub message: String,
 }
 
 /// `slurm/submission.json`.
@@ -92,6 +137,10 @@ pub struct SubmissionRecord {
     /// The granular binary the scripts run.
     pub binary: String,
     pub submissions: Vec<Submission>,
+    /// Error targets: how the chain of round jobs ended (None while it goes on; cleared by a
+    /// new submission).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outcome: Option<RoundsOutcome>,
 }
 
 /// What `submit` did or would do.
@@ -100,6 +149,8 @@ pub struct Plan {
     pub record: SubmissionRecord,
     pub script: String,
     pub compact_script: Option<String>,
+    /// Error targets: the round job's script (instead of the compaction's).
+    pub round_script: Option<String>,
     pub indices: Vec<u64>,
     pub notes: Vec<String>,
     /// Array jobs of earlier submissions with tasks still queued or running.
@@ -463,6 +514,36 @@ fn compact_script(c: &Campaign, root: &str, rec: &SubmissionRecord) -> String {
     s
 }
 
+/// The round job after array `number` (error targets): decides the next round and submits
+/// what follows (`granular slurm-round`, [`round_step`]).
+fn round_script(c: &Campaign, root: &str, rec: &SubmissionRecord, number: u32) -> String {
+    let o = &rec.options;
+    let mut s = String::new();
+    s.push_str("#!/bin/bash\n");
+    s.push_str(&format!(
+        "# granular campaign {:?}: the round after array {number} (afterany): decide the next\n\
+         # round of replicas from the committed runs and submit its array and round job, or the\n\
+         # compaction once every target is met or the campaign stopped.\n",
+        c.manifest.name
+    ));
+    s.push_str(&format!(
+        "#SBATCH --job-name={}-round\n",
+        job_name(&c.manifest.name)
+    ));
+    s.push_str(&format!("#SBATCH --time={}\n", sbatch_arg(&o.time)));
+    s.push_str("#SBATCH --ntasks=1\n");
+    s.push_str(&output_directive(root, "round-%j.out"));
+    s.push_str("#SBATCH --open-mode=append\n");
+    s.push_str(&option_directives(o));
+    s.push_str("set -u\n");
+    s.push_str(&format!(
+        "exec {} slurm-round {} --submission {number}\n",
+        shell_quote(&rec.binary),
+        shell_quote(root)
+    ));
+    s
+}
+
 /// One line of `squeue -h -r -o "%F %K %T"`: array job id, task index (or the range spec of a
 /// pending remainder, "3-9%2"; "N/A" for a plain job), state.
 struct Queued {
@@ -540,6 +621,16 @@ pub struct SubmissionStatus {
     pub array: String,
     pub array_job: Option<String>,
     pub compact_job: Option<String>,
+    /// Error targets: the round this array runs, which try of it, its round job.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attempt: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round_job: Option<String>,
+    /// Error targets, on the submission whose round job ended the chain: how it ended.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outcome: Option<RoundsOutcome>,
     /// SLURM states of this submission's jobs now (`squeue`), e.g. {"RUNNING": 2, "PENDING": 5};
     /// `None` when squeue could not be asked.
     pub queue: Option<std::collections::BTreeMap<String, u64>>,
@@ -557,8 +648,33 @@ impl SubmissionStatus {
                 .join(", "),
             None => "squeue not available".to_string(),
         };
+        let round = match (self.round, self.attempt) {
+            (Some(r), Some(a)) if a > 1 => format!("round {r} (try {a}): "),
+            (Some(r), _) => format!("round {r}: "),
+            _ => String::new(),
+        };
+        let round_job = match &self.round_job {
+            Some(j) => format!(", round job {j}"),
+            None if self.round.is_some() => ", round job -".to_string(),
+            None => String::new(),
+        };
+        let outcome = match &self.outcome {
+            Some(o) if o.verdict == "gave_up" => {
+                format!(
+                    "; the round jobs gave up at round {}: {}",
+                    o.round, o.message
+                )
+            }
+            Some(o) => format!(
+                "; targets {} after round {}: {}",
+                if o.verdict == "met" { "met" } else { "stopped" },
+                o.round,
+                o.message
+            ),
+            None => String::new(),
+        };
         format!(
-            "array {} job {}, compaction job {} ({queue})",
+            "{round}array {} job {}{round_job}, compaction job {} ({queue}){outcome}",
             self.array,
             self.array_job.as_deref().unwrap_or("-"),
             self.compact_job.as_deref().unwrap_or("-")
@@ -574,7 +690,13 @@ pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, CampaignE
     let ids: Vec<String> = rec
         .submissions
         .iter()
-        .flat_map(|s| [s.array_job.clone(), s.compact_job.clone()])
+        .flat_map(|s| {
+            [
+                s.array_job.clone(),
+                s.compact_job.clone(),
+                s.round_job.clone(),
+            ]
+        })
         .flatten()
         .collect();
     let states = squeue(&ids);
@@ -586,6 +708,10 @@ pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, CampaignE
             array: s.array.clone(),
             array_job: s.array_job.clone(),
             compact_job: s.compact_job.clone(),
+            round: s.round,
+            attempt: s.attempt,
+            round_job: s.round_job.clone(),
+            outcome: rec.outcome.clone().filter(|o| o.submission == s.number),
             queue: states.as_ref().map(|st| {
                 let mut m = std::collections::BTreeMap::new();
                 for q in st {
@@ -593,6 +719,8 @@ pub fn submission_status(root: &Path) -> Result<Vec<SubmissionStatus>, CampaignE
                         "tasks"
                     } else if Some(&q.job) == s.compact_job.as_ref() {
                         "compaction"
+                    } else if Some(&q.job) == s.round_job.as_ref() {
+                        "round"
                     } else {
                         continue;
                     };
@@ -616,7 +744,7 @@ pub fn plan(
 ) -> Result<Plan, CampaignError> {
     let existing = read_record(root)?;
     let mut notes = Vec::new();
-    let mut rec = match (&existing, missing) {
+    let rec = match (&existing, missing) {
         (Some(_), false) => return Err(already_submitted(root)),
         (None, true) => return Err(never_submitted(root)),
         (Some(r), true) => resubmission(r, options, binary),
@@ -631,10 +759,40 @@ pub fn plan(
     } else {
         missing_shards(c, root, &rec, &mut notes)?
     };
+    // Error targets: this array runs the round after the decisions so far (a new try).
+    let round = c
+        .manifest
+        .has_targets()
+        .then(|| (c.rounds.decisions.len() as u32 + 1, 1));
+    Ok(assemble(
+        c,
+        dir,
+        rec,
+        indices,
+        still_queued_arrays,
+        notes,
+        round,
+    ))
+}
+
+/// The plan of the next submission of `rec` (its scripts and record entry) for the shards
+/// `indices`; `round`: (round, try) of an error-target campaign, whose array is followed by a
+/// round job instead of the compaction. `dir` has passed [`scriptable_dir`].
+fn assemble(
+    c: &Campaign,
+    dir: &str,
+    mut rec: SubmissionRecord,
+    indices: Vec<u64>,
+    still_queued_arrays: Vec<String>,
+    notes: Vec<String>,
+    round: Option<(u32, u32)>,
+) -> Plan {
     let number = rec.submissions.len() as u32 + 1;
     let array = format!("{}%{}", ranges(&indices), rec.options.throttle.max(1));
     let script = array_script(c, dir, &rec, &array, number);
-    let compact = rec.options.compact.then(|| compact_script(c, dir, &rec));
+    let compact = (rec.options.compact && round.is_none()).then(|| compact_script(c, dir, &rec));
+    let round_text = round.map(|_| round_script(c, dir, &rec, number));
+    rec.outcome = None;
     rec.submissions.push(Submission {
         number,
         script: format!("slurm/array-{number:03}.sh"),
@@ -645,15 +803,22 @@ pub fn plan(
             .map(|_| format!("slurm/compact-{number:03}.sh")),
         compact_job: None,
         indices: indices.clone(),
+        round: round.map(|r| r.0),
+        attempt: round.map(|r| r.1),
+        round_script: round_text
+            .as_ref()
+            .map(|_| format!("slurm/round-{number:03}.sh")),
+        round_job: None,
     });
-    Ok(Plan {
+    Plan {
         record: rec,
         script,
         compact_script: compact,
+        round_script: round_text,
         indices,
         notes,
         still_queued_arrays,
-    })
+    }
 }
 
 fn already_submitted(root: &Path) -> CampaignError {
@@ -714,6 +879,7 @@ fn first_submission(
         options: o,
         binary: binary.to_string(),
         submissions: Vec::new(),
+        outcome: None,
     }
 }
 
@@ -832,15 +998,16 @@ pub fn submit(root: &Path, mut p: Plan) -> Result<Plan, CampaignError> {
     let sub = p.record.submissions.last().cloned().expect("a submission");
     let script_path = root.join(&sub.script);
     fsutil::write_atomic(&script_path, p.script.as_bytes()).map_err(|e| io(&script_path, e))?;
-    if let (Some(rel), Some(text)) = (&sub.compact_script, &p.compact_script) {
-        let path = root.join(rel);
-        fsutil::write_atomic(&path, text.as_bytes()).map_err(|e| io(&path, e))?;
+    for (rel, text) in [
+        (&sub.compact_script, &p.compact_script),
+        (&sub.round_script, &p.round_script),
+    ] {
+        if let (Some(rel), Some(text)) = (rel, text) {
+            let path = root.join(rel);
+            fsutil::write_atomic(&path, text.as_bytes()).map_err(|e| io(&path, e))?;
+        }
     }
-    let rp = record_path(root);
-    let save = |rec: &SubmissionRecord| {
-        fsutil::write_atomic(&rp, &serde_json::to_vec_pretty(rec).expect("record"))
-            .map_err(|e| io(&rp, e))
-    };
+    let save = |rec: &SubmissionRecord| save_record(root, rec);
     if p.indices.is_empty() {
         return Ok(p);
     }
@@ -858,7 +1025,217 @@ pub fn submit(root: &Path, mut p: Plan) -> Result<Plan, CampaignError> {
         p.record.submissions.last_mut().expect("sub").compact_job = Some(job);
         save(&p.record)?;
     }
+    if let Some(rel) = &sub.round_script {
+        // After every task of this array ends, whatever its state (the round job looks at
+        // what was committed), and after earlier arrays still queued or running.
+        let mut dep = format!("--dependency=afterany:{array_job}");
+        for j in &p.still_queued_arrays {
+            dep.push_str(&format!(",afterany:{j}"));
+        }
+        let path = root.join(rel).display().to_string();
+        let job = sbatch(&["--parsable", &dep, &path])?;
+        p.record.submissions.last_mut().expect("sub").round_job = Some(job);
+        save(&p.record)?;
+    }
     Ok(p)
+}
+
+/// Write `slurm/submission.json` atomically.
+fn save_record(root: &Path, rec: &SubmissionRecord) -> Result<(), CampaignError> {
+    let rp = record_path(root);
+    fsutil::write_atomic(&rp, &serde_json::to_vec_pretty(rec).expect("record"))
+        .map_err(|e| CampaignError::Io(format!("{}: {e}", rp.display())))
+}
+
+/// What a round job did ([`round_step`]).
+#[derive(Debug, Clone)]
+pub enum RoundStep {
+    /// A later submission exists (e.g. `submit --missing`): its round job decides; nothing done.
+    Superseded(u32),
+    /// The next array and its round job were submitted: the runs added by decision `round`
+    /// (`added` of them), or (`added` = 0) the resubmission of shards whose runs of the
+    /// round were not committed.
+    Submitted { round: u32, added: u64, plan: Plan },
+    /// Every target met, or the campaign stopped: the verdict, and the compaction job if one
+    /// was submitted.
+    Final {
+        outcome: RoundsOutcome,
+        compact_job: Option<String>,
+    },
+    /// The chain stopped (recorded in the outcome): the runs asked for are not all committed
+    /// after a resubmission, or [`MAX_ROUNDS`] rounds were decided.
+    GaveUp(RoundsOutcome),
+}
+
+/// The round job of submission `number` of the campaign at `root` (`granular slurm-round`):
+/// decide the next round and submit what follows (see the module). Errors are recorded in
+/// the record's outcome (as a give-up) too, so that `status` shows them.
+pub fn round_step(root: &Path, number: u32) -> Result<RoundStep, CampaignError> {
+    let rec = read_record(root)?.ok_or_else(|| never_submitted(root))?;
+    let Some(sub) = rec.submissions.iter().find(|s| s.number == number).cloned() else {
+        return Err(CampaignError::Invalid(format!(
+            "{}: no submission {number} in slurm/submission.json",
+            root.display()
+        )));
+    };
+    let last = rec.submissions.last().map_or(0, |s| s.number);
+    if last != number {
+        return Ok(RoundStep::Superseded(last));
+    }
+    let round = sub.round.unwrap_or(1);
+    let attempt = sub.attempt.unwrap_or(1);
+    match round_step_inner(root, rec.clone(), &sub, round, attempt) {
+        Err(e) => {
+            let mut rec = rec;
+            rec.outcome = Some(RoundsOutcome {
+                submission: number,
+                round,
+                verdict: "gave_up".into(),
+                message: format!("the round job of submission {number} failed: {e}"),
+            });
+            // The error is what matters; a record that cannot be written is said in the log.
+            if let Err(w) = save_record(root, &rec) {
+                tracing::warn!("{w}");
+            }
+            Err(e)
+        }
+        ok => ok,
+    }
+}
+
+fn round_step_inner(
+    root: &Path,
+    mut rec: SubmissionRecord,
+    sub: &Submission,
+    round: u32,
+    attempt: u32,
+) -> Result<RoundStep, CampaignError> {
+    let c = Campaign::open(root)?;
+    if !c.manifest.has_targets() {
+        return Err(CampaignError::Refused(format!(
+            "{}: the campaign has no error targets; its arrays need no round job",
+            root.display()
+        )));
+    }
+    check_time(&rec.options.time).map_err(|e| CampaignError::Refused(e.to_string()))?;
+    let dir = scriptable_dir(root, &rec)?.to_string();
+    let give_up =
+        |rec: &mut SubmissionRecord, message: String| -> Result<RoundStep, CampaignError> {
+            let o = RoundsOutcome {
+                submission: sub.number,
+                round,
+                verdict: "gave_up".into(),
+                message,
+            };
+            rec.outcome = Some(o.clone());
+            save_record(root, rec)?;
+            Ok(RoundStep::GaveUp(o))
+        };
+    let decided = super::targets::decide_round(&c)?;
+    let c = Campaign::open(root)?;
+    let (next_round, next_attempt, added) = match decided {
+        super::targets::Decided::Final(verdict, why) => {
+            let verdict = serde_json::to_value(verdict)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default();
+            let o = RoundsOutcome {
+                submission: sub.number,
+                round: c.rounds.decisions.len() as u32,
+                verdict,
+                message: why,
+            };
+            let mut compact_job = None;
+            if rec.options.compact {
+                let rel = format!("slurm/compact-{:03}.sh", sub.number);
+                let path = root.join(&rel);
+                let text = compact_script(&c, &dir, &rec);
+                fsutil::write_atomic(&path, text.as_bytes())
+                    .map_err(|e| CampaignError::Io(format!("{}: {e}", path.display())))?;
+                let job = sbatch(&["--parsable", &path.display().to_string()])?;
+                let s = rec.submissions.last_mut().expect("sub");
+                s.compact_script = Some(rel);
+                s.compact_job = Some(job.clone());
+                compact_job = Some(job);
+            }
+            rec.outcome = Some(o.clone());
+            save_record(root, &rec)?;
+            return Ok(RoundStep::Final {
+                outcome: o,
+                compact_job,
+            });
+        }
+        super::targets::Decided::More(n) => {
+            let decided = c.rounds.decisions.len() as u32;
+            if decided >= MAX_ROUNDS {
+                return give_up(
+                    &mut rec,
+                    format!(
+                        "{decided} rounds decided, the most a chain of round jobs takes ({MAX_ROUNDS}); the {n} run(s) of round {} are registered but not submitted: `granular submit --missing {}` goes on",
+                        decided + 1,
+                        root.display()
+                    ),
+                );
+            }
+            (decided + 1, 1, n)
+        }
+        super::targets::Decided::Incomplete => {
+            if attempt >= ATTEMPTS_PER_ROUND {
+                let pending = pending_shards(&c, rec.shards)?;
+                return give_up(
+                    &mut rec,
+                    format!(
+                        "round {round}: runs asked for are still not committed after {attempt} array submissions (shard indices {}); see the task logs in slurm/logs/ and the runs table, then `granular submit --missing {}`",
+                        ranges(&pending),
+                        root.display()
+                    ),
+                );
+            }
+            (round, attempt + 1, 0)
+        }
+    };
+    let mut notes = Vec::new();
+    let (indices, still) = missing_shards(&c, root, &rec, &mut notes)?;
+    for n in &notes {
+        tracing::warn!("{n}");
+    }
+    if indices.is_empty() {
+        return give_up(
+            &mut rec,
+            format!(
+                "round {next_round}: the shards with pending runs are all queued or running elsewhere ({}); `granular submit --missing {}` once they end",
+                notes.join("; "),
+                root.display()
+            ),
+        );
+    }
+    let plan = assemble(
+        &c,
+        &dir,
+        rec,
+        indices,
+        still,
+        notes,
+        Some((next_round, next_attempt)),
+    );
+    let plan = submit(root, plan)?;
+    Ok(RoundStep::Submitted {
+        round: next_round,
+        added,
+        plan,
+    })
+}
+
+/// The (0-based) shards of an `n`-shard layout with runs asked for and not finished.
+fn pending_shards(c: &Campaign, n: u64) -> Result<Vec<u64>, CampaignError> {
+    let finished = ledger::finished_runs(&ledger::read_commits(&c.root)?);
+    let set: BTreeSet<u64> = c
+        .plan
+        .current_runs()
+        .filter(|r| !finished.contains_key(&r.run_id))
+        .map(|r| r.run_id % n)
+        .collect();
+    Ok(set.into_iter().collect())
 }
 
 #[cfg(test)]
@@ -963,6 +1340,25 @@ mod tests {
         assert_eq!(job_name("x.y-z_1"), "granular-x_y-z_1");
         assert_eq!(job_name("HetJob-packjobs"), "granular-Het_Job-pack_jobs");
         assert!(check_value("", &job_name("hetjobhetjob"), true).is_empty());
+    }
+
+    /// A record written before error targets (no round fields, no outcome) still reads, and
+    /// writes back without them.
+    #[test]
+    fn records_of_earlier_versions_read() {
+        let old = r#"{"format_version": 1, "kind": "granular.slurm_submission", "shards": 3,
+            "runs_per_shard": 4, "options": {"throttle": 2, "per_task_runs": 4,
+            "time": "00:05:00", "partition": null, "sbatch_args": [], "cpus_per_task": 1,
+            "checkpoint_every": 300.0, "compact": true}, "binary": "/g",
+            "submissions": [{"number": 1, "script": "slurm/array-001.sh", "array": "0-2%2",
+            "array_job": "101", "compact_script": "slurm/compact-001.sh",
+            "compact_job": "102", "indices": [0, 1, 2]}]}"#;
+        let r: SubmissionRecord = serde_json::from_str(old).expect("reads");
+        assert_eq!(r.submissions[0].round, None);
+        assert_eq!(r.submissions[0].round_job, None);
+        assert_eq!(r.outcome, None);
+        let back = serde_json::to_string(&r).unwrap();
+        assert!(!back.contains("round") && !back.contains("outcome"), "{back}");
     }
 
     #[test]

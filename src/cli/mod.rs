@@ -34,6 +34,7 @@ mod run;
 mod schema;
 mod serve;
 mod signals;
+mod slurm_round;
 mod slurm_task;
 mod status;
 mod submit;
@@ -98,6 +99,10 @@ enum Command {
     /// Run one SLURM array task (used by the scripts `granular submit` writes).
     #[command(hide = true)]
     SlurmTask(slurm_task::Args),
+    /// Decide the next round of an error-target campaign under SLURM and submit what follows
+    /// (used by the round scripts `granular submit` writes).
+    #[command(hide = true)]
+    SlurmRound(slurm_round::Args),
     /// Merge a campaign's small Parquet parts into large files (readers never see missing or
     /// doubled rows) and fold its commit records into one ledger index.
     Compact(compact::Args),
@@ -148,6 +153,7 @@ pub fn main() -> i32 {
         Command::Theory(a) => theory::run(a),
         Command::Submit(a) => submit::run(a),
         Command::SlurmTask(a) => slurm_task::run(a),
+        Command::SlurmRound(a) => slurm_round::run(a),
         Command::Compact(a) => compact::run(a),
         Command::Verify(a) => verify::run(a),
         Command::Plot(a) => plot::run(a),
@@ -381,5 +387,24 @@ mod tests {
         assert_eq!((a.shards, a.index), (7, None));
         assert_eq!(a.exec.threads, Some(4));
         assert_eq!(a.exec.checkpoint.seconds(), 300.0);
+    }
+
+    /// The invocation written into round scripts (`campaign::slurm`) still parses; a
+    /// submission number of 0 or none is refused.
+    #[test]
+    fn slurm_round_invocation_parses() {
+        let cli = Cli::try_parse_from(["granular", "slurm-round", "/c", "--submission", "12"])
+            .expect("parses");
+        let Command::SlurmRound(a) = cli.command else {
+            panic!("not slurm-round")
+        };
+        assert_eq!(a.submission, 12);
+        for bad in [
+            &["granular", "slurm-round", "/c", "--submission", "0"][..],
+            &["granular", "slurm-round", "/c", "--submission", "-1"][..],
+            &["granular", "slurm-round", "/c"][..],
+        ] {
+            assert!(Cli::try_parse_from(bad).is_err(), "{bad:?}");
+        }
     }
 }

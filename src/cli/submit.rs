@@ -1,6 +1,8 @@
 //! `granular submit`: run a campaign as a SLURM job array with a compaction job chained by
 //! afterok (`MANIFEST --out DIR`), or resubmit its unfinished shards (`--missing DIR`);
-//! `--dry-run` prints the scripts and writes nothing.
+//! `--dry-run` prints the scripts and writes nothing. A campaign with error targets gets a
+//! round job chained by afterany instead (`slurm-round`: the rounds as chained arrays, the
+//! compaction after the last).
 
 use std::path::{Path, PathBuf};
 
@@ -270,14 +272,25 @@ fn print_dry_run(root: &Path, plan: &slurm::Plan) {
         path(&sub.script)
     );
     out!("{}", plan.script);
-    if let (Some(rel), Some(text)) = (&sub.compact_script, &plan.compact_script) {
-        outln!("# {rel}");
-        out!("{text}");
+    for (rel, text) in [
+        (&sub.compact_script, &plan.compact_script),
+        (&sub.round_script, &plan.round_script),
+    ] {
+        if let (Some(rel), Some(text)) = (rel, text) {
+            outln!("# {rel}");
+            out!("{text}");
+        }
     }
     outln!("# would run: sbatch --parsable {}", path(&sub.script));
     if let Some(rel) = &sub.compact_script {
         outln!(
             "# then: sbatch --parsable --dependency=afterok:<array job id> {}",
+            path(rel)
+        );
+    }
+    if let Some(rel) = &sub.round_script {
+        outln!(
+            "# then: sbatch --parsable --dependency=afterany:<array job id> {}",
             path(rel)
         );
     }
@@ -295,6 +308,10 @@ fn print_submitted(root: &Path, p: &slurm::Plan) {
         s.compact_job
             .as_deref()
             .map(|j| format!(", compaction job {j} (afterok)"))
+            .or_else(|| s.round_job.as_deref().map(|j| format!(
+                ", round {} job {j} (afterany; it submits the next round's array, and the compaction after the last)",
+                s.round.unwrap_or(1)
+            )))
             .unwrap_or_default()
     );
     outln!("script: {}", root.join(&s.script).display());

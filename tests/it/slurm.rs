@@ -615,3 +615,278 @@ fn scripts_carry_odd_paths_unchanged() {
         .collect();
     assert!(pwned.is_empty(), "injected commands ran: {pwned:?}");
 }
+
+/// A tiny error-target campaign: a binary mixture (500 + 500 particles), gamma = T_2/T_1 at
+/// t_end to 0.5 % at two mass ratios, 3 pilot replicas.
+fn target_manifest() -> Value {
+    json!({
+        "name": "slurm-target",
+        "model": "dsmc",
+        "seed": 31,
+        "min_replicas": 3,
+        "max_replicas": 60,
+        "params": {
+            "method": "low_rank",
+            "species": {"list": [
+                {"mass": 1, "diameter": 1, "count": 500},
+                {"mass": 2, "diameter": 1, "count": 500}
+            ]},
+            "volume": 10000,
+            "restitution": {"constant": 0.8},
+            "initial_temperature": {"hcs": {"mean": 1.0}},
+            "t_end": 2,
+            "output_times": {"list": [1, 2]},
+            "observables": ["temperature"]
+        },
+        "sweep": {"species.list.1.mass": [2, 8]},
+        "derived": {"gamma": "temperature[species=2] / temperature[species=1]"},
+        "target": [{"quantity": "gamma", "t": "t_end", "sem_rel": 0.005}]
+    })
+}
+
+fn record(c: &Path) -> Value {
+    serde_json::from_str(&fs::read_to_string(c.join("slurm/submission.json")).unwrap()).unwrap()
+}
+
+/// `granular slurm-round DIR --submission K` with the stand-in tools: (exit code, stdout).
+fn slurm_round(t: &Path, c: &Path, k: u64, log: &Path) -> (Option<i32>, String) {
+    let f = fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log)
+        .unwrap();
+    let out = Command::new(bin())
+        .args(["slurm-round", s(c), "--submission", &k.to_string()])
+        .env("GRANULAR_SBATCH", t.join("sbatch"))
+        .env("GRANULAR_SQUEUE", t.join("squeue"))
+        .env("GRANULAR_SCONTROL", t.join("scontrol"))
+        .stdin(Stdio::null())
+        .stderr(f)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+    )
+}
+
+/// An error-target campaign under SLURM (stand-in sbatch): `submit` writes array-001 and
+/// round-001 chained by afterany (no compaction yet); array tasks run by hand, `slurm-round`
+/// then submits the next round's array of exactly the shards with pending runs and the next
+/// round job after it, until every target is met, and then the compaction job. A task that
+/// did not run: its shard is resubmitted once (try 2), then the round job gives up (exit 1,
+/// said by `status`); an older round job is superseded; `submit --missing` restarts the chain.
+/// The tables equal a local `granular run` of the same manifest. (Before: `submit` chained
+/// only a compaction, and no command decided rounds under SLURM.)
+#[test]
+fn target_campaign_runs_as_chained_arrays() {
+    let _g = heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let t = dir.path();
+    fake_tools(t);
+    let m = t.join("m.json");
+    write_json(&m, &target_manifest());
+    let log = t.join("log");
+    let c = t.join("C");
+    let sbatch_calls = || -> Vec<String> {
+        fs::read_to_string(t.join("sbatch.log"))
+            .unwrap_or_default()
+            .lines()
+            .map(String::from)
+            .collect()
+    };
+    let task = |i: u64| {
+        let code = run_granular(
+            &[
+                "slurm-task",
+                s(&c),
+                "--shards",
+                "3",
+                "--index",
+                &i.to_string(),
+            ],
+            &log,
+            LIMIT,
+        );
+        assert_eq!(code, Some(0), "task {i}; log:\n{}", log_text(&log));
+    };
+    let done = || util::status_json(&c, &log)["done"].as_u64().unwrap();
+
+    // 6 pilot runs at 2 per task: 3 shards (MaxArraySize 3).
+    let (code, out) = submit(
+        t,
+        &[
+            s(&m),
+            "--out",
+            s(&c),
+            "--slurm",
+            "--tasks",
+            "2",
+            "--per-task-runs",
+            "2",
+            "--time",
+            "00:05:00",
+        ],
+        &log,
+    );
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    assert!(
+        out.contains("job 101") && out.contains("round 1 job 102"),
+        "{out}"
+    );
+    let rec = record(&c);
+    assert_eq!(rec["shards"], json!(3));
+    assert_eq!(rec["submissions"][0]["round"], json!(1));
+    assert_eq!(rec["submissions"][0]["round_job"], json!("102"));
+    assert_eq!(rec["submissions"][0]["compact_job"], Value::Null);
+    let round = fs::read_to_string(c.join("slurm/round-001.sh")).unwrap();
+    assert!(
+        round.contains(" slurm-round ") && round.contains("--submission 1"),
+        "{round}"
+    );
+    assert!(!c.join("slurm/compact-001.sh").exists());
+    let calls = sbatch_calls();
+    assert_eq!(calls.len(), 2, "{calls:?}");
+    assert!(calls[0].contains("array-001.sh"));
+    assert!(
+        calls[1].contains("--dependency=afterany:101") && calls[1].contains("round-001.sh"),
+        "{calls:?}"
+    );
+
+    // Task 0 never ran: the round job resubmits shard 0 once (try 2, its own round job)...
+    task(1);
+    task(2);
+    let (code, out) = slurm_round(t, &c, 1, &log);
+    assert_eq!(code, Some(0), "{out}\nlog:\n{}", log_text(&log));
+    assert!(out.contains("try 2") && out.contains("array 0%2"), "{out}");
+    let rec = record(&c);
+    assert_eq!(rec["submissions"][1]["round"], json!(1));
+    assert_eq!(rec["submissions"][1]["attempt"], json!(2));
+    let calls = sbatch_calls();
+    assert!(calls[3].contains("--dependency=afterany:103") && calls[3].contains("round-002.sh"));
+    // ... and gives up when it still did not run, saying so in status.
+    let (code, _) = slurm_round(t, &c, 2, &log);
+    assert_eq!(code, Some(1), "log:\n{}", log_text(&log));
+    assert!(log_text(&log).contains("still not committed after 2 array submissions"));
+    let st = Command::new(bin())
+        .args(["status", s(&c)])
+        .env("GRANULAR_SQUEUE", t.join("squeue"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&st.stdout);
+    assert!(
+        text.contains("slurm submission 2: round 1 (try 2): array 0%2 job 103, round job 104")
+            && text.contains("the round jobs gave up at round 1"),
+        "{text}"
+    );
+    // A round job of an earlier submission does nothing.
+    let before = sbatch_calls().len();
+    let (code, out) = slurm_round(t, &c, 1, &log);
+    assert_eq!(
+        (code, out.contains("followed by submission 2")),
+        (Some(0), true),
+        "{out}"
+    );
+    assert_eq!(sbatch_calls().len(), before);
+
+    // `submit --missing` restarts the chain: shard 0, round 1, a new round job.
+    let (code, out) = submit(t, &["--missing", s(&c)], &log);
+    assert_eq!(code, Some(0), "log:\n{}", log_text(&log));
+    assert!(
+        out.contains("array 0%2") && out.contains("round 1 job 106"),
+        "{out}"
+    );
+    assert_eq!(record(&c)["outcome"], Value::Null);
+
+    // The chain: run the tasks of the latest array, then its round job, until final. Every
+    // array holds exactly the shards with pending runs (a task of another shard runs nothing).
+    let mut rounds = 0;
+    let final_out = loop {
+        let rec = record(&c);
+        let subs = rec["submissions"].as_array().unwrap();
+        let last = subs.last().unwrap();
+        let k = last["number"].as_u64().unwrap();
+        let indices: Vec<u64> = last["indices"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert_eq!(last["attempt"], json!(1), "{rec}");
+        for i in 0..3 {
+            let before = done();
+            task(i);
+            let ran = done() > before;
+            assert_eq!(
+                ran,
+                indices.contains(&i),
+                "shard {i}, array {indices:?}: {rec}"
+            );
+        }
+        let (code, out) = slurm_round(t, &c, k, &log);
+        assert_eq!(code, Some(0), "{out}\nlog:\n{}", log_text(&log));
+        if out.contains("targets ") {
+            break out;
+        }
+        assert!(out.contains("run(s) added"), "{out}");
+        let rec = record(&c);
+        let n = rec["submissions"].as_array().unwrap().len();
+        let new = &rec["submissions"][n - 1];
+        let script = fs::read_to_string(c.join(new["script"].as_str().unwrap())).unwrap();
+        assert!(script.contains("--shards 3"), "{script}");
+        let calls = sbatch_calls();
+        let dep = format!(
+            "--dependency=afterany:{}",
+            new["array_job"].as_str().unwrap()
+        );
+        assert!(
+            calls[calls.len() - 1].contains(&dep)
+                && calls[calls.len() - 1].contains(&format!("round-{:03}.sh", k + 1)),
+            "{calls:?}"
+        );
+        rounds += 1;
+        assert!(rounds < 20, "no end of rounds");
+    };
+    assert!(
+        rounds >= 1,
+        "the pilot met the targets: no chained round tested"
+    );
+    assert!(
+        final_out.contains("targets met") && final_out.contains("compaction job"),
+        "{final_out}"
+    );
+    let rec = record(&c);
+    assert_eq!(rec["outcome"]["verdict"], json!("met"), "{rec}");
+    let calls = sbatch_calls();
+    let last = calls.last().unwrap();
+    assert!(
+        last.contains("compact-") && !last.contains("--dependency"),
+        "{calls:?}"
+    );
+    let st = util::status_json(&c, &log);
+    assert_eq!(st["targets"]["verdict"], json!("met"), "{st}");
+    assert!(
+        st["slurm"].as_array().unwrap().last().unwrap()["outcome"]["verdict"] == json!("met"),
+        "{st}"
+    );
+    assert_eq!(
+        run_granular(&["compact", s(&c)], &log, LIMIT),
+        Some(0),
+        "log:\n{}",
+        log_text(&log)
+    );
+
+    // The tables equal a local run's (same rounds, decided from the same committed rows).
+    let r = t.join("R");
+    assert_eq!(
+        run_granular(&["run", s(&m), "--out", s(&r), "--quiet"], &log, LIMIT),
+        Some(0),
+        "log:\n{}",
+        log_text(&log)
+    );
+    util::assert_tables_identical(
+        &read_tables(&r),
+        &read_tables(&c),
+        "SLURM rounds vs one run",
+    );
+}
