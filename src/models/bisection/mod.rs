@@ -29,6 +29,13 @@ impl Model for Bisection {
     }
 
     /// The 2^n partition lengths of a realisation (twice: the working copy) and the histogram.
+    /// The realisations' work units (2^(level+1) each) at [`WORK_UNIT_SECONDS`].
+    fn cost(p: &BisectionParams) -> f64 {
+        // 2^(level+1) work units per realisation (the partition and its histogram).
+        RUN_OVERHEAD_SECONDS
+            + p.realisations as f64 * 2f64.powi(p.level as i32 + 1) * WORK_UNIT_SECONDS
+    }
+
     fn memory(p: &BisectionParams) -> u64 {
         let partitions = 1u64.checked_shl(p.level).unwrap_or(u64::MAX);
         partitions
@@ -91,3 +98,10 @@ impl Simulation for BisectionRun {
         BisectionRun::state_bytes(self)
     }
 }
+
+/// The cost model (`Model::cost`, reference machine): CPU seconds per work unit (2^(level+1)
+/// per realisation), and of any run. Calibrated on the 2-core development machine (2026-11)
+/// with `granular run jobs/aux-bisection.json` (wall seconds of the `runs` table against the
+/// work units; scripts/cost-estimate-check.sh).
+pub const WORK_UNIT_SECONDS: f64 = 1.5e-9;
+pub const RUN_OVERHEAD_SECONDS: f64 = 0.01;

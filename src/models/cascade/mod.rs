@@ -38,6 +38,15 @@ impl Model for Cascade {
 
     /// The field, its FFT (complex) and the S(k) sums on the 2^n x 2^n grid, and the placed
     /// discs with their cell grid.
+    /// The realisations' work units and the placement at [`WORK_UNIT_SECONDS`], [`PLACEMENT_SECONDS_PER_DISC`].
+    fn cost(p: &CascadeParams) -> f64 {
+        // 30 4^level work units per realisation (the field and its spectrum), and the
+        // placement's discs.
+        let field = p.realisations as f64 * 30.0 * 4f64.powi(p.level as i32) * WORK_UNIT_SECONDS;
+        let discs = p.placement.as_ref().map_or(0.0, |pl| pl.n_particles as f64);
+        RUN_OVERHEAD_SECONDS + field + discs * PLACEMENT_SECONDS_PER_DISC
+    }
+
     fn memory(p: &CascadeParams) -> u64 {
         let side = 1u64.checked_shl(p.level).unwrap_or(u64::MAX);
         let cells = side.saturating_mul(side);
@@ -133,3 +142,12 @@ impl Simulation for CascadeRun {
         CascadeRun::state_bytes(self)
     }
 }
+
+/// The cost model (`Model::cost`, reference machine): CPU seconds per work unit (30 4^level
+/// per realisation; the engine's unit, ~1 ns), per placed disc (rejection sampling and
+/// overlap checks; an order of magnitude, not calibrated), and of any run. Calibrated on the
+/// 2-core development machine (2026-11) with `granular run jobs/aux-cascade.json`
+/// (scripts/cost-estimate-check.sh).
+pub const WORK_UNIT_SECONDS: f64 = 1.0e-9;
+pub const PLACEMENT_SECONDS_PER_DISC: f64 = 2e-6;
+pub const RUN_OVERHEAD_SECONDS: f64 = 0.01;

@@ -32,6 +32,19 @@ impl Model for Spm {
     }
 
     /// The velocity histogram (counts, time and walk weights) and the free-path table.
+    /// Walks x steps per walk (~1/dt) at [`STEP_SECONDS`].
+    fn cost(p: &SpmParams) -> f64 {
+        // A walk lasts a time of order one (scaled units) until it leaves the unit disc:
+        // ~ 1/dt Euler steps.
+        let steps = p.walks as f64 * WALK_STEPS_TIMES_DT / p.dt;
+        let s = RUN_OVERHEAD_SECONDS + steps * STEP_SECONDS;
+        if s.is_finite() {
+            s
+        } else {
+            f64::MAX
+        }
+    }
+
     fn memory(p: &SpmParams) -> u64 {
         let bins = p
             .velocity_histogram
@@ -88,3 +101,12 @@ impl Simulation for SpmRun {
         SpmRun::state_bytes(self)
     }
 }
+
+/// The cost model (`Model::cost`, reference machine): the mean Euler steps of a walk times
+/// dt (its mean exit time from the unit disc, scaled units), CPU seconds per step, and of any
+/// run. Calibrated on the 2-core development machine (2026-11) with `granular run
+/// jobs/aux-spm.json` (dt = 5e-4, 2e5 walks; wall seconds of the `runs` table;
+/// scripts/cost-estimate-check.sh).
+pub const WALK_STEPS_TIMES_DT: f64 = 2.5;
+pub const STEP_SECONDS: f64 = 2e-8;
+pub const RUN_OVERHEAD_SECONDS: f64 = 0.01;
