@@ -35,6 +35,9 @@
 //!   refused, a running campaign followed.
 //! - `sweep_columns`: every summary table of DSMC, RFM and cascade campaigns carries its
 //!   point's sweep columns after `point_id`, as in `points`.
+//! - `plan_cost`: `plan`'s cost estimate (core-hours, wall time at `--threads`) and the
+//!   calibration it names (reference, probe, finished runs); a target campaign's pilot; the
+//!   report's estimate against what the runs took.
 //! - `figures`: the standard figures of tiny rfm, bisection, cascade and SPM campaigns, the
 //!   same in `plot` and `report`; analyze's outputs in the report; overlays split beyond 12
 //!   points.
@@ -63,6 +66,7 @@ mod it {
     pub mod manifests;
     pub mod models;
     pub mod physics;
+    pub mod plan_cost;
     pub mod races;
     pub mod report;
     pub mod resume;

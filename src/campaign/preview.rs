@@ -657,11 +657,16 @@ impl Continued<'_> {
 
 /// The median over the finished runs (those that ran from t = 0) of wall seconds / cost.
 fn from_finished_runs(c: &Campaign, walls: &BTreeMap<u64, f64>) -> Calibration {
+    // Each point's cost once (a campaign may have many runs per point).
+    let mut costs: HashMap<u32, f64> = HashMap::new();
     let mut ratios: Vec<f64> = walls
         .iter()
         .filter(|(run, _)| c.plan.run(**run).continues.is_none())
         .filter_map(|(run, w)| {
-            let cost = c.plan.points[c.plan.run(*run).point_id as usize].params.cost();
+            let point = c.plan.run(*run).point_id;
+            let cost = *costs
+                .entry(point)
+                .or_insert_with(|| c.plan.points[point as usize].params.cost());
             (cost > 0.0 && w.is_finite() && *w > 0.0).then(|| w / cost)
         })
         .collect();
