@@ -100,8 +100,34 @@ impl Simulation for BisectionRun {
 }
 
 /// The cost model (`Model::cost`, reference machine): CPU seconds per work unit (2^(level+1)
-/// per realisation), and of any run. Calibrated on the 2-core development machine (2026-11)
-/// with `granular run jobs/aux-bisection.json` (wall seconds of the `runs` table against the
-/// work units; scripts/cost-estimate-check.sh).
-pub const WORK_UNIT_SECONDS: f64 = 1.5e-9;
+/// per realisation; a work unit is a partition interval's draw, histogram bin and moments),
+/// and of any run.
+/// The probe: `granular plan JOB --threads 2` of a new directory times its cheapest run for
+/// about a second; its factor (measured over estimated) set against table1-small's, measured
+/// back to back (2026-11, the 2-core development machine at load ~6: table1-small 1.95 and
+/// 1.86, whose DSMC constants come from its runs at load ~0.8): aux-bisection's probe 19.5 with 1.5e-9
+/// s per unit, so ~10x that.
+pub const WORK_UNIT_SECONDS: f64 = 1.5e-8;
 pub const RUN_OVERHEAD_SECONDS: f64 = 0.01;
+
+#[cfg(test)]
+mod cost_tests {
+    use super::*;
+
+    fn example() -> BisectionParams {
+        serde_json::from_str(Bisection::EXAMPLE).unwrap()
+    }
+
+    /// The cost model grows with the run's size.
+    #[test]
+    fn cost_grows_with_the_size() {
+        // Realisations and level (2^(level+1) units each) multiply the cost.
+        let mut p = example();
+        let base = Bisection::cost(&p);
+        p.realisations *= 10;
+        let more = Bisection::cost(&p);
+        assert!((more - RUN_OVERHEAD_SECONDS) / (base - RUN_OVERHEAD_SECONDS) > 9.99);
+        p.level += 1;
+        assert!(Bisection::cost(&p) > 1.99 * more - RUN_OVERHEAD_SECONDS);
+    }
+}

@@ -4,14 +4,18 @@
 //! neighbour lists, the noise and the integration; the samples add a pass over the
 //! particles (and the structure factor, when recorded, one per k vector and evaluation).
 //!
-//! Calibration (2026-11, the 2-core development machine, release build, one run per core):
+//! Calibration (2026-11, the 2-core development machine, release build):
 //! `granular run jobs/rfm2d-steady.json` (N = 2000 discs in 2D, 8e5 steps, a sample every
-//! 1000 steps): see [`PARTICLE_STEP_SECONDS_2D`] and scripts/cost-estimate-check.sh.
+//! 1000 steps): 119 s of user time for its 4 runs, 18.6 ns per particle-step; the probe of
+//! `granular plan` (its cheapest run for about a second) set against table1-small's, back to
+//! back at load ~6: rfm2d-steady 1.77 and rfm1d-xi2-small 1.83 with 2e-8 and 1e-8 s per
+//! particle-step, table1-small 1.95 and 1.86 (whose DSMC constants come from its runs at load
+//! ~0.8). See scripts/cost-estimate-check.sh.
 
 use super::params::{RfmObservable, RfmParams};
 
 /// CPU seconds per particle-step in 2D and in 1D (reference machine).
-pub const PARTICLE_STEP_SECONDS_2D: f64 = 2.0e-8;
+pub const PARTICLE_STEP_SECONDS_2D: f64 = 1.9e-8;
 pub const PARTICLE_STEP_SECONDS_1D: f64 = 1.0e-8;
 /// CPU seconds per particle and sample (temperature, moments, histograms).
 pub const SAMPLE_SECONDS_PER_PARTICLE: f64 = 2e-8;
