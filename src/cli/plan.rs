@@ -21,7 +21,7 @@ pub struct Args {
     #[arg(long)]
     json: bool,
     /// Worker threads the wall time is estimated for (0 = all cores, the default of `run`).
-    #[arg(long, value_name = "N", value_parser = super::flags::threads, default_value_t = 0)]
+    #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = super::flags::threads, default_value_t = 0)]
     threads: usize,
     /// Without finished runs to calibrate the cost model on, take it as it is (the
     /// reference machine) instead of timing a probe run of about a second.
