@@ -216,6 +216,7 @@ pub fn build(c: &Campaign) -> Result<Report, CampaignError> {
     section_campaign(&mut h, c, &info, &st);
     h.push_str("</section>\n<section id=\"sec-progress\">\n");
     section_progress(&mut h, &st, runs.as_ref().ok());
+    h.push_str(&cost_paragraph(c, runs.as_ref().ok()));
     h.push_str("</section>\n<section id=\"sec-shards\">\n");
     section_shards(&mut h, &ledger, &st, &mut notes);
     h.push_str("</section>\n<section id=\"sec-failures\">\n");
@@ -395,6 +396,32 @@ fn bar(k: &Counts) -> String {
 /// Rows of the per-point progress table at most (a larger campaign's points beyond are
 /// counted in the campaign line and `granular status --json`).
 pub const MAX_POINT_ROWS: usize = 2000;
+
+/// The cost model against what the finished runs took: `<p id="progress-cost">estimated X
+/// core-hours, took Y (ratio R)</p>` (the models' `cost` at the reference machine, summed over
+/// the finished runs, against their wall seconds in the `runs` table); empty before a run has
+/// finished.
+fn cost_paragraph(c: &Campaign, runs: Option<&RunsRead>) -> String {
+    let Some(r) = runs.filter(|r| !r.wall.is_empty()) else {
+        return String::new();
+    };
+    let (mut estimated, mut took, mut n) = (0.0, 0.0, 0);
+    for (point, (wall, count)) in &r.wall {
+        let Some(p) = c.plan.points.get(*point as usize) else {
+            continue;
+        };
+        estimated += p.params.cost() * *count as f64;
+        took += wall;
+        n += count;
+    }
+    let text = format!(
+        "Cost: the {n} finished run(s) were estimated at {:.3e} core-hours (the cost model at its reference machine), took {:.3e} (ratio {:.2}).",
+        estimated / 3600.0,
+        took / 3600.0,
+        if estimated > 0.0 { took / estimated } else { f64::NAN }
+    );
+    format!("<p id=\"progress-cost\">{}</p>\n", escape(&text))
+}
 
 fn section_progress(h: &mut String, st: &CampaignStatus, runs: Option<&RunsRead>) {
     h.push_str("<h2 id=\"progress\">Progress</h2>\n");

@@ -38,6 +38,9 @@
 //! - `derived`: derived quantities (manifest `derived`): bad expressions refused with their
 //!   paths; the `derived` and `derived_summary` tables of DSMC and RFM campaigns against values
 //!   computed from the run tables; the same with one thread; their figures.
+//! - `plan_cost`: `plan`'s cost estimate (core-hours, wall time at `--threads`) and the
+//!   calibration it names (reference, probe, finished runs); a target campaign's pilot; the
+//!   report's estimate against what the runs took.
 //! - `figures`: the standard figures of tiny rfm, bisection, cascade and SPM campaigns, the
 //!   same in `plot` and `report`; analyze's outputs in the report; overlays split beyond 12
 //!   points.
@@ -70,6 +73,7 @@ mod it {
     pub mod manifests;
     pub mod models;
     pub mod physics;
+    pub mod plan_cost;
     pub mod races;
     pub mod report;
     pub mod resume;

@@ -1,6 +1,9 @@
 //! What a manifest would do to a campaign directory, before any work (`granular plan`,
 //! `run --dry-run`): the points and runs it adds, the runs it continues to a longer horizon,
-//! what is kept, and an estimate of the cost from the wall time of the runs already done.
+//! what is kept, and an estimate of the cost: the models' cost model (`ModelParams::cost`,
+//! CPU seconds on the reference machine) calibrated to this machine ([`Calibration`]: from
+//! the campaign's finished runs, else a short probe run, else the reference as it is), as
+//! core-hours and as wall time at the threads given ([`Estimate`]).
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
@@ -11,6 +14,7 @@ use super::plan::Plan;
 use super::registry::Growth;
 use super::tables::{RunsTableCols, RUNS};
 use super::{Campaign, CampaignError};
+use crate::models::{ModelParams, WORK_CHUNK};
 
 /// The plan of a manifest against a campaign directory.
 #[derive(Serialize, Clone, Debug, Default, PartialEq)]
@@ -36,10 +40,11 @@ pub struct Preview {
     /// The kinetic theory of the new points (computed before the runs), as the model
     /// estimates it from their params.
     pub theory: TheoryWork,
-    /// Estimated CPU seconds of the runs to run (None without a finished run to go by).
-    pub estimate_seconds: Option<f64>,
-    /// How the estimate was made.
-    pub estimate_basis: String,
+    /// The cost of the runs to run (and of the new points' theory), calibrated to this
+    /// machine.
+    pub estimate: Estimate,
+    /// With error targets: the pilot and what the rounds may add.
+    pub targets: Option<TargetPilot>,
     pub notes: Vec<String>,
     /// The runs to run, in run order.
     pub runs: Vec<PlannedRun>,
@@ -154,11 +159,21 @@ pub struct PlannedRun {
 /// At most this many registered points are searched for a new point's nearest one.
 const NEAREST_SEARCH: usize = 2000;
 
+/// How the cost estimate is made: the worker threads the runs would have, and whether a
+/// short probe run may calibrate the cost model when the campaign has no finished run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EstimateOptions {
+    /// Worker threads (at least 1).
+    pub threads: usize,
+    pub probe: bool,
+}
+
 /// Preview `growth` (the result of `Campaign::prepare`) on campaign `c` (as it would be).
 pub fn preview(
     c: &Campaign,
     growth: &Growth,
     new_campaign: bool,
+    opts: EstimateOptions,
 ) -> Result<Preview, CampaignError> {
     let finished = if new_campaign {
         BTreeMap::new()
@@ -225,9 +240,42 @@ pub fn preview(
     } else {
         done_walls(c)?
     };
-    let (seconds, basis) = estimate(c, &current, &finished, &walls);
-    p.estimate_seconds = seconds;
-    p.estimate_basis = basis;
+    let work = runs_work(c, &current, &finished);
+    let calibration = if !walls.is_empty() {
+        from_finished_runs(c, &walls)
+    } else if opts.probe {
+        probe(&work)
+    } else {
+        Calibration::reference("--no-probe and no finished run")
+    };
+    p.estimate = estimate_costs(
+        work.iter().map(|(w, n)| (w.cost(), *n)),
+        &p.theory,
+        opts.threads,
+        calibration,
+    );
+    if c.manifest.has_targets() {
+        let per_point = c.manifest.min_replicas();
+        let most = c.manifest.max_replicas();
+        // Each current point at most `max_replicas` runs in all.
+        let mut points: BTreeMap<u32, f64> = BTreeMap::new();
+        for r in &current {
+            points
+                .entry(r.point_id)
+                .or_insert_with(|| c.plan.points[r.point_id as usize].params.cost());
+        }
+        let factor = p.estimate.calibration.factor;
+        let full: f64 = points.values().map(|s| s * most as f64 * factor).sum();
+        p.targets = Some(TargetPilot {
+            min_replicas: per_point,
+            max_replicas: most,
+            pilot_runs: p.estimate.runs,
+            pilot_core_hours: p.estimate.core_hours,
+            max_runs: points.len() as u64 * most as u64,
+            max_core_hours: full / 3600.0,
+            budget_core_hours: c.manifest.max_core_hours,
+        });
+    }
     Ok(p)
 }
 
@@ -432,40 +480,268 @@ fn done_walls(c: &Campaign) -> Result<BTreeMap<u64, f64>, CampaignError> {
     Ok(out)
 }
 
-/// CPU seconds of the unfinished current runs: each at the mean wall time of its point's done
-/// runs, or of the point it continues, or of all done runs.
-fn estimate(
-    c: &Campaign,
-    current: &[super::plan::RunSpec],
-    finished: &BTreeMap<u64, RunStatus>,
-    walls: &BTreeMap<u64, f64>,
-) -> (Option<f64>, String) {
-    if walls.is_empty() {
-        return (None, "no finished run to estimate from".into());
+/// With error targets: the runs of the pilot (`min_replicas` per point) are what the
+/// estimate counts; the replicas beyond it are decided in rounds from the pilot's variances,
+/// up to `max_replicas` per point (and `max_core_hours`).
+#[derive(Serialize, Clone, Debug, PartialEq)]
+pub struct TargetPilot {
+    pub min_replicas: u32,
+    pub max_replicas: u32,
+    pub pilot_runs: u64,
+    pub pilot_core_hours: f64,
+    /// Every current point at `max_replicas`: the most the rounds can reach.
+    pub max_runs: u64,
+    pub max_core_hours: f64,
+    /// The manifest's budget.
+    pub budget_core_hours: Option<f64>,
+}
+
+/// How the cost model's reference seconds become this machine's: seconds here per
+/// reference second, and where that factor comes from.
+#[derive(Serialize, Clone, Debug, PartialEq)]
+pub struct Calibration {
+    /// `finished runs`, `probe` or `reference`.
+    pub source: String,
+    /// Seconds on this machine per cost-model (reference) second.
+    pub factor: f64,
+    /// What it was made from, in words.
+    pub detail: String,
+}
+
+impl Default for Calibration {
+    fn default() -> Self {
+        Calibration::reference("")
     }
-    let mut per_point: BTreeMap<u32, (f64, u32)> = BTreeMap::new();
-    for (run, w) in walls {
-        let e = per_point.entry(c.plan.run(*run).point_id).or_default();
-        e.0 += w;
-        e.1 += 1;
+}
+
+impl Calibration {
+    /// The cost model as it is (factor 1), for the reason `why`.
+    pub fn reference(why: &str) -> Calibration {
+        Calibration {
+            source: "reference".into(),
+            factor: 1.0,
+            detail: format!("the cost model's reference machine as it is ({why})"),
+        }
     }
-    let all = walls.values().sum::<f64>() / walls.len() as f64;
-    let mut total = 0.0;
-    for r in current.iter().filter(|r| !finished.contains_key(&r.run_id)) {
-        let point = r
-            .continues
-            .map(|old| c.plan.run(old).point_id)
-            .unwrap_or(r.point_id);
-        total += per_point.get(&point).map_or(all, |(s, n)| s / *n as f64);
-    }
-    (
-        Some(total),
-        format!(
-            "mean wall time of the {} finished run(s) of the same point (or of all: {all:.3} s); a continued run counted as a whole one, an upper bound",
-            walls.len()
-        ),
+}
+
+/// The expected cost of some runs: core-seconds and wall seconds on this machine.
+#[derive(Serialize, Clone, Debug, Default, PartialEq)]
+pub struct Estimate {
+    /// Runs counted.
+    pub runs: u64,
+    /// Their CPU seconds by the cost model (reference machine): the sum of
+    /// `ModelParams::cost` (a continued run: the part beyond the run it continues).
+    pub reference_core_seconds: f64,
+    /// The same on this machine (times the calibration factor), and in core-hours.
+    pub core_seconds: f64,
+    pub core_hours: f64,
+    /// The longest run here (seconds).
+    pub longest_run_seconds: f64,
+    /// The new points' kinetic theory (CPU seconds, this machine as the reference).
+    pub theory_seconds: f64,
+    /// Worker threads the wall time is for.
+    pub threads: usize,
+    /// Expected wall seconds: the theory (spread over the threads, at least its largest
+    /// point), then the runs (max(core_seconds / threads, longest run)), then the campaign's
+    /// finish (summaries, figures) at [`FINISH_SECONDS_PER_RUN`] per run.
+    pub wall_seconds: f64,
+    pub calibration: Calibration,
+}
+
+/// Wall seconds per run of the campaign's finish after the last run (summaries, figures,
+/// compaction; measured with scripts/cost-estimate-check.sh, 2026-11, 2 cores).
+pub const FINISH_SECONDS_PER_RUN: f64 = 0.05;
+
+/// The estimate of `runs` (params, how many runs of them) and of the new points' `theory`,
+/// at `threads` worker threads, calibrated by `calibration`: what `plan` prints, and what a
+/// scheduler may call for any list of runs.
+pub fn estimate<'a>(
+    runs: impl IntoIterator<Item = (&'a ModelParams, u64)>,
+    theory: &TheoryWork,
+    threads: usize,
+    calibration: Calibration,
+) -> Estimate {
+    estimate_costs(
+        runs.into_iter().map(|(p, n)| (p.cost(), n)),
+        theory,
+        threads,
+        calibration,
     )
 }
+
+/// [`estimate`] from the runs' reference costs (CPU seconds, how many runs of each).
+pub fn estimate_costs(
+    runs: impl IntoIterator<Item = (f64, u64)>,
+    theory: &TheoryWork,
+    threads: usize,
+    calibration: Calibration,
+) -> Estimate {
+    let threads = threads.max(1);
+    let mut e = Estimate {
+        threads,
+        theory_seconds: theory.seconds,
+        ..Estimate::default()
+    };
+    let factor = calibration.factor;
+    for (s, n) in runs {
+        let s = if s.is_finite() { s.max(0.0) } else { f64::MAX };
+        e.runs += n;
+        e.reference_core_seconds += s * n as f64;
+        if n > 0 {
+            e.longest_run_seconds = e.longest_run_seconds.max(s * factor);
+        }
+    }
+    e.core_seconds = e.reference_core_seconds * factor;
+    e.core_hours = e.core_seconds / 3600.0;
+    let largest_theory = theory.largest.map_or(0.0, |(_, s, _)| s);
+    let theory_wall = (theory.seconds / threads as f64).max(largest_theory);
+    let runs_wall = (e.core_seconds / threads as f64).max(e.longest_run_seconds);
+    e.wall_seconds = theory_wall + runs_wall + FINISH_SECONDS_PER_RUN * e.runs as f64;
+    e.calibration = calibration;
+    e
+}
+
+impl Estimate {
+    /// `~0.0081 core-hours (29 core-s), ~15 s wall at 2 threads`.
+    pub fn text(&self) -> String {
+        format!(
+            "~{:.2e} core-hours ({} core-s), ~{} s wall at {} thread(s)",
+            self.core_hours,
+            seconds_text(self.core_seconds),
+            seconds_text(self.wall_seconds),
+            self.threads
+        )
+    }
+}
+
+/// The unfinished current runs, as (params, count) with the params they run: a run that
+/// continues a finished one counts as the part beyond it (its cost less that of the run it
+/// continues), as params of a shorter horizon.
+fn runs_work<'c>(
+    c: &'c Campaign,
+    current: &[super::plan::RunSpec],
+    finished: &BTreeMap<u64, RunStatus>,
+) -> Vec<(Continued<'c>, u64)> {
+    let mut per: BTreeMap<(u32, Option<u32>), u64> = BTreeMap::new();
+    for r in current.iter().filter(|r| !finished.contains_key(&r.run_id)) {
+        let from = r.continues.map(|old| c.plan.run(old).point_id);
+        *per.entry((r.point_id, from)).or_default() += 1;
+    }
+    per.into_iter()
+        .map(|((point, from), n)| {
+            (
+                Continued {
+                    params: &c.plan.points[point as usize].params,
+                    from: from.map(|f| &c.plan.points[f as usize].params),
+                },
+                n,
+            )
+        })
+        .collect()
+}
+
+/// A run's params and, when it continues a finished run, that run's.
+#[derive(Clone, Copy)]
+struct Continued<'c> {
+    params: &'c ModelParams,
+    from: Option<&'c ModelParams>,
+}
+
+impl Continued<'_> {
+    fn cost(&self) -> f64 {
+        let full = self.params.cost();
+        self.from.map_or(full, |f| (full - f.cost()).max(0.0))
+    }
+}
+
+/// The median over the finished runs (those that ran from t = 0) of wall seconds / cost.
+fn from_finished_runs(c: &Campaign, walls: &BTreeMap<u64, f64>) -> Calibration {
+    // Each point's cost once (a campaign may have many runs per point).
+    let mut costs: HashMap<u32, f64> = HashMap::new();
+    let mut ratios: Vec<f64> = walls
+        .iter()
+        .filter(|(run, _)| c.plan.run(**run).continues.is_none())
+        .filter_map(|(run, w)| {
+            let point = c.plan.run(*run).point_id;
+            let cost = *costs
+                .entry(point)
+                .or_insert_with(|| c.plan.points[point as usize].params.cost());
+            (cost > 0.0 && w.is_finite() && *w > 0.0).then(|| w / cost)
+        })
+        .collect();
+    if ratios.is_empty() {
+        return Calibration::reference("no finished run from t = 0 to calibrate on");
+    }
+    ratios.sort_by(f64::total_cmp);
+    let m = ratios.len();
+    let median = if m % 2 == 1 {
+        ratios[m / 2]
+    } else {
+        0.5 * (ratios[m / 2 - 1] + ratios[m / 2])
+    };
+    Calibration {
+        source: "finished runs".into(),
+        factor: median,
+        detail: format!(
+            "median of measured / estimated wall seconds over the {m} finished run(s): {median:.3}"
+        ),
+    }
+}
+
+/// The longest a probe runs (wall seconds).
+pub const PROBE_SECONDS: f64 = 1.0;
+
+/// Run the cheapest of the runs for at most [`PROBE_SECONDS`] (in chunks of `WORK_CHUNK`
+/// work units) and compare its time with its cost: the factor is the elapsed seconds over
+/// the cost of the part done (its `progress`; the whole cost if it finishes). Nothing is
+/// written.
+fn probe(work: &[(Continued<'_>, u64)]) -> Calibration {
+    let Some(cheapest) = work
+        .iter()
+        .map(|(w, _)| w.params)
+        .min_by(|a, b| a.cost().total_cmp(&b.cost()))
+    else {
+        return Calibration::reference("no run to do, nothing to probe");
+    };
+    let cost = cheapest.cost();
+    let started = std::time::Instant::now();
+    let mut engine = match cheapest.start(PROBE_SEED) {
+        Ok(e) => e,
+        Err(e) => return Calibration::reference(&format!("the probe run could not start: {e}")),
+    };
+    let mut done = false;
+    while !done && started.elapsed().as_secs_f64() < PROBE_SECONDS {
+        match engine.advance(WORK_CHUNK) {
+            Ok(d) => done = d,
+            Err(e) => {
+                return Calibration::reference(&format!("the probe run failed: {e}"));
+            }
+        }
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    let fraction = if done { 1.0 } else { engine.progress() };
+    if !(fraction > 0.01 && cost > 0.0 && elapsed > 0.0) {
+        return Calibration::reference(&format!(
+            "the probe run did {:.1} % of its work in {elapsed:.2} s, too little to go by",
+            100.0 * fraction
+        ));
+    }
+    let factor = elapsed / (cost * fraction);
+    Calibration {
+        source: "probe".into(),
+        factor,
+        detail: format!(
+            "a probe run of the cheapest point ({:.1} % of it{}, {elapsed:.2} s against {:.2} s estimated): {factor:.3}",
+            100.0 * fraction,
+            if done { ", all" } else { "" },
+            cost * fraction
+        ),
+    }
+}
+
+/// The probe run's seed (any: its results are thrown away).
+const PROBE_SEED: u64 = 0x5eed_c057;
 
 #[cfg(test)]
 mod tests {

@@ -1,11 +1,13 @@
 //! `granular plan MANIFEST --out DIR [--json]` (and `run --dry-run`): what running the manifest
 //! into DIR would do, written nowhere: new points and runs, runs continued to a longer horizon,
-//! runs kept, points no longer listed, and the estimated cost.
+//! runs kept, points no longer listed, and the estimated cost (core-hours, and wall time at
+//! `--threads`), from the models' cost model calibrated on the campaign's finished runs or a
+//! probe run (`--no-probe`: as it is).
 
 use std::path::{Path, PathBuf};
 
 use super::report_error;
-use crate::campaign::preview::{preview, Preview};
+use crate::campaign::preview::{preview, EstimateOptions, Preview};
 use crate::campaign::Campaign;
 use crate::exit_codes;
 
@@ -18,20 +20,40 @@ pub struct Args {
     /// Machine-readable output.
     #[arg(long)]
     json: bool,
+    /// Worker threads the wall time is estimated for (0 = all cores, the default of `run`).
+    #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = super::flags::threads, default_value_t = 0)]
+    threads: usize,
+    /// Without finished runs to calibrate the cost model on, take it as it is (the
+    /// reference machine) instead of timing a probe run of about a second.
+    #[arg(long)]
+    no_probe: bool,
 }
 
 pub fn run(a: Args) -> i32 {
-    show(&a.manifest, &a.out, a.json)
+    let opts = EstimateOptions {
+        threads: resolve_threads(a.threads),
+        probe: !a.no_probe,
+    };
+    show(&a.manifest, &a.out, a.json, opts)
+}
+
+/// `--threads N` as the runs would have it: 0 is every core.
+pub(super) fn resolve_threads(n: usize) -> usize {
+    if n == 0 {
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    } else {
+        n
+    }
 }
 
 /// Print the plan of `manifest` into `out`; nothing is written.
-pub(super) fn show(manifest: &Path, out: &Path, json: bool) -> i32 {
+pub(super) fn show(manifest: &Path, out: &Path, json: bool, opts: EstimateOptions) -> i32 {
     let new_campaign = !out.join("campaign.json").exists();
     let (c, growth) = match Campaign::prepare(manifest, out, false) {
         Ok(x) => x,
         Err(e) => return report_error(e),
     };
-    let p = match preview(&c, &growth, new_campaign) {
+    let p = match preview(&c, &growth, new_campaign, opts) {
         Ok(p) => p,
         Err(e) => return report_error(e),
     };
@@ -113,12 +135,26 @@ fn text(c: &Campaign, out: &Path, p: &Preview) -> String {
             p.theory.text()
         ));
     }
-    match p.estimate_seconds {
-        Some(t) => s.push_str(&format!(
-            "  estimate: {t:.1} CPU s ({})\n",
-            p.estimate_basis
-        )),
-        None => s.push_str(&format!("  estimate: none ({})\n", p.estimate_basis)),
+    let e = &p.estimate;
+    s.push_str(&format!(
+        "  estimate: {} runs, {}\n  calibration: {} ({})\n",
+        e.runs,
+        e.text(),
+        e.calibration.source,
+        e.calibration.detail
+    ));
+    if let Some(t) = &p.targets {
+        s.push_str(&format!(
+            "  error targets: the pilot of {} replica(s) per point is the {} run(s) above (~{:.2e} core-hours); the replicas beyond it are decided in rounds from the pilot's variances, up to {} per point ({} runs, ~{:.2e} core-hours at most{})\n",
+            t.min_replicas,
+            t.pilot_runs,
+            t.pilot_core_hours,
+            t.max_replicas,
+            t.max_runs,
+            t.max_core_hours,
+            t.budget_core_hours
+                .map_or(String::new(), |b| format!("; budget max_core_hours {b}"))
+        ));
     }
     for n in &p.notes {
         s.push_str(&format!("  note: {n}\n"));

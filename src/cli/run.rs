@@ -34,7 +34,11 @@ pub struct ResumeArgs {
 /// `run`: create (or continue) the campaign, then execute it.
 pub fn run(a: RunArgs) -> i32 {
     if a.dry_run {
-        return super::plan::show(&a.manifest, &a.out, false);
+        let opts = crate::campaign::preview::EstimateOptions {
+            threads: super::plan::resolve_threads(a.runtime.exec.threads(0)),
+            probe: true,
+        };
+        return super::plan::show(&a.manifest, &a.out, false, opts);
     }
     let opts = options(&a.runtime.exec, 0, a.runtime.shard);
     let existed = a.out.join("campaign.json").exists();

@@ -110,6 +110,11 @@ const COMMANDS: &[Cmd] = &[
         tails: &[&[]],
     },
     Cmd {
+        prefix: &["plan", "m.json", "--out", "out", "--no-probe"],
+        flags: &[THREADS],
+        tails: &[&[]],
+    },
+    Cmd {
         prefix: &["resume", "c", "--quiet"],
         flags: RUNTIME,
         tails: &[&[]],

@@ -29,6 +29,13 @@ impl Model for Bisection {
     }
 
     /// The 2^n partition lengths of a realisation (twice: the working copy) and the histogram.
+    /// The realisations' work units (2^(level+1) each) at [`WORK_UNIT_SECONDS`].
+    fn cost(p: &BisectionParams) -> f64 {
+        // 2^(level+1) work units per realisation (the partition and its histogram).
+        RUN_OVERHEAD_SECONDS
+            + p.realisations as f64 * 2f64.powi(p.level as i32 + 1) * WORK_UNIT_SECONDS
+    }
+
     fn memory(p: &BisectionParams) -> u64 {
         let partitions = 1u64.checked_shl(p.level).unwrap_or(u64::MAX);
         partitions
@@ -97,5 +104,38 @@ impl Simulation for BisectionRun {
     }
     fn state_bytes(&mut self) -> Vec<u8> {
         BisectionRun::state_bytes(self)
+    }
+}
+
+/// The cost model (`Model::cost`, reference machine): CPU seconds per work unit (2^(level+1)
+/// per realisation; a work unit is a partition interval's draw, histogram bin and moments),
+/// and of any run.
+/// The probe: `granular plan JOB --threads 2` of a new directory times its cheapest run for
+/// about a second; its factor (measured over estimated) set against table1-small's, measured
+/// back to back (2026-11, the 2-core development machine at load ~6: table1-small 1.95 and
+/// 1.86, whose DSMC constants come from its runs at load ~0.8): aux-bisection's probe 19.5 with 1.5e-9
+/// s per unit, so ~10x that.
+pub const WORK_UNIT_SECONDS: f64 = 1.5e-8;
+pub const RUN_OVERHEAD_SECONDS: f64 = 0.01;
+
+#[cfg(test)]
+mod cost_tests {
+    use super::*;
+
+    fn example() -> BisectionParams {
+        serde_json::from_str(Bisection::EXAMPLE).unwrap()
+    }
+
+    /// The cost model grows with the run's size.
+    #[test]
+    fn cost_grows_with_the_size() {
+        // Realisations and level (2^(level+1) units each) multiply the cost.
+        let mut p = example();
+        let base = Bisection::cost(&p);
+        p.realisations *= 10;
+        let more = Bisection::cost(&p);
+        assert!((more - RUN_OVERHEAD_SECONDS) / (base - RUN_OVERHEAD_SECONDS) > 9.99);
+        p.level += 1;
+        assert!(Bisection::cost(&p) > 1.99 * more - RUN_OVERHEAD_SECONDS);
     }
 }

@@ -38,6 +38,15 @@ impl Model for Cascade {
 
     /// The field, its FFT (complex) and the S(k) sums on the 2^n x 2^n grid, and the placed
     /// discs with their cell grid.
+    /// The realisations' work units and the placement at [`WORK_UNIT_SECONDS`], [`PLACEMENT_SECONDS_PER_DISC`].
+    fn cost(p: &CascadeParams) -> f64 {
+        // 30 4^level work units per realisation (the field and its spectrum), and the
+        // placement's discs.
+        let field = p.realisations as f64 * 30.0 * 4f64.powi(p.level as i32) * WORK_UNIT_SECONDS;
+        let discs = p.placement.as_ref().map_or(0.0, |pl| pl.n_particles as f64);
+        RUN_OVERHEAD_SECONDS + field + discs * PLACEMENT_SECONDS_PER_DISC
+    }
+
     fn memory(p: &CascadeParams) -> u64 {
         let side = 1u64.checked_shl(p.level).unwrap_or(u64::MAX);
         let cells = side.saturating_mul(side);
@@ -140,5 +149,44 @@ impl Simulation for CascadeRun {
     }
     fn state_bytes(&mut self) -> Vec<u8> {
         CascadeRun::state_bytes(self)
+    }
+}
+
+/// The cost model (`Model::cost`, reference machine): CPU seconds per work unit (30 4^level
+/// per realisation; the engine's unit, ~1 ns), per placed disc (rejection sampling and
+/// overlap checks; an order of magnitude: placing gets slower as the discs fill the box), and
+/// of any run.
+/// The probe: `granular plan JOB --threads 2` of a new directory times its cheapest run for
+/// about a second; its factor (measured over estimated) set against table1-small's, measured
+/// back to back (2026-11, the 2-core development machine at load ~6: table1-small 1.95 and
+/// 1.86, whose DSMC constants come from its runs at load ~0.8): aux-cascade 1.57 with 1e-9 s per unit, so
+/// 0.85e-9; aux-cascade-placement (200 realisations, 2500 discs) 2.61 with 2e-6 s per disc, so
+/// ~5e-5 s per disc.
+pub const WORK_UNIT_SECONDS: f64 = 0.85e-9;
+pub const PLACEMENT_SECONDS_PER_DISC: f64 = 5e-5;
+pub const RUN_OVERHEAD_SECONDS: f64 = 0.01;
+
+#[cfg(test)]
+mod cost_tests {
+    use super::*;
+
+    fn example() -> CascadeParams {
+        serde_json::from_str(Cascade::EXAMPLE).unwrap()
+    }
+
+    /// The cost model grows with the run's size.
+    #[test]
+    fn cost_grows_with_the_size() {
+        // Realisations, the level (4x per level) and the placed discs add to the cost.
+        let mut p = example();
+        let base = Cascade::cost(&p);
+        p.realisations *= 2;
+        let more = Cascade::cost(&p);
+        assert!(more > base);
+        p.level += 1;
+        assert!(Cascade::cost(&p) > 3.0 * (more - RUN_OVERHEAD_SECONDS));
+        let mut q = example();
+        q.placement.as_mut().unwrap().n_particles *= 10;
+        assert!(Cascade::cost(&q) > base);
     }
 }

@@ -11,6 +11,7 @@
 //!   figures of [`overview`]: deviation maps (points x species, in sems) and T_k, MSD_k at
 //!   t_end against each numeric sweep key.
 
+pub mod cost;
 pub mod figures;
 pub mod overview;
 pub mod params;
@@ -173,6 +174,10 @@ impl Model for Dsmc {
             t.push(DSMC_THEORY_TAMSD);
         }
         t
+    }
+
+    fn cost(p: &DsmcParams) -> f64 {
+        cost::seconds(p)
     }
 
     fn theory_estimate(p: &DsmcParams) -> TheoryEstimate {

@@ -529,7 +529,7 @@ impl DsmcParams {
     /// The species (each starting at its own temperature, else the initial one: the mean of
     /// an HCS start) and the volume, from the power law or the list (with `volume` or
     /// `number_density`); refused beyond `MAX_PARTICLES` particles.
-    fn resolved_species(&self) -> Result<(Vec<SpeciesInfo>, f64), ModelError> {
+    pub(super) fn resolved_species(&self) -> Result<(Vec<SpeciesInfo>, f64), ModelError> {
         let p = self;
         let base_t = match p.initial_temperature {
             InitialTemperature::Value(t) => t,

@@ -8,6 +8,7 @@
 //! - [`analysis`]: the thesis's fits across points (`granular analyze`).
 
 pub mod analysis;
+pub mod cost;
 pub mod figures;
 pub mod params;
 pub mod summary;
@@ -55,6 +56,10 @@ impl Model for Rfm {
 
     fn check(p: &RfmParams, path: &str, errors: &mut ParamErrors) {
         p.check(path, errors)
+    }
+
+    fn cost(p: &RfmParams) -> f64 {
+        cost::seconds(p)
     }
 
     fn memory(p: &RfmParams) -> u64 {

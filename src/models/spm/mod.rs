@@ -32,6 +32,19 @@ impl Model for Spm {
     }
 
     /// The velocity histogram (counts, time and walk weights) and the free-path table.
+    /// Walks x steps per walk (~1/dt) at [`STEP_SECONDS`].
+    fn cost(p: &SpmParams) -> f64 {
+        // A walk lasts a time of order one (scaled units) until it leaves the unit disc:
+        // ~ 1/dt Euler steps.
+        let steps = p.walks as f64 * WALK_STEPS_TIMES_DT / p.dt;
+        let s = RUN_OVERHEAD_SECONDS + steps * STEP_SECONDS;
+        if s.is_finite() {
+            s
+        } else {
+            f64::MAX
+        }
+    }
+
     fn memory(p: &SpmParams) -> u64 {
         let bins = p
             .velocity_histogram
@@ -94,5 +107,39 @@ impl Simulation for SpmRun {
     }
     fn state_bytes(&mut self) -> Vec<u8> {
         SpmRun::state_bytes(self)
+    }
+}
+
+/// The cost model (`Model::cost`, reference machine): the mean Euler steps of a walk times
+/// dt (its mean exit time from the unit disc, scaled units), CPU seconds per step, and of any
+/// run (the two constants only matter as their product).
+/// The probe: `granular plan JOB --threads 2` of a new directory times its cheapest run for
+/// about a second; its factor (measured over estimated) set against table1-small's, measured
+/// back to back (2026-11, the 2-core development machine at load ~6: table1-small 1.95 and
+/// 1.86, whose DSMC constants come from its runs at load ~0.8): aux-spm (dt = 5e-4, 2e5 walks) 1.42 with 2e-8 s per
+/// step, so 1.5e-8.
+pub const WALK_STEPS_TIMES_DT: f64 = 2.5;
+pub const STEP_SECONDS: f64 = 1.5e-8;
+pub const RUN_OVERHEAD_SECONDS: f64 = 0.01;
+
+#[cfg(test)]
+mod cost_tests {
+    use super::*;
+
+    fn example() -> SpmParams {
+        serde_json::from_str(Spm::EXAMPLE).unwrap()
+    }
+
+    /// The cost model grows with the run's size.
+    #[test]
+    fn cost_grows_with_the_size() {
+        // Walks and steps per walk (~1/dt) multiply the cost.
+        let mut p = example();
+        let base = Spm::cost(&p);
+        p.walks *= 10;
+        let more = Spm::cost(&p);
+        assert!((more - RUN_OVERHEAD_SECONDS) / (base - RUN_OVERHEAD_SECONDS) > 9.99);
+        p.dt /= 2.0;
+        assert!(Spm::cost(&p) > 1.99 * more - RUN_OVERHEAD_SECONDS);
     }
 }
