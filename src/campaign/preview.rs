@@ -266,7 +266,40 @@ pub fn preview(
         }
         let factor = p.estimate.calibration.factor;
         let full: f64 = points.values().map(|s| s * most as f64 * factor).sum();
+        // Where runs are finished: the replicas each point's variances imply, and their cost.
+        let expected = if finished.is_empty() {
+            Vec::new()
+        } else {
+            super::targets::status(c, &finished)
+                .map(|t| {
+                    let mut per: BTreeMap<u32, ExpectedReplicas> = BTreeMap::new();
+                    for r in &t.rows {
+                        let e = per.entry(r.point_id).or_insert(ExpectedReplicas {
+                            point_id: r.point_id,
+                            point: r.point.clone(),
+                            replicas: r.replicas,
+                            expected: r.expected,
+                            core_hours_left: 0.0,
+                        });
+                        e.expected = e.expected.max(r.expected);
+                    }
+                    for e in per.values_mut() {
+                        let done = c
+                            .plan
+                            .current_runs()
+                            .filter(|r| r.point_id == e.point_id && finished.contains_key(&r.run_id))
+                            .count() as u32;
+                        e.core_hours_left = e.expected.saturating_sub(done) as f64
+                            * points.get(&e.point_id).copied().unwrap_or(0.0)
+                            * factor
+                            / 3600.0;
+                    }
+                    per.into_values().collect()
+                })
+                .unwrap_or_default()
+        };
         p.targets = Some(TargetPilot {
+            expected,
             min_replicas: per_point,
             max_replicas: most,
             pilot_runs: p.estimate.runs,
@@ -494,6 +527,19 @@ pub struct TargetPilot {
     pub max_core_hours: f64,
     /// The manifest's budget.
     pub budget_core_hours: Option<f64>,
+    /// Of a campaign with finished runs: per point, the replicas its variances imply (see
+    /// `targets::status`) and the core-hours of the runs still to do for them.
+    pub expected: Vec<ExpectedReplicas>,
+}
+
+/// A point of a target campaign: the replicas asked now and expected in the end.
+#[derive(Serialize, Clone, Debug, PartialEq)]
+pub struct ExpectedReplicas {
+    pub point_id: u32,
+    pub point: String,
+    pub replicas: u32,
+    pub expected: u32,
+    pub core_hours_left: f64,
 }
 
 /// How the cost model's reference seconds become this machine's: seconds here per

@@ -155,6 +155,12 @@ fn text(c: &Campaign, out: &Path, p: &Preview) -> String {
             t.budget_core_hours
                 .map_or(String::new(), |b| format!("; budget max_core_hours {b}"))
         ));
+        for e in &t.expected {
+            s.push_str(&format!(
+                "  error targets: point {:>4} {:<30} {} replica(s) asked, {} expected from the variances seen (~{:.2e} core-hours left)\n",
+                e.point_id, e.point, e.replicas, e.expected, e.core_hours_left
+            ));
+        }
     }
     for n in &p.notes {
         s.push_str(&format!("  note: {n}\n"));

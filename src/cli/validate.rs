@@ -22,6 +22,20 @@ pub fn run(a: Args) -> i32 {
                 plan.runs_per_point_text(),
                 plan.n_runs()
             );
+            if m.has_targets() {
+                outln!(
+                    "  error targets: {}; the {} replicas per point are the pilot, more are added in rounds until every target is met (at most {} per point{})",
+                    m.target
+                        .iter()
+                        .map(crate::campaign::targets::describe)
+                        .collect::<Vec<_>>()
+                        .join("; "),
+                    m.min_replicas(),
+                    m.max_replicas(),
+                    m.max_core_hours
+                        .map_or(String::new(), |h| format!(", {h} core-hours in all"))
+                );
+            }
             let theory = crate::campaign::preview::theory_work(
                 &plan,
                 plan.points.iter().map(|p| p.point_id),
