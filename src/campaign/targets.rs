@@ -328,11 +328,10 @@ fn goal_of(t: &Target, mean: Option<f64>) -> Option<f64> {
 /// The decision of a round from the states of every current point: replicas per point
 /// (changed ones only) and the record.
 pub fn decide(
-    c: &Campaign,
+    m: &crate::manifest::Manifest,
     mut points: Vec<PointState>,
     spent_core_seconds: f64,
 ) -> (BTreeMap<u32, u32>, Decision) {
-    let m = &c.manifest;
     let max = m.max_replicas();
     let mut stops: Vec<String> = Vec::new();
     // What each unmet point would like.
@@ -450,9 +449,14 @@ pub fn decide(
             .iter()
             .map(|(p, n)| format!("point {p}: {} -> {n}", next_before(&points, *p)))
             .collect();
+        let short = if stops.is_empty() {
+            String::new()
+        } else {
+            format!("; short of what the variances ask: {}", stops.join("; "))
+        };
         (
             Verdict::Continue,
-            format!("{runs_added} replica(s) added ({})", per.join(", ")),
+            format!("{runs_added} replica(s) added ({}){short}", per.join(", ")),
         )
     } else if all_met {
         (Verdict::Met, "every target is met".to_string())
@@ -521,7 +525,7 @@ pub fn decide_round(c: &Campaign) -> Result<Decided, CampaignError> {
     }
     let states = evaluate(&c, &finished)?;
     let spent = asked_core_seconds(&c);
-    let (changed, mut decision) = decide(&c, states, spent);
+    let (changed, mut decision) = decide(&c.manifest, states, spent);
     decision.round = c.rounds.decisions.len() as u32 + 1;
     if changed.is_empty() {
         let same = c.rounds.decisions.last().is_some_and(|d| {
@@ -787,4 +791,124 @@ pub fn status(
         replicas_implied: implied,
         problem,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn manifest(extra: &str) -> crate::manifest::Manifest {
+        let text = format!(
+            r#"{{"name": "t", "model": "dsmc", "seed": 1, "params": {{}},
+                "derived": {{"g": "temperature"}},
+                "target": [{{"quantity": "g", "sem_rel": 0.01}}] {extra}}}"#
+        );
+        serde_json::from_str(&text).unwrap()
+    }
+
+    /// A point with `n` values of mean 1 and standard deviation `sd` (goal 0.01).
+    fn point(id: u32, n: u32, sd: f64, cost: f64) -> PointState {
+        let t = Target {
+            quantity: "g".into(),
+            t: TargetTime::TEnd,
+            sem_rel: Some(0.01),
+            sem_abs: None,
+        };
+        // Values 1 +- sd alternating: sample sd = sd * sqrt(n / (n - 1)) for even n.
+        let values: Vec<(Option<f64>, f64)> = (0..n)
+            .map(|i| (Some(1.0), if i % 2 == 0 { 1.0 + sd } else { 1.0 - sd }))
+            .collect();
+        let series: Vec<Series> = values.iter().map(|v| vec![*v]).collect();
+        let refs: Vec<&Series> = series.iter().collect();
+        PointState {
+            point_id: id,
+            replicas: n,
+            next: n,
+            cost,
+            targets: vec![target_state(0, &t, &refs)],
+        }
+    }
+
+    /// The replicas a point's variance implies: n* = ceil(s^2 / goal^2).
+    #[test]
+    fn a_target_state_implies_its_replicas() {
+        let p = point(0, 8, 0.05, 1.0);
+        let t = &p.targets[0];
+        let s2 = 0.05f64.powi(2) * 8.0 / 7.0;
+        assert_eq!(t.needed, Some((s2 / 1e-4).ceil() as u32));
+        assert!(!t.met);
+        let met = point(0, 8, 0.01, 1.0);
+        assert!(met.targets[0].met, "{:?}", met.targets[0]);
+    }
+
+    /// An unmet point grows to n*, but at most 4x and at least +10 %; a met point not at all;
+    /// at max_replicas it stops and says so.
+    #[test]
+    fn rounds_grow_within_their_bounds() {
+        let m = manifest("");
+        // n* = 29 from 8: 29 (< 32).
+        let (changed, d) = decide(&m, vec![point(0, 8, 0.05, 1.0), point(1, 8, 0.005, 1.0)], 0.0);
+        assert_eq!(changed.get(&0), Some(&29));
+        assert_eq!(changed.get(&1), None, "a met point got more");
+        assert_eq!(d.verdict, Verdict::Continue);
+        // n* ~ 1143 from 8: 4x = 32.
+        let (changed, _) = decide(&m, vec![point(0, 8, 0.3, 1.0)], 0.0);
+        assert_eq!(changed.get(&0), Some(&32));
+        // Just short of the goal at 100: +10 %.
+        let (changed, _) = decide(&m, vec![point(0, 100, 0.1005, 1.0)], 0.0);
+        assert_eq!(changed.get(&0), Some(&110));
+        // At max_replicas: stopped, named.
+        let capped = manifest(r#", "max_replicas": 8"#);
+        let (changed, d) = decide(&capped, vec![point(0, 8, 0.05, 1.0)], 0.0);
+        assert!(changed.is_empty());
+        assert_eq!(d.verdict, Verdict::Stopped);
+        assert!(d.why.contains("max_replicas (8) reached"), "{}", d.why);
+        // Every target met.
+        let (changed, d) = decide(&m, vec![point(0, 8, 0.001, 1.0)], 0.0);
+        assert!(changed.is_empty());
+        assert_eq!(d.verdict, Verdict::Met);
+    }
+
+    /// Under a budget, the replicas that fit go where one more buys the most error reduction
+    /// per core-second: of two points equally far from their goal, the cheap one.
+    #[test]
+    fn a_budget_goes_to_the_cheapest_error_reduction() {
+        // 0.01 core-hours = 36 core-s; point 0 costs 1 core-s a run, point 1 10.
+        let m = manifest(r#", "max_core_hours": 0.01"#);
+        let (changed, d) = decide(
+            &m,
+            vec![point(0, 8, 0.05, 1.0), point(1, 8, 0.05, 10.0)],
+            0.0,
+        );
+        let added = |p: u32| changed.get(&p).map_or(0, |n| n - 8);
+        assert!(added(0) as f64 + 10.0 * added(1) as f64 <= 36.0, "{changed:?}");
+        assert!(added(0) > added(1), "{changed:?}");
+        assert!(d.why.contains("max_core_hours"), "{}", d.why);
+        // Nothing fits: stopped, the budget named.
+        let (changed, d) = decide(&m, vec![point(0, 8, 0.05, 100.0)], 0.0);
+        assert!(changed.is_empty());
+        assert_eq!(d.verdict, Verdict::Stopped);
+        assert!(d.why.contains("max_core_hours"), "{}", d.why);
+    }
+
+    /// `after`: the time furthest from its goal counts.
+    #[test]
+    fn after_takes_the_worst_time() {
+        let t = Target {
+            quantity: "g".into(),
+            t: TargetTime::After(1.0),
+            sem_rel: Some(0.01),
+            sem_abs: None,
+        };
+        let series: Vec<Series> = (0..6)
+            .map(|i| {
+                let d = if i % 2 == 0 { 1.0 } else { -1.0 };
+                vec![(Some(0.5), 1.0 + 0.5 * d), (Some(1.0), 1.0 + 0.001 * d), (Some(2.0), 1.0 + 0.05 * d)]
+            })
+            .collect();
+        let refs: Vec<&Series> = series.iter().collect();
+        let s = target_state(0, &t, &refs);
+        assert_eq!(s.t, Some(2.0), "{s:?}");
+        assert!(!s.met);
+    }
 }
