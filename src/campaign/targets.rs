@@ -585,6 +585,7 @@ pub fn run(
         if !decide || o.interrupted || o.remaining > 0 {
             return Ok(total);
         }
+        let mut idle = 0;
         loop {
             if opts.interrupt.load(std::sync::atomic::Ordering::Relaxed) > 0 {
                 total.interrupted = true;
@@ -616,15 +617,31 @@ pub fn run(
                     return Ok(total);
                 }
                 Ok(Decided::Incomplete) => {
-                    if !others_running(c) {
-                        reporter.event(&super::Event::Round {
-                            message: "this shard's runs of the round are done; the round is decided when the other shards' runs are (by the last shard to finish, or `granular resume`)".into(),
-                        });
-                        return Ok(total);
+                    // This shard's runs of a round decided by another shard (read after the
+                    // decision's lock): run them.
+                    let now = Campaign::open(&c.root)?;
+                    if mine_pending(&now, opts.shard)? {
+                        current = Some(now);
+                        break;
+                    }
+                    // Another shard runs the rest: wait for it. A shard between its runs and
+                    // a decision holds no lock for a moment: none seen twice in a row, this
+                    // shard leaves the round to the others.
+                    if others_running(c) {
+                        idle = 0;
+                    } else {
+                        idle += 1;
+                        if idle >= 2 {
+                            reporter.event(&super::Event::Round {
+                                message: "this shard's runs of the round are done; the round is decided when the other shards' runs are (by the last shard to finish, or `granular resume`)".into(),
+                            });
+                            return Ok(total);
+                        }
                     }
                     std::thread::sleep(WAIT);
                 }
                 Err(CampaignError::Refused(m)) if others_running(c) || round_being_decided(c) => {
+                    idle = 0;
                     tracing::debug!("waiting to decide the round: {m}");
                     std::thread::sleep(WAIT);
                 }
@@ -651,6 +668,16 @@ fn dispatch_when_free(
             r => return r,
         }
     }
+}
+
+/// Whether runs of `shard` that the campaign asks for are not finished.
+fn mine_pending(c: &Campaign, shard: super::plan::Shard) -> Result<bool, CampaignError> {
+    let ledger = super::ledger::read_ledger(&c.root)?;
+    let finished = super::ledger::finished_runs(&ledger.commits);
+    Ok(c
+        .plan
+        .current_runs()
+        .any(|r| shard.contains(r.run_id) && !finished.contains_key(&r.run_id)))
 }
 
 /// Whether a shard process (another than this one) holds its lock.
