@@ -800,7 +800,7 @@ const LIVE: &str = r##"<style>
 <script>
 (function () {
   "use strict";
-  var EVERY = 2000, RELOAD_EVERY = 10000, SECTIONS = ["sec-headline", "sec-campaign", "sec-progress", "sec-shards", "sec-failures", "sec-figures", "sec-analysis", "sec-manifest"];
+  var EVERY = 2000, RELOAD_EVERY = 10000, SECTIONS = ["sec-headline", "sec-campaign", "sec-progress", "sec-targets", "sec-shards", "sec-failures", "sec-figures", "sec-analysis", "sec-manifest"];
   var live = document.getElementById("live"), shown = null, downSince = null, busy = false;
   var dirty = false, reloaded = 0;
   function time(d) { return d.toLocaleTimeString(); }
@@ -827,7 +827,7 @@ const LIVE: &str = r##"<style>
   // What, when it changes, asks for the whole page again (new figures, failures, shards).
   function pageKey(s) {
     return JSON.stringify([s.runs, s.done, s.failed, s.current_runs, s.manifests, s.points.length,
-      s.live_shards, s.damage || [], s.slurm || []]);
+      s.live_shards, s.damage || [], s.slurm || [], s.targets ? [s.targets.rounds, s.targets.verdict] : null]);
   }
   function update(s) {
     var k = s.current, over = k.done + k.failed >= s.current_runs;
