@@ -1025,4 +1025,16 @@ mod tests {
         );
         assert_eq!(inline_svg("<svg>x</svg>"), "<svg>x</svg>");
     }
+
+    #[test]
+    fn table_numbers_to_four_significant_digits() {
+        assert_eq!(num_cell(Some(1.12104)), "1.121");
+        assert_eq!(num_cell(Some(0.0010983)), "0.001098");
+        assert_eq!(num_cell(Some(-12345.6)), "-12346");
+        assert_eq!(num_cell(Some(123456.0)), "1.235e5");
+        assert_eq!(num_cell(Some(2.5e-5)), "2.500e-5");
+        assert_eq!(num_cell(Some(0.0)), "0");
+        assert_eq!(num_cell(Some(f64::NAN)), "-");
+        assert_eq!(num_cell(None), "-");
+    }
 }

@@ -1425,6 +1425,22 @@ mod tests {
     use super::*;
     use futures_util::FutureExt;
 
+    /// Every `<section id="sec-...">` the report writes is one the live script swaps.
+    #[test]
+    fn live_script_swaps_every_report_section() {
+        let report = include_str!("report.rs");
+        let mut ids = Vec::new();
+        for (i, _) in report.match_indices("<section id=\\\"sec-") {
+            let rest = &report[i + "<section id=\\\"".len()..];
+            ids.push(&rest[..rest.find('\\').unwrap()]);
+        }
+        assert!(ids.contains(&"sec-targets"), "{ids:?}");
+        assert!(ids.len() >= 9, "{ids:?}");
+        for id in ids {
+            assert!(LIVE.contains(&format!("\"{id}\"")), "{id} not swapped by the live page");
+        }
+    }
+
     #[test]
     fn traversal_segments_refused() {
         for raw in [
