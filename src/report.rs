@@ -217,6 +217,11 @@ pub fn build(c: &Campaign) -> Result<Report, CampaignError> {
     h.push_str("</section>\n<section id=\"sec-progress\">\n");
     section_progress(&mut h, &st, runs.as_ref().ok());
     h.push_str(&cost_paragraph(c, runs.as_ref().ok()));
+
+    if let Some(t) = &st.targets {
+        h.push_str("</section>\n<section id=\"sec-targets\">\n");
+        section_targets(&mut h, c, &st, t, runs.as_ref().ok());
+    }
     h.push_str("</section>\n<section id=\"sec-shards\">\n");
     section_shards(&mut h, &ledger, &st, &mut notes);
     h.push_str("</section>\n<section id=\"sec-failures\">\n");
@@ -515,6 +520,178 @@ fn section_progress(h: &mut String, st: &CampaignStatus, runs: Option<&RunsRead>
             st.points.len()
         );
     }
+}
+
+/// A number in a table cell: 4 significant digits, `-` where unknown.
+fn num_cell(x: Option<f64>) -> String {
+    match x {
+        Some(v) if v == 0.0 => "0".into(),
+        Some(v) if v.is_finite() => {
+            let e = v.abs().log10().floor() as i32;
+            if (-3..5).contains(&e) {
+                format!("{v:.*}", (3 - e).max(0) as usize)
+            } else {
+                format!("{v:.3e}")
+            }
+        }
+        _ => "-".into(),
+    }
+}
+
+/// A campaign with error targets: the latest verdict and why, the rounds decided, per target
+/// and point the error now against its goal and the replicas done, asked and expected, the
+/// estimated core-hours done and left and the time left at the rate the finished runs took.
+fn section_targets(
+    h: &mut String,
+    c: &Campaign,
+    st: &CampaignStatus,
+    t: &crate::campaign::targets::TargetsStatus,
+    runs: Option<&RunsRead>,
+) {
+    use crate::campaign::targets::Verdict;
+    h.push_str("<h2 id=\"targets\">Error targets</h2>\n");
+    let verdict = match t.verdict {
+        None => "no round decided yet: the pilot replicas are running".to_string(),
+        Some(Verdict::Met) => "met".to_string(),
+        Some(Verdict::Continue) => "not met yet, more replicas asked".to_string(),
+        Some(Verdict::Stopped) => "stopped, not every target met".to_string(),
+    };
+    let _ = writeln!(
+        h,
+        "<p id=\"targets-verdict\">{} round{} decided; verdict: <b>{}</b>{}</p>",
+        t.rounds,
+        if t.rounds == 1 { "" } else { "s" },
+        escape(&verdict),
+        if t.why.is_empty() {
+            String::new()
+        } else {
+            format!(": {}", escape(&t.why))
+        }
+    );
+    if let Some(p) = &t.problem {
+        let _ = writeln!(
+            h,
+            "<p class=\"note\" id=\"targets-problem\">The targets cannot be judged: {}</p>",
+            escape(p)
+        );
+    }
+    // The rounds decided (campaign.json).
+    if !c.rounds.decisions.is_empty() {
+        h.push_str(
+            "<table id=\"targets-rounds\">\n<tr><th>round</th><th>runs added</th>\
+             <th title=\"the models' cost estimates\">est. core-hours added</th>\
+             <th title=\"of every run asked for after the decision\">est. core-hours asked</th>\
+             <th>verdict</th><th>why</th></tr>\n",
+        );
+        for d in &c.rounds.decisions {
+            let _ = writeln!(
+                h,
+                "<tr><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{:.4}</td>\
+                 <td class=\"n\">{:.4}</td><td>{}</td><td>{}</td></tr>",
+                d.round,
+                d.runs_added,
+                d.core_seconds_added / 3600.0,
+                d.core_seconds_total / 3600.0,
+                escape(&format!("{:?}", d.verdict).to_lowercase()),
+                escape(&d.why)
+            );
+        }
+        h.push_str("</table>\n");
+    }
+    // Per target and point.
+    h.push_str(
+        "<table id=\"targets-table\">\n<tr><th>point</th><th>parameters</th><th>target</th>\
+         <th title=\"replicas with a value / asked now / expected in the end (from the variance)\">n done / asked / expected</th>\
+         <th>mean</th><th>sem</th><th>goal</th><th>sem / goal</th><th>met</th></tr>\n",
+    );
+    for r in t.rows.iter().take(MAX_POINT_ROWS) {
+        let s = &r.state;
+        let met = match (&s.problem, s.met) {
+            (Some(p), _) => format!("no ({})", escape(p)),
+            (None, true) => "yes".into(),
+            (None, false) => "no".into(),
+        };
+        let _ = writeln!(
+            h,
+            "<tr data-target-point=\"{}\" data-target=\"{}\"><td class=\"n\">{}</td><td>{}</td><td>{}</td>\
+             <td class=\"n\">{} / {} / {}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+             <td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td></tr>",
+            r.point_id,
+            s.target,
+            r.point_id,
+            escape(&r.point),
+            escape(&r.target),
+            s.n,
+            r.replicas,
+            r.expected,
+            num_cell(s.mean),
+            num_cell(s.sem),
+            num_cell(s.goal),
+            num_cell(s.ratio()),
+            met
+        );
+    }
+    h.push_str("</table>\n");
+    if t.rows.len() > MAX_POINT_ROWS {
+        let _ = writeln!(
+            h,
+            "<p class=\"note\">The first {MAX_POINT_ROWS} of {} rows; every row: \
+             <code>granular status --json</code>.</p>",
+            t.rows.len()
+        );
+    }
+    let _ = writeln!(
+        h,
+        "<p id=\"targets-replicas\">Replicas: {} asked; the variances seen so far imply at least {} \
+         ({:.2}x the minimum).</p>",
+        t.replicas_asked,
+        t.replicas_implied,
+        t.replicas_asked as f64 / t.replicas_implied.max(1) as f64
+    );
+    // The time left: the estimated core-seconds left at the rate the finished runs took
+    // (their wall seconds per estimated core-second).
+    let wall: f64 = runs
+        .map(|r| r.wall.values().map(|(s, _)| s).sum())
+        .unwrap_or(0.0);
+    let mut times = format!(
+        "Estimated core-hours (the models' cost estimates): {:.4} done, {:.4} left.",
+        t.core_seconds_done / 3600.0,
+        t.core_seconds_left / 3600.0
+    );
+    if t.core_seconds_left <= 0.0 {
+        times.push_str(" Nothing is left to run.");
+    } else if wall > 0.0 && t.core_seconds_done > 0.0 {
+        let rate = wall / t.core_seconds_done;
+        let cpu = rate * t.core_seconds_left;
+        let _ = write!(
+            times,
+            " Time left at this campaign's measured rate ({rate:.3} s of run time per estimated \
+             core-second, from the finished runs): {} of run time",
+            duration_text(cpu)
+        );
+        if st.counts.running > 0 {
+            let _ = write!(
+                times,
+                ", about {} of wall time at the {} runs running now",
+                duration_text(cpu / st.counts.running as f64),
+                st.counts.running
+            );
+        } else {
+            times.push_str(", to be divided by the runs that run at once (threads x shards)");
+        }
+        times.push_str(
+            "; it assumes the runs left cost as the models estimate, relative to those done, \
+             and that the replicas expected are those the variances seen so far imply.",
+        );
+    } else {
+        times.push_str(" No time left can be estimated before a run has finished.");
+    }
+    let _ = writeln!(h, "<p id=\"targets-times\">{}</p>", escape(&times));
+    h.push_str(
+        "<p>The figure <code>targets-error</code> (under Figures) shows each point's error \
+         against its goal over the estimated core-seconds spent on it, per round, with the \
+         1/sqrt(n) line through its latest state.</p>\n",
+    );
 }
 
 /// The ledger's tag (`s1of2`) of a live shard as `status` lists it (`1/2 (pid 17 on host)`).
@@ -875,5 +1052,17 @@ mod tests {
             "<svg a>x</svg>"
         );
         assert_eq!(inline_svg("<svg>x</svg>"), "<svg>x</svg>");
+    }
+
+    #[test]
+    fn table_numbers_to_four_significant_digits() {
+        assert_eq!(num_cell(Some(1.12104)), "1.121");
+        assert_eq!(num_cell(Some(0.0010983)), "0.001098");
+        assert_eq!(num_cell(Some(-12345.6)), "-12346");
+        assert_eq!(num_cell(Some(123456.0)), "1.235e5");
+        assert_eq!(num_cell(Some(2.5e-5)), "2.500e-5");
+        assert_eq!(num_cell(Some(0.0)), "0");
+        assert_eq!(num_cell(Some(f64::NAN)), "-");
+        assert_eq!(num_cell(None), "-");
     }
 }

@@ -800,7 +800,7 @@ const LIVE: &str = r##"<style>
 <script>
 (function () {
   "use strict";
-  var EVERY = 2000, RELOAD_EVERY = 10000, SECTIONS = ["sec-headline", "sec-campaign", "sec-progress", "sec-shards", "sec-failures", "sec-figures", "sec-analysis", "sec-manifest"];
+  var EVERY = 2000, RELOAD_EVERY = 10000, SECTIONS = ["sec-headline", "sec-campaign", "sec-progress", "sec-targets", "sec-shards", "sec-failures", "sec-figures", "sec-analysis", "sec-manifest"];
   var live = document.getElementById("live"), shown = null, downSince = null, busy = false;
   var dirty = false, reloaded = 0;
   function time(d) { return d.toLocaleTimeString(); }
@@ -827,7 +827,7 @@ const LIVE: &str = r##"<style>
   // What, when it changes, asks for the whole page again (new figures, failures, shards).
   function pageKey(s) {
     return JSON.stringify([s.runs, s.done, s.failed, s.current_runs, s.manifests, s.points.length,
-      s.live_shards, s.damage || [], s.slurm || []]);
+      s.live_shards, s.damage || [], s.slurm || [], s.targets ? [s.targets.rounds, s.targets.verdict] : null]);
   }
   function update(s) {
     var k = s.current, over = k.done + k.failed >= s.current_runs;
@@ -1424,6 +1424,22 @@ async fn table_file(s: &Arc<Served>, raw: String, head: bool) -> Response {
 mod tests {
     use super::*;
     use futures_util::FutureExt;
+
+    /// Every `<section id="sec-...">` the report writes is one the live script swaps.
+    #[test]
+    fn live_script_swaps_every_report_section() {
+        let report = include_str!("report.rs");
+        let mut ids = Vec::new();
+        for (i, _) in report.match_indices("<section id=\\\"sec-") {
+            let rest = &report[i + "<section id=\\\"".len()..];
+            ids.push(&rest[..rest.find('\\').unwrap()]);
+        }
+        assert!(ids.contains(&"sec-targets"), "{ids:?}");
+        assert!(ids.len() >= 9, "{ids:?}");
+        for id in ids {
+            assert!(LIVE.contains(&format!("\"{id}\"")), "{id} not swapped by the live page");
+        }
+    }
 
     #[test]
     fn traversal_segments_refused() {

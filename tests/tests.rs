@@ -54,6 +54,9 @@
 //! - `targets`: error targets: a campaign that adds replicas in rounds until every target is
 //!   met decides the same replicas and writes the same tables with 1 or 2 threads, 2 shards and
 //!   kill -9 + resume, and equals a direct campaign of the replicas decided.
+//! - `targets_report`: the report of a target campaign has its `sec-targets` section (verdict,
+//!   rounds, per point n / asked / expected and met) and the figure `targets-error`, which
+//!   `granular plot` draws the same each time; a campaign without targets has neither.
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
@@ -83,6 +86,7 @@ mod it {
     pub mod slurm;
     pub mod sweep_columns;
     pub mod targets;
+    pub mod targets_report;
     pub mod util;
     pub mod vdist;
 }

@@ -662,10 +662,12 @@ impl Campaign {
                 e.to_string(),
             )
         })?;
-        let done = self.done_replicas(&ledger::finished_runs(&ledger.commits));
+        let finished = ledger::finished_runs(&ledger.commits);
+        let done = self.done_replicas(&finished);
         let view = self.view(&data, &done);
         let figs = self.plan.model.figures(&view)?;
-        self.with_derived_figures(&view, figs)
+        let figs = self.with_derived_figures(&view, figs)?;
+        Ok(self.with_target_figures(&finished, figs))
     }
 
     /// The model's figures of the runs finished so far (`finished`, from the ledger): the
@@ -696,7 +698,23 @@ impl Campaign {
         self.plan.model.write_summaries(&view)?;
         self.write_derived(&view)?;
         let figs = self.plan.model.figures(&view)?;
-        self.with_derived_figures(&view, figs)
+        let figs = self.with_derived_figures(&view, figs)?;
+        Ok(self.with_target_figures(finished, figs))
+    }
+
+    /// The figures followed by those of the error targets ([`targets::figures`]).
+    fn with_target_figures(
+        &self,
+        finished: &BTreeMap<u64, RunStatus>,
+        figs: Option<Vec<(String, crate::plot::Figure)>>,
+    ) -> Option<Vec<(String, crate::plot::Figure)>> {
+        let t = targets::figures(self, finished);
+        if t.is_empty() {
+            return figs;
+        }
+        let mut figs = figs.unwrap_or_default();
+        figs.extend(t);
+        Some(figs)
     }
 
     /// `granular analyze`: the model's analysis ([`crate::models::Model::analyze`]) of the

@@ -938,4 +938,112 @@ mod tests {
         assert_eq!(s.t, Some(2.0), "{s:?}");
         assert!(!s.met);
     }
+
+/// The figures of a target campaign (none without targets): per target, `targets-error`
+/// (`targets-error-1`, `-2`, ... when there are several): the standard error against its goal
+/// (sem / goal, log axis) over the estimated core-seconds spent on each point (its runs x the
+/// model's cost estimate of one run, log axis), one series per point with a marker at each
+/// round's decision (from the rounds' records in `campaign.json`) and one at the current state
+/// (from the `finished` runs), the 1/sqrt(n) line through the point's last marker (the error
+/// falls as 1/sqrt(core-seconds), reaching the goal where the line crosses 1), and the goal
+/// y = 1. Deterministic: a function of the records and the committed rows only.
+pub fn figures(
+    c: &Campaign,
+    finished: &BTreeMap<u64, RunStatus>,
+) -> Vec<(String, crate::plot::Figure)> {
+    use crate::plot::{loglog, Figure, Series as PlotSeries};
+    if !c.manifest.has_targets() {
+        return Vec::new();
+    }
+    // The current state (not drawn if its rows cannot be read: the records still are).
+    let now = evaluate(c, finished).unwrap_or_default();
+    let mut done_of: BTreeMap<u32, u32> = BTreeMap::new();
+    for r in c.plan.current_runs() {
+        if finished.contains_key(&r.run_id) {
+            *done_of.entry(r.point_id).or_default() += 1;
+        }
+    }
+    let points: BTreeSet<u32> = c.plan.current_runs().map(|r| r.point_id).collect();
+    let several = c.manifest.target.len() > 1;
+    let mut out = Vec::new();
+    for (k, target) in c.manifest.target.iter().enumerate() {
+        // Per point, its markers (x = core-seconds spent, y = sem / goal) in order.
+        let marker = |p: &PointState, runs: u32| -> Option<(f64, f64)> {
+            let t = p.targets.iter().find(|t| t.target == k)?;
+            let (x, y) = (runs as f64 * p.cost, t.ratio()?);
+            (x.is_finite() && x > 0.0 && y.is_finite() && y > 0.0).then_some((x, y))
+        };
+        let mut series = Vec::new();
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+        for &pid in &points {
+            let mut marks: Vec<(f64, f64)> = c
+                .rounds
+                .decisions
+                .iter()
+                .filter_map(|d| d.points.iter().find(|p| p.point_id == pid))
+                .filter_map(|p| marker(p, p.replicas))
+                .collect();
+            if let Some(p) = now.iter().find(|p| p.point_id == pid) {
+                if let Some(m) = marker(p, done_of.get(&pid).copied().unwrap_or(0)) {
+                    if marks.last() != Some(&m) {
+                        marks.push(m);
+                    }
+                }
+            }
+            let mut line = Vec::new();
+            if let Some(&(x0, y0)) = marks.last() {
+                // sem = y0 sqrt(x0 / x): from the point's first marker to where it meets the
+                // goal (at most 100 times further).
+                let first = marks.iter().map(|m| m.0).fold(x0, f64::min);
+                let end = (x0 * y0 * y0).clamp(x0, 100.0 * x0);
+                let (xa, xb) = (first.min(x0 / 2.0), if end > x0 { end } else { 2.0 * x0 });
+                line = [xa, xb]
+                    .iter()
+                    .map(|&x| (x, y0 * (x0 / x).sqrt(), 0.0))
+                    .collect();
+                for &(x, _, _) in &line {
+                    lo = lo.min(x);
+                    hi = hi.max(x);
+                }
+            }
+            series.push(PlotSeries {
+                label: c.plan.label(pid),
+                points: marks.iter().map(|&(x, y)| (x, y, 0.0)).collect(),
+                line: false,
+            });
+            series.push(PlotSeries {
+                label: String::new(),
+                points: line,
+                line: true,
+            });
+        }
+        if hi <= 0.0 {
+            continue;
+        }
+        let refs = series.len();
+        series.push(PlotSeries {
+            label: "goal (sem = goal)".into(),
+            points: vec![(lo, 1.0, 0.0), (hi, 1.0, 0.0)],
+            line: true,
+        });
+        let fig = loglog(
+            Figure::new(
+                format!(
+                    "error against the goal: {} (lines: sem ~ 1/sqrt(n))",
+                    describe(target)
+                ),
+                "estimated core-seconds spent on the point",
+                "sem / goal",
+                series,
+            )
+            .with_references_from(refs),
+        );
+        let name = if several {
+            format!("targets-error-{}", k + 1)
+        } else {
+            "targets-error".to_string()
+        };
+        out.push((name, fig));
+    }
+    out
 }
