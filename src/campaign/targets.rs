@@ -938,6 +938,7 @@ mod tests {
         assert_eq!(s.t, Some(2.0), "{s:?}");
         assert!(!s.met);
     }
+}
 
 /// The figures of a target campaign (none without targets): per target, `targets-error`
 /// (`targets-error-1`, `-2`, ... when there are several): the standard error against its goal
