@@ -1437,7 +1437,10 @@ mod tests {
         assert!(ids.contains(&"sec-targets"), "{ids:?}");
         assert!(ids.len() >= 9, "{ids:?}");
         for id in ids {
-            assert!(LIVE.contains(&format!("\"{id}\"")), "{id} not swapped by the live page");
+            assert!(
+                LIVE.contains(&format!("\"{id}\"")),
+                "{id} not swapped by the live page"
+            );
         }
     }
 

@@ -17,9 +17,7 @@ use std::sync::Arc;
 
 use arrow_array::cast::AsArray;
 use arrow_array::types::{Float64Type, UInt32Type};
-use arrow_array::{
-    Array, ArrayRef, Float64Array, RecordBatch, UInt32Array, UInt64Array,
-};
+use arrow_array::{Array, ArrayRef, Float64Array, RecordBatch, UInt32Array, UInt64Array};
 use arrow_schema::{DataType, Field, Schema};
 
 use crate::derived::{Quantities, Series};
@@ -88,7 +86,8 @@ pub fn write(
     let nq = q.list.len();
 
     // derived: per run, the union of its quantities' times.
-    let (mut run_c, mut point_c, mut rep_c, mut t_c) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut run_c, mut point_c, mut rep_c, mut t_c) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut val_c: Vec<Vec<Option<f64>>> = vec![Vec::new(); nq];
     // summary: (point, t) -> per quantity (replica, value).
     let mut acc: BTreeMap<(u32, T), Vec<Vec<(u32, f64)>>> = BTreeMap::new();
@@ -162,9 +161,21 @@ pub fn write(
                 n.push(k);
             }
         }
-        fields.push(Field::new(format!("{}_mean", qu.name), DataType::Float64, true));
-        fields.push(Field::new(format!("{}_sem", qu.name), DataType::Float64, true));
-        fields.push(Field::new(format!("{}_n", qu.name), DataType::UInt32, false));
+        fields.push(Field::new(
+            format!("{}_mean", qu.name),
+            DataType::Float64,
+            true,
+        ));
+        fields.push(Field::new(
+            format!("{}_sem", qu.name),
+            DataType::Float64,
+            true,
+        ));
+        fields.push(Field::new(
+            format!("{}_n", qu.name),
+            DataType::UInt32,
+            false,
+        ));
         cols.push(Arc::new(Float64Array::from(m)));
         cols.push(Arc::new(Float64Array::from(s)));
         cols.push(Arc::new(UInt32Array::from(n)));
@@ -183,7 +194,11 @@ fn f64s(a: &dyn Array) -> Vec<Option<f64>> {
             .iter()
             .map(|v| v.map(f64::from))
             .collect(),
-        DataType::UInt32 => a.as_primitive::<UInt32Type>().iter().map(|v| v.map(f64::from)).collect(),
+        DataType::UInt32 => a
+            .as_primitive::<UInt32Type>()
+            .iter()
+            .map(|v| v.map(f64::from))
+            .collect(),
         DataType::UInt64 => a
             .as_primitive::<arrow_array::types::UInt64Type>()
             .iter()
@@ -280,7 +295,9 @@ pub fn figures(
                 ),
                 None => (
                     "point_id".into(),
-                    rows.iter().map(|(p, _, m, s)| (f64::from(*p), *m, *s)).collect(),
+                    rows.iter()
+                        .map(|(p, _, m, s)| (f64::from(*p), *m, *s))
+                        .collect(),
                 ),
             };
             if data.is_empty() {

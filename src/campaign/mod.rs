@@ -586,7 +586,10 @@ impl Campaign {
 
     /// Write the derived quantities' tables (`derived`, `derived_summary`) of the view's
     /// runs, if the manifest declares any.
-    fn write_derived(&self, view: &CampaignView<'_, ModelParams>) -> Result<(), crate::store::parquet_io::StoreError> {
+    fn write_derived(
+        &self,
+        view: &CampaignView<'_, ModelParams>,
+    ) -> Result<(), crate::store::parquet_io::StoreError> {
         let q = self.derived();
         if q.is_empty() {
             return Ok(());
@@ -599,7 +602,8 @@ impl Campaign {
         &self,
         view: &CampaignView<'_, ModelParams>,
         model: Option<Vec<(String, crate::plot::Figure)>>,
-    ) -> Result<Option<Vec<(String, crate::plot::Figure)>>, crate::store::parquet_io::StoreError> {
+    ) -> Result<Option<Vec<(String, crate::plot::Figure)>>, crate::store::parquet_io::StoreError>
+    {
         let q = self.derived();
         if q.is_empty() {
             return Ok(model);

@@ -224,9 +224,7 @@ impl Plan {
     pub fn is_current(&self, r: &RunSpec) -> bool {
         self.points[r.point_id as usize].current
             && match &self.runs_per_point {
-                RunsPerPoint::Replicas(_) => {
-                    r.replica < self.replicas_of(r.point_id).unwrap_or(0)
-                }
+                RunsPerPoint::Replicas(_) => r.replica < self.replicas_of(r.point_id).unwrap_or(0),
                 RunsPerPoint::Seeds(s) => s.contains(&r.seed),
             }
     }

@@ -287,7 +287,9 @@ pub fn preview(
                         let done = c
                             .plan
                             .current_runs()
-                            .filter(|r| r.point_id == e.point_id && finished.contains_key(&r.run_id))
+                            .filter(|r| {
+                                r.point_id == e.point_id && finished.contains_key(&r.run_id)
+                            })
                             .count() as u32;
                         e.core_hours_left = e.expected.saturating_sub(done) as f64
                             * points.get(&e.point_id).copied().unwrap_or(0.0)

@@ -1358,7 +1358,10 @@ mod tests {
         assert_eq!(r.submissions[0].round_job, None);
         assert_eq!(r.outcome, None);
         let back = serde_json::to_string(&r).unwrap();
-        assert!(!back.contains("round") && !back.contains("outcome"), "{back}");
+        assert!(
+            !back.contains("round") && !back.contains("outcome"),
+            "{back}"
+        );
     }
 
     #[test]

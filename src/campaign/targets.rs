@@ -189,8 +189,7 @@ pub fn evaluate(
                     .filter_map(|(_, run)| values.get(run))
                     .filter_map(|per_q| k.and_then(|k| per_q.get(k)))
                     .collect();
-                let series: Vec<&Series> =
-                    results.iter().filter_map(|r| r.as_ref().ok()).collect();
+                let series: Vec<&Series> = results.iter().filter_map(|r| r.as_ref().ok()).collect();
                 let mut s = target_state(i, t, &series);
                 // A run whose quantity cannot be evaluated: the target cannot be judged.
                 if let Some(Err(e)) = results.iter().find(|r| r.is_err()) {
@@ -361,8 +360,13 @@ pub fn decide(
             // A quantity of zero mean with only `sem_rel`, or one value: one more round.
             want.insert(p.point_id, (p.replicas + 1).min(max));
         } else {
-            let needed = unmet.iter().filter_map(|t| t.needed).max().unwrap_or(p.replicas + 1);
-            let least = p.replicas + ((MIN_GROWTH_PER_ROUND * p.replicas as f64).ceil() as u32).max(1);
+            let needed = unmet
+                .iter()
+                .filter_map(|t| t.needed)
+                .max()
+                .unwrap_or(p.replicas + 1);
+            let least =
+                p.replicas + ((MIN_GROWTH_PER_ROUND * p.replicas as f64).ceil() as u32).max(1);
             let next = needed
                 .max(least)
                 .min(p.replicas.saturating_mul(MAX_GROWTH_PER_ROUND))
@@ -599,7 +603,12 @@ pub fn run(
                 Ok(Decided::More(n)) => {
                     let d = Campaign::open(&c.root)?;
                     let round = d.rounds.decisions.len();
-                    let why = d.rounds.decisions.last().map(|d| d.why.clone()).unwrap_or_default();
+                    let why = d
+                        .rounds
+                        .decisions
+                        .last()
+                        .map(|d| d.why.clone())
+                        .unwrap_or_default();
                     reporter.event(&super::Event::Round {
                         message: format!("round {}: {n} run(s) added: {why}", round + 1),
                     });
@@ -674,8 +683,7 @@ fn dispatch_when_free(
 fn mine_pending(c: &Campaign, shard: super::plan::Shard) -> Result<bool, CampaignError> {
     let ledger = super::ledger::read_ledger(&c.root)?;
     let finished = super::ledger::finished_runs(&ledger.commits);
-    Ok(c
-        .plan
+    Ok(c.plan
         .current_runs()
         .any(|r| shard.contains(r.run_id) && !finished.contains_key(&r.run_id)))
 }
@@ -752,10 +760,7 @@ pub fn describe(t: &Target) -> String {
 }
 
 /// The targets' status of `c` from its finished runs (None without targets).
-pub fn status(
-    c: &Campaign,
-    finished: &BTreeMap<u64, RunStatus>,
-) -> Option<TargetsStatus> {
+pub fn status(c: &Campaign, finished: &BTreeMap<u64, RunStatus>) -> Option<TargetsStatus> {
     if !c.manifest.has_targets() {
         return None;
     }
@@ -804,7 +809,11 @@ pub fn status(
         }
     }
     // Once decided final, nothing is left.
-    if last.is_some_and(|d| d.verdict != Verdict::Continue) && c.plan.current_runs().all(|r| finished.contains_key(&r.run_id)) {
+    if last.is_some_and(|d| d.verdict != Verdict::Continue)
+        && c.plan
+            .current_runs()
+            .all(|r| finished.contains_key(&r.run_id))
+    {
         left_cs = 0.0;
     }
     Some(TargetsStatus {
@@ -874,7 +883,11 @@ mod tests {
     fn rounds_grow_within_their_bounds() {
         let m = manifest("");
         // n* = 29 from 8: 29 (< 32).
-        let (changed, d) = decide(&m, vec![point(0, 8, 0.05, 1.0), point(1, 8, 0.005, 1.0)], 0.0);
+        let (changed, d) = decide(
+            &m,
+            vec![point(0, 8, 0.05, 1.0), point(1, 8, 0.005, 1.0)],
+            0.0,
+        );
         assert_eq!(changed.get(&0), Some(&29));
         assert_eq!(changed.get(&1), None, "a met point got more");
         assert_eq!(d.verdict, Verdict::Continue);
@@ -908,7 +921,10 @@ mod tests {
             0.0,
         );
         let added = |p: u32| changed.get(&p).map_or(0, |n| n - 8);
-        assert!(added(0) as f64 + 10.0 * added(1) as f64 <= 36.0, "{changed:?}");
+        assert!(
+            added(0) as f64 + 10.0 * added(1) as f64 <= 36.0,
+            "{changed:?}"
+        );
         assert!(added(0) > added(1), "{changed:?}");
         assert!(d.why.contains("max_core_hours"), "{}", d.why);
         // Nothing fits: stopped, the budget named.
@@ -930,7 +946,11 @@ mod tests {
         let series: Vec<Series> = (0..6)
             .map(|i| {
                 let d = if i % 2 == 0 { 1.0 } else { -1.0 };
-                vec![(Some(0.5), 1.0 + 0.5 * d), (Some(1.0), 1.0 + 0.001 * d), (Some(2.0), 1.0 + 0.05 * d)]
+                vec![
+                    (Some(0.5), 1.0 + 0.5 * d),
+                    (Some(1.0), 1.0 + 0.001 * d),
+                    (Some(2.0), 1.0 + 0.05 * d),
+                ]
             })
             .collect();
         let refs: Vec<&Series> = series.iter().collect();

@@ -110,7 +110,11 @@ fn write_targets(
         out,
         "  targets: {} round(s) decided, {verdict}{}",
         t.rounds,
-        if t.why.is_empty() { String::new() } else { format!(": {}", t.why) }
+        if t.why.is_empty() {
+            String::new()
+        } else {
+            format!(": {}", t.why)
+        }
     )?;
     if let Some(p) = &t.problem {
         writeln!(out, "  targets cannot be judged: {p}")?;

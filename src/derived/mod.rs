@@ -23,8 +23,8 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use arrow_array::cast::AsArray;
 use arrow_array::types::{
-    Float32Type, Float64Type, Int16Type, Int32Type, Int64Type, Int8Type, UInt16Type,
-    UInt32Type, UInt64Type, UInt8Type,
+    Float32Type, Float64Type, Int16Type, Int32Type, Int64Type, Int8Type, UInt16Type, UInt32Type,
+    UInt64Type, UInt8Type,
 };
 use arrow_array::{Array, RecordBatch};
 use arrow_schema::{DataType, SchemaRef};
@@ -144,7 +144,11 @@ fn distance(a: &str, b: &str) -> usize {
     for (i, ca) in a.chars().enumerate() {
         let mut cur = vec![i + 1];
         for (j, cb) in b.iter().enumerate() {
-            cur.push((prev[j] + usize::from(ca != *cb)).min(prev[j + 1] + 1).min(cur[j] + 1));
+            cur.push(
+                (prev[j] + usize::from(ca != *cb))
+                    .min(prev[j + 1] + 1)
+                    .min(cur[j] + 1),
+            );
         }
         prev = cur;
     }
@@ -153,7 +157,11 @@ fn distance(a: &str, b: &str) -> usize {
 
 /// `candidates` nearest `to` first, at most 12, as text.
 fn nearest<'a>(to: &str, candidates: impl IntoIterator<Item = &'a str>) -> String {
-    let mut c: Vec<&str> = candidates.into_iter().collect::<BTreeSet<_>>().into_iter().collect();
+    let mut c: Vec<&str> = candidates
+        .into_iter()
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .collect();
     c.sort_by_key(|x| (distance(x, to), *x));
     let more = c.len().saturating_sub(12);
     c.truncate(12);
@@ -446,7 +454,10 @@ type Selected = BTreeMap<u64, Vec<(Option<f64>, Option<f64>)>>;
 fn column_f64(a: &dyn Array) -> Option<Vec<Option<f64>>> {
     macro_rules! prim {
         ($t:ty) => {
-            a.as_primitive::<$t>().iter().map(|v| v.map(|x| x as f64)).collect()
+            a.as_primitive::<$t>()
+                .iter()
+                .map(|v| v.map(|x| x as f64))
+                .collect()
         };
     }
     Some(match a.data_type() {
@@ -467,7 +478,10 @@ fn column_f64(a: &dyn Array) -> Option<Vec<Option<f64>>> {
 fn column_u64(a: &dyn Array) -> Option<Vec<Option<u64>>> {
     macro_rules! prim {
         ($t:ty) => {
-            a.as_primitive::<$t>().iter().map(|v| v.map(|x| x as u64)).collect()
+            a.as_primitive::<$t>()
+                .iter()
+                .map(|v| v.map(|x| x as u64))
+                .collect()
         };
     }
     Some(match a.data_type() {
@@ -482,7 +496,10 @@ fn column_u64(a: &dyn Array) -> Option<Vec<Option<u64>>> {
 fn column_i64(a: &dyn Array) -> Option<Vec<Option<i64>>> {
     macro_rules! prim {
         ($t:ty) => {
-            a.as_primitive::<$t>().iter().map(|v| v.map(|x| x as i64)).collect()
+            a.as_primitive::<$t>()
+                .iter()
+                .map(|v| v.map(|x| x as i64))
+                .collect()
         };
     }
     Some(match a.data_type() {
@@ -527,7 +544,10 @@ fn selector_mask(b: &RecordBatch, column: &str, v: &SelVal) -> Vec<bool> {
 /// The selected rows of `c` in `batches`, per run.
 fn select(c: &ColRef, batches: &[RecordBatch], out: &mut Selected) {
     for b in batches {
-        let Some(runs) = b.column_by_name("run_id").and_then(|a| column_u64(a.as_ref())) else {
+        let Some(runs) = b
+            .column_by_name("run_id")
+            .and_then(|a| column_u64(a.as_ref()))
+        else {
             continue;
         };
         let n = b.num_rows();
@@ -596,9 +616,23 @@ fn reduce(r: Reduction, c: &ColRef, rows: &[(Option<f64>, Option<f64>)]) -> Resu
         Reduction::Min => v.iter().map(|x| x.1).fold(f64::INFINITY, f64::min),
         Reduction::Max => v.iter().map(|x| x.1).fold(f64::NEG_INFINITY, f64::max),
         Reduction::First | Reduction::Last => {
-            let pick = |a: f64, b: f64| if r == Reduction::First { a.total_cmp(&b) } else { b.total_cmp(&a) };
-            let best = v.iter().map(|x| x.0).min_by(|a, b| pick(*a, *b)).expect("rows");
-            let at: Vec<f64> = v.iter().filter(|x| x.0.total_cmp(&best).is_eq()).map(|x| x.1).collect();
+            let pick = |a: f64, b: f64| {
+                if r == Reduction::First {
+                    a.total_cmp(&b)
+                } else {
+                    b.total_cmp(&a)
+                }
+            };
+            let best = v
+                .iter()
+                .map(|x| x.0)
+                .min_by(|a, b| pick(*a, *b))
+                .expect("rows");
+            let at: Vec<f64> = v
+                .iter()
+                .filter(|x| x.0.total_cmp(&best).is_eq())
+                .map(|x| x.1)
+                .collect();
             if at.len() > 1 {
                 return Err(format!(
                     "`{}({})`: {} rows of {} at t = {best}: a selection must name one row per time (add selectors)",
@@ -700,7 +734,10 @@ impl Quantity {
             .copied()
             .collect();
         if times.is_empty() {
-            let refs: Vec<&str> = timed.iter().map(|(i, _)| self.inputs[*i].col().text.as_str()).collect();
+            let refs: Vec<&str> = timed
+                .iter()
+                .map(|(i, _)| self.inputs[*i].col().text.as_str())
+                .collect();
             return Err(format!(
                 "no time at which every reference ({}) has a row",
                 refs.join(", ")
@@ -775,7 +812,10 @@ impl Quantities {
                 let mut all = BTreeSet::new();
                 for t in self.tables() {
                     for b in rows.get(t).unwrap_or(&empty) {
-                        if let Some(r) = b.column_by_name("run_id").and_then(|a| column_u64(a.as_ref())) {
+                        if let Some(r) = b
+                            .column_by_name("run_id")
+                            .and_then(|a| column_u64(a.as_ref()))
+                        {
                             all.extend(r.into_iter().flatten());
                         }
                     }

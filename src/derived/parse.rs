@@ -73,9 +73,8 @@ pub enum Piece {
 
 /// The short names of evalexpr's math functions (`sqrt(x)` for `math::sqrt(x)`).
 pub const ALIASES: &[&str] = &[
-    "sqrt", "cbrt", "ln", "log", "log2", "log10", "exp", "exp2", "pow", "abs", "sin", "cos",
-    "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "asinh", "acosh", "atanh",
-    "hypot",
+    "sqrt", "cbrt", "ln", "log", "log2", "log10", "exp", "exp2", "pow", "abs", "sin", "cos", "tan",
+    "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "asinh", "acosh", "atanh", "hypot",
 ];
 
 /// evalexpr's own functions that a quantity may call (besides `math::<alias>`).
@@ -200,7 +199,11 @@ fn literal(s: &str) -> Result<Lit, String> {
         }
         return Err(format!("unterminated string {s}"));
     }
-    if !s.is_empty() && s.parse::<f64>().is_ok() && !s.chars().any(|c| c.is_ascii_alphabetic() && c != 'e' && c != 'E')
+    if !s.is_empty()
+        && s.parse::<f64>().is_ok()
+        && !s
+            .chars()
+            .any(|c| c.is_ascii_alphabetic() && c != 'e' && c != 'E')
     {
         return Ok(Lit::Num(s.to_string()));
     }
@@ -260,7 +263,10 @@ pub fn reference(s: &str) -> Result<RefText, String> {
             if !valid(k) {
                 return Err(format!("`{text}`: `{k}` is not a column name"));
             }
-            selectors.push((k.to_string(), literal(v).map_err(|e| format!("`{text}`: {e}"))?));
+            selectors.push((
+                k.to_string(),
+                literal(v).map_err(|e| format!("`{text}`: {e}"))?,
+            ));
         }
         i = end + 1;
     }
@@ -355,11 +361,13 @@ pub fn rewrite(text: &str) -> Result<(String, Vec<Piece>), Vec<String>> {
                         out.push_str(&word)
                     }
                     (None, _) => {
-                        let mut known: Vec<&str> = ["mean", "sum", "min", "max", "first", "last", "slope", "count"]
-                            .into_iter()
-                            .chain(ALIASES.iter().copied())
-                            .chain(["floor", "round", "ceil", "if"])
-                            .collect();
+                        let mut known: Vec<&str> = [
+                            "mean", "sum", "min", "max", "first", "last", "slope", "count",
+                        ]
+                        .into_iter()
+                        .chain(ALIASES.iter().copied())
+                        .chain(["floor", "round", "ceil", "if"])
+                        .collect();
                         known.sort_by_key(|k| (super::distance(k, &word), *k));
                         errors.push(format!(
                             "unknown function `{word}`: expected one of {} (nearest first)",
@@ -404,7 +412,8 @@ mod tests {
 
     #[test]
     fn references_and_reductions_become_variables() {
-        let (t, p) = rewrite("temperature[species=1] / dsmc_species.temperature[species = 0]").unwrap();
+        let (t, p) =
+            rewrite("temperature[species=1] / dsmc_species.temperature[species = 0]").unwrap();
         assert_eq!(t, "__q0 / __q1");
         assert_eq!(p.len(), 2);
         let Piece::Ref(r) = &p[1] else { panic!() };

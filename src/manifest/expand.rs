@@ -302,7 +302,10 @@ fn target_errors(m: &Manifest) -> Vec<(String, String)> {
         }
         return errors;
     }
-    for (key, given) in [("replicas", m.replicas.is_some()), ("seeds", m.seeds.is_some())] {
+    for (key, given) in [
+        ("replicas", m.replicas.is_some()),
+        ("seeds", m.seeds.is_some()),
+    ] {
         if given {
             errors.push((
                 format!("/{key}"),
@@ -322,7 +325,10 @@ fn target_errors(m: &Manifest) -> Vec<(String, String)> {
     }
     if let Some(h) = m.max_core_hours {
         if !(h.is_finite() && h > 0.0) {
-            errors.push(("/max_core_hours".into(), format!("expected a positive number of core-hours, got {h}")));
+            errors.push((
+                "/max_core_hours".into(),
+                format!("expected a positive number of core-hours, got {h}"),
+            ));
         }
     }
     let mut seen = HashSet::new();

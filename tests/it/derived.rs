@@ -12,7 +12,9 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
-use super::util::{heavy, log_text, read_all, run_capture, run_granular, s, write_json, Cell, Table};
+use super::util::{
+    heavy, log_text, read_all, run_capture, run_granular, s, write_json, Cell, Table,
+};
 
 fn f(c: &Cell) -> Option<f64> {
     match c {
@@ -125,7 +127,10 @@ fn species_of(sp: &Table, run: u64) -> BTreeMap<(u64, u64), (f64, Option<f64>)> 
         .filter(|row| row[r].as_u64() == run)
         .map(|row| {
             let Cell::F(tb) = row[t] else { panic!() };
-            ((tb, row[k].as_u64()), (f(&row[temp]).unwrap(), f(&row[msd])))
+            (
+                (tb, row[k].as_u64()),
+                (f(&row[temp]).unwrap(), f(&row[msd])),
+            )
         })
         .collect()
 }
@@ -141,30 +146,62 @@ fn dsmc_gamma_equals_the_ratio_of_the_species_temperatures() {
     let names: Vec<&str> = d.columns.iter().map(|(c, _)| c.as_str()).collect();
     assert_eq!(
         names,
-        ["run_id", "point_id", "restitution_constant", "replica", "t", "d1", "gamma", "n1"]
+        [
+            "run_id",
+            "point_id",
+            "restitution_constant",
+            "replica",
+            "t",
+            "d1",
+            "gamma",
+            "n1"
+        ]
     );
-    let runs: std::collections::BTreeSet<u64> = d.column("run_id").iter().map(|c| c.as_u64()).collect();
+    let runs: std::collections::BTreeSet<u64> =
+        d.column("run_id").iter().map(|c| c.as_u64()).collect();
     assert_eq!(runs.len(), 6, "every run");
-    let (cr, ct, cg, cd, cn) = (d.col("run_id"), d.col("t"), d.col("gamma"), d.col("d1"), d.col("n1"));
+    let (cr, ct, cg, cd, cn) = (
+        d.col("run_id"),
+        d.col("t"),
+        d.col("gamma"),
+        d.col("d1"),
+        d.col("n1"),
+    );
     // Per point and t: (replica, gamma); per point: (replica, d1).
     let mut gammas: BTreeMap<(u64, u64), Vec<(u64, f64)>> = BTreeMap::new();
     let mut checked = 0;
     for run in &runs {
         let rows = species_of(sp, *run);
         let mine: Vec<&Vec<Cell>> = d.rows.iter().filter(|r| r[cr].as_u64() == *run).collect();
-        let times: Vec<u64> = rows.keys().map(|k| k.0).filter(|_| true).collect::<std::collections::BTreeSet<_>>().into_iter().collect();
+        let times: Vec<u64> = rows
+            .keys()
+            .map(|k| k.0)
+            .filter(|_| true)
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
         // One row with t null (the scalar quantities), then one per output time.
         assert_eq!(mine.len(), times.len() + 1, "run {run}");
-        let scalar = mine.iter().find(|r| r[ct] == Cell::Null).expect("a row with t null");
+        let scalar = mine
+            .iter()
+            .find(|r| r[ct] == Cell::Null)
+            .expect("a row with t null");
         assert_eq!(f(&scalar[cg]), None);
-        assert_eq!(f(&scalar[cn]), Some(times.len() as f64), "count of species-1 rows");
+        assert_eq!(
+            f(&scalar[cn]),
+            Some(times.len() as f64),
+            "count of species-1 rows"
+        );
         // slope of msd[species=1] against t, least squares, / 6.
         let pts: Vec<(f64, f64)> = times
             .iter()
             .map(|t| (f64::from_bits(*t), rows[&(*t, 1)].1.unwrap()))
             .collect();
         let n = pts.len() as f64;
-        let (mt, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+        let (mt, my) = (
+            pts.iter().map(|p| p.0).sum::<f64>() / n,
+            pts.iter().map(|p| p.1).sum::<f64>() / n,
+        );
         let sxx: f64 = pts.iter().map(|p| (p.0 - mt) * (p.0 - mt)).sum();
         let sxy: f64 = pts.iter().map(|p| (p.0 - mt) * (p.1 - my)).sum();
         assert_eq!(f(&scalar[cd]), Some(sxy / sxx / 6.0), "run {run}: d1");
@@ -173,7 +210,12 @@ fn dsmc_gamma_equals_the_ratio_of_the_species_temperatures() {
         for r in &mine {
             let Cell::F(tb) = r[ct] else { continue };
             let want = rows[&(tb, 2)].0 / rows[&(tb, 1)].0;
-            assert_eq!(f(&r[cg]), Some(want), "run {run}, t = {}", f64::from_bits(tb));
+            assert_eq!(
+                f(&r[cg]),
+                Some(want),
+                "run {run}, t = {}",
+                f64::from_bits(tb)
+            );
             assert_eq!(f(&r[cd]), None);
             gammas.entry((point, tb)).or_default().push((replica, want));
             checked += 1;
@@ -186,13 +228,25 @@ fn dsmc_gamma_equals_the_ratio_of_the_species_temperatures() {
     assert_eq!(
         names,
         [
-            "point_id", "restitution_constant", "t", "d1_mean", "d1_sem", "d1_n", "gamma_mean",
-            "gamma_sem", "gamma_n", "n1_mean", "n1_sem", "n1_n"
+            "point_id",
+            "restitution_constant",
+            "t",
+            "d1_mean",
+            "d1_sem",
+            "d1_n",
+            "gamma_mean",
+            "gamma_sem",
+            "gamma_n",
+            "n1_mean",
+            "n1_sem",
+            "n1_n"
         ]
     );
     let mut seen = 0;
     for r in &sm.rows {
-        let Cell::F(tb) = r[sm.col("t")] else { continue };
+        let Cell::F(tb) = r[sm.col("t")] else {
+            continue;
+        };
         let p = r[sm.col("point_id")].as_u64();
         let mut v = gammas[&(p, tb)].clone();
         v.sort_by_key(|x| x.0);
@@ -264,17 +318,25 @@ fn rfm_block_temperature_and_an_ambiguous_selection_left_null() {
             moments
                 .rows
                 .iter()
-                .find(|m| m[moments.col("run_id")].as_u64() == run && m[moments.col("order")].as_u64() == o)
+                .find(|m| {
+                    m[moments.col("run_id")].as_u64() == run
+                        && m[moments.col("order")].as_u64() == o
+                })
                 .map(|m| f(&m[moments.col("value")]).unwrap())
                 .unwrap()
         };
         let k = f(&r[d.col("kurtosis")]).unwrap();
         let want = moment(4) / moment(2).powf(2.0);
-        assert!((k - want).abs() <= 1e-12 * want.abs(), "run {run}: {k} vs {want}");
+        assert!(
+            (k - want).abs() <= 1e-12 * want.abs(),
+            "run {run}: {k} vs {want}"
+        );
         // A reference to a table without t selecting several rows: null, warned.
         assert_eq!(r[d.col("several")], Cell::Null);
         assert!(
-            log.contains(&format!("run {run}")) && log.contains("matches") && log.contains("several"),
+            log.contains(&format!("run {run}"))
+                && log.contains("matches")
+                && log.contains("several"),
             "warned: {log}"
         );
     }

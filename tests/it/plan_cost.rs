@@ -66,7 +66,10 @@ fn plan_estimates_the_cost_and_names_its_calibration() {
     assert_eq!(e["threads"], json!(2));
     assert_eq!(e["calibration"]["source"], json!("reference"), "{e}");
     assert_eq!(f(&e["calibration"]["factor"]), 1.0);
-    assert!(f(&e["core_seconds"]) > 0.0 && f(&e["wall_seconds"]) > 0.0, "{e}");
+    assert!(
+        f(&e["core_seconds"]) > 0.0 && f(&e["wall_seconds"]) > 0.0,
+        "{e}"
+    );
     assert!((f(&e["core_hours"]) * 3600.0 - f(&e["core_seconds"])).abs() < 1e-9);
     assert_eq!(one["estimate"]["core_seconds"], e["core_seconds"]);
     assert!(f(&one["estimate"]["wall_seconds"]) > f(&e["wall_seconds"]));

@@ -58,7 +58,12 @@ fn rounds(dir: &Path) -> Value {
 
 fn run_ok(args: &[&str], log: &Path) {
     let code = run_granular(args, log, LIMIT);
-    assert_eq!(code, Some(0), "granular {args:?} failed; log:\n{}", log_text(log));
+    assert_eq!(
+        code,
+        Some(0),
+        "granular {args:?} failed; log:\n{}",
+        log_text(log)
+    );
 }
 
 /// Every target met, each point's sem at most its goal, more replicas than the pilot.
@@ -74,8 +79,14 @@ fn assert_met(dir: &Path, log: &Path) -> Value {
         assert!(sem <= goal, "{r:#}");
         // The goal is 0.5 % of the mean.
         let mean = r["mean"].as_f64().unwrap();
-        assert!((goal - GOAL * mean.abs()).abs() <= 1e-12 * mean.abs(), "{r:#}");
-        assert!(r["n"].as_u64().unwrap() > 4, "the pilot alone met it: {r:#}");
+        assert!(
+            (goal - GOAL * mean.abs()).abs() <= 1e-12 * mean.abs(),
+            "{r:#}"
+        );
+        assert!(
+            r["n"].as_u64().unwrap() > 4,
+            "the pilot alone met it: {r:#}"
+        );
     }
     t.clone()
 }
@@ -92,7 +103,10 @@ fn a_target_campaign_meets_its_target_the_same_way_whatever_the_threads_and_shar
     let m = d.path().join("m.json");
     write_json(&m, &manifest(gamma_target()));
     let a = d.path().join("a");
-    run_ok(&["run", s(&m), "--out", s(&a), "--threads", "2", "--quiet"], &log);
+    run_ok(
+        &["run", s(&m), "--out", s(&a), "--threads", "2", "--quiet"],
+        &log,
+    );
     let t = assert_met(&a, &log);
     let r = rounds(&a);
     assert!(
@@ -101,17 +115,27 @@ fn a_target_campaign_meets_its_target_the_same_way_whatever_the_threads_and_shar
     );
 
     let b = d.path().join("b");
-    run_ok(&["run", s(&m), "--out", s(&b), "--threads", "1", "--quiet"], &log);
+    run_ok(
+        &["run", s(&m), "--out", s(&b), "--threads", "1", "--quiet"],
+        &log,
+    );
     assert_eq!(rounds(&b), r, "--threads 1 decided otherwise");
     assert_tables_identical(&read_tables(&a), &read_tables(&b), "threads 2 vs 1");
 
     // Two shards, one after the other, until the campaign's verdict is final.
     let c = d.path().join("c");
-    run_ok(&["run", s(&m), "--out", s(&c), "--shard", "1/2", "--quiet"], &log);
+    run_ok(
+        &["run", s(&m), "--out", s(&c), "--shard", "1/2", "--quiet"],
+        &log,
+    );
     let mut turns = 0;
     while status_json(&c, &log)["targets"]["verdict"] != "met" {
         turns += 1;
-        assert!(turns < 40, "the shards never finished; log:\n{}", log_text(&log));
+        assert!(
+            turns < 40,
+            "the shards never finished; log:\n{}",
+            log_text(&log)
+        );
         let shard = if turns % 2 == 1 { "2/2" } else { "1/2" };
         run_ok(&["resume", s(&c), "--shard", shard, "--quiet"], &log);
     }
@@ -119,7 +143,9 @@ fn a_target_campaign_meets_its_target_the_same_way_whatever_the_threads_and_shar
     assert_tables_identical(&read_tables(&a), &read_tables(&c), "one shard vs two");
 
     // A direct campaign of the first point with the replicas its rounds decided.
-    let n0 = r["replicas"]["0"].as_u64().expect("point 0 got more replicas");
+    let n0 = r["replicas"]["0"]
+        .as_u64()
+        .expect("point 0 got more replicas");
     let mut direct = manifest(gamma_target());
     let o = direct.as_object_mut().unwrap();
     for k in ["min_replicas", "max_replicas", "target"] {
@@ -166,7 +192,15 @@ fn a_target_campaign_killed_and_resumed_decides_the_same() {
     let mut attempt = 0;
     loop {
         let args: Vec<&str> = if attempt == 0 {
-            vec!["run", s(&m), "--out", s(&b), "--quiet", "--checkpoint-every", "0.05"]
+            vec![
+                "run",
+                s(&m),
+                "--out",
+                s(&b),
+                "--quiet",
+                "--checkpoint-every",
+                "0.05",
+            ]
         } else {
             vec!["resume", s(&b), "--quiet", "--checkpoint-every", "0.05"]
         };
@@ -186,10 +220,18 @@ fn a_target_campaign_killed_and_resumed_decides_the_same() {
         }
         assert!(attempt < 30, "never finished; log:\n{}", log_text(&log));
     }
-    assert!(kills >= 1, "no kill landed ({attempt} attempts); log:\n{}", log_text(&log));
+    assert!(
+        kills >= 1,
+        "no kill landed ({attempt} attempts); log:\n{}",
+        log_text(&log)
+    );
     assert_met(&b, &log);
     assert_eq!(rounds(&b), rounds(&a), "decisions after kill -9 differ");
-    assert_tables_identical(&read_tables(&a), &read_tables(&b), "killed vs uninterrupted");
+    assert_tables_identical(
+        &read_tables(&a),
+        &read_tables(&b),
+        "killed vs uninterrupted",
+    );
 }
 
 /// Wait for `child` at most `delay`, then SIGKILL it; its exit status.

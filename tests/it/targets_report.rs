@@ -107,7 +107,9 @@ fn report_and_figure_of_a_target_campaign() {
     for r in rows {
         let p = r["point_id"].as_u64().unwrap();
         let tag = format!("<tr data-target-point=\"{p}\" data-target=\"0\">");
-        let row = &sec[sec.find(&tag).unwrap_or_else(|| panic!("no row {tag}: {sec}"))..];
+        let row = &sec[sec
+            .find(&tag)
+            .unwrap_or_else(|| panic!("no row {tag}: {sec}"))..];
         let row = &row[..row.find("</tr>").unwrap()];
         let n = format!(
             "{} / {} / {}",
@@ -135,7 +137,10 @@ fn report_and_figure_of_a_target_campaign() {
     assert!(html.contains("<figure id=\"fig-targets-error\">"));
     let svg = fs::read_to_string(figs.join("targets-error.svg")).unwrap();
     assert!(svg.contains("sem / goal"), "axis label missing");
-    assert!(svg.contains("constant=0.6") && svg.contains("constant=0.8"), "legend");
+    assert!(
+        svg.contains("constant=0.6") && svg.contains("constant=0.8"),
+        "legend"
+    );
     let again = tmp.path().join("figs2");
     let code = run_granular(&["plot", s(&c), "--out", s(&again)], &log, LIMIT);
     assert_eq!(code, Some(0), "log:\n{}", log_text(&log));

@@ -96,7 +96,10 @@ impl Model for Cascade {
     /// The run tables a derived quantity may read (all of them, whatever the observables).
     fn run_tables() -> Vec<(&'static str, arrow_schema::SchemaRef)> {
         vec![
-            (CascadeStructureFactor::TABLE, CascadeStructureFactor::schema()),
+            (
+                CascadeStructureFactor::TABLE,
+                CascadeStructureFactor::schema(),
+            ),
             (CascadeFit::TABLE, CascadeFit::schema()),
             (CascadePlacement::TABLE, CascadePlacement::schema()),
         ]

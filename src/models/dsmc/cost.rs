@@ -169,7 +169,10 @@ mod tests {
         near(c, 2.58e6);
         near(t, 6.84e6);
         near(work(&params("bird", 100_000, 0.5, 100.0)).unwrap().1, 7.6e7);
-        near(work(&params("bird", 100_000, 0.9, 100.0)).unwrap().1, 1.37e8);
+        near(
+            work(&params("bird", 100_000, 0.9, 100.0)).unwrap().1,
+            1.37e8,
+        );
     }
 
     fn mixture(method: &str, n: u64, eps: f64, t_end: f64) -> DsmcParams {
