@@ -27,6 +27,7 @@ pub mod plan;
 pub mod preview;
 pub mod registry;
 pub mod resources;
+pub mod rounds;
 pub mod slurm;
 pub mod status;
 pub mod tables;

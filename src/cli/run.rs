@@ -86,11 +86,11 @@ pub(super) fn options(exec: &Execution, default_threads: usize, shard: Shard) ->
 }
 
 /// Run the shard `opts.shard` of `c` to its end or an interruption, with the rounds of an
-/// error-target campaign where `decide` (`campaign::targets::run`); the exit code.
+/// error-target campaign where `decide` (`campaign::rounds::run`); the exit code.
 pub(super) fn execute(c: &Campaign, opts: RunOptions, quiet: bool, decide: bool) -> i32 {
     tracing::info!(campaign = %c.manifest.name, dir = %c.root.display(), shard = %opts.shard, "starting");
     let mut reporter = CliReporter::new(quiet);
-    let result = campaign::targets::run(c, &opts, &mut reporter, decide);
+    let result = campaign::rounds::run(c, &opts, &mut reporter, decide);
     reporter.finish();
     match result {
         Ok(o) => summarise(c, &o),
