@@ -55,6 +55,21 @@ impl Ord for T {
     }
 }
 
+/// The quantities of every finished run of the view (`view.done`), each quantity of each run
+/// on its own (an error of one leaves the others): what the tables are written from and what
+/// the error targets judge.
+pub fn values(
+    view: &CampaignView<'_, ModelParams>,
+    q: &Quantities,
+) -> Result<BTreeMap<u64, Vec<Result<Series, crate::derived::EvalError>>>, StoreError> {
+    let mut rows: BTreeMap<&str, Vec<RecordBatch>> = BTreeMap::new();
+    for t in q.tables() {
+        rows.insert(t, view.read_done(t)?);
+    }
+    let runs: Vec<u64> = view.done.keys().copied().collect();
+    Ok(q.eval_each(&rows, Some(&runs)))
+}
+
 /// Write `derived` and `derived_summary` of the view's finished runs (`view.done`; `point_of`
 /// gives a run's point).
 pub fn write(
@@ -62,12 +77,7 @@ pub fn write(
     q: &Quantities,
     point_of: &dyn Fn(u64) -> u32,
 ) -> Result<(), StoreError> {
-    let mut rows: BTreeMap<&str, Vec<RecordBatch>> = BTreeMap::new();
-    for t in q.tables() {
-        rows.insert(t, view.read_done(t)?);
-    }
-    let runs: Vec<u64> = view.done.keys().copied().collect();
-    let values = q.eval_each(&rows, Some(&runs));
+    let values = values(view, q)?;
     // Per run: its series per quantity (None where it could not be evaluated).
     let mut per_run: BTreeMap<u64, Vec<Option<Series>>> = BTreeMap::new();
     for (run, qs) in values {

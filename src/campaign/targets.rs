@@ -24,7 +24,6 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use arrow_array::{Array, BooleanArray, RecordBatch, UInt64Array};
 use serde::{Deserialize, Serialize};
 
 use super::ledger::RunStatus;
@@ -140,35 +139,21 @@ pub fn evaluate(
 ) -> Result<Vec<PointState>, CampaignError> {
     let m = &c.manifest;
     let q = quantities(c)?;
-    // The finished (done) current runs, by point, in replica order.
+    // The finished (done) current runs, by point, in replica order: what the summaries are of.
+    let done = c.done_replicas(finished);
     let mut runs_of: BTreeMap<u32, Vec<(u32, u64)>> = BTreeMap::new();
-    let mut keep: BTreeSet<u64> = BTreeSet::new();
-    for r in c.plan.current_runs() {
-        if finished.get(&r.run_id) == Some(&RunStatus::Done) {
-            runs_of
-                .entry(r.point_id)
-                .or_default()
-                .push((r.replica, r.run_id));
-            keep.insert(r.run_id);
-        }
+    for (&run, &replica) in &done {
+        runs_of
+            .entry(c.plan.run(run).point_id)
+            .or_default()
+            .push((replica, run));
+    }
+    for runs in runs_of.values_mut() {
+        runs.sort_unstable();
     }
     let data = c.data();
-    let mut rows: BTreeMap<&str, Vec<RecordBatch>> = BTreeMap::new();
-    for table in q.tables() {
-        let batches = if keep.is_empty() {
-            Vec::new()
-        } else {
-            data.read(table)
-                .map_err(|e| CampaignError::Io(e.to_string()))?
-                .iter()
-                .map(|b| only_runs(b, &keep))
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(|e| CampaignError::Refused(format!("{table}: {e}")))?
-        };
-        rows.insert(table, batches);
-    }
-    let run_ids: Vec<u64> = keep.iter().copied().collect();
-    let values = q.eval_each(&rows, Some(&run_ids));
+    let values = super::derived_tables::values(&c.view(&data, &done), &q)
+        .map_err(|e| CampaignError::Io(e.to_string()))?;
     let index: BTreeMap<&str, usize> = q
         .list
         .iter()
@@ -209,18 +194,6 @@ pub fn evaluate(
         });
     }
     Ok(out)
-}
-
-/// The rows of `b` (with a `run_id` column) of the runs in `keep`.
-fn only_runs(b: &RecordBatch, keep: &BTreeSet<u64>) -> Result<RecordBatch, String> {
-    let runs = b
-        .column_by_name("run_id")
-        .and_then(|c| c.as_any().downcast_ref::<UInt64Array>())
-        .ok_or("no run_id column of 64-bit unsigned integers")?;
-    let mask: BooleanArray = (0..runs.len())
-        .map(|i| Some(!runs.is_null(i) && keep.contains(&runs.value(i))))
-        .collect();
-    arrow_select::filter::filter_record_batch(b, &mask).map_err(|e| e.to_string())
 }
 
 /// The values of each run at the target's times, grouped by time (in replica order).
