@@ -20,7 +20,7 @@ const LIMIT: Duration = Duration::from_secs(300);
 /// relative standard deviation of ~2-3 % here (measured: sem 0.0147 of mean 1.339 from 4
 /// replicas), so a 0.5 % target needs about (0.025 / 0.005)^2 ~ 20-30 replicas per point: the
 /// pilot (4) cannot meet it, and a round or two more do.
-fn manifest(target: Value) -> Value {
+pub fn manifest(target: Value) -> Value {
     json!({
         "name": "targets-test",
         "model": "dsmc",
@@ -46,7 +46,7 @@ fn manifest(target: Value) -> Value {
     })
 }
 
-fn gamma_target() -> Value {
+pub fn gamma_target() -> Value {
     json!({"quantity": "gamma", "sem_rel": GOAL})
 }
 

@@ -16,29 +16,8 @@ const LIMIT: Duration = Duration::from_secs(300);
 /// The binary mixture of tests/it/targets.rs (two points; a 0.5 % target on gamma needs a
 /// round or two after the 4 pilot replicas), or without its target.
 fn manifest(with_target: bool) -> Value {
-    let mut m = json!({
-        "name": "targets-report-test",
-        "model": "dsmc",
-        "seed": 77,
-        "min_replicas": 4,
-        "max_replicas": 400,
-        "params": {
-            "method": "low_rank",
-            "species": {"list": [
-                {"mass": 1, "diameter": 1, "count": 300},
-                {"mass": 4, "diameter": 1, "count": 300}
-            ]},
-            "volume": 6000,
-            "restitution": {"constant": 0.8},
-            "initial_temperature": {"hcs": {"mean": 1.0}},
-            "t_end": 5,
-            "output_times": {"list": [2.5, 5]},
-            "observables": ["temperature"]
-        },
-        "sweep": {"restitution.constant": [0.8, 0.6]},
-        "derived": {"gamma": "temperature[species=2] / temperature[species=1]"},
-        "target": [{"quantity": "gamma", "sem_rel": 0.005}]
-    });
+    let mut m = super::targets::manifest(super::targets::gamma_target());
+    m["name"] = json!("targets-report-test");
     if !with_target {
         let o = m.as_object_mut().unwrap();
         o.remove("target");
