@@ -11,6 +11,71 @@ use rand::RngCore;
 
 use serde::{Deserialize, Serialize};
 
+/// How a run draws its random numbers. Part of a campaign's identity: recorded in the
+/// campaign when it is created, kept when it grows, so that its runs replay bit for bit.
+///
+/// - 1: every draw from the run's sequential ChaCha8 stream ([`RunRng`], [`stream`]).
+/// - 2: as 1, except the RFM noise: ChaCha8 keyed by the run's seed and addressed by
+///   (step, particle), so that a run can be split over threads with identical output.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[serde(try_from = "u32", into = "u32")]
+pub struct StreamVersion(u32);
+
+impl StreamVersion {
+    /// The stream of every campaign made before stream versions were recorded.
+    pub const V1: StreamVersion = StreamVersion(1);
+    /// Counter-addressed RFM noise.
+    pub const V2: StreamVersion = StreamVersion(2);
+    /// The version of new campaigns.
+    pub const CURRENT: StreamVersion = StreamVersion::V2;
+
+    pub fn number(self) -> u32 {
+        self.0
+    }
+}
+
+/// A stream version this granular does not know (a newer granular made the campaign).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownStreamVersion(pub u32);
+
+impl std::fmt::Display for UnknownStreamVersion {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "random stream version {} is not known to this granular (it knows 1 to {}); \
+             a newer granular made it",
+            self.0,
+            StreamVersion::CURRENT.0
+        )
+    }
+}
+
+impl std::error::Error for UnknownStreamVersion {}
+
+impl TryFrom<u32> for StreamVersion {
+    type Error = UnknownStreamVersion;
+    fn try_from(v: u32) -> Result<Self, UnknownStreamVersion> {
+        if (1..=StreamVersion::CURRENT.0).contains(&v) {
+            Ok(StreamVersion(v))
+        } else {
+            Err(UnknownStreamVersion(v))
+        }
+    }
+}
+
+impl From<StreamVersion> for u32 {
+    fn from(v: StreamVersion) -> u32 {
+        v.0
+    }
+}
+
+impl Default for StreamVersion {
+    /// Absent from a record: the campaign predates stream versions.
+    fn default() -> Self {
+        StreamVersion::V1
+    }
+}
+
 const BUF: usize = 256;
 
 pub struct RunRng {
