@@ -6,6 +6,8 @@
 //! the CPU has it, else AVX2 or the portable path: all give identical words), and fills the
 //! caller's slice directly, so a step's normals cost no per-word bookkeeping.
 
+use std::sync::OnceLock;
+
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -16,7 +18,9 @@ const CHUNK_BLOCKS: usize = 16;
 /// 64-bit words per chunk.
 const CHUNK: usize = CHUNK_BLOCKS * 8;
 
-type ChunkFn = unsafe fn(&[u32; 8], u64, &mut [u32]);
+/// (key, stream, first block, out): 16 blocks of ChaCha8 with the 64-bit `stream` in state
+/// words 14-15 (rand_chacha's `set_stream`; the run's sequential stream is stream 0).
+type ChunkFn = unsafe fn(&[u32; 8], u64, u64, &mut [u32]);
 
 pub struct WordStream {
     seed: u64,
@@ -37,10 +41,7 @@ impl WordStream {
 
     /// The stream at a saved position.
     pub fn at(pos: &RngPosition) -> Self {
-        let seed_bytes = ChaCha8Rng::seed_from_u64(pos.seed).get_seed();
-        let key = std::array::from_fn(|k| {
-            u32::from_le_bytes(seed_bytes[4 * k..4 * k + 4].try_into().unwrap())
-        });
+        let key = key_of(pos.seed);
         // Position in 32-bit words (always even: RunRng serves 64-bit words).
         let p = pos.filled_at + 2 * pos.idx as u128;
         let block = (p / 16) as u64;
@@ -72,7 +73,7 @@ impl WordStream {
 
     fn refill(&mut self) {
         let out = as_u32(&mut self.buf[..]);
-        unsafe { (self.gen)(&self.key, self.next_block, out) };
+        unsafe { (self.gen)(&self.key, 0, self.next_block, out) };
         fix_endian(&mut self.buf[..]);
         self.next_block = self.next_block.wrapping_add(CHUNK_BLOCKS as u64);
         self.idx = 0;
@@ -108,7 +109,7 @@ impl WordStream {
         let mut rest = &mut out[take..];
         while rest.len() >= CHUNK {
             let (head, tail) = rest.split_at_mut(CHUNK);
-            unsafe { (self.gen)(&self.key, self.next_block, as_u32(head)) };
+            unsafe { (self.gen)(&self.key, 0, self.next_block, as_u32(head)) };
             fix_endian(head);
             self.next_block = self.next_block.wrapping_add(CHUNK_BLOCKS as u64);
             rest = tail;
@@ -119,6 +120,36 @@ impl WordStream {
             rest.copy_from_slice(&self.buf[..k]);
             self.idx = k;
         }
+    }
+}
+
+/// The ChaCha8 key of a run's seed (rand_chacha's `ChaCha8Rng::seed_from_u64`).
+pub fn key_of(seed: u64) -> [u32; 8] {
+    let seed_bytes = ChaCha8Rng::seed_from_u64(seed).get_seed();
+    std::array::from_fn(|k| u32::from_le_bytes(seed_bytes[4 * k..4 * k + 4].try_into().unwrap()))
+}
+
+/// Counter-addressed words: `out[i]` is 64-bit word `8 * first_block + i` of ChaCha8 with
+/// `key` and `stream` (words of blocks `first_block ..`, as rand_chacha's `ChaCha8Rng` with
+/// `set_stream(stream)` and `set_word_pos(16 * first_block)` would serve them). Any length;
+/// whole chunks go straight into `out`.
+pub fn fill_counter(key: &[u32; 8], stream: u64, first_block: u64, out: &mut [u64]) {
+    static GEN: OnceLock<ChunkFn> = OnceLock::new();
+    let gen = *GEN.get_or_init(pick);
+    let mut block = first_block;
+    let mut chunks = out.chunks_exact_mut(CHUNK);
+    for c in &mut chunks {
+        unsafe { gen(key, stream, block, as_u32(c)) };
+        fix_endian(c);
+        block = block.wrapping_add(CHUNK_BLOCKS as u64);
+    }
+    let rest = chunks.into_remainder();
+    if !rest.is_empty() {
+        let mut tmp = [0u64; CHUNK];
+        unsafe { gen(key, stream, block, as_u32(&mut tmp)) };
+        fix_endian(&mut tmp);
+        let k = rest.len();
+        rest.copy_from_slice(&tmp[..k]);
     }
 }
 
@@ -155,7 +186,7 @@ fn pick() -> ChunkFn {
 /// then a 16 x 16 transpose by in-lane unpacks and 128-bit shuffles.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn chunk_avx512(key: &[u32; 8], block: u64, out: &mut [u32]) {
+unsafe fn chunk_avx512(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32]) {
     use std::arch::x86_64::*;
     assert!(out.len() >= 256);
     const C: [u32; 4] = [0x6170_7865, 0x3320_646e, 0x7962_2d32, 0x6b20_6574];
@@ -175,6 +206,8 @@ unsafe fn chunk_avx512(key: &[u32; 8], block: u64, out: &mut [u32]) {
     }
     init[12] = lo;
     init[13] = hi;
+    init[14] = _mm512_set1_epi32(stream as u32 as i32);
+    init[15] = _mm512_set1_epi32((stream >> 32) as u32 as i32);
     let mut x = init;
     macro_rules! qr {
         ($a:expr, $b:expr, $c:expr, $d:expr) => {
@@ -228,15 +261,16 @@ unsafe fn chunk_avx512(key: &[u32; 8], block: u64, out: &mut [u32]) {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn chunk_avx2(key: &[u32; 8], block: u64, out: &mut [u32]) {
-    blocks::<8>(key, block, &mut out[..128]);
-    blocks::<8>(key, block.wrapping_add(8), &mut out[128..]);
+unsafe fn chunk_avx2(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32]) {
+    blocks::<8>(key, stream, block, &mut out[..128]);
+    blocks::<8>(key, stream, block.wrapping_add(8), &mut out[128..]);
 }
 
-unsafe fn chunk_portable(key: &[u32; 8], block: u64, out: &mut [u32]) {
+unsafe fn chunk_portable(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32]) {
     for q in 0..4 {
         blocks::<4>(
             key,
+            stream,
             block.wrapping_add(4 * q as u64),
             &mut out[64 * q..64 * (q + 1)],
         );
@@ -259,7 +293,7 @@ fn qr<const L: usize>(x: &mut [[u32; L]; 16], a: usize, b: usize, c: usize, d: u
 
 /// ChaCha8 blocks `block .. block + L` into `out` (16 L words, block after block).
 #[inline(always)]
-fn blocks<const L: usize>(key: &[u32; 8], block: u64, out: &mut [u32]) {
+fn blocks<const L: usize>(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32]) {
     const C: [u32; 4] = [0x6170_7865, 0x3320_646e, 0x7962_2d32, 0x6b20_6574];
     let mut x = [[0u32; L]; 16];
     for k in 0..4 {
@@ -272,6 +306,8 @@ fn blocks<const L: usize>(key: &[u32; 8], block: u64, out: &mut [u32]) {
         let b = block.wrapping_add(j as u64);
         x[12][j] = b as u32;
         x[13][j] = (b >> 32) as u32;
+        x[14][j] = stream as u32;
+        x[15][j] = (stream >> 32) as u32;
     }
     let init = x;
     for _ in 0..4 {
@@ -333,13 +369,34 @@ mod tests {
         let key = [1, 2, 3, 4, 5, 6, 7, 8];
         let mut a = [0u32; 256];
         let mut b = [0u32; 256];
-        unsafe { chunk_portable(&key, u32::MAX as u64 - 3, &mut a) };
-        unsafe { (pick())(&key, u32::MAX as u64 - 3, &mut b) };
+        unsafe { chunk_portable(&key, 0, u32::MAX as u64 - 3, &mut a) };
+        unsafe { (pick())(&key, 0, u32::MAX as u64 - 3, &mut b) };
         assert_eq!(a, b);
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
-            unsafe { chunk_avx2(&key, u32::MAX as u64 - 3, &mut b) };
+            unsafe { chunk_avx2(&key, 0, u32::MAX as u64 - 3, &mut b) };
             assert_eq!(a, b);
+        }
+    }
+
+    /// `fill_counter` serves rand_chacha's ChaCha8 words of a given stream and word position,
+    /// for lengths that end inside a chunk and first blocks that wrap the low counter word.
+    #[test]
+    fn counter_words_are_rand_chacha_streams() {
+        use rand::RngCore;
+        for (seed, stream, block) in [
+            (3u64, 0u64, 0u64),
+            (9, 7, 5),
+            (1, u64::MAX, u32::MAX as u64 - 2),
+        ] {
+            let key = key_of(seed);
+            let mut got = vec![0u64; 301];
+            fill_counter(&key, stream, block, &mut got);
+            let mut r = ChaCha8Rng::seed_from_u64(seed);
+            r.set_stream(stream);
+            r.set_word_pos(16 * block as u128);
+            let want: Vec<u64> = (0..301).map(|_| r.next_u64()).collect();
+            assert_eq!(got, want, "seed {seed} stream {stream} block {block}");
         }
     }
 }
