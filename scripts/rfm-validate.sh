@@ -8,18 +8,19 @@
 #     Expected: uniform and hexagonal starts agree within their noise (measured 0.2458 +- 0.0029
 #     vs 0.2408 +- 0.0016 m^2/s^2; the thesis's "12 m^2/s^2" is inconsistent with its parameters, spec 6.1).
 # About 4 minutes on 2 cores.   scripts/rfm-validate.sh [1] [2]
+# BIN=path/to/granular runs another binary (no build); OUT_ROOT=dir puts the campaigns there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 parts=${*:-1 2}
-cargo build --release --quiet
+if [ -z "${BIN:-}" ]; then cargo build --release --quiet; BIN=target/release/granular; fi
 for p in $parts; do
   case $p in
     1) job=rfm1d-xi2-small ;;
     2) job=rfm2d-steady ;;
   esac
-  out=runs/$job
+  out=${OUT_ROOT:-runs}/$job
   rm -rf "$out"
-  target/release/granular run "jobs/$job.json" --out "$out" --quiet 2>/dev/null
+  "$BIN" run "jobs/$job.json" --out "$out" --quiet 2>/dev/null
   .venv/bin/python - "$out" "$p" <<'PY'
 import math, sys, duckdb
 out, part = sys.argv[1], sys.argv[2]
