@@ -259,11 +259,116 @@ unsafe fn chunk_avx512(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32])
     }
 }
 
+/// AVX2, written out: 8 blocks per register set (one block per 32-bit lane of the 16 state
+/// registers), rotations by 16 and 8 as byte shuffles, by 12 and 7 as shift/or, then two
+/// 8 x 8 transposes in registers (unpacks and 128-bit permutes) and full-width stores.
+/// Two such groups of 8 blocks make the chunk.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn chunk_avx2(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32]) {
-    blocks::<8>(key, stream, block, &mut out[..128]);
-    blocks::<8>(key, stream, block.wrapping_add(8), &mut out[128..]);
+    assert!(out.len() >= 256);
+    avx2_8(key, stream, block, out.as_mut_ptr());
+    avx2_8(key, stream, block.wrapping_add(8), out.as_mut_ptr().add(128));
+}
+
+/// ChaCha8 blocks `block .. block + 8` (with `stream`) into `out[0..128]`, block after block.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn avx2_8(key: &[u32; 8], stream: u64, block: u64, out: *mut u32) {
+    use std::arch::x86_64::*;
+    const C: [u32; 4] = [0x6170_7865, 0x3320_646e, 0x7962_2d32, 0x6b20_6574];
+    // Byte shuffles that rotate each 32-bit lane left by 16 and by 8.
+    let r16 = _mm256_setr_epi8(
+        2, 3, 0, 1, 6, 7, 4, 5, 10, 11, 8, 9, 14, 15, 12, 13, 2, 3, 0, 1, 6, 7, 4, 5, 10, 11, 8,
+        9, 14, 15, 12, 13,
+    );
+    let r8 = _mm256_setr_epi8(
+        3, 0, 1, 2, 7, 4, 5, 6, 11, 8, 9, 10, 15, 12, 13, 14, 3, 0, 1, 2, 7, 4, 5, 6, 11, 8, 9,
+        10, 15, 12, 13, 14,
+    );
+    let b: [u64; 8] = std::array::from_fn(|j| block.wrapping_add(j as u64));
+    let lo = _mm256_setr_epi32(
+        b[0] as i32, b[1] as i32, b[2] as i32, b[3] as i32, b[4] as i32, b[5] as i32,
+        b[6] as i32, b[7] as i32,
+    );
+    let hi = _mm256_setr_epi32(
+        (b[0] >> 32) as i32,
+        (b[1] >> 32) as i32,
+        (b[2] >> 32) as i32,
+        (b[3] >> 32) as i32,
+        (b[4] >> 32) as i32,
+        (b[5] >> 32) as i32,
+        (b[6] >> 32) as i32,
+        (b[7] >> 32) as i32,
+    );
+    let mut init = [_mm256_setzero_si256(); 16];
+    for k in 0..4 {
+        init[k] = _mm256_set1_epi32(C[k] as i32);
+    }
+    for k in 0..8 {
+        init[4 + k] = _mm256_set1_epi32(key[k] as i32);
+    }
+    init[12] = lo;
+    init[13] = hi;
+    init[14] = _mm256_set1_epi32(stream as u32 as i32);
+    init[15] = _mm256_set1_epi32((stream >> 32) as u32 as i32);
+    let mut x = init;
+    macro_rules! rot {
+        ($v:expr, $n:literal) => {
+            _mm256_or_si256(_mm256_slli_epi32::<$n>($v), _mm256_srli_epi32::<{ 32 - $n }>($v))
+        };
+    }
+    macro_rules! qr {
+        ($a:expr, $b:expr, $c:expr, $d:expr) => {
+            x[$a] = _mm256_add_epi32(x[$a], x[$b]);
+            x[$d] = _mm256_shuffle_epi8(_mm256_xor_si256(x[$d], x[$a]), r16);
+            x[$c] = _mm256_add_epi32(x[$c], x[$d]);
+            x[$b] = rot!(_mm256_xor_si256(x[$b], x[$c]), 12);
+            x[$a] = _mm256_add_epi32(x[$a], x[$b]);
+            x[$d] = _mm256_shuffle_epi8(_mm256_xor_si256(x[$d], x[$a]), r8);
+            x[$c] = _mm256_add_epi32(x[$c], x[$d]);
+            x[$b] = rot!(_mm256_xor_si256(x[$b], x[$c]), 7);
+        };
+    }
+    for _ in 0..4 {
+        qr!(0, 4, 8, 12);
+        qr!(1, 5, 9, 13);
+        qr!(2, 6, 10, 14);
+        qr!(3, 7, 11, 15);
+        qr!(0, 5, 10, 15);
+        qr!(1, 6, 11, 12);
+        qr!(2, 7, 8, 13);
+        qr!(3, 4, 9, 14);
+    }
+    for k in 0..16 {
+        x[k] = _mm256_add_epi32(x[k], init[k]);
+    }
+    // Half h: state words 8h .. 8h + 8 of the 8 blocks, transposed to 8 rows of one block.
+    let p = out as *mut __m256i;
+    for h in 0..2 {
+        let y = &x[8 * h..8 * h + 8];
+        // t[g][r], 128-bit half l: words 8h + 4g .. + 4 of block 4l + r.
+        let mut t = [[_mm256_setzero_si256(); 4]; 2];
+        for g in 0..2 {
+            let a0 = _mm256_unpacklo_epi32(y[4 * g], y[4 * g + 1]);
+            let a1 = _mm256_unpackhi_epi32(y[4 * g], y[4 * g + 1]);
+            let a2 = _mm256_unpacklo_epi32(y[4 * g + 2], y[4 * g + 3]);
+            let a3 = _mm256_unpackhi_epi32(y[4 * g + 2], y[4 * g + 3]);
+            t[g][0] = _mm256_unpacklo_epi64(a0, a2);
+            t[g][1] = _mm256_unpackhi_epi64(a0, a2);
+            t[g][2] = _mm256_unpacklo_epi64(a1, a3);
+            t[g][3] = _mm256_unpackhi_epi64(a1, a3);
+        }
+        for r in 0..4 {
+            // Block r: row 2 r + h of 32 bytes; block 4 + r: row 2 (4 + r) + h.
+            _mm256_storeu_si256(p.add(2 * r + h), _mm256_permute2x128_si256::<0x20>(t[0][r], t[1][r]));
+            _mm256_storeu_si256(
+                p.add(2 * (4 + r) + h),
+                _mm256_permute2x128_si256::<0x31>(t[0][r], t[1][r]),
+            );
+        }
+    }
 }
 
 unsafe fn chunk_portable(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32]) {
@@ -366,16 +471,42 @@ mod tests {
                 }
             }
         }
-        let key = [1, 2, 3, 4, 5, 6, 7, 8];
-        let mut a = [0u32; 256];
-        let mut b = [0u32; 256];
-        unsafe { chunk_portable(&key, 0, u32::MAX as u64 - 3, &mut a) };
-        unsafe { (pick())(&key, 0, u32::MAX as u64 - 3, &mut b) };
-        assert_eq!(a, b);
+        // Every code path the CPU offers against the portable one: several keys, streams and
+        // first blocks, including wraps of the low counter word and of the whole counter.
+        let mut paths: Vec<(&str, ChunkFn)> = vec![("pick", pick())];
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            unsafe { chunk_avx2(&key, 0, u32::MAX as u64 - 3, &mut b) };
-            assert_eq!(a, b);
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                paths.push(("avx2", chunk_avx2));
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                paths.push(("avx512", chunk_avx512));
+            }
+        }
+        let keys = [[1, 2, 3, 4, 5, 6, 7, 8], key_of(0), key_of(0xdead_beef), [u32::MAX; 8]];
+        let streams = [0u64, 1, 7, 0x1234_5678_9abc_def0, u64::MAX];
+        let blocks = [
+            0u64,
+            5,
+            u32::MAX as u64 - 3,
+            u32::MAX as u64 - 15,
+            u32::MAX as u64,
+            (7u64 << 32) - 9,
+            u64::MAX - 3,
+            u64::MAX,
+        ];
+        for key in &keys {
+            for &stream in &streams {
+                for &block in &blocks {
+                    let mut a = [0u32; 256];
+                    unsafe { chunk_portable(key, stream, block, &mut a) };
+                    for (name, f) in &paths {
+                        let mut b = [0u32; 256];
+                        unsafe { f(key, stream, block, &mut b) };
+                        assert_eq!(a, b, "{name}: key {key:?} stream {stream} block {block}");
+                    }
+                }
+            }
         }
     }
 
