@@ -21,6 +21,9 @@ use crate::models::{ModelParams, WORK_CHUNK};
 pub struct Preview {
     /// The directory holds no campaign yet.
     pub new_campaign: bool,
+    /// How the runs draw their random numbers: a new campaign's is this granular's current
+    /// version, a campaign's own is kept when it grows.
+    pub stream_version: crate::rng::StreamVersion,
     /// Points the manifest adds (ids).
     pub new_points: Vec<u32>,
     /// The same, described.
@@ -204,6 +207,7 @@ pub fn preview(
     );
     let mut p = Preview {
         new_campaign,
+        stream_version: c.stream,
         new_points: growth.new_points.clone(),
         points: growth
             .new_points
