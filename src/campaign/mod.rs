@@ -146,15 +146,18 @@ impl CampaignInfo {
         // A stream version this granular does not know is said as such (a newer granular
         // made the campaign), not as a corrupt file.
         if let Some(v) = value.get("stream_version") {
-            if let Err(e) = StreamVersion::deserialize(v) {
-                return Err(CampaignError::Refused(match v.as_u64() {
+            if StreamVersion::deserialize(v).is_err() {
+                let newer = v
+                    .as_u64()
+                    .filter(|&n| n > u64::from(StreamVersion::CURRENT.number()));
+                return Err(CampaignError::Refused(match newer {
                     Some(n) => format!(
                         "{}: stream_version: {}; continue it with that granular",
                         info_path.display(),
                         crate::rng::UnknownStreamVersion(n.min(u32::MAX as u64) as u32)
                     ),
                     None => format!(
-                        "{}: stream_version: expected a random stream version (a number from 1 to {}): {e}",
+                        "{}: stream_version: expected a random stream version (a number from 1 to {}), found {v}",
                         info_path.display(),
                         StreamVersion::CURRENT.number()
                     ),
