@@ -330,6 +330,11 @@ fn section_campaign(h: &mut String, c: &Campaign, info: &CampaignInfo, st: &Camp
     row(h, "format version", &info.format_version.to_string());
     row(
         h,
+        "random stream",
+        &escape(&crate::campaign::status::describe_stream(c.stream)),
+    );
+    row(
+        h,
         "points",
         &format!(
             "{} ({} in the latest manifest)",

@@ -57,6 +57,9 @@
 //! - `targets_report`: the report of a target campaign has its `sec-targets` section (verdict,
 //!   rounds, per point n / asked / expected and met) and the figure `targets-error`, which
 //!   `granular plot` draws the same each time; a campaign without targets has neither.
+//! - `streams`: random stream versions: campaigns made before they were recorded (committed
+//!   fixture) resume and grow on stream 1 to the old binary's tables; a new campaign records
+//!   the current version and keeps it; an unknown version is refused (exit 3).
 //!
 //! Heavy tests (simulations, campaigns) take `util::heavy()` so that they run one at a time:
 //! the machine has few cores, and the kill test scales its kill moments to a measured run time.
@@ -84,6 +87,7 @@ mod it {
     pub mod schema;
     pub mod serve;
     pub mod slurm;
+    pub mod streams;
     pub mod sweep_columns;
     pub mod targets;
     pub mod targets_report;

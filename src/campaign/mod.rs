@@ -51,6 +51,7 @@ use crate::fsutil;
 use crate::manifest::validate::ManifestErrors;
 use crate::manifest::Manifest;
 use crate::models::{CampaignView, ModelKind, ModelParams, PointView};
+use crate::rng::StreamVersion;
 use crate::store::dataset::Dataset;
 use crate::store::parquet_io::Stamp;
 use crate::store::FORMAT_VERSION;
@@ -80,6 +81,32 @@ pub struct CampaignInfo {
     /// The rounds of a campaign with error targets (`targets`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rounds: Option<targets::Rounds>,
+    /// How the campaign's runs draw their random numbers, fixed when it is created (absent:
+    /// a campaign made before stream versions were recorded, version 1).
+    #[serde(default)]
+    pub stream_version: StreamVersion,
+}
+
+/// The format version of `campaign.json` of a campaign whose random stream is not version 1
+/// (the tables and everything else are of [`FORMAT_VERSION`]). A granular that predates
+/// stream versions ignores the `stream_version` field; it refuses this format instead of
+/// continuing such a campaign on stream version 1.
+pub const STREAMS_FORMAT: u32 = FORMAT_VERSION + 1;
+
+/// The format version of `campaign.json` of a campaign of random stream `stream`:
+/// [`FORMAT_VERSION`] for version 1 (what every granular of that format reads),
+/// [`STREAMS_FORMAT`] for another.
+pub fn info_format(stream: StreamVersion) -> u32 {
+    if stream == StreamVersion::V1 {
+        FORMAT_VERSION
+    } else {
+        STREAMS_FORMAT
+    }
+}
+
+/// The formats of `campaign.json` that this granular reads as they are.
+pub fn is_current_format(format_version: u32) -> bool {
+    format_version == FORMAT_VERSION || format_version == STREAMS_FORMAT
 }
 
 impl From<LockError> for CampaignError {
@@ -109,12 +136,35 @@ impl CampaignInfo {
                 )
             })
         })?;
-        serde_json::from_str(&text).map_err(|e| {
+        let corrupt = |e: serde_json::Error| {
             CampaignError::Refused(format!(
                 "{}: corrupt or foreign file: {e}",
                 info_path.display()
             ))
-        })
+        };
+        let value: Value = serde_json::from_str(&text).map_err(corrupt)?;
+        // A stream version this granular does not know is said as such (a newer granular
+        // made the campaign), not as a corrupt file.
+        if let Some(v) = value.get("stream_version") {
+            if StreamVersion::deserialize(v).is_err() {
+                let newer = v
+                    .as_u64()
+                    .filter(|&n| n > u64::from(StreamVersion::CURRENT.number()));
+                return Err(CampaignError::Refused(match newer {
+                    Some(n) => format!(
+                        "{}: stream_version: {}; continue it with that granular",
+                        info_path.display(),
+                        crate::rng::UnknownStreamVersion(n.min(u32::MAX as u64) as u32)
+                    ),
+                    None => format!(
+                        "{}: stream_version: expected a random stream version (a number from 1 to {}), found {v}",
+                        info_path.display(),
+                        StreamVersion::CURRENT.number()
+                    ),
+                }));
+            }
+        }
+        serde_json::from_value(value).map_err(corrupt)
     }
 }
 
@@ -136,6 +186,8 @@ pub struct Campaign {
     pub history: Vec<history::Accepted>,
     /// The rounds decided (error targets; empty otherwise).
     pub rounds: targets::Rounds,
+    /// How its runs draw their random numbers (recorded when it was created, never changed).
+    pub stream: StreamVersion,
 }
 
 /// `--out` must be a directory or not exist: a regular file, a dangling symbolic link or a
@@ -296,6 +348,7 @@ impl Campaign {
             plan,
             history: Vec::new(),
             rounds: targets::Rounds::default(),
+            stream: StreamVersion::CURRENT,
         }
     }
 
@@ -416,7 +469,7 @@ impl Campaign {
     /// the rounds) from this campaign as it is in memory. The caller holds the exclusive lock.
     pub(crate) fn write_info(&self) -> Result<(), CampaignError> {
         let info = CampaignInfo {
-            format_version: FORMAT_VERSION,
+            format_version: info_format(self.stream),
             code_version: CODE_VERSION.into(),
             name: self.manifest.name.clone(),
             n_runs: self.plan.n_runs(),
@@ -424,6 +477,7 @@ impl Campaign {
             registry: Some(self.plan.registry.clone()),
             history: self.history.clone(),
             rounds: (self.rounds != targets::Rounds::default()).then(|| self.rounds.clone()),
+            stream_version: self.stream,
         };
         let info_path = self.root.join("campaign.json");
         let bytes = serde_json::to_vec_pretty(&info).expect("info serialises");
@@ -457,9 +511,9 @@ impl Campaign {
                 root.display()
             )));
         }
-        if info.format_version != FORMAT_VERSION {
+        if !is_current_format(info.format_version) {
             return Err(CampaignError::Refused(format!(
-                "{}: format version {}, this granular reads {FORMAT_VERSION}",
+                "{}: format version {}, this granular reads {FORMAT_VERSION} and {STREAMS_FORMAT}",
                 info_path.display(),
                 info.format_version
             )));
@@ -473,6 +527,15 @@ impl Campaign {
                 info_path.display()
             ))
         };
+        if info.format_version != info_format(info.stream_version) {
+            return Err(corrupt(format!(
+                "format version {} with random stream version {} (a campaign of stream version {} is of format {})",
+                info.format_version,
+                info.stream_version.number(),
+                info.stream_version.number(),
+                info_format(info.stream_version)
+            )));
+        }
         let registry = info
             .registry
             .ok_or_else(|| corrupt("no registry of points and runs".into()))?;
@@ -499,6 +562,7 @@ impl Campaign {
             plan,
             manifest_json: canonical(&info.manifest),
             history: info.history,
+            stream: info.stream_version,
         })
     }
 

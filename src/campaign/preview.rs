@@ -21,6 +21,9 @@ use crate::models::{ModelParams, WORK_CHUNK};
 pub struct Preview {
     /// The directory holds no campaign yet.
     pub new_campaign: bool,
+    /// How the runs draw their random numbers: a new campaign's is this granular's current
+    /// version, a campaign's own is kept when it grows.
+    pub stream_version: crate::rng::StreamVersion,
     /// Points the manifest adds (ids).
     pub new_points: Vec<u32>,
     /// The same, described.
@@ -204,6 +207,7 @@ pub fn preview(
     );
     let mut p = Preview {
         new_campaign,
+        stream_version: c.stream,
         new_points: growth.new_points.clone(),
         points: growth
             .new_points
@@ -244,7 +248,7 @@ pub fn preview(
     let calibration = if !walls.is_empty() {
         from_finished_runs(c, &walls)
     } else if opts.probe {
-        probe(&work)
+        probe(&work, c.stream)
     } else {
         Calibration::reference("--no-probe and no finished run")
     };
@@ -744,7 +748,7 @@ pub const PROBE_SECONDS: f64 = 1.0;
 /// work units) and compare its time with its cost: the factor is the elapsed seconds over
 /// the cost of the part done (its `progress`; the whole cost if it finishes). Nothing is
 /// written.
-fn probe(work: &[(Continued<'_>, u64)]) -> Calibration {
+fn probe(work: &[(Continued<'_>, u64)], stream: crate::rng::StreamVersion) -> Calibration {
     let Some(cheapest) = work
         .iter()
         .map(|(w, _)| w.params)
@@ -754,7 +758,7 @@ fn probe(work: &[(Continued<'_>, u64)]) -> Calibration {
     };
     let cost = cheapest.cost();
     let started = std::time::Instant::now();
-    let mut engine = match cheapest.start(PROBE_SEED) {
+    let mut engine = match cheapest.start(PROBE_SEED, stream) {
         Ok(e) => e,
         Err(e) => return Calibration::reference(&format!("the probe run could not start: {e}")),
     };

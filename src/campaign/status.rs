@@ -2,6 +2,7 @@
 //! commit records and the live shards' heartbeats; of the tables only their sizes (the quick
 //! integrity check).
 
+use crate::rng::StreamVersion;
 use std::collections::BTreeSet;
 use std::path::Path;
 
@@ -52,6 +53,10 @@ pub struct CampaignStatus {
     /// Manifests accepted so far (the latest is the campaign's).
     #[serde(default)]
     pub manifests: usize,
+    /// How the campaign's runs draw their random numbers (`campaign.json`; see
+    /// [`describe_stream`]).
+    #[serde(default)]
+    pub stream_version: StreamVersion,
     pub live_shards: Vec<String>,
     pub points: Vec<PointStatus>,
     /// SLURM submissions (`granular submit`), with their jobs' states when squeue answers.
@@ -87,6 +92,17 @@ pub fn remove_heartbeat(root: &Path, tag: &str) {
 
 /// The JSON of a status, as `granular status --json` prints it and `granular serve` answers
 /// `/api/status`.
+/// What a random stream version is, for people: "version 2 (ChaCha8, counter-addressed RFM
+/// noise)".
+pub fn describe_stream(v: StreamVersion) -> String {
+    let what = match v.number() {
+        1 => "ChaCha8, sequential draws",
+        2 => "ChaCha8, counter-addressed RFM noise",
+        _ => "unknown",
+    };
+    format!("version {} ({what})", v.number())
+}
+
 pub fn to_json(s: &CampaignStatus) -> String {
     serde_json::to_string_pretty(s).expect("status serialises")
 }
@@ -153,6 +169,7 @@ pub fn status(c: &Campaign) -> Result<CampaignStatus, CampaignError> {
         current_runs,
         current,
         manifests: c.history.len(),
+        stream_version: c.stream,
         live_shards: live
             .iter()
             .map(|l| format!("{} (pid {} on {})", l.shard, l.pid, l.host))

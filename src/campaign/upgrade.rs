@@ -50,8 +50,9 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
     // Not a campaign: refused before anything (the lock) is written. A directory of this
     // format has nothing to upgrade and nothing is written, but while another process holds it
     // (a shard runs, a compaction) that is said (exit 3), as for any other directory.
-    if CampaignInfo::read(root)?.format_version == FORMAT_VERSION {
-        return already_current(root);
+    let format = CampaignInfo::read(root)?.format_version;
+    if super::is_current_format(format) {
+        return already_current(root, format);
     }
     // Decided under the lock on what is read under it (a shard running, another upgrade).
     let _lock =
@@ -63,7 +64,10 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
         steps: Vec::new(),
     };
     match info.format_version {
-        FORMAT_VERSION => return Ok(report),
+        v if super::is_current_format(v) => {
+            report.to = v;
+            return Ok(report);
+        }
         1 | 2 => {}
         v => {
             return Err(CampaignError::Refused(format!(
@@ -111,7 +115,7 @@ pub fn upgrade(root: &Path) -> Result<UpgradeReport, CampaignError> {
 
 /// A directory already of this format: nothing to do, but refused (exit 3) while another
 /// process holds it (a shard runs, a compaction), as for any other directory.
-fn already_current(root: &Path) -> Result<UpgradeReport, CampaignError> {
+fn already_current(root: &Path, format: u32) -> Result<UpgradeReport, CampaignError> {
     if let Some(l) = ledger::live_locks(root).into_iter().find(|l| !l.is_ours()) {
         return Err(CampaignError::Refused(format!(
             "cannot upgrade: {} is in use: {} is being run by {}",
@@ -121,8 +125,8 @@ fn already_current(root: &Path) -> Result<UpgradeReport, CampaignError> {
         )));
     }
     Ok(UpgradeReport {
-        from: FORMAT_VERSION,
-        to: FORMAT_VERSION,
+        from: format,
+        to: format,
         steps: Vec::new(),
     })
 }
@@ -179,6 +183,7 @@ fn upgrade_format1(
         registry: Some(plan.registry),
         history: vec![first],
         rounds: None,
+        stream_version: info.stream_version,
     })
 }
 

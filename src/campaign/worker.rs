@@ -185,7 +185,7 @@ fn start(
             ),
         );
     }
-    Ok((params.start(spec.seed)?, From::Start))
+    Ok((params.start(spec.seed, c.stream)?, From::Start))
 }
 
 /// A run on its worker: the engine and what its checkpoints need.

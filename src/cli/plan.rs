@@ -89,6 +89,10 @@ fn text(c: &Campaign, out: &Path, p: &Preview) -> String {
             p.new_runs
         )
     };
+    s.push_str(&format!(
+        "  random stream: {}\n",
+        crate::campaign::status::describe_stream(p.stream_version)
+    ));
     for np in &p.points {
         s.push_str(&format!("  new point {:>4} {}", np.point_id, np.label));
         if let Some(near) = np.nearest {

@@ -59,6 +59,11 @@ fn write_text(out: &mut impl Write, s: &CampaignStatus) -> std::io::Result<()> {
         s.counts.pending,
         s.counts.checkpointed
     )?;
+    writeln!(
+        out,
+        "  random stream: {}",
+        campaign::status::describe_stream(s.stream_version)
+    )?;
     if s.manifests > 1 || s.current_runs != s.runs {
         let c = &s.current;
         writeln!(

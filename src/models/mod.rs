@@ -24,6 +24,7 @@ use serde_json::Value;
 use crate::analysis::{Analysis, AnalysisError};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
+use crate::rng::StreamVersion;
 use crate::store::parquet_io::StoreError;
 
 mod checks;
@@ -102,7 +103,9 @@ pub trait Model {
     fn check(p: &Self::Params, path: &str, errors: &mut ParamErrors);
     /// An estimate of the memory (bytes) one run of these parameters holds at its peak.
     fn memory(p: &Self::Params) -> u64;
-    fn start(p: &Self::Params, seed: u64) -> Result<Self::Sim, ModelError>;
+    /// A new run of seed `seed` drawing as the campaign's random stream version `stream`
+    /// prescribes (a model whose draws no version changes ignores it).
+    fn start(p: &Self::Params, seed: u64, stream: StreamVersion) -> Result<Self::Sim, ModelError>;
     /// Continue from `Simulation::state_bytes` (of layout `STATE_FORMAT`).
     fn restore(p: &Self::Params, state: &[u8]) -> Result<Self::Sim, ModelError>;
     /// The rows of a finished run.
@@ -472,10 +475,11 @@ macro_rules! models {
                 }
             }
 
-            pub fn start(&self, seed: u64) -> Result<Engine, ModelError> {
+            /// See [`Model::start`].
+            pub fn start(&self, seed: u64, stream: StreamVersion) -> Result<Engine, ModelError> {
                 match self {
                     $(ModelParams::$variant(p) => {
-                        Ok(Engine::$variant(Box::new(<$model as Model>::start(p, seed)?)))
+                        Ok(Engine::$variant(Box::new(<$model as Model>::start(p, seed, stream)?)))
                     })+
                 }
             }
@@ -567,13 +571,15 @@ models! {
     Spm = "spm" => spm::Spm,
 }
 
-/// Run one simulation to its end in memory, without a campaign directory (tests, benches).
+/// Run one simulation to its end in memory, without a campaign directory (tests, benches),
+/// drawing as random stream version `stream`.
 pub fn run_in_memory(
     params: &ModelParams,
     seed: u64,
+    stream: StreamVersion,
     ids: RunIds,
 ) -> Result<RunRows, PhysicsError> {
-    let mut e = params.start(seed).map_err(|e| PhysicsError {
+    let mut e = params.start(seed, stream).map_err(|e| PhysicsError {
         t: 0.0,
         reason: e.to_string(),
     })?;

@@ -333,8 +333,18 @@ impl RfmRun {
     }
 
     pub fn new(rc: &RunConfig, seed: u64) -> Result<Self, SimError> {
+        Self::with_stream(rc, seed, crate::rng::StreamVersion::V1)
+    }
+
+    /// A new run drawing as random stream version `stream` prescribes
+    /// ([`RfmSim::with_stream`]).
+    pub fn with_stream(
+        rc: &RunConfig,
+        seed: u64,
+        stream: crate::rng::StreamVersion,
+    ) -> Result<Self, SimError> {
         let sampler = Self::sampler_for(rc);
-        let mut sim = RfmSim::new(rc.sim.clone(), seed)?;
+        let mut sim = RfmSim::with_stream(rc.sim.clone(), seed, stream)?;
         if let Some(fc) = &rc.free_paths {
             sim.track_free_paths(fc.clone());
         }

@@ -15,6 +15,7 @@ use serde_json::{json, Value};
 
 use granular::campaign::{dispatch, verify, Campaign, RunOptions, Silent};
 use granular::models::{Engine, ModelKind, ModelParams, RunIds};
+use granular::rng::StreamVersion;
 
 use super::util::{heavy, Lcg};
 
@@ -40,7 +41,7 @@ fn run(
     work: u64,
     restore_at: Option<usize>,
 ) -> (Vec<(&'static str, RecordBatch)>, u64, u64, usize) {
-    let mut e: Engine = p.start(seed).expect("starts");
+    let mut e: Engine = p.start(seed, StreamVersion::CURRENT).expect("starts");
     let mut chunks = 0;
     while !e.advance(work).expect("no physics failure") {
         chunks += 1;

@@ -9,6 +9,7 @@ use granular::dsmc::{DsmcSim, SpeciesRow, TamsdRow};
 use granular::models::dsmc::DsmcParams;
 use granular::models::{Engine, ModelParams};
 use granular::physics::PhysicsError;
+use granular::rng::StreamVersion;
 use granular::theory::temperature::{haff, tau0};
 use granular::theory::Species;
 
@@ -55,10 +56,12 @@ fn finish(e: Engine) -> RunOutput {
 
 /// Run to the end in memory.
 fn run_in_memory(params: &ModelParams, seed: u64) -> Result<RunOutput, PhysicsError> {
-    let mut e = params.start(seed).map_err(|e| PhysicsError {
-        t: 0.0,
-        reason: e.to_string(),
-    })?;
+    let mut e = params
+        .start(seed, StreamVersion::CURRENT)
+        .map_err(|e| PhysicsError {
+            t: 0.0,
+            reason: e.to_string(),
+        })?;
     while !e.advance(u64::MAX)? {}
     Ok(finish(e))
 }
@@ -211,7 +214,7 @@ fn chunked(
     restore_at: &dyn Fn(usize) -> bool,
     peek_at: &dyn Fn(usize) -> bool,
 ) -> Finished {
-    let mut e = params.start(seed).unwrap();
+    let mut e = params.start(seed, StreamVersion::CURRENT).unwrap();
     let mut chunks = 0;
     loop {
         let done = e.advance(chunk).unwrap();
@@ -436,7 +439,7 @@ fn restore_refuses_a_foreign_state() {
     let b = model(
         json!({"method": "low_rank", "species": {"power_law": {"n1": 0.1, "N1": 400, "theta": 3}}, "restitution": {"constant": 0.5}, "t_end": 1.0}),
     );
-    let mut e = a.start(1).unwrap();
+    let mut e = a.start(1, StreamVersion::CURRENT).unwrap();
     e.advance(1000).unwrap();
     let bytes = e.state_bytes();
     assert!(

@@ -9,6 +9,7 @@ use crate::aux_models::bisection::BisectionRun;
 use crate::models::{CampaignView, Model, ModelError, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
+use crate::rng::StreamVersion;
 use crate::store::parquet_io::StoreError;
 pub use params::BisectionParams;
 use tables::*;
@@ -44,7 +45,11 @@ impl Model for Bisection {
             .saturating_add(8 << 20)
     }
 
-    fn start(p: &BisectionParams, seed: u64) -> Result<BisectionRun, ModelError> {
+    fn start(
+        p: &BisectionParams,
+        seed: u64,
+        _stream: StreamVersion,
+    ) -> Result<BisectionRun, ModelError> {
         Ok(BisectionRun::new(p.config(), seed))
     }
 

@@ -14,6 +14,7 @@ use crate::models::{
 };
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
+use crate::rng::StreamVersion;
 use crate::store::parquet_io::StoreError;
 pub use params::CascadeParams;
 use tables::*;
@@ -57,7 +58,11 @@ impl Model for Cascade {
             .saturating_add(8 << 20)
     }
 
-    fn start(p: &CascadeParams, seed: u64) -> Result<CascadeRun, ModelError> {
+    fn start(
+        p: &CascadeParams,
+        seed: u64,
+        _stream: StreamVersion,
+    ) -> Result<CascadeRun, ModelError> {
         Ok(CascadeRun::new(p.config(), seed))
     }
 

@@ -26,6 +26,7 @@ use crate::models::{
 };
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
+use crate::rng::StreamVersion;
 use crate::store::parquet_io::StoreError;
 pub use params::DsmcParams;
 use tables::*;
@@ -61,7 +62,7 @@ impl Model for Dsmc {
         p.memory_estimate()
     }
 
-    fn start(p: &DsmcParams, seed: u64) -> Result<DsmcSim, ModelError> {
+    fn start(p: &DsmcParams, seed: u64, _stream: StreamVersion) -> Result<DsmcSim, ModelError> {
         Ok(DsmcSim::new(p.system()?, seed))
     }
 

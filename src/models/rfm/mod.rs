@@ -22,6 +22,7 @@ use crate::models::{
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
 use crate::rfm::observe::RfmRun;
+use crate::rng::StreamVersion;
 use crate::store::parquet_io::StoreError;
 pub use params::{RfmObservable, RfmParams};
 use tables::*;
@@ -66,8 +67,8 @@ impl Model for Rfm {
         p.memory_estimate()
     }
 
-    fn start(p: &RfmParams, seed: u64) -> Result<RfmRun, ModelError> {
-        Ok(RfmRun::new(&p.run_config(), seed)?)
+    fn start(p: &RfmParams, seed: u64, stream: StreamVersion) -> Result<RfmRun, ModelError> {
+        Ok(RfmRun::with_stream(&p.run_config(), seed, stream)?)
     }
 
     fn restore(p: &RfmParams, state: &[u8]) -> Result<RfmRun, ModelError> {

@@ -9,6 +9,7 @@ use crate::aux_models::spm::SpmRun;
 use crate::models::{CampaignView, Model, ModelError, ParamErrors, RunIds, RunRows, Simulation};
 use crate::physics::PhysicsError;
 use crate::plot::Figure;
+use crate::rng::StreamVersion;
 use crate::store::parquet_io::StoreError;
 pub use params::SpmParams;
 use tables::*;
@@ -53,7 +54,7 @@ impl Model for Spm {
         bins.saturating_mul(8 * 6).saturating_add(8 << 20)
     }
 
-    fn start(p: &SpmParams, seed: u64) -> Result<SpmRun, ModelError> {
+    fn start(p: &SpmParams, seed: u64, _stream: StreamVersion) -> Result<SpmRun, ModelError> {
         Ok(SpmRun::new(p.config(), seed))
     }
 
