@@ -5,6 +5,7 @@
 //! vectorised), and its position can be saved and restored exactly for checkpoints.
 //! [`stream`] is that block function in bulk, also used directly by the RFM noise.
 
+pub mod normal;
 pub mod stream;
 
 use rand::RngCore;
