@@ -374,6 +374,8 @@ pub(crate) struct PairTable<'a> {
     r: &'a PairRestitution,
     /// (8 sqrt(2 pi)/3) n_i sigma_ki^2, mu_i, and the constant (a1, a2) when eps is constant.
     pre: Vec<(f64, f64, f64, f64)>,
+    /// m_k mu_i per pair (the first product of gamma's numerator, so the same bits).
+    mk_mu: Vec<f64>,
 }
 
 impl<'a> PairTable<'a> {
@@ -393,11 +395,45 @@ impl<'a> PairTable<'a> {
                 pre.push((p0, mu, a1, a2));
             }
         }
-        PairTable { m, species, r, pre }
+        let mk_mu = (0..m * m)
+            .map(|ki| species[ki / m].mass * pre[ki].1)
+            .collect();
+        PairTable {
+            m,
+            species,
+            r,
+            pre,
+            mk_mu,
+        }
     }
 
-    /// (xi_ki, tau_v,ki^-1).
-    #[inline]
+    /// T_j / m_j of every species: the terms of u^2 that [`PairTable::rates_tm`] takes, each
+    /// divided once per right-hand side instead of once per pair.
+    pub(crate) fn t_over_m(&self, t: &[f64]) -> Vec<f64> {
+        t.iter().zip(self.species).map(|(t, s)| t / s.mass).collect()
+    }
+
+    /// [`PairTable::rates`] with `tmk` = tk / m_k and `tmi` = ti / m_i given: the same
+    /// operations in the same order, so the same bits.
+    #[inline(always)]
+    pub(crate) fn rates_tm(&self, k: usize, tk: f64, tmk: f64, i: usize, tmi: f64) -> (f64, f64) {
+        let ki = k * self.m + i;
+        let (p0, mu, a1, a2) = self.pre[ki];
+        let u2 = tmk + tmi;
+        let u = u2.sqrt();
+        let (a1, a2) = if a1.is_nan() {
+            self.r.averages(k, i, u)
+        } else {
+            (a1, a2)
+        };
+        let gam = self.mk_mu[ki] * u2 / tk;
+        let p = p0 * u * mu;
+        (p * (a1 - 0.5 * gam * a2), p * 0.25 * gam * a2)
+    }
+
+    /// (xi_ki, tau_v,ki^-1): the reference form of [`PairTable::rates_tm`] (the tests check
+    /// that both give the same bits).
+    #[cfg(test)]
     pub(crate) fn rates(&self, k: usize, tk: f64, i: usize, ti: f64) -> (f64, f64) {
         let (p0, mu, a1, a2) = self.pre[k * self.m + i];
         let (mk, mi) = (self.species[k].mass, self.species[i].mass);
@@ -415,17 +451,23 @@ impl<'a> PairTable<'a> {
 
     /// xi_k (14) of every species.
     pub(crate) fn cooling_rates(&self, t: &[f64]) -> Vec<f64> {
+        let tm = self.t_over_m(t);
         (0..self.m)
-            .map(|k| (0..self.m).map(|i| self.rates(k, t[k], i, t[i]).0).sum())
+            .map(|k| {
+                (0..self.m)
+                    .map(|i| self.rates_tm(k, t[k], tm[k], i, tm[i]).0)
+                    .sum()
+            })
             .collect()
     }
 
     /// tau_v,k (10) of every species.
     pub(crate) fn tau_v(&self, t: &[f64]) -> Vec<f64> {
+        let tm = self.t_over_m(t);
         (0..self.m)
             .map(|k| {
                 1.0 / (0..self.m)
-                    .map(|i| self.rates(k, t[k], i, t[i]).1)
+                    .map(|i| self.rates_tm(k, t[k], tm[k], i, tm[i]).1)
                     .sum::<f64>()
             })
             .collect()
@@ -579,6 +621,35 @@ mod tests {
                 r.xi
             );
             assert!((rv.tau_v_inv / r.tau_v_inv - 1.0).abs() < 1e-12);
+        }
+    }
+
+    /// The hot path of the ODEs (T/m divided once per species, m_k mu_i premultiplied) gives
+    /// the same bits as the per-pair formula, constant and velocity-dependent, over a range
+    /// of masses and temperatures (the theory tables must not move by one bit).
+    #[test]
+    fn rates_tm_is_bit_identical() {
+        let s: Vec<Species> = (1..=40)
+            .map(|k| sp(k as f64 * 1.37, 0.1 / (k as f64).powf(2.5)))
+            .collect();
+        let t: Vec<f64> = (0..40).map(|k| 0.013 * (1.0 + k as f64).powf(1.9) + 1e-3).collect();
+        for r in [
+            PairRestitution::Constant(0.5),
+            PairRestitution::series(&s, 0.09, vec![0.0, -1.15344, 0.0, 0.79826]),
+        ] {
+            let table = PairTable::new(&s, &r);
+            let tm = table.t_over_m(&t);
+            for k in 0..s.len() {
+                for i in 0..s.len() {
+                    let want = table.rates(k, t[k], i, t[i]);
+                    let got = table.rates_tm(k, t[k], tm[k], i, tm[i]);
+                    assert_eq!(
+                        (want.0.to_bits(), want.1.to_bits()),
+                        (got.0.to_bits(), got.1.to_bits()),
+                        "pair ({k}, {i})"
+                    );
+                }
+            }
         }
     }
 

@@ -195,12 +195,6 @@ pub(crate) struct TemperatureOde<'a> {
     pub with_reduced_time: bool,
 }
 
-impl TemperatureOde<'_> {
-    fn xi_pair(&self, k: usize, tk: f64, i: usize, ti: f64) -> f64 {
-        self.table.rates(k, tk, i, ti).0
-    }
-}
-
 impl OdeSystem for TemperatureOde<'_> {
     fn dim(&self) -> usize {
         self.m
@@ -227,16 +221,24 @@ impl OdeSystem for TemperatureOde<'_> {
         let d: f64 = 1e-6;
         let ed = d.exp();
         let dtds = self.t_s * s.exp();
+        // T_j e^d, and T_j / m_j and T_j e^d / m_j, divided once per species (the same bits
+        // as dividing in every pair evaluation).
+        let te: Vec<f64> = t.iter().map(|v| v * ed).collect();
+        let tm = self.table.t_over_m(&t);
+        let tem = self.table.t_over_m(&te);
+        let xi = |k: usize, tk: f64, tmk: f64, i: usize, tmi: f64| {
+            self.table.rates_tm(k, tk, tmk, i, tmi).0
+        };
         jac.iter_mut().for_each(|v| *v = 0.0);
         for k in 0..m {
             for i in 0..m {
-                let base = self.xi_pair(k, t[k], i, t[i]);
+                let base = xi(k, t[k], tm[k], i, tm[i]);
                 if i == k {
-                    let v = self.xi_pair(k, t[k] * ed, i, t[i] * ed);
+                    let v = xi(k, te[k], tem[k], i, tem[i]);
                     jac[k * m + k] -= dtds * (v - base) / d;
                 } else {
-                    let vk = self.xi_pair(k, t[k] * ed, i, t[i]);
-                    let vi = self.xi_pair(k, t[k], i, t[i] * ed);
+                    let vk = xi(k, te[k], tem[k], i, tm[i]);
+                    let vi = xi(k, t[k], tm[k], i, tem[i]);
                     jac[k * m + k] -= dtds * (vk - base) / d;
                     jac[k * m + i] -= dtds * (vi - base) / d;
                 }
