@@ -10,7 +10,12 @@
 //!   superposed over pairs.
 //! - [`noise`]: bulk normals and the symmetrised kicks (variance 2 D dt / M^2 per component).
 //! - [`neighbours`]: 1D ring neighbours; 2D cell-built Verlet lists with a skin.
-//! - [`sim`]: [`RfmSim`], the state, initial layouts, checkpoints.
+//! - [`sim`]: [`RfmSim`], the state, initial layouts, checkpoints. Stream version 2
+//!   ([`RfmSim::with_stream`]) draws the noise counter-addressed by (step, slot)
+//!   ([`noise::Kicks::kick_counter`]); from [`sim::PARALLEL_MIN_PARTICLES`] particles a step
+//!   runs its kicks, pair pass and drift in work blocks of fixed size on the current rayon
+//!   pool, with sums and pair corrections in an order fixed by N: identical output for any
+//!   thread count (version 1 draws its noise sequentially, the rest in blocks likewise).
 //! - [`observe`]: warm-up, snapshots and the accumulators of a run; [`structure`]: 1D
 //!   neighbour distances, 2D S(k), g(R) and C(R); [`freepath`]: free paths and
 //!   post-collision velocities from per-particle contact counts (tracked inside the step).

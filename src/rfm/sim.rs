@@ -17,7 +17,114 @@ use super::noise::Kicks;
 use super::params::{InitialLayout, RfmConfig};
 use crate::physics::SimError;
 use crate::rng::stream::WordStream;
-use crate::rng::{RngPosition, RunRng};
+use crate::rng::{RngPosition, RunRng, StreamVersion};
+
+/// Runs with fewer particles step on the calling thread alone (no rayon call at all).
+pub const PARALLEL_MIN_PARTICLES: usize = 4096;
+/// Pairs per work block of the 2D pair pass (fixed: the corrections are applied in pair order
+/// whatever the thread count).
+const PAIR_BLOCK: usize = 4096;
+/// Particles per work block of the drift.
+const DRIFT_BLOCK: usize = 4096;
+
+/// One contacting pair's correction: x_i += dx - dv h, v_i += dv; j gets the opposite. `t` is
+/// the in-step contact interval (for free-path tracking).
+#[derive(Clone, Copy, Debug)]
+struct Corr<const D: usize> {
+    i: u32,
+    j: u32,
+    t: [f64; 2],
+    dx: [f64; D],
+    dv: [f64; D],
+}
+
+/// One pair's correction from separation r = x_i - x_j and g = v_i - v_j (None: no contact
+/// within the step).
+#[inline(always)]
+fn pair_eval<const D: usize>(
+    prop: &PairPropagator,
+    d: f64,
+    i: usize,
+    j: usize,
+    r: [f64; D],
+    g: [f64; D],
+) -> Option<Corr<D>> {
+    let rho2: f64 = r.iter().map(|a| a * a).sum();
+    let rho = rho2.sqrt();
+    let inv = 1.0 / rho;
+    let e: [f64; D] = std::array::from_fn(|k| r[k] * inv);
+    let gn: f64 = (0..D).map(|k| g[k] * e[k]).sum();
+    let ns = prop.normal(d - rho, -gn)?;
+    let mut dx: [f64; D] = std::array::from_fn(|k| -0.5 * ns.ddelta * e[k]);
+    let mut dv: [f64; D] = std::array::from_fn(|k| -0.5 * ns.du * e[k]);
+    if D > 1 && prop.has_tangential() {
+        let gt: [f64; D] = std::array::from_fn(|k| g[k] - gn * e[k]);
+        let gt_abs = gt.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let (a, b) = prop.tangential(gt_abs, &ns);
+        for k in 0..D {
+            dv[k] += 0.5 * a * gt[k];
+            dx[k] += 0.5 * b * gt[k];
+        }
+    }
+    Some(Corr {
+        i: i as u32,
+        j: j as u32,
+        t: [ns.t_on, ns.t_off],
+        dx,
+        dv,
+    })
+}
+
+/// The drift x += (v - c) h of particles `x`, `v` (references `r`), and the largest
+/// displacement squared since the list build, at least `m0`: four particles at a time
+/// (independent maxima; a maximum is exact, so any cut into blocks gives the same value).
+fn drift_block<const D: usize>(
+    x: &mut [[f64; D]],
+    v: &mut [[f64; D]],
+    r: &[[f64; D]],
+    c: [f64; D],
+    h: f64,
+    m0: f64,
+) -> f64 {
+    let mut m = [m0; 4];
+    let mut xs = x.chunks_exact_mut(4);
+    let mut vs = v.chunks_exact_mut(4);
+    let mut rs = r.chunks_exact(4);
+    for ((x4, v4), r4) in (&mut xs).zip(&mut vs).zip(&mut rs) {
+        for p in 0..4 {
+            let mut d2 = 0.0;
+            for k in 0..D {
+                let vk = v4[p][k] - c[k];
+                v4[p][k] = vk;
+                x4[p][k] += vk * h;
+                let dd = x4[p][k] - r4[p][k];
+                d2 += dd * dd;
+            }
+            if d2 > m[p] {
+                m[p] = d2;
+            }
+        }
+    }
+    for ((x, v), r) in xs
+        .into_remainder()
+        .iter_mut()
+        .zip(vs.into_remainder().iter_mut())
+        .zip(rs.remainder())
+    {
+        let mut d2 = 0.0;
+        for k in 0..D {
+            let vk = v[k] - c[k];
+            v[k] = vk;
+            x[k] += vk * h;
+            let dd = x[k] - r[k];
+            d2 += dd * dd;
+        }
+        if d2 > m[0] {
+            m[0] = d2;
+        }
+    }
+    m.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a })
+}
 
 /// Skin of the 2D neighbour list, in diameters.
 pub const SKIN_DIAMETERS: f64 = 0.25;
@@ -54,9 +161,14 @@ pub struct Core<const D: usize> {
     /// The run's stream (continues the [`RunRng`] that drew the initial state).
     pub rng: WordStream,
     pub step: u64,
+    /// How the noise is drawn (1: from `rng`; 2: counter-addressed, see
+    /// [`Kicks::kick_counter`]).
+    stream: StreamVersion,
     nl: NeighbourList<D>,
-    /// This step's pair corrections: (i, j, dx_i, dv_i); j gets the opposite.
-    corr: Vec<(u32, u32, [f64; D], [f64; D])>,
+    /// This step's pair corrections, in pair order (one step on one thread).
+    corr: Vec<Corr<D>>,
+    /// This step's pair corrections per work block of [`PAIR_BLOCK`] pairs (several threads).
+    corr_blocks: Vec<Vec<Corr<D>>>,
     /// 1D: this step's candidate ring pairs (scratch).
     cand: Vec<u32>,
     /// Neighbour-list builds so far (diagnostic, not part of the state).
@@ -66,15 +178,25 @@ pub struct Core<const D: usize> {
 }
 
 impl<const D: usize> Core<D> {
-    fn new(cfg: &RfmConfig, x: Vec<[f64; D]>, v: Vec<[f64; D]>, rng: RunRng) -> Self {
+    fn new(
+        cfg: &RfmConfig,
+        x: Vec<[f64; D]>,
+        v: Vec<[f64; D]>,
+        rng: RunRng,
+        stream: StreamVersion,
+    ) -> Self {
         let h = cfg.dt();
         let law = ContactLaw::from_config(cfg);
+        let mut kicks = Kicks::new(cfg.noise_strength, cfg.mass, h);
+        if stream != StreamVersion::V1 {
+            kicks.set_seed(rng.position().seed);
+        }
         let mut c = Core {
             l: cfg.box_length(),
             d: cfg.diameter(),
             h,
             prop: PairPropagator::new(&law, cfg.reduced_mass(), h),
-            kicks: Kicks::new(cfg.noise_strength, cfg.mass, h),
+            kicks,
             skin: SKIN_DIAMETERS * cfg.diameter(),
             x,
             v,
@@ -82,8 +204,10 @@ impl<const D: usize> Core<D> {
             max_disp2: 0.0,
             rng: WordStream::from_rng(&rng),
             step: 0,
+            stream,
             nl: NeighbourList::default(),
             corr: Vec::new(),
+            corr_blocks: Vec::new(),
             cand: Vec::new(),
             builds: 0,
             fp: None,
@@ -143,29 +267,61 @@ impl<const D: usize> Core<D> {
     /// One pair's contribution from separation r = x_i - x_j and g = v_i - v_j.
     #[inline(always)]
     fn pair(&mut self, i: usize, j: usize, r: [f64; D], g: [f64; D]) {
-        let rho2: f64 = r.iter().map(|a| a * a).sum();
-        let rho = rho2.sqrt();
-        let inv = 1.0 / rho;
-        let e: [f64; D] = std::array::from_fn(|k| r[k] * inv);
-        let gn: f64 = (0..D).map(|k| g[k] * e[k]).sum();
-        let Some(ns) = self.prop.normal(self.d - rho, -gn) else {
+        let Some(c) = pair_eval(&self.prop, self.d, i, j, r, g) else {
             return;
         };
         if self.fp.is_some() {
-            self.track_pair(i, j, ns.t_on, ns.t_off);
+            self.track_pair(i, j, c.t[0], c.t[1]);
         }
-        let mut dx: [f64; D] = std::array::from_fn(|k| -0.5 * ns.ddelta * e[k]);
-        let mut dv: [f64; D] = std::array::from_fn(|k| -0.5 * ns.du * e[k]);
-        if D > 1 && self.prop.has_tangential() {
-            let gt: [f64; D] = std::array::from_fn(|k| g[k] - gn * e[k]);
-            let gt_abs = gt.iter().map(|a| a * a).sum::<f64>().sqrt();
-            let (a, b) = self.prop.tangential(gt_abs, &ns);
-            for k in 0..D {
-                dv[k] += 0.5 * a * gt[k];
-                dx[k] += 0.5 * b * gt[k];
+        self.corr.push(c);
+    }
+
+    /// Whether this step runs on the current rayon pool: N of at least
+    /// [`PARALLEL_MIN_PARTICLES`] and a pool of several threads. Both ways give the same bits.
+    fn parallel(&self) -> bool {
+        self.x.len() >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1
+    }
+
+    /// The 2D pair pass on the current rayon pool: each work block of [`PAIR_BLOCK`] pairs
+    /// collects its corrections in pair order; free-path tracking then sees them in pair
+    /// order (before any is applied, as in the one-thread pass).
+    fn pair_pass_parallel(&mut self, vmax: f64) {
+        use rayon::prelude::*;
+        self.corr.clear();
+        let cut = self.d + 2.5 * vmax * self.h;
+        let cut2 = cut * cut;
+        let pairs = &self.nl.pairs;
+        let nb = pairs.len().div_ceil(PAIR_BLOCK);
+        if self.corr_blocks.len() < nb {
+            self.corr_blocks.resize_with(nb, Vec::new);
+        }
+        let (x, v, prop, d) = (&self.x, &self.v, &self.prop, self.d);
+        pairs
+            .par_chunks(PAIR_BLOCK)
+            .zip(self.corr_blocks[..nb].par_iter_mut())
+            .for_each(|(ps, out)| {
+                out.clear();
+                for p in ps {
+                    let (i, j) = (p.i as usize, p.j as usize);
+                    let r: [f64; D] = std::array::from_fn(|k| x[i][k] - x[j][k] + p.shift[k]);
+                    let rho2: f64 = r.iter().map(|a| a * a).sum();
+                    if rho2 >= cut2 {
+                        continue;
+                    }
+                    let g: [f64; D] = std::array::from_fn(|k| v[i][k] - v[j][k]);
+                    if let Some(c) = pair_eval(prop, d, i, j, r, g) {
+                        out.push(c);
+                    }
+                }
+            });
+        for b in self.corr_blocks[nb..].iter_mut() {
+            b.clear();
+        }
+        if let Some(fp) = self.fp.as_mut() {
+            for c in self.corr_blocks[..nb].iter().flatten() {
+                fp.push(c.i as usize, c.j as usize, c.t[0], c.t[1], &self.x, &self.v);
             }
         }
-        self.corr.push((i as u32, j as u32, dx, dv));
     }
 
     /// Collect this step's pair corrections from the kicked state (list or ring).
@@ -241,10 +397,15 @@ impl<const D: usize> Core<D> {
     }
 
     fn step_once(&mut self) {
+        let par = self.parallel();
         // Kick without the symmetrising shift c (pair flows see velocity differences only);
         // the shift is subtracted in the drift pass below.
         let (c, vmax2) = if self.kicks.active() {
-            self.kicks.kick(&mut self.rng, &mut self.v)
+            if self.stream == StreamVersion::V1 {
+                self.kicks.kick(&mut self.rng, &mut self.v)
+            } else {
+                self.kicks.kick_counter(self.step, &mut self.v, par)
+            }
         } else {
             ([0.0; D], if D > 1 { self.vmax2() } else { 0.0 })
         };
@@ -262,61 +423,53 @@ impl<const D: usize> Core<D> {
         if let Some(fp) = self.fp.as_mut() {
             fp.c = c;
         }
-        self.pair_pass(vmax);
+        let par_pairs = par && D > 1;
+        if par_pairs {
+            self.pair_pass_parallel(vmax);
+        } else {
+            self.pair_pass(vmax);
+        }
         let h = self.h;
         // A pair's (dx, dv) enters as x += dx - dv h, v += dv now, so that the drift below
-        // with the corrected velocity gives x + (v - c) h + dx.
-        for &(i, j, dx, dv) in &self.corr {
-            let (i, j) = (i as usize, j as usize);
-            for k in 0..D {
-                let ex = dx[k] - dv[k] * h;
-                self.x[i][k] += ex;
-                self.v[i][k] += dv[k];
-                self.x[j][k] -= ex;
-                self.v[j][k] -= dv[k];
+        // with the corrected velocity gives x + (v - c) h + dx. Always in pair order.
+        {
+            let (x, v) = (&mut self.x, &mut self.v);
+            let corr = if par_pairs {
+                &self.corr_blocks[..]
+            } else {
+                std::slice::from_ref(&self.corr)
+            };
+            for c in corr.iter().flatten() {
+                let (i, j) = (c.i as usize, c.j as usize);
+                for k in 0..D {
+                    let ex = c.dx[k] - c.dv[k] * h;
+                    x[i][k] += ex;
+                    v[i][k] += c.dv[k];
+                    x[j][k] -= ex;
+                    v[j][k] -= c.dv[k];
+                }
             }
         }
         if D > 1 {
-            // Drift and the largest displacement since the list build, four particles at a
-            // time (independent maxima).
-            let mut m = [self.max_disp2; 4];
-            let mut xs = self.x.chunks_exact_mut(4);
-            let mut vs = self.v.chunks_exact_mut(4);
-            let mut rs = self.x_ref.chunks_exact(4);
-            for ((x4, v4), r4) in (&mut xs).zip(&mut vs).zip(&mut rs) {
-                for p in 0..4 {
-                    let mut d2 = 0.0;
-                    for k in 0..D {
-                        let vk = v4[p][k] - c[k];
-                        v4[p][k] = vk;
-                        x4[p][k] += vk * h;
-                        let dd = x4[p][k] - r4[p][k];
-                        d2 += dd * dd;
-                    }
-                    if d2 > m[p] {
-                        m[p] = d2;
-                    }
-                }
+            // Drift and the largest displacement since the list build.
+            if par {
+                use rayon::prelude::*;
+                let m = self
+                    .x
+                    .par_chunks_mut(DRIFT_BLOCK)
+                    .zip(self.v.par_chunks_mut(DRIFT_BLOCK))
+                    .zip(self.x_ref.par_chunks(DRIFT_BLOCK))
+                    .map(|((x, v), r)| drift_block(x, v, r, c, h, 0.0))
+                    .reduce(|| 0.0, |a: f64, b: f64| if b > a { b } else { a });
+                self.max_disp2 = if m > self.max_disp2 {
+                    m
+                } else {
+                    self.max_disp2
+                };
+            } else {
+                self.max_disp2 =
+                    drift_block(&mut self.x, &mut self.v, &self.x_ref, c, h, self.max_disp2);
             }
-            for ((x, v), r) in xs
-                .into_remainder()
-                .iter_mut()
-                .zip(vs.into_remainder().iter_mut())
-                .zip(rs.remainder())
-            {
-                let mut d2 = 0.0;
-                for k in 0..D {
-                    let vk = v[k] - c[k];
-                    v[k] = vk;
-                    x[k] += vk * h;
-                    let dd = x[k] - r[k];
-                    d2 += dd * dd;
-                }
-                if d2 > m[0] {
-                    m[0] = d2;
-                }
-            }
-            self.max_disp2 = m.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a });
         } else {
             for (x, v) in self.x.iter_mut().zip(self.v.iter_mut()) {
                 for k in 0..D {
@@ -379,7 +532,8 @@ impl<const D: usize> Core<D> {
             self.pair_pass(vmax);
         }
         let mut out = vec![([0.0; D], [0.0; D]); n];
-        for &(i, j, dx, dv) in &self.corr {
+        for c in &self.corr {
+            let (i, j, dx, dv) = (c.i, c.j, c.dx, c.dv);
             for k in 0..D {
                 out[i as usize].0[k] += dx[k];
                 out[i as usize].1[k] += dv[k];
@@ -414,20 +568,24 @@ fn unflatten<const D: usize>(a: &[f64]) -> Vec<[f64; D]> {
 
 impl RfmSim {
     /// A new run drawing as stream version `stream` prescribes (see
-    /// [`crate::rng::StreamVersion`]).
-    // Scaffolding of issue 25: version 2's counter-addressed noise is not built yet, so every
-    // version draws as version 1 here for now.
-    pub fn with_stream(
-        cfg: RfmConfig,
-        seed: u64,
-        _stream: crate::rng::StreamVersion,
-    ) -> Result<Self, SimError> {
-        Self::new(cfg, seed)
+    /// [`crate::rng::StreamVersion`]): the initial state is drawn from the run's sequential
+    /// stream in every version; version 1 draws the noise from it too, version 2 draws the
+    /// noise counter-addressed by (step, slot) ([`Kicks::kick_counter`]), so that a run can
+    /// step on several threads with the same output.
+    pub fn with_stream(cfg: RfmConfig, seed: u64, stream: StreamVersion) -> Result<Self, SimError> {
+        let (x, v, rng) = Self::initial(&cfg, seed)?;
+        Self::assemble(cfg, x, v, rng, stream)
     }
 
-    /// A new run: validated config, the initial layout and velocities (spec 1.9: each
-    /// component 0.1 U(-0.5, 0.5) m/s, mean removed) drawn from the run's stream.
+    /// A new run of stream version 1 (see [`with_stream`](Self::with_stream)): validated
+    /// config, the initial layout and velocities (spec 1.9: each component
+    /// 0.1 U(-0.5, 0.5) m/s, mean removed) drawn from the run's stream.
     pub fn new(cfg: RfmConfig, seed: u64) -> Result<Self, SimError> {
+        Self::with_stream(cfg, seed, StreamVersion::V1)
+    }
+
+    /// The validated config's initial positions and velocities, and the stream after them.
+    fn initial(cfg: &RfmConfig, seed: u64) -> Result<(Vec<f64>, Vec<f64>, RunRng), SimError> {
         cfg.validate().map_err(|e| SimError::Config(e.join("; ")))?;
         for w in cfg.warnings() {
             tracing::warn!("{w}");
@@ -435,7 +593,7 @@ impl RfmSim {
         let mut rng = RunRng::new(seed);
         let n = cfg.n_particles;
         let dim = cfg.dim as usize;
-        let x = initial_positions(&cfg, &mut rng)?;
+        let x = initial_positions(cfg, &mut rng)?;
         let mut v: Vec<f64> = (0..n * dim).map(|_| 0.1 * (rng.f64() - 0.5)).collect();
         for k in 0..dim {
             let m = v.iter().skip(k).step_by(dim).sum::<f64>() / n as f64;
@@ -443,7 +601,7 @@ impl RfmSim {
                 *a -= m;
             }
         }
-        Self::assemble(cfg, x, v, rng)
+        Ok((x, v, rng))
     }
 
     /// A run from explicit positions and velocities (flat, particle-major; 1D positions must
@@ -461,15 +619,29 @@ impl RfmSim {
                 "from_parts: positions and velocities must have N * dim entries".into(),
             ));
         }
-        Self::assemble(cfg, x, v, RunRng::new(seed))
+        Self::assemble(cfg, x, v, RunRng::new(seed), StreamVersion::V1)
     }
 
-    fn assemble(cfg: RfmConfig, x: Vec<f64>, v: Vec<f64>, rng: RunRng) -> Result<Self, SimError> {
+    fn assemble(
+        cfg: RfmConfig,
+        x: Vec<f64>,
+        v: Vec<f64>,
+        rng: RunRng,
+        stream: StreamVersion,
+    ) -> Result<Self, SimError> {
         let inner = match cfg.dim {
-            1 => Inner::D1(Core::new(&cfg, unflatten(&x), unflatten(&v), rng)),
-            _ => Inner::D2(Core::new(&cfg, unflatten(&x), unflatten(&v), rng)),
+            1 => Inner::D1(Core::new(&cfg, unflatten(&x), unflatten(&v), rng, stream)),
+            _ => Inner::D2(Core::new(&cfg, unflatten(&x), unflatten(&v), rng, stream)),
         };
         Ok(RfmSim { cfg, inner })
+    }
+
+    /// The run's random stream version.
+    pub fn stream_version(&self) -> StreamVersion {
+        match &self.inner {
+            Inner::D1(c) => c.stream,
+            Inner::D2(c) => c.stream,
+        }
     }
 
     pub fn config(&self) -> &RfmConfig {
@@ -595,14 +767,34 @@ impl RfmSim {
                 free_paths: c.fp.as_ref().map(|f| f.acc.clone()),
             },
         };
-        postcard::to_stdvec(&st).expect("state serialises")
+        let mut bytes = postcard::to_stdvec(&st).expect("state serialises");
+        // The stream version follows the state (postcard varint of its number); version 1
+        // writes nothing, so its bytes are those of granular before stream versions.
+        let stream = self.stream_version();
+        if stream != StreamVersion::V1 {
+            bytes.extend(postcard::to_stdvec(&stream.number()).expect("u32 serialises"));
+        }
+        bytes
     }
 
     /// Rebuild a run from its config and a checkpoint payload.
     pub fn from_state_bytes(cfg: RfmConfig, bytes: &[u8]) -> Result<Self, SimError> {
         cfg.validate().map_err(|e| e.join("; "))?;
-        let st: RfmState = postcard::from_bytes(bytes)
+        let (st, rest): (RfmState, &[u8]) = postcard::take_from_bytes(bytes)
             .map_err(|e| format!("checkpoint payload does not decode: {e}"))?;
+        // Nothing after the state: a version-1 run (every checkpoint before stream versions).
+        let stream = if rest.is_empty() {
+            StreamVersion::V1
+        } else {
+            let (number, tail): (u32, &[u8]) = postcard::take_from_bytes(rest)
+                .map_err(|e| format!("checkpoint's stream version does not decode: {e}"))?;
+            if !tail.is_empty() {
+                return Err(
+                    "checkpoint payload has trailing bytes after its stream version".into(),
+                );
+            }
+            StreamVersion::try_from(number).map_err(|e| format!("checkpoint: {e}"))?
+        };
         let n = cfg.n_particles * cfg.dim as usize;
         if st.dim != cfg.dim || st.x.len() != n || st.v.len() != n {
             return Err("checkpoint does not match the run's dimension or particle count".into());
@@ -615,7 +807,7 @@ impl RfmSim {
         let rng = RunRng::restore(&st.rng);
         let inner = match cfg.dim {
             1 => {
-                let mut c = Core::<1>::new(&cfg, unflatten(&st.x), unflatten(&st.v), rng);
+                let mut c = Core::<1>::new(&cfg, unflatten(&st.x), unflatten(&st.v), rng, stream);
                 c.step = st.step;
                 c.fp = st.free_paths.map(|a| Box::new(FreePaths::new(a)));
                 Inner::D1(c)
@@ -624,7 +816,8 @@ impl RfmSim {
                 if st.x_ref.len() != n {
                     return Err("checkpoint lacks the neighbour-list reference".into());
                 }
-                let mut c = Core::<2>::new(&cfg, unflatten(&st.x_ref), unflatten(&st.v), rng);
+                let mut c =
+                    Core::<2>::new(&cfg, unflatten(&st.x_ref), unflatten(&st.v), rng, stream);
                 c.x = unflatten(&st.x);
                 c.max_disp2 = st.max_disp2;
                 c.step = st.step;

@@ -1,6 +1,7 @@
 //! Tests of the RFM simulation; each states its tolerance.
 
 use super::*;
+use crate::rfm::freepath::FreePathConfig;
 
 fn no_noise(dim: u32, eps_n: f64, eps_t: f64, dt: f64, l: f64) -> RfmConfig {
     RfmConfig {
@@ -289,7 +290,7 @@ fn neighbour_list_matches_brute_force() {
     let v: Vec<[f64; 2]> = (0..600)
         .map(|_| [rng.f64() - 0.5, rng.f64() - 0.5])
         .collect();
-    let mut core = Core::<2>::new(&cfg, x, v, RunRng::new(1));
+    let mut core = Core::<2>::new(&cfg, x, v, RunRng::new(1), StreamVersion::V1);
     let list = core.corrections(false);
     let brute = core.corrections(true);
     let scale = brute
@@ -339,3 +340,150 @@ fn initial_layouts_do_not_overlap() {
             .all(|p| p.abs() < 1e-15 * cfg.mass * 500.0));
     }
 }
+
+fn dense_2d(n: usize) -> RfmConfig {
+    RfmConfig {
+        n_particles: n,
+        box_length: None,
+        packing_fraction: Some(0.53),
+        restitution_normal: 0.1,
+        restitution_tangential: 0.1,
+        ..RfmConfig::default()
+    }
+}
+
+fn pool(k: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(k)
+        .build()
+        .unwrap()
+}
+
+/// Stream version 2: a run stepped in rayon pools of 1, 2 and 3 threads gives bit-identical
+/// states, above the parallel threshold (2D N = 9000, with and without free-path tracking,
+/// so that the pair pass, the corrections and the drift all run in blocks) and below it
+/// (N = 1500); its noise is not version 1's.
+#[test]
+fn v2_threads_give_identical_states() {
+    for (n, steps, fp) in [(9000, 300, false), (9000, 200, true), (1500, 300, false)] {
+        let run = |k: usize| {
+            pool(k).install(|| {
+                let mut s = RfmSim::with_stream(dense_2d(n), 7, StreamVersion::V2).unwrap();
+                if fp {
+                    s.track_free_paths(FreePathConfig {
+                        paths: true,
+                        lo: 1e-9,
+                        hi: 1.0,
+                        bins_per_decade: 20,
+                        velocity: Some(([-5.0, 5.0], 200)),
+                        from_step: 0,
+                        sample_every: 50,
+                    });
+                }
+                s.advance(steps);
+                assert_eq!(s.stream_version(), StreamVersion::V2);
+                s
+            })
+        };
+        let one = run(1);
+        for k in [2, 3] {
+            let other = run(k);
+            assert!(
+                one.state_bytes() == other.state_bytes(),
+                "N {n} fp {fp}: {k} threads differ from 1"
+            );
+        }
+        let mut v1 = RfmSim::new(dense_2d(n), 7).unwrap();
+        v1.advance(steps);
+        assert_ne!(v1.velocities(), one.velocities(), "N {n}: V2 drew as V1");
+    }
+}
+
+/// Stream version 1 stepped on several threads (pair pass and drift in blocks, the noise
+/// drawn sequentially as before) gives the states of one thread.
+#[test]
+fn v1_threads_give_identical_states() {
+    let run = |k: usize| {
+        pool(k).install(|| {
+            let mut s = RfmSim::new(dense_2d(6000), 3).unwrap();
+            s.advance(200);
+            s.state_bytes()
+        })
+    };
+    assert!(run(1) == run(2));
+}
+
+/// A version-2 run restored from its checkpoint mid-run continues bit for bit and stays
+/// version 2 (1D, 2D below and above the parallel threshold, the latter on 2 threads).
+#[test]
+fn v2_checkpoint_restore_is_bit_identical() {
+    let cfgs = [
+        RfmConfig {
+            n_particles: 300,
+            box_length: None,
+            packing_fraction: Some(0.45),
+            restitution_tangential: 0.5,
+            ..RfmConfig::default()
+        },
+        RfmConfig {
+            reduced_length: Some(0.05),
+            ..RfmConfig::thesis_1d(100, 0.3)
+        },
+        dense_2d(5000),
+    ];
+    for cfg in cfgs {
+        pool(2).install(|| {
+            let mut a = RfmSim::with_stream(cfg.clone(), 5, StreamVersion::V2).unwrap();
+            a.advance(700);
+            let bytes = a.state_bytes();
+            let mut b = RfmSim::from_state_bytes(cfg.clone(), &bytes).unwrap();
+            assert_eq!(b.stream_version(), StreamVersion::V2);
+            a.advance(800);
+            b.advance(123);
+            b.advance(677);
+            let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(a.positions()), bits(b.positions()));
+            assert_eq!(bits(a.velocities()), bits(b.velocities()));
+            assert_eq!(a.state_bytes(), b.state_bytes());
+            // Momentum stays zero with the version-2 kicks.
+            let t = a.temperature();
+            let p: f64 = a.momentum().iter().map(|x| x * x).sum::<f64>().sqrt();
+            let scale = cfg.mass * cfg.n_particles as f64 * t.sqrt();
+            assert!(t > 0.0 && p / scale < 1e-12, "{p} vs {scale}");
+        });
+    }
+}
+
+/// Checkpoint bytes written by granular c713da0 (before stream versions; 2D N = 3, L = 0.03,
+/// seed 11, 5 steps) restore as a version-1 run that continues as the same run made fresh,
+/// and version 1 still writes those bytes; a version number this granular does not know is
+/// refused.
+#[test]
+fn old_checkpoints_restore_as_v1() {
+    let cfg = RfmConfig {
+        n_particles: 3,
+        box_length: Some(0.03),
+        ..RfmConfig::default()
+    };
+    let old: Vec<u8> = (0..OLD_STATE_HEX.len() / 2)
+        .map(|i| u8::from_str_radix(&OLD_STATE_HEX[2 * i..2 * i + 2], 16).unwrap())
+        .collect();
+    let mut fresh = RfmSim::new(cfg.clone(), 11).unwrap();
+    fresh.advance(5);
+    assert_eq!(fresh.state_bytes(), old);
+    let mut b = RfmSim::from_state_bytes(cfg.clone(), &old).unwrap();
+    assert_eq!(b.stream_version(), StreamVersion::V1);
+    fresh.advance(50);
+    b.advance(50);
+    assert_eq!(fresh.state_bytes(), b.state_bytes());
+    let mut bad = old.clone();
+    bad.push(9);
+    let e = RfmSim::from_state_bytes(cfg, &bad)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("stream version 9"), "{e}");
+}
+
+/// `state_bytes` of granular c713da0, see [`old_checkpoints_restore_as_v1`].
+const OLD_STATE_HEX: &str = "0205068739520ebbe9853fec0292ed7234663f9bbb7d48514a883f4032471a7f00913fa07a1b0d53c0793f303eb9f091b19a3f063e1a9b33736da1bf148651b9b09796bfdaea8036863aa93f9dc19a9ee17ca1bf7142970b4c348fbfa68443fbb9c8ac3f06d69ee0aad2e9853f0219b68d9f34663fc9acaf962f4a883f6280a0478b00913fa4cd9a3767c0793f4b6d5b2f80b19a3ff3ee1ef7d0013b3d0b540000";
