@@ -42,32 +42,48 @@ fn main() {
     let key = key_of(42);
 
     let mut rng = WordStream::from_rng(&RunRng::new(42));
-    best("v1 words only: WordStream::fill, 1 word per normal", calls, |_| {
-        rng.fill(&mut words);
-        black_box(&words);
-    });
+    best(
+        "v1 words only: WordStream::fill, 1 word per normal",
+        calls,
+        |_| {
+            rng.fill(&mut words);
+            black_box(&words);
+        },
+    );
     let mut rng = WordStream::from_rng(&RunRng::new(42));
-    best("v1 fill_normals_with (64-bit ziggurat, words included)", calls, |_| {
-        fill_normals_with(&mut rng, &mut out, &mut words, &mut rejected);
-        black_box(&out);
-    });
+    best(
+        "v1 fill_normals_with (64-bit ziggurat, words included)",
+        calls,
+        |_| {
+            fill_normals_with(&mut rng, &mut out, &mut words, &mut rejected);
+            black_box(&out);
+        },
+    );
 
     let mut half = vec![0u64; N / 2];
-    best("v2 words only: fill_counter, 1 word per 2 normals", calls, |s| {
-        fill_counter(&key, s as u64, 0, &mut half);
-        black_box(&half);
-    });
+    best(
+        "v2 words only: fill_counter, 1 word per 2 normals",
+        calls,
+        |s| {
+            fill_counter(&key, s as u64, 0, &mut half);
+            black_box(&half);
+        },
+    );
     // The slow path's continuation: a stream of its own (as the V2 noise's per-slot one).
     let mut more = WordStream::from_rng(&RunRng::new(7));
-    best("v2 fill_counter + normal_candidates + finish_slow", calls, |s| {
-        fill_counter(&key, s as u64, 0, &mut half);
-        normal_candidates(&half, &mut out, &mut slow);
-        for &j in &slow {
-            let j = j as usize;
-            out[j] = finish_slow((half[j / 2] >> (32 * (j % 2))) as u32, &mut || more.u64());
-        }
-        black_box(&out);
-    });
+    best(
+        "v2 fill_counter + normal_candidates + finish_slow",
+        calls,
+        |s| {
+            fill_counter(&key, s as u64, 0, &mut half);
+            normal_candidates(&half, &mut out, &mut slow);
+            for &j in &slow {
+                let j = j as usize;
+                out[j] = finish_slow((half[j / 2] >> (32 * (j % 2))) as u32, &mut || more.u64());
+            }
+            black_box(&out);
+        },
+    );
 
     // Words excluded: 8 different sets of words (320 KB, so that the slow slots differ from
     // call to call), generated beforehand.
@@ -78,15 +94,19 @@ fn main() {
             w
         })
         .collect();
-    best("v2 normal_candidates + finish_slow (words excluded)", calls, |c| {
-        let w = &sets[c % sets.len()];
-        normal_candidates(w, &mut out, &mut slow);
-        for &j in &slow {
-            let j = j as usize;
-            out[j] = finish_slow((w[j / 2] >> (32 * (j % 2))) as u32, &mut || more.u64());
-        }
-        black_box(&out);
-    });
+    best(
+        "v2 normal_candidates + finish_slow (words excluded)",
+        calls,
+        |c| {
+            let w = &sets[c % sets.len()];
+            normal_candidates(w, &mut out, &mut slow);
+            for &j in &slow {
+                let j = j as usize;
+                out[j] = finish_slow((w[j / 2] >> (32 * (j % 2))) as u32, &mut || more.u64());
+            }
+            black_box(&out);
+        },
+    );
     best("v2 normal_candidates alone (words excluded)", calls, |c| {
         normal_candidates(&sets[c % sets.len()], &mut out, &mut slow);
         black_box(&out);

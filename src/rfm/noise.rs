@@ -203,23 +203,47 @@ pub fn fill_normals(rng: &mut WordStream, out: &mut [f64]) {
 
 /// Particles per work block of the version-2 kicks: the step's slots are cut into blocks of
 /// `KICK_BLOCK * D` slots (the last one shorter), fixed by N alone, whose sums are combined
-/// in block order. A multiple of 64, so every block starts on a ChaCha8 chunk (16 blocks of 8
-/// words) for D = 1 and 2.
+/// in block order. A multiple of 256, so every block starts on a ChaCha8 chunk (16 blocks of 8
+/// words, 2 slots per word) for D = 1 and 2.
 pub const KICK_BLOCK: usize = 2048;
 
 /// Bit that marks a continuation stream in stream version 2.
 const CONTINUATION: u64 = 1 << 63;
 
-/// Stream version 2's normal of one slot whose candidate (from its word `w`) fell outside its
-/// inner rectangle: the ziggurat's slow path reading the slot's own continuation words (see
-/// [`Kicks::kick_counter`] for the layout).
-#[cold]
-#[inline(never)]
-fn normal_continued(cont: &mut ChaCha8Rng, step: u64, slot: u64, w: u64) -> f64 {
-    cont.set_stream((step & !CONTINUATION) | CONTINUATION);
-    // Block slot * 2^32, in 32-bit words (16 per block).
-    cont.set_word_pos(((slot as u128) << 32) * 16);
-    Zig::get().normal_slow(cont, w)
+/// 64-bit words per continuation refill (one ChaCha8 chunk of 16 blocks).
+const CONT_WORDS: usize = 128;
+
+/// Stream version 2's continuation words of one work block (see [`Kicks::kick_counter`]):
+/// ChaCha8 with the run's key and stream `(step mod 2^63) | 2^63`, 64-bit words from block
+/// `b 2^40` on (work block b), generated a chunk at a time.
+struct Continuation {
+    stream: u64,
+    next_block: u64,
+    buf: [u64; CONT_WORDS],
+    idx: usize,
+}
+
+impl Continuation {
+    fn new(step: u64, work_block: u64) -> Self {
+        Continuation {
+            stream: (step & !CONTINUATION) | CONTINUATION,
+            next_block: work_block << 40,
+            buf: [0; CONT_WORDS],
+            idx: CONT_WORDS,
+        }
+    }
+
+    #[inline(always)]
+    fn next(&mut self, key: &[u32; 8]) -> u64 {
+        if self.idx == CONT_WORDS {
+            fill_counter(key, self.stream, self.next_block, &mut self.buf);
+            self.next_block += (CONT_WORDS / 8) as u64;
+            self.idx = 0;
+        }
+        let w = self.buf[self.idx];
+        self.idx += 1;
+        w
+    }
 }
 
 /// One version-2 work block: particles `v` (the first is particle `p0`) of step `step` get
@@ -228,36 +252,39 @@ fn normal_continued(cont: &mut ChaCha8Rng, step: u64, slot: u64, w: u64) -> f64 
 #[allow(clippy::too_many_arguments)]
 fn kick_block_counter<const D: usize>(
     key: &[u32; 8],
-    cont: &mut ChaCha8Rng,
     step: u64,
     p0: usize,
     v: &mut [[f64; D]],
     sigma: f64,
-    words: &mut Vec<u64>,
+    sc: &mut (Vec<u64>, Vec<f64>, Vec<u32>),
 ) -> ([f64; D], f64) {
+    let (words, zs, slow) = sc;
     let first = (p0 * D) as u64;
-    debug_assert_eq!(first % 8, 0);
+    // Two slots per 64-bit word: slot j's candidate is half j % 2 of word j / 2.
+    debug_assert_eq!(first % 16, 0);
     let n = v.len() * D;
-    words.resize(n, 0);
-    fill_counter(key, step & !CONTINUATION, first / 8, words);
-    let z = Zig::get();
+    words.resize(n.div_ceil(2), 0);
+    zs.resize(n, 0.0);
+    fill_counter(key, step & !CONTINUATION, first / 16, words);
+    crate::rng::normal::normal_candidates(words, zs, slow);
+    // The slow slots, in slot order, read the work block's continuation words in turn.
+    let mut cont = Continuation::new(step, (p0 / KICK_BLOCK) as u64);
+    for &j in slow.iter() {
+        let j = j as usize;
+        let half = (words[j / 2] >> (32 * (j % 2))) as u32;
+        zs[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
+    }
     const W: usize = 8;
     let vf = v.as_flattened_mut();
     let mut acc = [0.0; W];
     let mut mx = [0.0; W];
     let mut vc = vf.chunks_exact_mut(W);
-    let mut wc = words.chunks_exact(W);
-    let mut slot = first;
-    for (vv, ww) in (&mut vc).zip(&mut wc) {
+    let mut zc = zs.chunks_exact(W);
+    for (vv, zz) in (&mut vc).zip(&mut zc) {
         for j in 0..W {
-            let (mut x, ok) = z.candidate(ww[j]);
-            if !ok {
-                x = normal_continued(cont, step, slot + j as u64, ww[j]);
-            }
-            acc[j] += x;
-            vv[j] += sigma * x;
+            acc[j] += zz[j];
+            vv[j] += sigma * zz[j];
         }
-        slot += W as u64;
         for p in 0..W / D {
             let mut a2 = 0.0;
             for k in 0..D {
@@ -268,22 +295,17 @@ fn kick_block_counter<const D: usize>(
             }
         }
     }
-    for (vv, ww) in vc
+    for (vv, zz) in vc
         .into_remainder()
         .chunks_exact_mut(D)
-        .zip(wc.remainder().chunks_exact(D))
+        .zip(zc.remainder().chunks_exact(D))
     {
         let mut a2 = 0.0;
         for k in 0..D {
-            let (mut x, ok) = z.candidate(ww[k]);
-            if !ok {
-                x = normal_continued(cont, step, slot + k as u64, ww[k]);
-            }
-            acc[k] += x;
-            vv[k] += sigma * x;
+            acc[k] += zz[k];
+            vv[k] += sigma * zz[k];
             a2 += vv[k] * vv[k];
         }
-        slot += D as u64;
         if a2 > mx[0] {
             mx[0] = a2;
         }
@@ -296,10 +318,9 @@ fn kick_block_counter<const D: usize>(
     (sum, m)
 }
 
-/// Scratch of one version-2 work block.
 struct BlockScratch {
-    words: Vec<u64>,
-    cont: ChaCha8Rng,
+    /// Candidate words, normals, slow slots.
+    words: (Vec<u64>, Vec<f64>, Vec<u32>),
 }
 
 /// Generates the symmetrised kicks of one step.
@@ -339,18 +360,22 @@ impl Kicks {
     /// step `step` (the number of steps before it) and slot `j = i D + k` (particle i,
     /// component k) is a function of (seed, step, j) alone:
     ///
-    /// - its candidate word is 64-bit word `j` of ChaCha8 with the key of the seed
-    ///   ([`crate::rng::stream::key_of`]) and stream `step mod 2^63` (top bit clear), read from
-    ///   block 0 (`fill_counter(key, step, 0, ..)[j]`); the 256-layer ziggurat of
-    ///   [`fill_normals_with`] maps it;
-    /// - when the candidate falls outside its layer's inner rectangle (~1.4 %), the wedge,
-    ///   tail and rejection words are the slot's continuation: ChaCha8 with the same key and
-    ///   stream `(step mod 2^63) | 2^63` (top bit set), 64-bit words from block `j 2^32`
-    ///   on, in order (rand_chacha's `set_stream`, `set_word_pos(16 j 2^32)`).
+    /// - its candidate is the 32-bit half `j % 2` (0: low) of 64-bit word `j / 2` of ChaCha8
+    ///   with the key of the seed ([`crate::rng::stream::key_of`]) and stream `step mod 2^63`
+    ///   (top bit clear), read from block 0 (`fill_counter(key, step, 0, ..)[j / 2]`); the
+    ///   256-layer ziggurat on 32 bits of [`crate::rng::normal`] maps it (two normals per
+    ///   word: half the generator's work of version 1's one word per normal);
+    /// - when the candidate falls outside its layer's inner rectangle (~1.5 %), the wedge,
+    ///   tail and rejection words ([`crate::rng::normal::finish_slow`]) come from the
+    ///   continuation of the slot's work block b (particles `b KICK_BLOCK ..`): ChaCha8 with
+    ///   the same key and stream `(step mod 2^63) | 2^63` (top bit set), 64-bit words from
+    ///   block `b 2^40` on, taken in turn by the block's slow slots in slot order.
     ///
     /// Candidate and continuation streams differ in their top bit, steps in the rest; within
-    /// a continuation stream slot j owns blocks `j 2^32 .. (j + 1) 2^32` (2^35 words; slots
-    /// below 2^32, i.e. N D < 2^32), so no two slots or steps share a word. The sum of the
+    /// a continuation stream work block b owns blocks `b 2^40 .. (b + 1) 2^40` (2^43 words;
+    /// work blocks below 2^24, i.e. N < 2^35), so no two work blocks or steps share a word,
+    /// and within a work block the words are taken in slot order (fixed by N, never by the
+    /// thread count). The sum of the
     /// normals (for the symmetrisation) is taken per work block of [`KICK_BLOCK`] particles
     /// and combined in block order: a function of N, never of the thread count. With
     /// `parallel`, the blocks run on the current rayon pool (same result).
@@ -360,14 +385,12 @@ impl Kicks {
         v: &mut [[f64; D]],
         parallel: bool,
     ) -> ([f64; D], f64) {
-        use rand::SeedableRng;
         use rayon::prelude::*;
         let n = v.len();
         let nb = n.div_ceil(KICK_BLOCK);
         while self.blocks.len() < nb {
             self.blocks.push(BlockScratch {
-                words: Vec::new(),
-                cont: ChaCha8Rng::seed_from_u64(self.seed),
+                words: Default::default(),
             });
         }
         let (s, key) = (self.sigma, &self.key);
@@ -378,15 +401,7 @@ impl Kicks {
                 .zip(res.par_iter_mut())
                 .enumerate()
                 .for_each(|(b, ((vb, sc), r))| {
-                    *r = kick_block_counter(
-                        key,
-                        &mut sc.cont,
-                        step,
-                        b * KICK_BLOCK,
-                        vb,
-                        s,
-                        &mut sc.words,
-                    );
+                    *r = kick_block_counter(key, step, b * KICK_BLOCK, vb, s, &mut sc.words);
                 });
         } else {
             for (b, ((vb, sc), r)) in v
@@ -395,15 +410,7 @@ impl Kicks {
                 .zip(res.iter_mut())
                 .enumerate()
             {
-                *r = kick_block_counter(
-                    key,
-                    &mut sc.cont,
-                    step,
-                    b * KICK_BLOCK,
-                    vb,
-                    s,
-                    &mut sc.words,
-                );
+                *r = kick_block_counter(key, step, b * KICK_BLOCK, vb, s, &mut sc.words);
             }
         }
         let mut sum = [0.0; D];

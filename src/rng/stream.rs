@@ -271,7 +271,12 @@ unsafe fn chunk_avx512(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32])
 unsafe fn chunk_avx2(key: &[u32; 8], stream: u64, block: u64, out: &mut [u32]) {
     assert!(out.len() >= 256);
     avx2_8(key, stream, block, out.as_mut_ptr());
-    avx2_8(key, stream, block.wrapping_add(8), out.as_mut_ptr().add(128));
+    avx2_8(
+        key,
+        stream,
+        block.wrapping_add(8),
+        out.as_mut_ptr().add(128),
+    );
 }
 
 /// ChaCha8 blocks `block .. block + 8` (with `stream`) into `out[0..128]`, block after block.
@@ -283,17 +288,23 @@ unsafe fn avx2_8(key: &[u32; 8], stream: u64, block: u64, out: *mut u32) {
     const C: [u32; 4] = [0x6170_7865, 0x3320_646e, 0x7962_2d32, 0x6b20_6574];
     // Byte shuffles that rotate each 32-bit lane left by 16 and by 8.
     let r16 = _mm256_setr_epi8(
-        2, 3, 0, 1, 6, 7, 4, 5, 10, 11, 8, 9, 14, 15, 12, 13, 2, 3, 0, 1, 6, 7, 4, 5, 10, 11, 8,
-        9, 14, 15, 12, 13,
+        2, 3, 0, 1, 6, 7, 4, 5, 10, 11, 8, 9, 14, 15, 12, 13, 2, 3, 0, 1, 6, 7, 4, 5, 10, 11, 8, 9,
+        14, 15, 12, 13,
     );
     let r8 = _mm256_setr_epi8(
-        3, 0, 1, 2, 7, 4, 5, 6, 11, 8, 9, 10, 15, 12, 13, 14, 3, 0, 1, 2, 7, 4, 5, 6, 11, 8, 9,
-        10, 15, 12, 13, 14,
+        3, 0, 1, 2, 7, 4, 5, 6, 11, 8, 9, 10, 15, 12, 13, 14, 3, 0, 1, 2, 7, 4, 5, 6, 11, 8, 9, 10,
+        15, 12, 13, 14,
     );
     let b: [u64; 8] = std::array::from_fn(|j| block.wrapping_add(j as u64));
     let lo = _mm256_setr_epi32(
-        b[0] as i32, b[1] as i32, b[2] as i32, b[3] as i32, b[4] as i32, b[5] as i32,
-        b[6] as i32, b[7] as i32,
+        b[0] as i32,
+        b[1] as i32,
+        b[2] as i32,
+        b[3] as i32,
+        b[4] as i32,
+        b[5] as i32,
+        b[6] as i32,
+        b[7] as i32,
     );
     let hi = _mm256_setr_epi32(
         (b[0] >> 32) as i32,
@@ -319,7 +330,10 @@ unsafe fn avx2_8(key: &[u32; 8], stream: u64, block: u64, out: *mut u32) {
     let mut x = init;
     macro_rules! rot {
         ($v:expr, $n:literal) => {
-            _mm256_or_si256(_mm256_slli_epi32::<$n>($v), _mm256_srli_epi32::<{ 32 - $n }>($v))
+            _mm256_or_si256(
+                _mm256_slli_epi32::<$n>($v),
+                _mm256_srli_epi32::<{ 32 - $n }>($v),
+            )
         };
     }
     macro_rules! qr {
@@ -365,7 +379,10 @@ unsafe fn avx2_8(key: &[u32; 8], stream: u64, block: u64, out: *mut u32) {
         }
         for r in 0..4 {
             // Block r: row 2 r + h of 32 bytes; block 4 + r: row 2 (4 + r) + h.
-            _mm256_storeu_si256(p.add(2 * r + h), _mm256_permute2x128_si256::<0x20>(t[0][r], t[1][r]));
+            _mm256_storeu_si256(
+                p.add(2 * r + h),
+                _mm256_permute2x128_si256::<0x20>(t[0][r], t[1][r]),
+            );
             _mm256_storeu_si256(
                 p.add(2 * (4 + r) + h),
                 _mm256_permute2x128_si256::<0x31>(t[0][r], t[1][r]),
@@ -486,7 +503,12 @@ mod tests {
                 paths.push(("avx512", chunk_avx512));
             }
         }
-        let keys = [[1, 2, 3, 4, 5, 6, 7, 8], key_of(0), key_of(0xdead_beef), [u32::MAX; 8]];
+        let keys = [
+            [1, 2, 3, 4, 5, 6, 7, 8],
+            key_of(0),
+            key_of(0xdead_beef),
+            [u32::MAX; 8],
+        ];
         let streams = [0u64, 1, 7, 0x1234_5678_9abc_def0, u64::MAX];
         let blocks = [
             0u64,

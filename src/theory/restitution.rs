@@ -410,7 +410,10 @@ impl<'a> PairTable<'a> {
     /// T_j / m_j of every species: the terms of u^2 that [`PairTable::rates_tm`] takes, each
     /// divided once per right-hand side instead of once per pair.
     pub(crate) fn t_over_m(&self, t: &[f64]) -> Vec<f64> {
-        t.iter().zip(self.species).map(|(t, s)| t / s.mass).collect()
+        t.iter()
+            .zip(self.species)
+            .map(|(t, s)| t / s.mass)
+            .collect()
     }
 
     /// [`PairTable::rates`] with `tmk` = tk / m_k and `tmi` = ti / m_i given: the same
@@ -632,7 +635,9 @@ mod tests {
         let s: Vec<Species> = (1..=40)
             .map(|k| sp(k as f64 * 1.37, 0.1 / (k as f64).powf(2.5)))
             .collect();
-        let t: Vec<f64> = (0..40).map(|k| 0.013 * (1.0 + k as f64).powf(1.9) + 1e-3).collect();
+        let t: Vec<f64> = (0..40)
+            .map(|k| 0.013 * (1.0 + k as f64).powf(1.9) + 1e-3)
+            .collect();
         for r in [
             PairRestitution::Constant(0.5),
             PairRestitution::series(&s, 0.09, vec![0.0, -1.15344, 0.0, 0.79826]),
