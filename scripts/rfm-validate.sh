@@ -7,6 +7,11 @@
 #  2. jobs/rfm2d-steady.json: the steady temperature does not depend on the initial layout.
 #     Expected: uniform and hexagonal starts agree within their noise (measured 0.2458 +- 0.0029
 #     vs 0.2408 +- 0.0016 m^2/s^2; the thesis's "12 m^2/s^2" is inconsistent with its parameters, spec 6.1).
+# Stream version 2 (issue 25: counter-addressed noise, two normals per word), against 8e852f0's
+# version 1 in the same session: xi_2 0.469 / 0.476 / 0.573 (v1: 0.465 / 0.485 / 0.587); 2D
+# hexagonal 0.2514 +- 0.0021, uniform 0.2417 +- 0.0013 (v1: 0.2457 +- 0.0014, 0.2433 +- 0.0018).
+# These +- are block errors of 2 replicas and understate the run-to-run spread (replica sd
+# 0.0047): 6 replicas per layout (seed 7) gave 0.2447 +- 0.0019 and 0.2423 +- 0.0020.
 # About 4 minutes on 2 cores.   scripts/rfm-validate.sh [1] [2]
 # BIN=path/to/granular runs another binary (no build); OUT_ROOT=dir puts the campaigns there.
 set -euo pipefail
