@@ -12,40 +12,7 @@
 
 use std::sync::OnceLock;
 
-use rand::RngCore;
-use rand_chacha::ChaCha8Rng;
-
 use crate::rng::stream::{fill_counter, WordStream};
-
-/// A source of 64-bit words for the ziggurat's slow path: the run's sequential stream
-/// (stream version 1) or a slot's own continuation stream (version 2).
-pub trait Words {
-    fn u64(&mut self) -> u64;
-    /// Uniform in [0, 1) with 53 random bits.
-    #[inline(always)]
-    fn f64(&mut self) -> f64 {
-        crate::rng::unit_f64(self.u64())
-    }
-    /// Uniform in (0, 1].
-    #[inline(always)]
-    fn f64_open0(&mut self) -> f64 {
-        crate::rng::unit_f64_open0(self.u64())
-    }
-}
-
-impl Words for WordStream {
-    #[inline(always)]
-    fn u64(&mut self) -> u64 {
-        WordStream::u64(self)
-    }
-}
-
-impl Words for ChaCha8Rng {
-    #[inline(always)]
-    fn u64(&mut self) -> u64 {
-        self.next_u64()
-    }
-}
 
 /// Layers of the normal ziggurat (the layer index is the low 8 bits of a word, the sign
 /// bit 8, the value bits 11-63).
@@ -65,48 +32,9 @@ struct Zig {
     r: f64,
 }
 
-/// Integral of f over [r, inf): f(r) times Mills' ratio (continued fraction, r > 3).
-fn tail_area(r: f64) -> f64 {
-    let mut t = r;
-    for k in (1..=400).rev() {
-        t = r + k as f64 / t;
-    }
-    (-0.5 * r * r).exp() / t
-}
-
 impl Zig {
-    /// Layer boundaries for tail start `r`, and the top layer's area minus `v` (increasing
-    /// in r; -inf when the layers reach the mode before the last one).
-    fn layers(r: f64) -> ([f64; LAYERS + 1], f64) {
-        let f = |x: f64| (-0.5 * x * x).exp();
-        let v = r * f(r) + tail_area(r);
-        let mut x = [0.0; LAYERS + 1];
-        x[0] = v / f(r);
-        x[1] = r;
-        for i in 1..LAYERS - 1 {
-            let y = v / x[i] + f(x[i]);
-            if y >= 1.0 {
-                return (x, f64::NEG_INFINITY);
-            }
-            x[i + 1] = (-2.0 * y.ln()).sqrt();
-        }
-        let top = x[LAYERS - 1] * (1.0 - f(x[LAYERS - 1]));
-        (x, top - v)
-    }
-
     fn new() -> Self {
-        // 256 layers: r = 3.6541528853610088 (Marsaglia & Tsang); 128: 3.442619855899.
-        let (mut lo, mut hi) = (3.2, 4.0);
-        for _ in 0..200 {
-            let mid = 0.5 * (lo + hi);
-            if Self::layers(mid).1 < 0.0 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        let r = 0.5 * (lo + hi);
-        let (x, _) = Self::layers(r);
+        let (r, x) = crate::rng::normal::ziggurat_layers();
         let f = std::array::from_fn(|i| (-0.5 * x[i] * x[i]).exp());
         let scale = 1.0 / (1u64 << 53) as f64;
         Zig {
@@ -135,7 +63,7 @@ impl Zig {
     /// The wedges, the tail, and rejections (which restart with a fresh word).
     #[cold]
     #[inline(never)]
-    fn normal_slow<W: Words>(&self, rng: &mut W, mut w: u64) -> f64 {
+    fn normal_slow(&self, rng: &mut WordStream, mut w: u64) -> f64 {
         let mut i = (w & (LAYERS as u64 - 1)) as usize;
         let mut x = (w >> 11) as f64 * self.xs[i];
         loop {
@@ -246,34 +174,12 @@ impl Continuation {
     }
 }
 
-/// One version-2 work block: particles `v` (the first is particle `p0`) of step `step` get
-/// `sigma z`; returns the sum of their z per component (eight partial sums in slot order,
-/// lane j holding component j % D, then the lanes in order) and the largest |v|^2 after.
-#[allow(clippy::too_many_arguments)]
-fn kick_block_counter<const D: usize>(
-    key: &[u32; 8],
-    step: u64,
-    p0: usize,
-    v: &mut [[f64; D]],
-    sigma: f64,
-    sc: &mut (Vec<u64>, Vec<f64>, Vec<u32>),
-) -> ([f64; D], f64) {
-    let (words, zs, slow) = sc;
-    let first = (p0 * D) as u64;
-    // Two slots per 64-bit word: slot j's candidate is half j % 2 of word j / 2.
-    debug_assert_eq!(first % 16, 0);
-    let n = v.len() * D;
-    words.resize(n.div_ceil(2), 0);
-    zs.resize(n, 0.0);
-    fill_counter(key, step & !CONTINUATION, first / 16, words);
-    crate::rng::normal::normal_candidates(words, zs, slow);
-    // The slow slots, in slot order, read the work block's continuation words in turn.
-    let mut cont = Continuation::new(step, (p0 / KICK_BLOCK) as u64);
-    for &j in slow.iter() {
-        let j = j as usize;
-        let half = (words[j / 2] >> (32 * (j % 2))) as u32;
-        zs[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
-    }
+/// Add `sigma z` to the velocities `v` (slot `i D + k` of `zs` to component k of particle i)
+/// and return the sum of the z per component (eight partial sums in slot order, lane j
+/// holding component j % D, then the lanes in order: independent dependency chains, fixed
+/// order) and the largest |v|^2 after. The kick loop of both stream versions.
+#[inline(always)]
+fn add_kicks<const D: usize>(v: &mut [[f64; D]], zs: &[f64], sigma: f64) -> ([f64; D], f64) {
     const W: usize = 8;
     let vf = v.as_flattened_mut();
     let mut acc = [0.0; W];
@@ -318,6 +224,37 @@ fn kick_block_counter<const D: usize>(
     (sum, m)
 }
 
+/// One version-2 work block: particles `v` (the first is particle `p0`) of step `step` get
+/// `sigma z`; returns the sum of their z per component (eight partial sums in slot order,
+/// lane j holding component j % D, then the lanes in order) and the largest |v|^2 after.
+#[allow(clippy::too_many_arguments)]
+fn kick_block_counter<const D: usize>(
+    key: &[u32; 8],
+    step: u64,
+    p0: usize,
+    v: &mut [[f64; D]],
+    sigma: f64,
+    sc: &mut (Vec<u64>, Vec<f64>, Vec<u32>),
+) -> ([f64; D], f64) {
+    let (words, zs, slow) = sc;
+    let first = (p0 * D) as u64;
+    // Two slots per 64-bit word: slot j's candidate is half j % 2 of word j / 2.
+    debug_assert_eq!(first % 16, 0);
+    let n = v.len() * D;
+    words.resize(n.div_ceil(2), 0);
+    zs.resize(n, 0.0);
+    fill_counter(key, step & !CONTINUATION, first / 16, words);
+    crate::rng::normal::normal_candidates(words, zs, slow);
+    // The slow slots, in slot order, read the work block's continuation words in turn.
+    let mut cont = Continuation::new(step, (p0 / KICK_BLOCK) as u64);
+    for &j in slow.iter() {
+        let j = j as usize;
+        let half = (words[j / 2] >> (32 * (j % 2))) as u32;
+        zs[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
+    }
+    add_kicks(v, zs, sigma)
+}
+
 struct BlockScratch {
     /// Candidate words, normals, slow slots.
     words: (Vec<u64>, Vec<f64>, Vec<u32>),
@@ -332,7 +269,6 @@ pub struct Kicks {
     rejected: Vec<u32>,
     /// Stream version 2: the ChaCha8 key of the run's seed, and per work block its scratch.
     key: [u32; 8],
-    seed: u64,
     blocks: Vec<BlockScratch>,
 }
 
@@ -344,7 +280,6 @@ impl Kicks {
             words: Vec::new(),
             rejected: Vec::new(),
             key: crate::rng::stream::key_of(0),
-            seed: 0,
             blocks: Vec::new(),
         }
     }
@@ -352,7 +287,6 @@ impl Kicks {
     /// Key the version-2 noise by the run's seed.
     pub fn set_seed(&mut self, seed: u64) {
         self.key = crate::rng::stream::key_of(seed);
-        self.seed = seed;
         self.blocks.clear();
     }
 
@@ -446,49 +380,7 @@ impl Kicks {
         self.buf.resize(n * D, 0.0);
         fill_normals_with(rng, &mut self.buf, &mut self.words, &mut self.rejected);
         let s = self.sigma;
-        // Eight independent partial sums and (8 / D) partial maxima break the dependency
-        // chains; lane j of `acc` holds component j % D. Fixed order: deterministic.
-        const W: usize = 8;
-        let vf = v.as_flattened_mut();
-        let mut acc = [0.0; W];
-        let mut mx = [0.0; W];
-        let mut vc = vf.chunks_exact_mut(W);
-        let mut zc = self.buf.chunks_exact(W);
-        for (vv, zz) in (&mut vc).zip(&mut zc) {
-            for j in 0..W {
-                acc[j] += zz[j];
-                vv[j] += s * zz[j];
-            }
-            for p in 0..W / D {
-                let mut a2 = 0.0;
-                for k in 0..D {
-                    a2 += vv[p * D + k] * vv[p * D + k];
-                }
-                if a2 > mx[p] {
-                    mx[p] = a2;
-                }
-            }
-        }
-        for (vv, zz) in vc
-            .into_remainder()
-            .chunks_exact_mut(D)
-            .zip(zc.remainder().chunks_exact(D))
-        {
-            let mut a2 = 0.0;
-            for k in 0..D {
-                acc[k] += zz[k];
-                vv[k] += s * zz[k];
-                a2 += vv[k] * vv[k];
-            }
-            if a2 > mx[0] {
-                mx[0] = a2;
-            }
-        }
-        let mut sum = [0.0; D];
-        for j in 0..W {
-            sum[j % D] += acc[j];
-        }
-        let m = mx.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a });
+        let (sum, m) = add_kicks(v, &self.buf, s);
         (std::array::from_fn(|k| s * (sum[k] / n as f64)), m)
     }
 }

@@ -55,39 +55,47 @@ fn tail_area(r: f64) -> f64 {
     (-0.5 * r * r).exp() / t
 }
 
-impl Tables {
-    /// Layer boundaries for tail start `r`, and the top layer's area minus `v` (increasing
-    /// in r; -inf when the layers reach the mode before the last one).
-    fn layers(r: f64) -> ([f64; LAYERS + 1], f64) {
-        let f = |x: f64| (-0.5 * x * x).exp();
-        let v = r * f(r) + tail_area(r);
-        let mut x = [0.0; LAYERS + 1];
-        x[0] = v / f(r);
-        x[1] = r;
-        for i in 1..LAYERS - 1 {
-            let y = v / x[i] + f(x[i]);
-            if y >= 1.0 {
-                return (x, f64::NEG_INFINITY);
-            }
-            x[i + 1] = (-2.0 * y.ln()).sqrt();
+/// Layer boundaries for tail start `r`, and the top layer's area minus `v` (increasing in r;
+/// -inf when the layers reach the mode before the last one).
+fn layers(r: f64) -> ([f64; LAYERS + 1], f64) {
+    let f = |x: f64| (-0.5 * x * x).exp();
+    let v = r * f(r) + tail_area(r);
+    let mut x = [0.0; LAYERS + 1];
+    x[0] = v / f(r);
+    x[1] = r;
+    for i in 1..LAYERS - 1 {
+        let y = v / x[i] + f(x[i]);
+        if y >= 1.0 {
+            return (x, f64::NEG_INFINITY);
         }
-        let top = x[LAYERS - 1] * (1.0 - f(x[LAYERS - 1]));
-        (x, top - v)
+        x[i + 1] = (-2.0 * y.ln()).sqrt();
     }
+    let top = x[LAYERS - 1] * (1.0 - f(x[LAYERS - 1]));
+    (x, top - v)
+}
 
-    fn new() -> Self {
-        // 256 layers: r = 3.6541528853610088 (Marsaglia & Tsang).
-        let (mut lo, mut hi) = (3.2, 4.0);
-        for _ in 0..200 {
-            let mid = 0.5 * (lo + hi);
-            if Self::layers(mid).1 < 0.0 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
+/// The 256-layer ziggurat of the half-normal density f(x) = exp(-x^2/2) (Marsaglia & Tsang
+/// 2000), layers of equal area v: the tail start `r` (bisection on the top layer's area, so
+/// that all layers have area v to round-off: r = 3.6541528853610088) and the boundaries `x`
+/// (`x[0] = v / f(r)`, `x[1] = r`, decreasing to `x[256] = 0`). Shared by this module and
+/// the stream-version-1 ziggurat of `rfm::noise`.
+pub(crate) fn ziggurat_layers() -> (f64, [f64; LAYERS + 1]) {
+    let (mut lo, mut hi) = (3.2, 4.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if layers(mid).1 < 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
         }
-        let r = 0.5 * (lo + hi);
-        let (x, _) = Self::layers(r);
+    }
+    let r = 0.5 * (lo + hi);
+    (r, layers(r).0)
+}
+
+impl Tables {
+    fn new() -> Self {
+        let (r, x) = ziggurat_layers();
         let f = std::array::from_fn(|i| (-0.5 * x[i] * x[i]).exp());
         let scale: [f64; LAYERS] = std::array::from_fn(|i| x[i] / (1u64 << VALUE_BITS) as f64);
         // The inner test as an integer threshold: the first u whose candidate is >= x[i+1]
@@ -317,7 +325,7 @@ mod tests {
     fn tables_are_solved() {
         let t = Tables::get();
         assert!((t.r - 3.6541528853610088).abs() < 1e-12, "{}", t.r);
-        let (x, top) = Tables::layers(t.r);
+        let (x, top) = layers(t.r);
         // (Top layer area minus v: round-off amplified by the 255-step recursion; v = 4.9e-3.)
         assert!(top.abs() < 1e-14, "{top}");
         for i in 0..LAYERS {
