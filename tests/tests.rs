@@ -41,6 +41,8 @@
 //! - `plan_cost`: `plan`'s cost estimate (core-hours, wall time at `--threads`) and the
 //!   calibration it names (reference, probe, finished runs); a target campaign's pilot; the
 //!   report's estimate against what the runs took.
+//! - `docs`: every relative link and `#anchor` in README.md and docs/*.md resolves (GitHub's
+//!   anchor rules).
 //! - `figures`: the standard figures of tiny rfm, bisection, cascade and SPM campaigns, the
 //!   same in `plot` and `report`; analyze's outputs in the report; overlays split beyond 12
 //!   points.
@@ -71,6 +73,7 @@ mod it {
     pub mod cli_flags;
     pub mod damage;
     pub mod derived;
+    pub mod docs;
     pub mod drills;
     pub mod figures;
     pub mod growth;

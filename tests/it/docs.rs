@@ -1,0 +1,240 @@
+//! The documentation holds together: every relative link and `#anchor` in README.md and
+//! docs/*.md resolves (a file or directory of the repository; an anchor of a heading of the
+//! target Markdown file, by GitHub's rules). No binary is run: these tests take milliseconds.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fs;
+use std::path::{Component, Path, PathBuf};
+
+use super::util::repo_root;
+
+/// GitHub's anchor of a heading: lowercase, every character that is not a letter, a digit,
+/// `-`, `_` or a space dropped, each space replaced by `-` (github-slugger).
+fn slug(heading: &str) -> String {
+    heading
+        .trim()
+        .to_lowercase()
+        .chars()
+        .filter(|c| c.is_alphanumeric() || *c == '-' || *c == '_' || *c == ' ')
+        .map(|c| if c == ' ' { '-' } else { c })
+        .collect()
+}
+
+/// The lines of a Markdown text outside fenced code blocks, with their line numbers (from 1).
+fn prose_lines(text: &str) -> Vec<(usize, &str)> {
+    let mut fenced = false;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+            continue;
+        }
+        if !fenced {
+            out.push((i + 1, line));
+        }
+    }
+    out
+}
+
+/// The anchors of a Markdown text's headings (duplicates get `-1`, `-2`, ... as on GitHub).
+fn anchors(text: &str) -> BTreeSet<String> {
+    let mut seen: BTreeMap<String, usize> = BTreeMap::new();
+    let mut out = BTreeSet::new();
+    for (_, line) in prose_lines(text) {
+        let hashes = line.chars().take_while(|c| *c == '#').count();
+        if (1..=6).contains(&hashes) && line[hashes..].starts_with(' ') {
+            let base = slug(&line[hashes..]);
+            let n = seen.entry(base.clone()).or_insert(0);
+            out.insert(if *n == 0 {
+                base.clone()
+            } else {
+                format!("{base}-{n}")
+            });
+            *n += 1;
+        }
+    }
+    out
+}
+
+/// A line without its inline code spans (text between backticks).
+fn without_code_spans(line: &str) -> String {
+    let mut out = String::new();
+    let mut in_code = false;
+    for c in line.chars() {
+        if c == '`' {
+            in_code = !in_code;
+        } else if !in_code {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// The targets of the inline links `[text](target)` of a Markdown text, with line numbers.
+fn link_targets(text: &str) -> Vec<(usize, String)> {
+    let mut out = Vec::new();
+    for (n, line) in prose_lines(text) {
+        let line = without_code_spans(line);
+        let mut rest = line.as_str();
+        while let Some(i) = rest.find("](") {
+            let after = &rest[i + 2..];
+            let end = after.find(')').unwrap_or(after.len());
+            let target = after[..end].split_whitespace().next().unwrap_or("");
+            out.push((n, target.to_string()));
+            rest = &after[end..];
+        }
+    }
+    out
+}
+
+/// `path` with `.` and `..` folded, or None if it climbs above its root.
+fn normalise(path: &Path) -> Option<PathBuf> {
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                if !out.pop() {
+                    return None;
+                }
+            }
+            Component::Normal(x) => out.push(x),
+            _ => return None,
+        }
+    }
+    Some(out)
+}
+
+/// Every broken relative link of the Markdown files `files` (paths relative to `root`), as
+/// "FILE:LINE: TARGET: why".
+fn broken_links(root: &Path, files: &[PathBuf]) -> Vec<String> {
+    let mut broken = Vec::new();
+    for file in files {
+        let text = fs::read_to_string(root.join(file))
+            .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        for (line, target) in link_targets(&text) {
+            let at = format!("{}:{line}: {target}", file.display());
+            if target.is_empty() {
+                broken.push(format!("{at}: an empty link"));
+                continue;
+            }
+            if target.contains("://") || target.starts_with("mailto:") {
+                continue;
+            }
+            let (path, anchor) = match target.split_once('#') {
+                Some((p, a)) => (p, Some(a)),
+                None => (target.as_str(), None),
+            };
+            let dest = if path.is_empty() {
+                file.clone()
+            } else {
+                match normalise(&file.parent().unwrap_or(Path::new("")).join(path)) {
+                    Some(p) => p,
+                    None => {
+                        broken.push(format!("{at}: leaves the repository"));
+                        continue;
+                    }
+                }
+            };
+            if !root.join(&dest).exists() {
+                broken.push(format!("{at}: {} does not exist", dest.display()));
+                continue;
+            }
+            if let Some(anchor) = anchor {
+                if dest.extension().is_none_or(|x| x != "md") {
+                    broken.push(format!("{at}: an anchor into a file that is not Markdown"));
+                    continue;
+                }
+                let dest_text = fs::read_to_string(root.join(&dest)).unwrap();
+                if !anchors(&dest_text).contains(anchor) {
+                    broken.push(format!(
+                        "{at}: no heading of {} has the anchor #{anchor}",
+                        dest.display()
+                    ));
+                }
+            }
+        }
+    }
+    broken
+}
+
+/// README.md and every docs/*.md, relative to the repository root.
+fn doc_files(root: &Path) -> Vec<PathBuf> {
+    let mut files = vec![PathBuf::from("README.md")];
+    let mut docs: Vec<PathBuf> = fs::read_dir(root.join("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+        .map(|p| PathBuf::from("docs").join(p.file_name().unwrap()))
+        .collect();
+    docs.sort();
+    files.extend(docs);
+    files
+}
+
+#[test]
+fn github_anchors_follow_githubs_rules() {
+    assert_eq!(slug(" Clusters (SLURM)"), "clusters-slurm");
+    assert_eq!(
+        slug(" Auxiliary models: `bisection`, `cascade`, `spm` (spec `rfm.md` sec. 3)"),
+        "auxiliary-models-bisection-cascade-spm-spec-rfmmd-sec-3"
+    );
+    assert_eq!(
+        slug(" Report (`granular report`)"),
+        "report-granular-report"
+    );
+    let a = anchors("# A\n\n## Two  words\n```\n# not a heading\n```\n## A\n");
+    let want: BTreeSet<String> = ["a", "two--words", "a-1"].map(String::from).into();
+    assert_eq!(a, want);
+}
+
+/// The checker itself finds what is broken: a missing file, a missing anchor (in the same
+/// file and in another), a link out of the repository; and passes good links.
+#[test]
+fn the_link_checker_finds_broken_links() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    fs::create_dir(root.join("docs")).unwrap();
+    fs::write(
+        root.join("README.md"),
+        "# Top\n\n## Quick start\n\nSee [a](docs/a.md#part-one), [b](#quick-start), \
+         [web](https://example.org/x#y), `[code](#nowhere)`.\n\
+         Broken: [c](docs/missing.md), [d](#no-such-heading), [e](docs/a.md#part-two),\n\
+         [f](../outside.md), [g](README.md#top)\n```\n[fenced](#nowhere)\n```\n",
+    )
+    .unwrap();
+    fs::write(
+        root.join("docs/a.md"),
+        "# A\n\n## Part one\n\n[back](../README.md#quick-start) [bad](../README.md#part-one)\n",
+    )
+    .unwrap();
+    let broken = broken_links(root, &doc_files(root));
+    let targets: Vec<&str> = broken
+        .iter()
+        .map(|b| b.split(": ").nth(1).unwrap())
+        .collect();
+    assert_eq!(
+        targets,
+        [
+            "docs/missing.md",
+            "#no-such-heading",
+            "docs/a.md#part-two",
+            "../outside.md",
+            "../README.md#part-one"
+        ],
+        "{broken:#?}"
+    );
+}
+
+#[test]
+fn every_relative_link_and_anchor_in_the_docs_resolves() {
+    let root = repo_root();
+    let files = doc_files(&root);
+    assert!(files.len() >= 7, "README.md and docs/*.md: {files:?}");
+    let broken = broken_links(&root, &files);
+    assert!(
+        broken.is_empty(),
+        "broken links in README.md / docs/*.md (anchors: GitHub's rules, lowercase, spaces -> '-', punctuation dropped):\n{}",
+        broken.join("\n")
+    );
+}
