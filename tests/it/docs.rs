@@ -1,6 +1,7 @@
 //! The documentation holds together: every relative link and `#anchor` in README.md and
 //! docs/*.md resolves (a file or directory of the repository; an anchor of a heading of the
-//! target Markdown file, by GitHub's rules). No binary is run: these tests take milliseconds.
+//! target Markdown file, by GitHub's rules), and every property name of the manifest's JSON
+//! Schema is mentioned in docs/manifest.md. These tests take milliseconds.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
@@ -237,4 +238,76 @@ fn every_relative_link_and_anchor_in_the_docs_resolves() {
         "broken links in README.md / docs/*.md (anchors: GitHub's rules, lowercase, spaces -> '-', punctuation dropped):\n{}",
         broken.join("\n")
     );
+}
+/// Property names of the schema that docs/manifest.md need not mention, each with its reason.
+/// (None today: add `("name", "why")` only for a key that is deliberately undocumented.)
+const UNDOCUMENTED_KEYS: &[(&str, &str)] = &[];
+
+/// Every property name of every object in `v` (under `properties`, at any depth: `$defs`,
+/// `oneOf`, `anyOf`, `items`, ...).
+fn property_names(v: &serde_json::Value, out: &mut BTreeSet<String>) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                if k == "properties" {
+                    if let Some(p) = x.as_object() {
+                        out.extend(p.keys().cloned());
+                    }
+                }
+                property_names(x, out);
+            }
+        }
+        serde_json::Value::Array(a) => a.iter().for_each(|x| property_names(x, out)),
+        _ => {}
+    }
+}
+
+/// The names of `schema` that `doc` does not mention as `` `name` `` or as a JSON key
+/// `"name"` (in an example or a form such as `{"constant": eps}`).
+fn undocumented(schema: &serde_json::Value, doc: &str) -> Vec<String> {
+    let mut names = BTreeSet::new();
+    property_names(schema, &mut names);
+    names
+        .into_iter()
+        .filter(|n| !UNDOCUMENTED_KEYS.iter().any(|(k, _)| k == n))
+        .filter(|n| !doc.contains(&format!("`{n}`")) && !doc.contains(&format!("\"{n}\"")))
+        .collect()
+}
+
+#[test]
+fn the_manifest_reference_mentions_every_schema_property() {
+    let root = repo_root();
+    let schema: serde_json::Value = serde_json::from_str(
+        &fs::read_to_string(root.join("schemas/manifest.schema.json")).unwrap(),
+    )
+    .unwrap();
+    let doc = fs::read_to_string(root.join("docs/manifest.md")).unwrap();
+    let mut names = BTreeSet::new();
+    property_names(&schema, &mut names);
+    // The walk reaches into $defs and oneOf: keys that only appear there are found.
+    for deep in [
+        "power_law",
+        "N1",
+        "a_kappa",
+        "per_decade",
+        "sem_rel",
+        "h_max",
+    ] {
+        assert!(names.contains(deep), "the schema walk missed {deep}");
+    }
+    let missing = undocumented(&schema, &doc);
+    assert!(
+        missing.is_empty(),
+        "property names of schemas/manifest.schema.json not mentioned in docs/manifest.md (as `name` or \"name\"): {missing:?}; document them there (or list a reason in UNDOCUMENTED_KEYS)"
+    );
+    // And the check can fail: a key the document does not have is reported.
+    let mut grown = schema.clone();
+    grown["properties"]["a_key_nobody_documented"] = serde_json::json!({"type": "string"});
+    assert_eq!(undocumented(&grown, &doc), ["a_key_nobody_documented"]);
+    for (k, why) in UNDOCUMENTED_KEYS {
+        assert!(
+            names.contains(*k),
+            "UNDOCUMENTED_KEYS lists {k} ({why}), which the schema does not have"
+        );
+    }
 }
