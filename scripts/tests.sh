@@ -3,7 +3,8 @@
 # tables are read back with DuckDB, pyarrow and Polars (scripts/check_tables.py), grown and
 # compared with the campaign of its final manifest (scripts/compare_tables.py --current), the
 # report and the live dashboard in headless Chromium (scripts/browser-test.sh, which installs
-# Debian's chromium when missing), and the SLURM test.
+# Debian's chromium when missing), and the SLURM test. The tutorial's commands and queries
+# (scripts/tutorial_test.py) run before the browser test.
 # Needs scripts/setup.sh to have been run once (for .venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -68,6 +69,9 @@ echo "== compaction while readers read, then the tables again"
 "$bin" compact "$tmp/runs"
 "$bin" verify "$tmp/runs"
 .venv/bin/python scripts/check_tables.py "$tmp/runs"
+
+echo "== the tutorial (docs/tutorial.md): every command and query run, every output shown checked"
+.venv/bin/python scripts/tutorial_test.py "$bin"
 
 echo "== the report and the live dashboard in a real browser (headless Chromium)"
 bash scripts/browser-test.sh

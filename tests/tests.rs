@@ -42,7 +42,9 @@
 //!   calibration it names (reference, probe, finished runs); a target campaign's pilot; the
 //!   report's estimate against what the runs took.
 //! - `docs`: every relative link and `#anchor` in README.md and docs/*.md resolves (GitHub's
-//!   anchor rules); every property of the manifest's JSON Schema is named in docs/manifest.md.
+//!   anchor rules); every property of the manifest's JSON Schema is named in docs/manifest.md;
+//!   the tutorial's manifest is its job and validates as shown (the rest of docs/tutorial.md:
+//!   scripts/tutorial_test.py).
 //! - `figures`: the standard figures of tiny rfm, bisection, cascade and SPM campaigns, the
 //!   same in `plot` and `report`; analyze's outputs in the report; overlays split beyond 12
 //!   points.

@@ -1,7 +1,8 @@
 //! The documentation holds together: every relative link and `#anchor` in README.md and
 //! docs/*.md resolves (a file or directory of the repository; an anchor of a heading of the
 //! target Markdown file, by GitHub's rules), and every property name of the manifest's JSON
-//! Schema is mentioned in docs/manifest.md. These tests take milliseconds.
+//! Schema is mentioned in docs/manifest.md; docs/tutorial.md's manifest is its job and
+//! `granular validate` prints what the tutorial shows. These tests take milliseconds.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
@@ -308,6 +309,81 @@ fn the_manifest_reference_mentions_every_schema_property() {
         assert!(
             names.contains(*k),
             "UNDOCUMENTED_KEYS lists {k} ({why}), which the schema does not have"
+        );
+    }
+}
+
+/// The fenced blocks of a Markdown text: (info string, body).
+fn fenced_blocks(text: &str) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mut open: Option<(String, String)> = None;
+    for line in text.lines() {
+        match (&mut open, line.strip_prefix("```")) {
+            (None, Some(info)) => open = Some((info.trim().to_string(), String::new())),
+            (Some(_), Some(_)) => out.push(open.take().unwrap()),
+            (Some((_, body)), None) => {
+                body.push_str(line);
+                body.push('\n');
+            }
+            (None, None) => {}
+        }
+    }
+    assert!(open.is_none(), "a fenced block is not closed");
+    out
+}
+
+/// The part of docs/tutorial.md that needs no Python (scripts/tutorial_test.py, run by
+/// scripts/tests.sh, runs all of it): the manifest it shows is `jobs/tutorial-mixture.json`,
+/// and its first command, `granular validate`, prints what the tutorial shows.
+#[test]
+fn the_tutorials_manifest_is_the_job_and_validates_as_shown() {
+    let root = repo_root();
+    let text = fs::read_to_string(root.join("docs/tutorial.md")).unwrap();
+    let blocks = fenced_blocks(&text);
+    let job = "jobs/tutorial-mixture.json";
+    let shown: Vec<&String> = blocks
+        .iter()
+        .filter(|(info, _)| info == &format!("json file={job}"))
+        .map(|(_, body)| body)
+        .collect();
+    assert_eq!(shown.len(), 1, "docs/tutorial.md must show {job} once");
+    let shown: serde_json::Value = serde_json::from_str(shown[0]).unwrap();
+    let file: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(root.join(job)).unwrap()).unwrap();
+    assert_eq!(shown, file, "the manifest in docs/tutorial.md is not {job}");
+
+    let i = blocks
+        .iter()
+        .position(|(info, _)| info == "sh run")
+        .expect("docs/tutorial.md has no `sh run` block");
+    let command: Vec<&str> = blocks[i].1.split_whitespace().collect();
+    assert_eq!(command[..2], ["granular", "validate"], "{command:?}");
+    let (info, expected) = &blocks[i + 1];
+    assert_eq!(
+        info, "text output",
+        "the validate block's output is not shown"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let args: Vec<String> = command[1..]
+        .iter()
+        .map(|a| {
+            if a.ends_with(".json") {
+                root.join(a).display().to_string()
+            } else {
+                a.to_string()
+            }
+        })
+        .collect();
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (code, out) = super::util::run_capture(&args, &log);
+    assert_eq!(code, Some(0), "{out}{}", super::util::log_text(&log));
+    let root_prefix = format!("{}/", root.display());
+    let out = out.replace(&root_prefix, "");
+    for line in expected.lines().filter(|l| !l.trim().is_empty()) {
+        assert!(
+            out.lines().any(|o| o.trim() == line.trim()),
+            "docs/tutorial.md shows `{line}`, granular printed:\n{out}"
         );
     }
 }
