@@ -38,8 +38,19 @@ pub struct Preview {
     pub kept_runs: u64,
     /// Runs the latest manifest asks for that are not finished (new ones included).
     pub to_run: u64,
-    /// Registered points the manifest no longer lists (kept, with their finished runs).
+    /// Registered points the manifest no longer lists (kept, with their finished runs): those
+    /// leaving now ([`Preview::leaving_points`]) and those earlier manifests left.
     pub retired_points: Vec<u32>,
+    /// Points of the campaign's latest manifest that this one no longer lists (they stay in
+    /// the campaign: see [`LEAVING_MEANS`]).
+    pub leaving_points: Vec<LeavingPoint>,
+    /// Runs of the campaign's latest manifest that this one no longer asks for at points it
+    /// still lists (replicas beyond its count, seeds it no longer lists), per point.
+    pub leaving_runs: Vec<LeavingRuns>,
+    /// The expected cost of the runs this manifest adds (new points' and new replicas' runs,
+    /// continued runs as the part beyond the run they continue) and of the new points'
+    /// theory: the new work, beside `estimate` (every run still to run).
+    pub new_work: Estimate,
     /// The kinetic theory of the new points (computed before the runs), as the model
     /// estimates it from their params.
     pub theory: TheoryWork,
@@ -146,6 +157,38 @@ pub struct NewPoint {
     pub differs: Vec<String>,
     /// The point whose finished runs its runs continue (a longer horizon).
     pub continues: Option<u32>,
+}
+
+/// What happens to the points and runs that leave the manifest, in words (`plan` prints
+/// it): what the campaign does with runs its latest manifest does not ask for.
+pub const LEAVING_MEANS: &str = "they stay in the campaign, nothing is deleted: finished runs keep their rows in the tables, unfinished ones are not run (status counts them as dropped), summaries and figures cover only the manifest's runs, and a later manifest that lists them again takes them back with their finished runs";
+
+/// A point of the campaign's latest manifest that the new manifest no longer lists.
+#[derive(Serialize, Clone, Debug, Default, PartialEq)]
+pub struct LeavingPoint {
+    pub point_id: u32,
+    /// Its swept values in the campaign's latest manifest (`key=value, ...`).
+    pub label: String,
+    /// The runs the campaign's latest manifest asked of it, and how many are finished.
+    pub runs: u64,
+    pub finished: u64,
+    /// The nearest point of the new manifest (see `plan`'s distance) and how it differs from
+    /// the leaving point (`key: leaving -> nearest`).
+    pub nearest: Option<u32>,
+    pub differs: Vec<String>,
+    /// The new point (a longer horizon) whose runs continue its finished runs.
+    pub continued_by: Option<u32>,
+}
+
+/// Runs of a point still in the manifest that it no longer asks for.
+#[derive(Serialize, Clone, Debug, Default, PartialEq)]
+pub struct LeavingRuns {
+    pub point_id: u32,
+    pub label: String,
+    /// Their replica numbers and run ids, in run order, and how many are finished.
+    pub replicas: Vec<u32>,
+    pub run_ids: Vec<u64>,
+    pub finished: u64,
 }
 
 /// A run to run.
@@ -258,6 +301,23 @@ pub fn preview(
         opts.threads,
         calibration,
     );
+    let added: BTreeSet<u64> = growth.new_runs.iter().map(|(_, _, r)| *r).collect();
+    let added: Vec<_> = current
+        .iter()
+        .filter(|r| added.contains(&r.run_id))
+        .copied()
+        .collect();
+    p.new_work = estimate_costs(
+        runs_work(c, &added, &finished)
+            .iter()
+            .map(|(w, n)| (w.cost(), *n)),
+        &p.theory,
+        opts.threads,
+        p.estimate.calibration.clone(),
+    );
+    if !new_campaign {
+        leaving(c, growth, &finished, &mut p)?;
+    }
     if c.manifest.has_targets() {
         let per_point = c.manifest.min_replicas();
         let most = c.manifest.max_replicas();
@@ -318,51 +378,163 @@ pub fn preview(
     Ok(p)
 }
 
-/// A new point: the registered point it continues or is closest to (fewest differing params,
-/// the first among equals), and the differences.
+/// The points and runs of the campaign's latest manifest (the campaign as it is on disk)
+/// that the new manifest (`c`, the campaign as it would be) no longer asks for.
+fn leaving(
+    c: &Campaign,
+    growth: &Growth,
+    finished: &BTreeMap<u64, RunStatus>,
+    p: &mut Preview,
+) -> Result<(), CampaignError> {
+    let before = Campaign::open(&c.root)?;
+    let reg = &c.plan.registry.points;
+    let mut continued_by: HashMap<u32, u32> = HashMap::new();
+    for (run, old) in &growth.continued {
+        continued_by
+            .entry(c.plan.run(*old).point_id)
+            .or_insert_with(|| c.plan.run(*run).point_id);
+    }
+    let mut points: BTreeMap<u32, LeavingPoint> = BTreeMap::new();
+    let mut runs: BTreeMap<u32, LeavingRuns> = BTreeMap::new();
+    for r in before.plan.current_runs() {
+        let now = c.plan.point(r.point_id);
+        let done = u64::from(finished.contains_key(&r.run_id));
+        if !now.current {
+            let lp = points.entry(r.point_id).or_insert_with(|| LeavingPoint {
+                point_id: r.point_id,
+                label: before.plan.label(r.point_id),
+                continued_by: continued_by.get(&r.point_id).copied(),
+                ..LeavingPoint::default()
+            });
+            lp.runs += 1;
+            lp.finished += done;
+        } else if !c.plan.is_current(&c.plan.run(r.run_id)) {
+            let lr = runs.entry(r.point_id).or_insert_with(|| LeavingRuns {
+                point_id: r.point_id,
+                label: c.plan.label(r.point_id),
+                ..LeavingRuns::default()
+            });
+            lr.replicas.push(r.replica);
+            lr.run_ids.push(r.run_id);
+            lr.finished += done;
+        }
+    }
+    if !points.is_empty() {
+        let nearest = Nearest::new(
+            c.plan
+                .points
+                .iter()
+                .filter(|q| q.current)
+                .take(NEAREST_SEARCH)
+                .map(|q| (q.point_id, flatten(&reg[q.point_id as usize].params))),
+        );
+        for lp in points.values_mut() {
+            let mine = flatten(&reg[lp.point_id as usize].params);
+            lp.nearest = nearest.find(&mine);
+            lp.differs = lp
+                .nearest
+                .map(|n| differences(&mine, &flatten(&reg[n as usize].params)))
+                .unwrap_or_default();
+        }
+    }
+    p.leaving_points = points.into_values().collect();
+    p.leaving_runs = runs.into_values().collect();
+    Ok(())
+}
+
+/// A new point: the registered point it continues or is closest to (see [`Nearest`]), and
+/// the differences.
 fn describe(c: &Campaign, id: u32, continues: Option<u32>, nearest: &Nearest) -> NewPoint {
     let reg = &c.plan.registry.points;
     let mine = flatten(&reg[id as usize].params);
-    let differs_from = |other: u32| -> Vec<String> {
-        let theirs = flatten(&reg[other as usize].params);
-        let keys: BTreeSet<&String> = mine.keys().chain(theirs.keys()).collect();
-        keys.into_iter()
-            .filter(|k| mine.get(*k) != theirs.get(*k))
-            .map(|k| {
-                let show = |v: Option<&String>| v.cloned().unwrap_or_else(|| "(none)".into());
-                format!("{k}: {} -> {}", show(theirs.get(k)), show(mine.get(k)))
-            })
-            .collect()
-    };
     let nearest = continues.or_else(|| nearest.find(&mine));
     NewPoint {
         point_id: id,
         label: c.plan.label(id),
         nearest,
-        differs: nearest.map(differs_from).unwrap_or_default(),
+        differs: nearest
+            .map(|other| differences(&flatten(&reg[other as usize].params), &mine))
+            .unwrap_or_default(),
         continues,
     }
 }
 
-/// The search for a new point's nearest registered point (the fewest differing flattened
-/// params, the smallest id among equals) over the candidates (the first [`NEAREST_SEARCH`]
-/// registered points that are not new), built once per preview so that a plan of many new
-/// points stays linear in them. Each candidate's values are interned per key; only the keys
-/// whose values vary among the candidates can tell them apart, and a point at distance 0 or 1
-/// of a candidate on those keys is found by hashing (the usual case: a sweep grown by a value
-/// or a key); otherwise the candidates are scanned, stopping at the first at distance 2.
+/// The leaves where `to` differs from `from`, `key: from -> to` (dotted paths with list
+/// indices, `(absent)` where one side has no such key), in key order.
+pub(crate) fn differences(
+    from: &BTreeMap<String, String>,
+    to: &BTreeMap<String, String>,
+) -> Vec<String> {
+    let keys: BTreeSet<&String> = from.keys().chain(to.keys()).collect();
+    let show = |v: Option<&String>| v.cloned().unwrap_or_else(|| "(absent)".into());
+    keys.into_iter()
+        .filter(|k| from.get(*k) != to.get(*k))
+        .map(|k| format!("{k}: {} -> {}", show(from.get(k)), show(to.get(k))))
+        .collect()
+}
+
+/// The relative difference of two leaves (compact JSON): |a - b| / max(|a|, |b|) where both
+/// are numbers, 0 otherwise (or where both are 0).
+fn relative(a: Option<f64>, b: Option<f64>) -> f64 {
+    match (a, b) {
+        (Some(a), Some(b)) => {
+            let m = a.abs().max(b.abs());
+            if m > 0.0 && m.is_finite() {
+                (a - b).abs() / m
+            } else {
+                0.0
+            }
+        }
+        _ => 0.0,
+    }
+}
+
+/// A leaf's number, if it is one (compact JSON: a string leaf is quoted, so never parses).
+fn number(leaf: &str) -> Option<f64> {
+    leaf.parse::<f64>().ok().filter(|x| x.is_finite())
+}
+
+/// The distance between two points' flattened params, the smaller the nearer: first the
+/// number of differing leaf keys (a key on one side only counts), then the sum over the
+/// differing leaves that are numbers on both sides of |a - b| / max(|a|, |b|). ([`Nearest`]
+/// ranks by it; the tests compare the two.)
+#[cfg(test)]
+fn distance(a: &BTreeMap<String, String>, b: &BTreeMap<String, String>) -> (usize, f64) {
+    let keys: BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    let mut d = (0usize, 0.0f64);
+    for k in keys {
+        let (x, y) = (a.get(k), b.get(k));
+        if x != y {
+            d.0 += 1;
+            d.1 += relative(x.and_then(|s| number(s)), y.and_then(|s| number(s)));
+        }
+    }
+    d
+}
+
+/// The search for a point's nearest registered point over the candidates (the first
+/// [`NEAREST_SEARCH`] registered points that are not new): the smallest [`distance`] (the
+/// fewest differing leaf keys, then the smallest sum of relative numeric differences), the
+/// smallest point id among equals. Built once per preview so that a plan of many new points
+/// stays linear in them. Each candidate's values are interned per key; only the keys whose
+/// values vary among the candidates can tell them apart (the others add the same to every
+/// distance), and the candidates at distance 0 or 1 of a point on those keys are found by
+/// hashing (the usual case: a sweep grown by a value or a key); otherwise the candidates are
+/// scanned.
 struct Nearest {
     ids: Vec<u32>,
     /// Every key of a candidate, and per key its values' numbers (0: no value).
     keys: HashMap<String, (usize, HashMap<String, u32>)>,
+    /// Per varying key (in `varying` order), the number of each value number (index 0: none).
+    numbers: Vec<Vec<Option<f64>>>,
     /// Per candidate, the value numbers of the varying keys (in `varying` order).
     rows: Vec<Vec<u32>>,
     /// The keys whose values vary among the candidates (indices into the key numbering).
     varying: Vec<usize>,
-    /// The smallest candidate index per exact row, and per (masked key, row with that key's
-    /// value replaced by `MASKED`).
+    /// The smallest candidate index per exact row, and every candidate per (masked key, row
+    /// with that key's value replaced by `MASKED`).
     exact: HashMap<Vec<u32>, usize>,
-    masked: HashMap<(usize, Vec<u32>), usize>,
+    masked: HashMap<(usize, Vec<u32>), Vec<usize>>,
 }
 
 const MASKED: u32 = u32::MAX - 1;
@@ -396,31 +568,49 @@ impl Nearest {
                 d
             })
             .collect();
-        // Keys that every candidate has alike add the same to every distance: the ranking
-        // depends on the varying keys only.
-        let varying: Vec<usize> = (0..n_keys)
+        // In key order, so that the sums of relative differences are made in one order.
+        let mut names: Vec<(&str, usize)> =
+            keys.iter().map(|(k, (i, _))| (k.as_str(), *i)).collect();
+        names.sort_unstable();
+        let varying: Vec<usize> = names
+            .iter()
+            .map(|(_, k)| *k)
             .filter(|&k| {
                 let first = dense.first().map_or(0, |d| d[k]);
                 dense.iter().any(|d| d[k] != first)
             })
+            .collect();
+        // The numbers of the values of each key, by value number.
+        let mut by_key: Vec<Vec<Option<f64>>> = vec![Vec::new(); n_keys];
+        for (ki, values) in keys.values() {
+            let mut nums = vec![None; values.len() + 1];
+            for (v, vi) in values {
+                nums[*vi as usize] = number(v);
+            }
+            by_key[*ki] = nums;
+        }
+        let numbers: Vec<Vec<Option<f64>>> = varying
+            .iter()
+            .map(|&k| std::mem::take(&mut by_key[k]))
             .collect();
         let rows: Vec<Vec<u32>> = dense
             .iter()
             .map(|d| varying.iter().map(|&k| d[k]).collect())
             .collect();
         let mut exact = HashMap::new();
-        let mut masked = HashMap::new();
+        let mut masked: HashMap<(usize, Vec<u32>), Vec<usize>> = HashMap::new();
         for (c, row) in rows.iter().enumerate() {
             exact.entry(row.clone()).or_insert(c);
             for j in 0..row.len() {
                 let mut m = row.clone();
                 m[j] = MASKED;
-                masked.entry((j, m)).or_insert(c);
+                masked.entry((j, m)).or_default().push(c);
             }
         }
         Nearest {
             ids,
             keys,
+            numbers,
             rows,
             varying,
             exact,
@@ -436,54 +626,91 @@ impl Nearest {
         }
         // The point's value number per key (UNSEEN: a value no candidate has there).
         let mut mine = vec![0u32; self.keys.len()];
+        let mut mine_num: Vec<Option<f64>> = vec![None; self.keys.len()];
         for (k, v) in flat {
             if let Some((ki, values)) = self.keys.get(k) {
                 mine[*ki] = values.get(v).copied().unwrap_or(UNSEEN);
+                mine_num[*ki] = number(v);
             }
         }
         let row: Vec<u32> = self.varying.iter().map(|&k| mine[k]).collect();
+        let nums: Vec<Option<f64>> = self.varying.iter().map(|&k| mine_num[k]).collect();
         if let Some(&c) = self.exact.get(&row) {
             return Some(self.ids[c]);
         }
-        let mut best: Option<usize> = None;
+        // The relative difference of candidate `c` from the point on varying key `j`.
+        let rel = |c: usize, j: usize| relative(self.numbers[j][self.rows[c][j] as usize], nums[j]);
+        let better = |a: (usize, f64, u32), b: (usize, f64, u32)| {
+            a.0.cmp(&b.0)
+                .then(a.1.total_cmp(&b.1))
+                .then(a.2.cmp(&b.2))
+                .is_lt()
+        };
+        let mut best: Option<(usize, f64, u32)> = None;
         for j in 0..row.len() {
             let mut m = row.clone();
             m[j] = MASKED;
-            if let Some(&c) = self.masked.get(&(j, m)) {
-                best = Some(best.map_or(c, |b| b.min(c)));
-            }
-        }
-        if let Some(c) = best {
-            return Some(self.ids[c]);
-        }
-        // Every candidate is at distance >= 2: the first at exactly 2, else the smallest.
-        let mut best = (usize::MAX, 0usize);
-        for (c, r) in self.rows.iter().enumerate() {
-            let d = r.iter().zip(&row).filter(|(a, b)| a != b).count();
-            if d < best.0 {
-                best = (d, c);
-                if d <= 2 {
-                    break;
+            for &c in self.masked.get(&(j, m)).into_iter().flatten() {
+                let d = (1, rel(c, j), self.ids[c]);
+                if best.is_none_or(|b| better(d, b)) {
+                    best = Some(d);
                 }
             }
         }
-        Some(self.ids[best.1])
+        if let Some((_, _, id)) = best {
+            return Some(id);
+        }
+        // Every candidate is at distance >= 2: scan them all.
+        for (c, r) in self.rows.iter().enumerate() {
+            let mut d = (0usize, 0.0f64, self.ids[c]);
+            for (j, (a, b)) in r.iter().zip(&row).enumerate() {
+                if a != b {
+                    d.0 += 1;
+                    d.1 += rel(c, j);
+                }
+            }
+            if best.is_none_or(|b| better(d, b)) {
+                best = Some(d);
+            }
+        }
+        best.map(|(_, _, id)| id)
     }
 }
 
-/// A JSON value as dotted keys and compact JSON leaves (arrays are leaves).
-fn flatten(v: &serde_json::Value) -> BTreeMap<String, String> {
+/// A number as a reader writes it: a whole number without `.0` (`16`, not the `16.0` of a
+/// float), others as JSON has them (`0.5`, `1e-7`).
+fn number_text(n: &serde_json::Number) -> String {
+    match n.as_f64() {
+        Some(x) if n.is_f64() && x.fract() == 0.0 && x.abs() < 1e15 => format!("{}", x as i64),
+        _ => n.to_string(),
+    }
+}
+
+/// A JSON value as dotted keys (list elements by their index, from 0:
+/// `species.list.1.mass`) and compact JSON leaves (numbers, strings, booleans, null, empty
+/// lists and objects; whole numbers without `.0`: [`number_text`]).
+pub(crate) fn flatten(v: &serde_json::Value) -> BTreeMap<String, String> {
     fn walk(prefix: &str, v: &serde_json::Value, out: &mut BTreeMap<String, String>) {
+        let key = |k: &str| {
+            if prefix.is_empty() {
+                k.to_string()
+            } else {
+                format!("{prefix}.{k}")
+            }
+        };
         match v {
             serde_json::Value::Object(o) if !o.is_empty() => {
                 for (k, x) in o {
-                    let key = if prefix.is_empty() {
-                        k.clone()
-                    } else {
-                        format!("{prefix}.{k}")
-                    };
-                    walk(&key, x, out);
+                    walk(&key(k), x, out);
                 }
+            }
+            serde_json::Value::Array(a) if !a.is_empty() => {
+                for (i, x) in a.iter().enumerate() {
+                    walk(&key(&i.to_string()), x, out);
+                }
+            }
+            serde_json::Value::Number(n) => {
+                out.insert(prefix.to_string(), number_text(n));
             }
             leaf => {
                 out.insert(prefix.to_string(), leaf.to_string());
@@ -799,9 +1026,11 @@ const PROBE_SEED: u64 = 0x5eed_c057;
 mod tests {
     use super::*;
 
-    /// The search by index finds the point the scan of every candidate finds (the fewest
-    /// differing keys, the smallest id among equals), for points at distance 0, 1, 2 and more
-    /// on the varying keys, with keys missing on either side.
+    /// The search by index finds the point the scan of every candidate by [`distance`] finds
+    /// (the fewest differing keys, then the smallest sum of relative numeric differences, the
+    /// smallest id among equals), for points at distance 0, 1, 2 and more on the varying keys,
+    /// with keys missing on either side. (Values 0, 1, 2, 4: every relative difference and
+    /// every sum of them is exact, so that ties are ties.)
     #[test]
     fn nearest_is_that_of_the_scan() {
         let mut seed = 7u64;
@@ -817,7 +1046,10 @@ mod tests {
             for k in 0..5 {
                 let v = next(3);
                 if v < 2 || k == 0 {
-                    m.insert(format!("k{k}"), format!("{}", next(4)));
+                    m.insert(
+                        format!("k{k}"),
+                        format!("{}", [0, 1, 2, 4][next(4) as usize]),
+                    );
                 }
             }
             if i % 7 == 0 {
@@ -831,24 +1063,82 @@ mod tests {
         let scan = |mine: &BTreeMap<String, String>| {
             candidates
                 .iter()
-                .map(|(id, theirs)| {
-                    let keys: BTreeSet<&String> = mine.keys().chain(theirs.keys()).collect();
-                    let d = keys
-                        .into_iter()
-                        .filter(|k| mine.get(*k) != theirs.get(*k))
-                        .count();
-                    (d, *id)
-                })
-                .min()
+                .map(|(id, theirs)| (distance(mine, theirs), *id))
+                .min_by(|(a, i), (b, j)| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(i.cmp(j)))
                 .map(|(_, id)| id)
         };
+        let mut by_relative = 0;
         for i in 0..400 {
             let p = point(1000 + i);
-            assert_eq!(index.find(&p), scan(&p), "{p:?}");
+            let found = index.find(&p);
+            assert_eq!(found, scan(&p), "{p:?}");
+            // How often the relative differences decide (the fewest keys alone would not).
+            let fewest = candidates
+                .iter()
+                .map(|(id, theirs)| (distance(&p, theirs).0, *id))
+                .min()
+                .map(|(_, id)| id);
+            by_relative += usize::from(found != fewest);
         }
+        assert!(
+            by_relative > 20,
+            "the relative differences decided {by_relative} times"
+        );
         for (_, c) in &candidates {
             assert_eq!(index.find(c), scan(c));
         }
         assert_eq!(Nearest::new(std::iter::empty()).find(&point(0)), None);
+    }
+
+    /// Params flatten to dotted paths with list indices from 0; the differences name only
+    /// the leaves that differ, `(absent)` for a key on one side only; the nearest of a mass
+    /// sweep [2, 4, 8] to 16 is 8 (one leaf differs from each; 8 the least relatively),
+    /// and of restitution [0.5, 0.9] to 0.8 is 0.9.
+    #[test]
+    fn differences_are_leaves_and_nearest_is_relative() {
+        let p = |mass: f64, eps: f64| {
+            flatten(&serde_json::json!({
+                "species": {"list": [{"mass": 1, "count": 10}, {"mass": mass, "count": 5}]},
+                "restitution": {"constant": eps}, "output_times": {"list": []}
+            }))
+        };
+        assert_eq!(p(2.0, 0.5)["species.list.1.mass"], "2");
+        assert_eq!(p(2.5, 0.5)["species.list.1.mass"], "2.5");
+        assert_eq!(p(2.0, 0.5)["output_times.list"], "[]");
+        assert_eq!(
+            differences(&p(8.0, 0.5), &p(16.0, 0.5)),
+            vec!["species.list.1.mass: 8 -> 16".to_string()]
+        );
+        let mut q = p(8.0, 0.5);
+        q.insert("t_end".into(), "3".into());
+        assert_eq!(
+            differences(&p(8.0, 0.5), &q),
+            vec!["t_end: (absent) -> 3".to_string()]
+        );
+        let masses = Nearest::new(
+            [2.0, 4.0, 8.0]
+                .iter()
+                .enumerate()
+                .map(|(i, m)| (i as u32, p(*m, 0.5))),
+        );
+        assert_eq!(masses.find(&p(16.0, 0.5)), Some(2));
+        assert_eq!(masses.find(&p(3.0, 0.5)), Some(1));
+        let eps = Nearest::new(
+            [0.5, 0.9]
+                .iter()
+                .enumerate()
+                .map(|(i, e)| (i as u32, p(2.0, *e))),
+        );
+        assert_eq!(eps.find(&p(2.0, 0.8)), Some(1));
+        assert_eq!(eps.find(&p(2.0, 0.6)), Some(0));
+        // Two leaves differ from each: the relative sums decide (8 and 0.9 nearer).
+        let both = Nearest::new(
+            [(2.0, 0.5), (8.0, 0.9)]
+                .iter()
+                .enumerate()
+                .map(|(i, (m, e))| (i as u32, p(*m, *e))),
+        );
+        assert_eq!(both.find(&p(16.0, 0.8)), Some(1));
+        assert_eq!(distance(&p(2.0, 0.5), &p(2.0, 0.5)), (0, 0.0));
     }
 }

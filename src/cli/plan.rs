@@ -101,13 +101,7 @@ fn text(c: &Campaign, out: &Path, p: &Preview) -> String {
             } else {
                 "differs from"
             };
-            let mut d = np.differs.clone();
-            if d.len() > 4 {
-                let n = d.len() - 3;
-                d.truncate(3);
-                d.push(format!("{n} more"));
-            }
-            s.push_str(&format!(" ({verb} point {near}: {})", d.join("; ")));
+            s.push_str(&format!(" ({verb} point {near}: {})", short(&np.differs)));
         }
         s.push('\n');
     }
@@ -126,13 +120,7 @@ fn text(c: &Campaign, out: &Path, p: &Preview) -> String {
         "  runs the manifest asks for: {} finished (kept), {} to run\n",
         p.kept_runs, p.to_run
     ));
-    if !p.retired_points.is_empty() {
-        s.push_str(&format!(
-            "  {} point(s) no longer in the manifest (kept, with their finished runs): {:?}\n",
-            p.retired_points.len(),
-            p.retired_points
-        ));
-    }
+    leaving_text(p, &mut s);
     if p.theory.points > 0 {
         s.push_str(&format!(
             "  kinetic theory of the new points (before the runs): {}\n",
@@ -147,6 +135,19 @@ fn text(c: &Campaign, out: &Path, p: &Preview) -> String {
         e.calibration.source,
         e.calibration.detail
     ));
+    if !p.new_campaign && p.new_runs > 0 {
+        let n = &p.new_work;
+        s.push_str(&format!(
+            "  expected time of the new work ({} run(s) added{}): {}\n",
+            n.runs,
+            if p.continued_runs > 0 {
+                format!(", {} continuing finished runs", p.continued_runs)
+            } else {
+                String::new()
+            },
+            n.text()
+        ));
+    }
     if let Some(t) = &p.targets {
         s.push_str(&format!(
             "  error targets: the pilot of {} replica(s) per point is the {} run(s) above (~{:.2e} core-hours); the replicas beyond it are decided in rounds from the pilot's variances, up to {} per point ({} runs, ~{:.2e} core-hours at most{})\n",
@@ -170,4 +171,98 @@ fn text(c: &Campaign, out: &Path, p: &Preview) -> String {
         s.push_str(&format!("  note: {n}\n"));
     }
     s
+}
+
+/// At most this many leaving points (and points with leaving runs) are printed one a line;
+/// `--json` lists them all.
+const LEAVING_LINES: usize = 12;
+
+/// The points and runs that leave the manifest, and what that means for them; the points
+/// that earlier manifests left.
+fn leaving_text(p: &Preview, s: &mut String) {
+    let (lp, lr) = (&p.leaving_points, &p.leaving_runs);
+    if !lp.is_empty() || !lr.is_empty() {
+        let runs: u64 = lp.iter().map(|x| x.runs).sum::<u64>()
+            + lr.iter().map(|x| x.run_ids.len() as u64).sum::<u64>();
+        let done: u64 =
+            lp.iter().map(|x| x.finished).sum::<u64>() + lr.iter().map(|x| x.finished).sum::<u64>();
+        s.push_str(&format!(
+            "  leaving the manifest: {} point(s) and {} run(s) of points it keeps ({runs} run(s), {done} finished); {}\n",
+            lp.len(),
+            lr.iter().map(|x| x.run_ids.len()).sum::<usize>(),
+            crate::campaign::preview::LEAVING_MEANS
+        ));
+    }
+    for x in lp.iter().take(LEAVING_LINES) {
+        s.push_str(&format!(
+            "  leaving point {:>4} {} ({} run(s), {} finished",
+            x.point_id, x.label, x.runs, x.finished
+        ));
+        if let Some(n) = x.continued_by {
+            s.push_str(&format!("; continued by point {n}"));
+        } else if let Some(n) = x.nearest {
+            s.push_str(&format!("; nearest kept point {n}: {}", short(&x.differs)));
+        }
+        s.push_str(")\n");
+    }
+    if lp.len() > LEAVING_LINES {
+        s.push_str(&format!(
+            "  ... and {} more leaving point(s) (--json lists them all)\n",
+            lp.len() - LEAVING_LINES
+        ));
+    }
+    for x in lr.iter().take(LEAVING_LINES) {
+        s.push_str(&format!(
+            "  leaving runs of point {:>4} {}: replica(s) {} (run(s) {}; {} finished)\n",
+            x.point_id,
+            x.label,
+            list(&x.replicas),
+            list(&x.run_ids),
+            x.finished
+        ));
+    }
+    if lr.len() > LEAVING_LINES {
+        s.push_str(&format!(
+            "  ... and {} more point(s) with leaving runs (--json lists them all)\n",
+            lr.len() - LEAVING_LINES
+        ));
+    }
+    let leaving: std::collections::BTreeSet<u32> = lp.iter().map(|x| x.point_id).collect();
+    let earlier: Vec<u32> = p
+        .retired_points
+        .iter()
+        .copied()
+        .filter(|id| !leaving.contains(id))
+        .collect();
+    if !earlier.is_empty() {
+        s.push_str(&format!(
+            "  {} point(s) that earlier manifests left, not in this one either (kept): {}\n",
+            earlier.len(),
+            list(&earlier)
+        ));
+    }
+}
+
+/// At most 3 differences, then how many more.
+fn short(d: &[String]) -> String {
+    let mut d = d.to_vec();
+    if d.len() > 4 {
+        let n = d.len() - 3;
+        d.truncate(3);
+        d.push(format!("{n} more"));
+    }
+    d.join("; ")
+}
+
+/// `0, 1, 2` or, for more than 8, the first 6 and how many more.
+fn list<T: std::fmt::Display>(xs: &[T]) -> String {
+    let mut out: Vec<String> = xs
+        .iter()
+        .take(if xs.len() > 8 { 6 } else { 8 })
+        .map(|x| x.to_string())
+        .collect();
+    if xs.len() > 8 {
+        out.push(format!("... ({} more)", xs.len() - 6));
+    }
+    out.join(", ")
 }
