@@ -57,7 +57,11 @@ fn example_at(root: &Value, schema: &Value, got: Option<&Value>, depth: usize) -
     if let Some(c) = s.get("const") {
         return c.clone();
     }
-    if let Some(first) = s.get("enum").and_then(Value::as_array).and_then(|e| e.first()) {
+    if let Some(first) = s
+        .get("enum")
+        .and_then(Value::as_array)
+        .and_then(|e| e.first())
+    {
         return first.clone();
     }
     for key in ["oneOf", "anyOf", "allOf"] {
@@ -91,7 +95,11 @@ fn example_at(root: &Value, schema: &Value, got: Option<&Value>, depth: usize) -
                 .get("items")
                 .map(|i| example_at(root, i, None, depth + 1))
                 .unwrap_or(Value::Null);
-            let n = s.get("minItems").and_then(Value::as_u64).unwrap_or(1).max(1);
+            let n = s
+                .get("minItems")
+                .and_then(Value::as_u64)
+                .unwrap_or(1)
+                .max(1);
             Value::Array(vec![item; n.min(4) as usize])
         }
         "object" => {

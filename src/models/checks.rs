@@ -54,7 +54,10 @@ pub fn numbers_by_value(mut value: Value) -> Value {
             Value::Object(m) => m.values_mut().for_each(walk),
             Value::Number(n) if n.is_f64() => {
                 let x = n.as_f64().unwrap_or(f64::NAN);
-                if x.fract() == 0.0 && x.abs() < 9007199254740992.0 && !(x == 0.0 && x.is_sign_negative()) {
+                if x.fract() == 0.0
+                    && x.abs() < 9007199254740992.0
+                    && !(x == 0.0 && x.is_sign_negative())
+                {
                     *v = Value::from(x as i64);
                 }
             }

@@ -13,7 +13,9 @@ use serde_json::{json, Value};
 
 use granular::manifest::{forms, json_schema, validate};
 
-use super::util::{assert_same_current, bin, heavy, log_text, run_capture, run_granular, s, write_json};
+use super::util::{
+    assert_same_current, bin, heavy, log_text, run_capture, run_granular, s, write_json,
+};
 
 const LIMIT: Duration = Duration::from_secs(120);
 
@@ -49,7 +51,11 @@ fn every_alternative_names_each_form_with_a_valid_example() {
     let defs = root["$defs"].clone();
     let mut checked = 0;
     for (at, node) in nodes {
-        let key = if node.get("oneOf").is_some() { "oneOf" } else { "anyOf" };
+        let key = if node.get("oneOf").is_some() {
+            "oneOf"
+        } else {
+            "anyOf"
+        };
         let alternatives = node[key].as_array().unwrap().clone();
         let mut schema = node.clone();
         schema["$defs"] = defs.clone();
@@ -60,7 +66,10 @@ fn every_alternative_names_each_form_with_a_valid_example() {
             let named = forms::describe(&schema, &alternatives, &wrong);
             assert_eq!(named.len(), alternatives.len(), "{at}");
             for form in &named {
-                assert!(message.contains(form.as_str()), "{at}: {form} not in {message:?}");
+                assert!(
+                    message.contains(form.as_str()),
+                    "{at}: {form} not in {message:?}"
+                );
             }
         }
         for alt in &alternatives {
@@ -68,7 +77,10 @@ fn every_alternative_names_each_form_with_a_valid_example() {
             let mut one = alt.clone();
             one["$defs"] = defs.clone();
             let errs = validate::schema_errors(&one, &ex, "");
-            assert!(errs.is_empty(), "{at}: the example {ex} of {alt} is refused: {errs:?}");
+            assert!(
+                errs.is_empty(),
+                "{at}: the example {ex} of {alt} is refused: {errs:?}"
+            );
         }
         checked += 1;
     }
@@ -122,9 +134,14 @@ fn a_wrong_form_names_the_allowed_forms() {
     ] {
         assert!(text.contains(want), "{want:?} not in\n{text}");
     }
-    let text = errors_of(&dsmc(json!({}), json!({"restitution": [{"constant": 0.5}, 0.9]})));
+    let text = errors_of(&dsmc(
+        json!({}),
+        json!({"restitution": [{"constant": 0.5}, 0.9]}),
+    ));
     assert!(
-        text.contains(r#"0.9 is not one of the allowed forms: {"constant": 0.9}, {"viscoelastic": "#),
+        text.contains(
+            r#"0.9 is not one of the allowed forms: {"constant": 0.9}, {"viscoelastic": "#
+        ),
         "{text}"
     );
 }
@@ -153,8 +170,14 @@ fn a_number_is_its_value() {
         // Whole-number keys too (before: "invalid type: floating point `60.0`, expected u64").
         .replace("\"count\":60", "\"count\":60.0")
         .replace("\"seed\":5", "\"seed\":5e0");
-    assert!(b_text.contains("\"count\":60.0") && b_text.contains("\"seed\":5e0"), "{b_text}");
-    assert!(!b_text.contains("\"mass\":2.0") && b_text.contains("[4,8e0]"), "{b_text}");
+    assert!(
+        b_text.contains("\"count\":60.0") && b_text.contains("\"seed\":5e0"),
+        "{b_text}"
+    );
+    assert!(
+        !b_text.contains("\"mass\":2.0") && b_text.contains("[4,8e0]"),
+        "{b_text}"
+    );
     let (_, pa) = granular::campaign::plan::parse(&a.to_string(), "a.json").unwrap();
     let (_, pb) = granular::campaign::plan::parse(&b_text, "b.json").unwrap();
     let view = |p: &granular::campaign::plan::Plan| -> Vec<(u32, String, String)> {
@@ -230,7 +253,10 @@ fn serve_stopped_by_a_signal_says_so() {
         let mut err = String::new();
         std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
         assert_eq!(status.code(), Some(130), "{name}: {err}");
-        assert!(err.contains(&format!("granular serve: stopped by {name}")), "{name}: {err}");
+        assert!(
+            err.contains(&format!("granular serve: stopped by {name}")),
+            "{name}: {err}"
+        );
         assert!(!err.contains("before any simulation"), "{err}");
     }
 }
@@ -262,7 +288,11 @@ fn refusals_say_what_to_do_next() {
     let log = d.join("2.log");
     let (code, _) = run_capture(&["status", s(&damaged)], &log);
     assert_eq!(code, Some(3), "{}", log_text(&log));
-    assert!(log_text(&log).contains("restore it from a backup"), "{}", log_text(&log));
+    assert!(
+        log_text(&log).contains("restore it from a backup"),
+        "{}",
+        log_text(&log)
+    );
 
     let mut bad = dsmc(json!({"restitution": 0.8}), json!({}));
     bad["model"] = json!("dsmcc");
@@ -271,5 +301,10 @@ fn refusals_say_what_to_do_next() {
     let (code, _) = run_capture(&["validate", s(&m)], &log);
     assert_eq!(code, Some(2));
     let text = log_text(&log);
-    assert!(text.contains(r#"expected "dsmc" or "rfm" or "bisection" or "cascade" or "spm", got "dsmcc""#), "{text}");
+    assert!(
+        text.contains(
+            r#"expected "dsmc" or "rfm" or "bisection" or "cascade" or "spm", got "dsmcc""#
+        ),
+        "{text}"
+    );
 }
