@@ -82,6 +82,7 @@ mod it {
     pub mod interrupt;
     pub mod links;
     pub mod manifests;
+    pub mod messages;
     pub mod models;
     pub mod physics;
     pub mod plan_cost;

@@ -1097,7 +1097,7 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<LockFile, LockError> {
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                 if let Some(h) = read_lock(&locks, &name).filter(|h| lock_is_live(&locks, h)) {
                     return Err(LockError::Held(format!(
-                        "{} is in use: {} is being run by {} (lock {})",
+                        "{} is in use: {} is being run by {} (lock {}); wait for it to finish (`granular status DIR` shows its progress) or run another shard",
                         root.display(),
                         h.doing(),
                         h.by(),
@@ -1186,7 +1186,7 @@ impl ExclusiveLock {
             .collect();
         if let Some(l) = running.first() {
             return Err(LockError::Held(format!(
-                "{} is in use: {} is being run by {} ({} shard(s) running); {} waits until no shard runs",
+                "{} is in use: {} is being run by {} ({} shard(s) running); {} waits until no shard runs: try again when they have finished (`granular status DIR` shows their progress)",
                 root.display(),
                 l.doing(),
                 l.by(),
@@ -1230,7 +1230,7 @@ impl ShardLock {
         for other in live_locks(root) {
             if !other.is_exclusive() && other.shard_count != shard.count {
                 return Err(LockError::Held(format!(
-                    "{} is in use by {} running shard {} (a different shard layout than {shard})",
+                    "{} is in use by {} running shard {} (a different shard layout than {shard}): use its shard count, or wait until it has finished",
                     root.display(),
                     other.by(),
                     other.shard

@@ -138,7 +138,7 @@ impl CampaignInfo {
         })?;
         let corrupt = |e: serde_json::Error| {
             CampaignError::Refused(format!(
-                "{}: corrupt or foreign file: {e}",
+                "{}: corrupt or foreign file: {e}; restore it from a backup (`granular verify DIR` checks the tables), or start over in another --out",
                 info_path.display()
             ))
         };
@@ -231,7 +231,7 @@ fn refuse_non_empty(out: &Path, allowed: &[&str]) -> Result<(), CampaignError> {
         let e = e.map_err(|e| io_err(out, e))?;
         if !allowed.iter().any(|a| e.file_name() == **a) {
             return Err(CampaignError::Refused(format!(
-                "{} exists and is not a granular campaign directory (no campaign.json); refusing to write into it",
+                "{} exists and is not a granular campaign directory (no campaign.json); refusing to write into it: give a new or empty directory with --out",
                 out.display()
             )));
         }
@@ -513,7 +513,7 @@ impl Campaign {
         }
         if !is_current_format(info.format_version) {
             return Err(CampaignError::Refused(format!(
-                "{}: format version {}, this granular reads {FORMAT_VERSION} and {STREAMS_FORMAT}",
+                "{}: format version {}, this granular reads {FORMAT_VERSION} and {STREAMS_FORMAT}: use the (newer) granular that wrote it",
                 info_path.display(),
                 info.format_version
             )));
@@ -523,7 +523,7 @@ impl Campaign {
         }
         let corrupt = |why: String| {
             CampaignError::Refused(format!(
-                "{}: corrupt campaign file: {why}",
+                "{}: corrupt campaign file: {why}; restore it from a backup, or start over in another --out",
                 info_path.display()
             ))
         };

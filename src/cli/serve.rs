@@ -1,7 +1,8 @@
 //! `granular serve DIR [--addr 127.0.0.1:8080]`: a read-only live dashboard of a campaign over
 //! HTTP (`crate::serve`): the report page kept current, `/api/status` (the JSON of `status
 //! --json`), the table files. Loopback unless told otherwise; Ctrl-C/SIGTERM exits at once
-//! with 130 (`signals`: it writes nothing, so there is nothing to finish).
+//! with 130, saying `granular serve: stopped by SIGTERM` (`signals`: it writes nothing, so
+//! there is nothing to finish).
 //!
 //! For the tests only (README, Live dashboard), the environment can shorten the limits on
 //! clients: `GRANULAR_SERVE_HEADER_TIMEOUT_MS`, `GRANULAR_SERVE_SEND_TIMEOUT_MS`,
@@ -74,6 +75,7 @@ fn limits_from_env() -> Result<serve::Limits, FlagError> {
 }
 
 pub fn run(a: Args) -> i32 {
+    super::signals::command("serve");
     let limits = match limits_from_env() {
         Ok(l) => l,
         Err(e) => return failed(&e),

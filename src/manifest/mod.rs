@@ -7,6 +7,7 @@
 
 pub mod check;
 pub mod expand;
+pub mod forms;
 pub mod sweep;
 pub mod validate;
 

@@ -16,6 +16,7 @@ use jsonschema::error::ValidationErrorKind;
 use jsonschema::ValidationError;
 use serde_json::Value;
 
+use super::forms;
 use super::sweep::sweep_key_errors;
 use super::{json_schema, Manifest, ModelKind};
 
@@ -151,9 +152,25 @@ pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
         }
         return Err(fail(errors));
     }
-    // The schema takes 42.0 for an integer (JSON Schema does); serde does not: say where.
-    crate::models::from_value_at(value, "")
+    // The schema takes 42.0 for an integer (JSON Schema does), and so does granular: a number
+    // is its value (`envelope_by_value`); serde's errors say where.
+    crate::models::from_value_at(envelope_by_value(value), "")
         .map_err(|(path, message)| fail(vec![ManifestError { path, message }]))
+}
+
+/// `value` (a manifest) with its whole numbers written as integers
+/// ([`crate::models::numbers_by_value`]: `"seed": 42.0` is 42), except in `params` and `sweep`,
+/// which are kept as written (the campaign's copy of the manifest; the models read each
+/// number of them by value).
+fn envelope_by_value(mut value: Value) -> Value {
+    if let Value::Object(m) = &mut value {
+        for (k, v) in m.iter_mut() {
+            if k != "params" && k != "sweep" {
+                *v = crate::models::numbers_by_value(std::mem::take(v));
+            }
+        }
+    }
+    value
 }
 
 /// The manifest of `text` (valid JSON) with the members of `params` that `errors` (the schema's)
@@ -180,7 +197,7 @@ pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<Str
         }
         errors = schema_errors(&json_schema(), &value, "");
         if errors.is_empty() {
-            let m = crate::models::from_value_at(value, "").ok()?;
+            let m = crate::models::from_value_at(envelope_by_value(value), "").ok()?;
             return Some((m, left_out));
         }
     }
@@ -317,32 +334,35 @@ impl<'de> serde::de::Visitor<'de> for &mut KeyScan {
 /// prefixed with `prefix`.
 pub fn params_schema_errors(model: ModelKind, params: &Value, prefix: &str) -> Vec<ManifestError> {
     thread_local! {
-        static VALIDATORS: std::cell::RefCell<Vec<(ModelKind, jsonschema::Validator)>> = const { std::cell::RefCell::new(Vec::new()) };
+        static VALIDATORS: std::cell::RefCell<Vec<(ModelKind, jsonschema::Validator, Value)>> = const { std::cell::RefCell::new(Vec::new()) };
     }
     VALIDATORS.with(|cell| {
         let mut cache = cell.borrow_mut();
-        if !cache.iter().any(|(m, _)| *m == model) {
-            let v = jsonschema::validator_for(&model.params_schema())
-                .expect("generated schema compiles");
-            cache.push((model, v));
+        if !cache.iter().any(|(m, ..)| *m == model) {
+            let schema = model.params_schema();
+            let v = jsonschema::validator_for(&schema).expect("generated schema compiles");
+            cache.push((model, v, schema));
         }
-        let validator = &cache.iter().find(|(m, _)| *m == model).expect("cached").1;
-        collect(validator.iter_errors(params), prefix)
+        let (_, validator, schema) = cache.iter().find(|(m, ..)| *m == model).expect("cached");
+        collect(validator.iter_errors(params), prefix, schema)
     })
 }
 
-fn schema_errors(schema: &Value, instance: &Value, prefix: &str) -> Vec<ManifestError> {
+/// The errors of `instance` against `schema` (a whole schema: its `$defs` resolve), each
+/// explained as in a manifest's errors, paths prefixed with `prefix`.
+pub fn schema_errors(schema: &Value, instance: &Value, prefix: &str) -> Vec<ManifestError> {
     let validator = jsonschema::validator_for(schema).expect("generated schema compiles");
-    collect(validator.iter_errors(instance), prefix)
+    collect(validator.iter_errors(instance), prefix, schema)
 }
 
 fn collect<'a>(
     iter: impl Iterator<Item = ValidationError<'a>>,
     prefix: &str,
+    root: &Value,
 ) -> Vec<ManifestError> {
     let mut out = Vec::new();
     for e in iter {
-        explain(&e, prefix, &mut out);
+        explain(&e, prefix, root, &mut out);
     }
     dedup(&mut out);
     out
@@ -354,8 +374,10 @@ fn dedup(errors: &mut Vec<ManifestError>) {
 }
 
 /// Turn one schema error into messages; a failed `oneOf` is narrowed to the variant whose tag
-/// the instance carries, so `{"constant": 2}` reports the range, not "no variant matched".
-fn explain(e: &ValidationError<'_>, prefix: &str, out: &mut Vec<ManifestError>) {
+/// the instance carries, so `{"constant": 2}` reports the range, not "no variant matched";
+/// where none is evidently meant, the message names every allowed form with an example made
+/// from the schema (`root`, that of the validator: [`super::forms`]).
+fn explain(e: &ValidationError<'_>, prefix: &str, root: &Value, out: &mut Vec<ManifestError>) {
     let path = format!("{prefix}{}", e.instance_path().as_str());
     match e.kind() {
         ValidationErrorKind::OneOfNotValid { context } | ValidationErrorKind::AnyOf { context } => {
@@ -378,8 +400,25 @@ fn explain(e: &ValidationError<'_>, prefix: &str, out: &mut Vec<ManifestError>) 
             let candidates: Vec<_> = context.iter().filter(|errs| !shape_error(errs)).collect();
             if candidates.len() == 1 {
                 for x in candidates[0] {
-                    explain(x, prefix, out);
+                    explain(x, prefix, root, out);
                 }
+                return;
+            }
+            let got = short(e.instance());
+            if let Some(alternatives) = forms::alternatives_at(root, e.schema_path().as_str()) {
+                let forms = forms::describe(root, alternatives, e.instance());
+                let all_constants = alternatives
+                    .iter()
+                    .all(|a| a.get("const").is_some() || a.get("enum").is_some());
+                let message = if all_constants {
+                    format!("expected {}, got {got}", forms.join(" or "))
+                } else {
+                    format!(
+                        "{got} is not one of the allowed forms: {}",
+                        forms.join(", ")
+                    )
+                };
+                out.push(ManifestError { path, message });
                 return;
             }
             let mut options = Vec::new();
@@ -405,7 +444,6 @@ fn explain(e: &ValidationError<'_>, prefix: &str, out: &mut Vec<ManifestError>) 
                 }
             }
             options.dedup();
-            let got = short(e.instance());
             let message = if options.is_empty() {
                 format!("{got} matches none of the allowed forms")
             } else {

@@ -43,6 +43,31 @@ pub const SCALE_MAX: f64 = 1e30;
 /// (`realisations` 1.8e19 was accepted and ran for ever).
 pub const MAX_RUN_WORK: f64 = 1e15;
 
+/// `value` with every whole number written as a float (`2.0`, `2e0`, `-3.0`) written as an
+/// integer: a number is its value, so a whole-number parameter takes `2.0` as `2` (before: an
+/// error) and a real-valued one reads the same double either way. Only where that is exact:
+/// |x| < 2^53, and not -0.0 (whose sign a real-valued parameter keeps).
+pub fn numbers_by_value(mut value: Value) -> Value {
+    fn walk(v: &mut Value) {
+        match v {
+            Value::Array(a) => a.iter_mut().for_each(walk),
+            Value::Object(m) => m.values_mut().for_each(walk),
+            Value::Number(n) if n.is_f64() => {
+                let x = n.as_f64().unwrap_or(f64::NAN);
+                if x.fract() == 0.0
+                    && x.abs() < 9007199254740992.0
+                    && !(x == 0.0 && x.is_sign_negative())
+                {
+                    *v = Value::from(x as i64);
+                }
+            }
+            _ => {}
+        }
+    }
+    walk(&mut value);
+    value
+}
+
 /// `value` deserialised as `T`; an error names the JSON pointer of the offending value (below
 /// `path`), e.g. `/seed` for `"seed": 42.0`, which the schema takes for an integer.
 pub fn from_value_at<T: DeserializeOwned>(value: Value, path: &str) -> Result<T, (String, String)> {

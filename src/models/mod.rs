@@ -315,7 +315,7 @@ macro_rules! models {
             ) -> Option<ModelParams> {
                 match self {
                     $(ModelKind::$variant => {
-                        match from_value_at::<<$model as Model>::Params>(value.clone(), path) {
+                        match from_value_at::<<$model as Model>::Params>(numbers_by_value(value.clone()), path) {
                             Ok(p) => {
                                 let before = errors.len();
                                 <$model as Model>::check(&p, path, errors);

@@ -293,7 +293,6 @@ fn validate_and_run_refuse_what_a_run_could_not_do() {
         "bounds_runs",
         "bounds_runs_seeds",
         "bounds_sweep_points",
-        "integer_written_as_float",
         "integer_written_as_float_in_params",
         // Inputs that overflowed, panicked or never ended (issue: bounded inputs).
         "bounds_n1_overflow",
