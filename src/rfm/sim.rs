@@ -24,8 +24,10 @@ pub const PARALLEL_MIN_PARTICLES: usize = 4096;
 /// Pairs per work block of the 2D pair pass (fixed: the corrections are applied in pair order
 /// whatever the thread count).
 const PAIR_BLOCK: usize = 4096;
-/// Particles per work block of the drift.
+/// Particles per work block of the drift (and of the contact corrections' application).
 const DRIFT_BLOCK: usize = 4096;
+/// Tries per batch of the random sequential addition of the uniform initial layout.
+const RSA_BATCH: usize = 4096;
 
 /// One contacting pair's correction: x_i += dx - dv h, v_i += dv; j gets the opposite. `t` is
 /// the in-step contact interval (for free-path tracking).
@@ -35,6 +37,16 @@ struct Corr<const D: usize> {
     j: u32,
     t: [f64; 2],
     dx: [f64; D],
+    dv: [f64; D],
+}
+
+/// One half of a contacting pair's correction, for the particle `p` it moves:
+/// x_p += ex, v_p += dv (the pair's i gets (dx - dv h, dv), its j the negatives: negation is
+/// exact, so x_j + (-ex) is x_j - ex bit for bit).
+#[derive(Clone, Copy, Debug)]
+struct Half<const D: usize> {
+    p: u32,
+    ex: [f64; D],
     dv: [f64; D],
 }
 
@@ -169,6 +181,10 @@ pub struct Core<const D: usize> {
     corr: Vec<Corr<D>>,
     /// This step's pair corrections per work block of [`PAIR_BLOCK`] pairs (several threads).
     corr_blocks: Vec<Vec<Corr<D>>>,
+    /// The same corrections as halves, per pair block and per particle block of
+    /// [`DRIFT_BLOCK`] particles, each list in pair order (several threads): the particle
+    /// blocks apply them in parallel, each particle its own halves in pair order.
+    half_blocks: Vec<Vec<Vec<Half<D>>>>,
     /// 1D: this step's candidate ring pairs (scratch).
     cand: Vec<u32>,
     /// Neighbour-list builds so far (diagnostic, not part of the state).
@@ -208,6 +224,7 @@ impl<const D: usize> Core<D> {
             nl: NeighbourList::default(),
             corr: Vec::new(),
             corr_blocks: Vec::new(),
+            half_blocks: Vec::new(),
             cand: Vec::new(),
             builds: 0,
             fp: None,
@@ -295,12 +312,21 @@ impl<const D: usize> Core<D> {
         if self.corr_blocks.len() < nb {
             self.corr_blocks.resize_with(nb, Vec::new);
         }
-        let (x, v, prop, d) = (&self.x, &self.v, &self.prop, self.d);
+        if self.half_blocks.len() < nb {
+            self.half_blocks.resize_with(nb, Vec::new);
+        }
+        let npb = self.x.len().div_ceil(DRIFT_BLOCK);
+        let (x, v, prop, d, h) = (&self.x, &self.v, &self.prop, self.d, self.h);
         pairs
             .par_chunks(PAIR_BLOCK)
             .zip(self.corr_blocks[..nb].par_iter_mut())
-            .for_each(|(ps, out)| {
+            .zip(self.half_blocks[..nb].par_iter_mut())
+            .for_each(|((ps, out), halves)| {
                 out.clear();
+                halves.resize_with(npb, Vec::new);
+                for hb in halves.iter_mut() {
+                    hb.clear();
+                }
                 for p in ps {
                     let (i, j) = (p.i as usize, p.j as usize);
                     let r: [f64; D] = std::array::from_fn(|k| x[i][k] - x[j][k] + p.shift[k]);
@@ -310,11 +336,25 @@ impl<const D: usize> Core<D> {
                     }
                     let g: [f64; D] = std::array::from_fn(|k| v[i][k] - v[j][k]);
                     if let Some(c) = pair_eval(prop, d, i, j, r, g) {
+                        let ex: [f64; D] = std::array::from_fn(|k| c.dx[k] - c.dv[k] * h);
+                        halves[i / DRIFT_BLOCK].push(Half {
+                            p: c.i,
+                            ex,
+                            dv: c.dv,
+                        });
+                        halves[j / DRIFT_BLOCK].push(Half {
+                            p: c.j,
+                            ex: ex.map(|a| -a),
+                            dv: c.dv.map(|a| -a),
+                        });
                         out.push(c);
                     }
                 }
             });
         for b in self.corr_blocks[nb..].iter_mut() {
+            b.clear();
+        }
+        for b in self.half_blocks[nb..].iter_mut() {
             b.clear();
         }
         if let Some(fp) = self.fp.as_mut() {
@@ -430,16 +470,49 @@ impl<const D: usize> Core<D> {
             self.pair_pass(vmax);
         }
         let h = self.h;
+        if par_pairs {
+            // The corrections and the drift in one pass over the particle blocks: each block
+            // applies its particles' halves (pair blocks in order, each in pair order: every
+            // particle's updates in pair order, as below), then drifts them.
+            use rayon::prelude::*;
+            let nb = self.nl.pairs.len().div_ceil(PAIR_BLOCK);
+            let halves = &self.half_blocks[..nb];
+            let m = self
+                .x
+                .par_chunks_mut(DRIFT_BLOCK)
+                .zip(self.v.par_chunks_mut(DRIFT_BLOCK))
+                .zip(self.x_ref.par_chunks(DRIFT_BLOCK))
+                .enumerate()
+                .map(|(b, ((x, v), r))| {
+                    let base = b * DRIFT_BLOCK;
+                    for hs in halves {
+                        for e in &hs[b] {
+                            let p = e.p as usize - base;
+                            for k in 0..D {
+                                x[p][k] += e.ex[k];
+                                v[p][k] += e.dv[k];
+                            }
+                        }
+                    }
+                    drift_block(x, v, r, c, h, 0.0)
+                })
+                .reduce(|| 0.0, |a: f64, b: f64| if b > a { b } else { a });
+            self.max_disp2 = if m > self.max_disp2 {
+                m
+            } else {
+                self.max_disp2
+            };
+            if let Some(fp) = self.fp.as_mut() {
+                fp.post(&self.x, &self.v, h, self.step);
+            }
+            self.step += 1;
+            return;
+        }
         // A pair's (dx, dv) enters as x += dx - dv h, v += dv now, so that the drift below
         // with the corrected velocity gives x + (v - c) h + dx. Always in pair order.
         {
             let (x, v) = (&mut self.x, &mut self.v);
-            let corr = if par_pairs {
-                &self.corr_blocks[..]
-            } else {
-                std::slice::from_ref(&self.corr)
-            };
-            for c in corr.iter().flatten() {
+            for c in &self.corr {
                 let (i, j) = (c.i as usize, c.j as usize);
                 for k in 0..D {
                     let ex = c.dx[k] - c.dv[k] * h;
@@ -452,24 +525,8 @@ impl<const D: usize> Core<D> {
         }
         if D > 1 {
             // Drift and the largest displacement since the list build.
-            if par {
-                use rayon::prelude::*;
-                let m = self
-                    .x
-                    .par_chunks_mut(DRIFT_BLOCK)
-                    .zip(self.v.par_chunks_mut(DRIFT_BLOCK))
-                    .zip(self.x_ref.par_chunks(DRIFT_BLOCK))
-                    .map(|((x, v), r)| drift_block(x, v, r, c, h, 0.0))
-                    .reduce(|| 0.0, |a: f64, b: f64| if b > a { b } else { a });
-                self.max_disp2 = if m > self.max_disp2 {
-                    m
-                } else {
-                    self.max_disp2
-                };
-            } else {
-                self.max_disp2 =
-                    drift_block(&mut self.x, &mut self.v, &self.x_ref, c, h, self.max_disp2);
-            }
+            self.max_disp2 =
+                drift_block(&mut self.x, &mut self.v, &self.x_ref, c, h, self.max_disp2);
         } else {
             for (x, v) in self.x.iter_mut().zip(self.v.iter_mut()) {
                 for k in 0..D {
@@ -875,26 +932,24 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, SimE
             }
         }
         InitialLayout::Uniform => {
-            // Random sequential addition with a cell grid (cells >= d).
+            // Random sequential addition with a cell grid (cells >= d): try t draws the
+            // point (u l, u' l) (two uniforms, accepted or not) and keeps it if it overlaps no
+            // point kept before it. The tries are taken in batches of RSA_BATCH: on several
+            // threads (N of at least PARALLEL_MIN_PARTICLES), a batch's tries are first tested
+            // in parallel against the points kept before the batch (a hit there rejects the
+            // try for sure), then the rest in order against all kept points. The kept points,
+            // their order and the stream's position after them are those of one try at a time
+            // whatever the thread count.
+            use rayon::prelude::*;
             let nc = ((l / sp).floor() as usize)
                 .min((2.0 * (n as f64).sqrt()) as usize)
                 .max(1);
             let side = l / nc as f64;
             let mut cells: Vec<Vec<u32>> = vec![Vec::new(); nc * nc];
-            let mut tries = 0u64;
-            let max_tries = 10_000 * n as u64 + 100_000;
-            while x.len() < 2 * n {
-                tries += 1;
-                if tries > max_tries {
-                    return Err(
-                        "packing_fraction: too dense for the uniform (random) layout".into(),
-                    );
-                }
-                let p = [rng.f64() * l, rng.f64() * l];
+            let overlaps = |p: [f64; 2], cells: &[Vec<u32>], x: &[f64]| -> bool {
                 let cx = ((p[0] / side) as usize).min(nc - 1);
                 let cy = ((p[1] / side) as usize).min(nc - 1);
-                let mut ok = true;
-                'search: for dy in -1isize..=1 {
+                for dy in -1isize..=1 {
                     for dx in -1isize..=1 {
                         let ix = (cx as isize + dx).rem_euclid(nc as isize) as usize;
                         let iy = (cy as isize + dy).rem_euclid(nc as isize) as usize;
@@ -903,15 +958,54 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, SimE
                             let rx = super::neighbours::min_image(p[0] - x[2 * q], l);
                             let ry = super::neighbours::min_image(p[1] - x[2 * q + 1], l);
                             if rx * rx + ry * ry < sp * sp {
-                                ok = false;
-                                break 'search;
+                                return true;
                             }
                         }
                     }
                 }
-                if ok {
+                false
+            };
+            let par = n >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1;
+            let mut tries = 0u64;
+            let max_tries = 10_000 * n as u64 + 100_000;
+            let mut cand: Vec<[f64; 2]> = Vec::with_capacity(RSA_BATCH);
+            let mut hit: Vec<bool> = Vec::with_capacity(RSA_BATCH);
+            while x.len() < 2 * n {
+                let start = rng.position();
+                cand.clear();
+                cand.extend((0..RSA_BATCH).map(|_| [rng.f64() * l, rng.f64() * l]));
+                hit.clear();
+                if par {
+                    let (cells, x) = (&cells, &x);
+                    cand.par_iter()
+                        .with_min_len(RSA_BATCH / 16)
+                        .map(|&p| overlaps(p, cells, x))
+                        .collect_into_vec(&mut hit);
+                } else {
+                    hit.resize(RSA_BATCH, false);
+                }
+                for (t, (&p, &h)) in cand.iter().zip(&hit).enumerate() {
+                    tries += 1;
+                    if tries > max_tries {
+                        return Err(
+                            "packing_fraction: too dense for the uniform (random) layout".into(),
+                        );
+                    }
+                    if h || overlaps(p, &cells, &x) {
+                        continue;
+                    }
+                    let cx = ((p[0] / side) as usize).min(nc - 1);
+                    let cy = ((p[1] / side) as usize).min(nc - 1);
                     cells[cy * nc + cx].push((x.len() / 2) as u32);
                     x.extend_from_slice(&p);
+                    if x.len() == 2 * n {
+                        // The last point: leave the stream just after its try.
+                        *rng = RunRng::restore(&start);
+                        for _ in 0..2 * (t + 1) {
+                            rng.u64();
+                        }
+                        break;
+                    }
                 }
             }
         }

@@ -341,6 +341,71 @@ fn initial_layouts_do_not_overlap() {
     }
 }
 
+/// The uniform layout's random sequential addition, one try at a time (the code before the
+/// tries were batched and pre-tested on several threads), and the velocities drawn after it.
+fn rsa_reference(cfg: &RfmConfig, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    let mut rng = RunRng::new(seed);
+    let (n, l, d) = (cfg.n_particles, cfg.box_length(), cfg.diameter());
+    let sp = d * (1.0 + 1e-3);
+    let nc = ((l / sp).floor() as usize)
+        .min((2.0 * (n as f64).sqrt()) as usize)
+        .max(1);
+    let side = l / nc as f64;
+    let mut cells: Vec<Vec<u32>> = vec![Vec::new(); nc * nc];
+    let mut x: Vec<f64> = Vec::new();
+    while x.len() < 2 * n {
+        let p = [rng.f64() * l, rng.f64() * l];
+        let cx = ((p[0] / side) as usize).min(nc - 1);
+        let cy = ((p[1] / side) as usize).min(nc - 1);
+        let mut ok = true;
+        'search: for dy in -1isize..=1 {
+            for dx in -1isize..=1 {
+                let ix = (cx as isize + dx).rem_euclid(nc as isize) as usize;
+                let iy = (cy as isize + dy).rem_euclid(nc as isize) as usize;
+                for &q in &cells[iy * nc + ix] {
+                    let q = q as usize;
+                    let rx = super::super::neighbours::min_image(p[0] - x[2 * q], l);
+                    let ry = super::super::neighbours::min_image(p[1] - x[2 * q + 1], l);
+                    if rx * rx + ry * ry < sp * sp {
+                        ok = false;
+                        break 'search;
+                    }
+                }
+            }
+        }
+        if ok {
+            cells[cy * nc + cx].push((x.len() / 2) as u32);
+            x.extend_from_slice(&p);
+        }
+    }
+    let mut v: Vec<f64> = (0..2 * n).map(|_| 0.1 * (rng.f64() - 0.5)).collect();
+    for k in 0..2 {
+        let m = v.iter().skip(k).step_by(2).sum::<f64>() / n as f64;
+        for a in v.iter_mut().skip(k).step_by(2) {
+            *a -= m;
+        }
+    }
+    (x, v)
+}
+
+/// The uniform layout drawn in batches of tries, pre-tested on 1, 2 and 3 threads, places the
+/// points of one try at a time and leaves the stream where one try at a time leaves it (the
+/// velocities drawn after the layout are the same bits), above the parallel threshold
+/// (N = 5000 at phi = 0.53: many batches, the last one cut short) and below it (N = 1500).
+#[test]
+fn uniform_layout_is_one_try_at_a_time_on_any_threads() {
+    for n in [5000, 1500] {
+        let cfg = dense_2d(n);
+        let (x, v) = rsa_reference(&cfg, 11);
+        for k in [1, 2, 3] {
+            let sim = pool(k)
+                .install(|| RfmSim::with_stream(cfg.clone(), 11, StreamVersion::V2).unwrap());
+            assert!(sim.positions() == x, "N {n}, {k} threads: positions differ");
+            assert!(sim.velocities() == v, "N {n}, {k} threads: velocities differ");
+        }
+    }
+}
+
 fn dense_2d(n: usize) -> RfmConfig {
     RfmConfig {
         n_particles: n,
@@ -361,7 +426,8 @@ fn pool(k: usize) -> rayon::ThreadPool {
 
 /// Stream version 2: a run stepped in rayon pools of 1, 2 and 3 threads gives bit-identical
 /// states, above the parallel threshold (2D N = 9000, with and without free-path tracking,
-/// so that the pair pass, the corrections and the drift all run in blocks) and below it
+/// so that the pair pass and the corrections with the drift (applied per particle block,
+/// each particle's in pair order) run in blocks; one thread applies them in pair order) and below it
 /// (N = 1500); its noise is not version 1's.
 #[test]
 fn v2_threads_give_identical_states() {
