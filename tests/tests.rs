@@ -72,6 +72,7 @@ mod it {
     pub mod damage;
     pub mod derived;
     pub mod drills;
+    pub mod figure_quality;
     pub mod figures;
     pub mod growth;
     pub mod interrupt;
