@@ -51,7 +51,12 @@ fn reduced(mut job: Value) -> Value {
     match model.as_str() {
         "dsmc" => {
             // At most ~600 particles, at the same densities.
-            let Some(list) = p["species"]["list"].as_array_mut() else {
+            // (`get_mut`: indexing a `Value` mutably would insert what is missing.)
+            let Some(list) = p
+                .get_mut("species")
+                .and_then(|s| s.get_mut("list"))
+                .and_then(Value::as_array_mut)
+            else {
                 return job;
             };
             let total: f64 = list.iter().map(|s| s["count"].as_f64().unwrap()).sum();
@@ -86,7 +91,9 @@ fn reduced(mut job: Value) -> Value {
                     p[k]["every"] = 1.into();
                 }
             }
-            if let Some(Value::Array(ns)) = job["sweep"].get_mut("n_particles") {
+            if let Some(Value::Array(ns)) =
+                job.get_mut("sweep").and_then(|s| s.get_mut("n_particles"))
+            {
                 let n = ns.len().min(3);
                 *ns = (0..n).map(|i| Value::from(40 + 10 * i as u64)).collect();
             }
