@@ -127,7 +127,7 @@ impl Figure {
     }
 }
 
-/// Axis tick text: plain numbers in [1e-2, 1e4), powers of ten outside.
+/// A colour bar's tick text: plain numbers in [1e-2, 1e4), powers of ten outside.
 fn tick(v: f64) -> String {
     let a = v.abs();
     if a == 0.0 {
@@ -138,6 +138,211 @@ fn tick(v: f64) -> String {
     } else {
         format!("{v:.0e}")
     }
+}
+
+/// `v` written as briefly as it is known to within `tol`: plain (`0.25`, `1200`) when its
+/// size is in [1e-3, 1e5), else `2.5e-4` / `3e6`.
+fn number(v: f64, tol: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return if v == 0.0 { "0".into() } else { format!("{v}") };
+    }
+    let a = v.abs();
+    if (1e-3..1e5).contains(&a) {
+        for d in 0..=15usize {
+            let s = format!("{v:.d$}");
+            if (s.parse::<f64>().unwrap_or(f64::NAN) - v).abs() <= tol {
+                return s;
+            }
+        }
+    }
+    for p in 0..=15usize {
+        let s = format!("{v:.p$e}");
+        if (s.parse::<f64>().unwrap_or(f64::NAN) - v).abs() <= tol {
+            return s;
+        }
+    }
+    format!("{v:e}")
+}
+
+/// Ticks of one axis: where they go on the chart (log10 of the value on a log axis) and
+/// their labels, distinct.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ticks {
+    pub at: Vec<f64>,
+    pub labels: Vec<String>,
+}
+
+/// The steps of a linear axis: 1, 2, 2.5 and 5 x 10^k.
+const STEPS: [f64; 4] = [1.0, 2.0, 2.5, 5.0];
+
+/// Round values in [a, b] a `STEPS` step apart, at most 7 of them (at least 2 when the
+/// range holds two round values at all); the step.
+fn round_values(a: f64, b: f64) -> (Vec<f64>, f64) {
+    let (a, b) = if a <= b { (a, b) } else { (b, a) };
+    let w = if b > a { b - a } else { a.abs().max(1.0) };
+    let mut best: Option<(Vec<f64>, f64)> = None;
+    let e0 = (w / 9.0).log10().floor() as i32;
+    'search: for e in e0..=e0 + 2 {
+        for m in STEPS {
+            let step = m * 10f64.powi(e);
+            let (i0, i1) = ((a / step).ceil() as i64, (b / step).floor() as i64);
+            if i1 - i0 + 1 <= 7 {
+                let v: Vec<f64> = (i0..=i1).map(|i| i as f64 * step).collect();
+                best = Some((v, step));
+                break 'search;
+            }
+        }
+    }
+    best.unwrap_or_else(|| (vec![a, b], w))
+}
+
+/// The ticks of a linear axis over [a, b]: round values (`round_values`), labelled with one
+/// number of decimals for the axis (as many as tell them apart), or as `2.5e-4` where long.
+pub fn linear_ticks(a: f64, b: f64) -> Ticks {
+    let (at, step) = round_values(a, b);
+    let tol = step * 1e-6;
+    let at: Vec<f64> = at
+        .into_iter()
+        .map(|v| if v.abs() < tol { 0.0 } else { v })
+        .collect();
+    let big = at.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let plain = (1e-3..1e5).contains(&big);
+    let labels = if plain {
+        let d = (0..=15usize)
+            .find(|d| {
+                at.iter().all(|v| {
+                    (format!("{v:.d$}").parse::<f64>().unwrap_or(f64::NAN) - v).abs() <= tol
+                })
+            })
+            .unwrap_or(15);
+        at.iter()
+            .map(|v| {
+                let s = format!("{v:.d$}");
+                if s.trim_start_matches('-')
+                    .chars()
+                    .all(|c| c == '0' || c == '.')
+                {
+                    "0".into()
+                } else {
+                    s
+                }
+            })
+            .collect()
+    } else {
+        at.iter().map(|&v| number(v, tol)).collect()
+    };
+    distinct(Ticks { at, labels })
+}
+
+/// The ticks of a logarithmic axis over log10 values [a, b]: decades (every k-th when the
+/// range spans many), or 1-2-5 x 10^k, or 1..9 x 10^k, whichever first gives at least 3
+/// within the range, else round values as on a linear axis; labelled `0.01`, `0.1`, `1`,
+/// `10`, or `1e-4` / `2e5` outside [1e-3, 1e5).
+pub fn log_ticks(a: f64, b: f64) -> Ticks {
+    let (a, b) = if a <= b { (a, b) } else { (b, a) };
+    let span = b - a;
+    let (k0, k1) = (a.floor() as i32 - 1, b.ceil() as i32 + 1);
+    let within = |mantissas: &[f64], every: i32| -> Vec<f64> {
+        let mut v = Vec::new();
+        for k in k0..=k1 {
+            if k.rem_euclid(every) != 0 {
+                continue;
+            }
+            for m in mantissas {
+                let x = m * 10f64.powi(k);
+                let l = x.log10();
+                if l >= a - 1e-9 && l <= b + 1e-9 {
+                    v.push(x);
+                }
+            }
+        }
+        v
+    };
+    let mut choice: Option<Vec<f64>> = None;
+    if span > 2.5 {
+        let every = ((span / 8.0).ceil() as i32).max(1);
+        choice = Some(within(&[1.0], every));
+    } else {
+        for m in [
+            &[1.0, 2.0, 5.0][..],
+            &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0][..],
+        ] {
+            let v = within(m, 1);
+            if v.len() >= 3 {
+                choice = Some(v);
+                break;
+            }
+        }
+    }
+    let values = match choice {
+        Some(v) if v.len() >= 2 => v,
+        _ => {
+            let (v, step) = round_values(10f64.powf(a), 10f64.powf(b));
+            let v: Vec<f64> = v.into_iter().filter(|x| *x > 0.0).collect();
+            let labels = v.iter().map(|&x| number(x, step * 1e-6)).collect();
+            return distinct(Ticks {
+                at: v.iter().map(|x| x.log10()).collect(),
+                labels,
+            });
+        }
+    };
+    let labels = values.iter().map(|&x| number(x, x * 1e-9)).collect();
+    distinct(Ticks {
+        at: values.iter().map(|x| x.log10()).collect(),
+        labels,
+    })
+}
+
+/// `t` with any tick whose label repeats an earlier one's left out (a safety net: the
+/// labels above are exact to their round values, so this leaves them as they are).
+fn distinct(t: Ticks) -> Ticks {
+    let mut seen = std::collections::BTreeSet::new();
+    let (mut at, mut labels) = (Vec::new(), Vec::new());
+    for (x, l) in t.at.into_iter().zip(t.labels) {
+        if seen.insert(l.clone()) {
+            at.push(x);
+            labels.push(l);
+        }
+    }
+    Ticks { at, labels }
+}
+
+/// The lines of `text` broken at spaces so that each is at most `max` characters (a word
+/// longer than that broken inside).
+pub fn wrap(text: &str, max: usize) -> Vec<String> {
+    let max = max.max(8);
+    let mut lines: Vec<String> = Vec::new();
+    let mut cur = String::new();
+    for word in text.split(' ') {
+        let mut word = word.to_string();
+        loop {
+            let (n, w) = (cur.chars().count(), word.chars().count());
+            if n > 0 && n + 1 + w <= max {
+                cur.push(' ');
+                cur.push_str(&word);
+                break;
+            } else if n == 0 && w <= max {
+                cur = word;
+                break;
+            } else if n > 0 {
+                lines.push(std::mem::take(&mut cur));
+            } else {
+                let head: String = word.chars().take(max).collect();
+                word = word.chars().skip(max).collect();
+                lines.push(head);
+            }
+        }
+    }
+    if !cur.is_empty() || lines.is_empty() {
+        lines.push(cur);
+    }
+    lines
+}
+
+/// An upper estimate of the width in pixels of `chars` characters of DejaVu Sans at font
+/// size `px` (its widest common glyphs are about 0.6 of the size).
+fn text_width(chars: usize, px: u32) -> u32 {
+    (chars as f64 * px as f64 * 0.62).ceil() as u32
 }
 
 /// The colour map of every figure: 24 well-separated colours (Glasbey-like, dark enough on
@@ -180,33 +385,44 @@ fn rgb(i: usize) -> RGBColor {
     RGBColor(r, g, b)
 }
 
-/// Width of the legend column to the right of the plot area (the legend never covers data).
-const LEGEND_WIDTH: u32 = 210;
 /// Height of one legend row.
 const LEGEND_ROW: i32 = 18;
 /// Longest legend label drawn, in characters (longer ones end with `...`).
-const LEGEND_CHARS: usize = 28;
+const LEGEND_CHARS: usize = 40;
+/// Font sizes of the title, the tick labels, the axis names and the legend.
+const TITLE_PX: u32 = 18;
+const TICK_PX: u32 = 14;
+const DESC_PX: u32 = 16;
+const LEGEND_PX: u32 = 12;
+/// Height of one title line.
+const TITLE_LINE: i32 = 22;
+
+/// The legend's labels as drawn (at most `LEGEND_CHARS` characters).
+fn legend_text(label: &str) -> String {
+    shorten(label, LEGEND_CHARS)
+}
+
+/// Width of the legend column: as wide as its longest label needs (none without labels),
+/// at most 40 % of the figure.
+fn legend_width(fig: &Figure, series: &[Vec<Drawn>], width: u32) -> u32 {
+    let longest = fig
+        .series
+        .iter()
+        .zip(series)
+        .filter(|(s, d)| !d.is_empty() && !s.label.is_empty())
+        .map(|(s, _)| legend_text(&s.label).chars().count())
+        .max();
+    match longest {
+        None => 0,
+        Some(n) => (32 + text_width(n, LEGEND_PX) + 10).min(width * 2 / 5),
+    }
+}
 
 fn tr(v: f64, log: bool) -> Option<f64> {
     if log {
         (v > 0.0 && v.is_finite()).then(|| v.log10())
     } else {
         v.is_finite().then_some(v)
-    }
-}
-
-/// Label of a log-axis tick at log10 value `v`: three significant digits.
-fn log_tick(v: f64) -> String {
-    let r = 10f64.powf(v);
-    if !(1e-2..1e4).contains(&r) {
-        return format!("{r:.1e}");
-    }
-    let decimals = (2 - v.floor() as i32).max(0) as usize;
-    let s = format!("{r:.decimals$}");
-    if s.contains('.') {
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        s
     }
 }
 
@@ -222,11 +438,55 @@ pub enum PlotError {
     Io(String),
 }
 
+/// A chart axis: f64 values over a range, ticked and labelled as its `Ticks` say.
+struct Axis {
+    range: std::ops::Range<f64>,
+    ticks: Ticks,
+}
+
+impl Ranged for Axis {
+    type ValueType = f64;
+    type FormatOption = plotters::coord::ranged1d::NoDefaultFormatting;
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        let (a, b) = (self.range.start, self.range.end);
+        let f = if b > a { (value - a) / (b - a) } else { 0.5 };
+        limit.0 + (f * (limit.1 - limit.0) as f64).round() as i32
+    }
+    fn key_points<Hint: plotters::coord::ranged1d::KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            Vec::new()
+        } else {
+            self.ticks.at.clone()
+        }
+    }
+    fn range(&self) -> std::ops::Range<f64> {
+        self.range.clone()
+    }
+}
+
+impl plotters::coord::ranged1d::ValueFormatter<f64> for Axis {
+    fn format(v: &f64) -> String {
+        number(*v, v.abs() * 1e-6)
+    }
+    fn format_ext(&self, v: &f64) -> String {
+        self.ticks
+            .at
+            .iter()
+            .zip(&self.ticks.labels)
+            .min_by(|a, b| (a.0 - v).abs().total_cmp(&(b.0 - v).abs()))
+            .map(|(_, l)| l.clone())
+            .unwrap_or_else(|| Self::format(v))
+    }
+}
+
 /// A point as drawn: (x, y, y_lo, y_hi) on the chart's axes (log10 of the data on a log axis).
 type Drawn = (f64, f64, f64, f64);
 
-/// Draws a figure: a heatmap, or the series on their axes and the legend beside them.
+/// Draws a figure: a heatmap, or the wrapped title on top, the series on their axes (round
+/// ticks, see `linear_ticks` and `log_ticks`) and the legend in a column beside them as wide
+/// as its labels need.
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), PlotError> {
+    use plotters::style::text_anchor::{HPos, VPos};
     if let Some(h) = &fig.heatmap {
         return draw_heatmap(root, fig, h).map_err(|x| PlotError::Draw(x.to_string()));
     }
@@ -235,30 +495,67 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Resul
     let series = transformed_series(fig);
     let ((x0, x1), (y0, y1)) = data_ranges(&series, fig.log_y)?;
     let (width, _) = root.dim_in_pixel();
-    let (plot_area, legend_area) = root.split_horizontally(width.saturating_sub(LEGEND_WIDTH));
-    let mut chart = ChartBuilder::on(&plot_area)
-        .caption(&fig.title, ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, y0..y1)
+    let title = wrap(
+        &fig.title,
+        ((width - 24) / text_width(1, TITLE_PX)) as usize,
+    );
+    let title_font = ("sans-serif", TITLE_PX).into_font().color(&BLACK);
+    for (i, line) in title.iter().enumerate() {
+        root.draw(&Text::new(
+            line.clone(),
+            (width as i32 / 2, 8 + i as i32 * TITLE_LINE),
+            title_font.clone().pos(anchor(HPos::Center, VPos::Top)),
+        ))
         .map_err(e)?;
-    let (lx, ly) = (fig.log_x, fig.log_y);
-    // A linear tick at zero computed as a sum of steps may come out as -1e-17: it is 0.
-    let (sx, sy) = ((x1 - x0).abs() * 1e-9, (y1 - y0).abs() * 1e-9);
-    let snap = |v: f64, eps: f64| if v.abs() < eps { 0.0 } else { v };
-    let fx = move |v: &f64| if lx { log_tick(*v) } else { tick(snap(*v, sx)) };
-    let fy = move |v: &f64| if ly { log_tick(*v) } else { tick(snap(*v, sy)) };
+    }
+    let top = 12 + title.len() as u32 * TITLE_LINE as u32;
+    let (_, body) = root.split_vertically(top);
+    let legend_w = legend_width(fig, &series, width);
+    let (plot_area, legend_area) = body.split_horizontally(width - legend_w);
+    let xt = if fig.log_x {
+        log_ticks(x0, x1)
+    } else {
+        linear_ticks(x0, x1)
+    };
+    let yt = if fig.log_y {
+        log_ticks(y0, y1)
+    } else {
+        linear_ticks(y0, y1)
+    };
+    let widest = |t: &Ticks| {
+        t.labels
+            .iter()
+            .map(|l| l.chars().count())
+            .max()
+            .unwrap_or(1)
+    };
+    let y_area = text_width(widest(&yt), TICK_PX) + 12 + DESC_PX + 10;
+    // Room right of the plot for half the last x label.
+    let right = (text_width(widest(&xt), TICK_PX) / 2 + 6).max(16);
+    let mut chart = ChartBuilder::on(&plot_area)
+        .margin_top(10)
+        .margin_bottom(8)
+        .margin_left(8)
+        .margin_right(right)
+        .x_label_area_size(TICK_PX + 12 + DESC_PX + 14)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(
+            Axis {
+                range: x0..x1,
+                ticks: xt,
+            },
+            Axis {
+                range: y0..y1,
+                ticks: yt,
+            },
+        )
+        .map_err(e)?;
     chart
         .configure_mesh()
         .x_desc(&fig.x_label)
         .y_desc(&fig.y_label)
-        .label_style(("sans-serif", 14))
-        .axis_desc_style(("sans-serif", 16))
-        .x_labels(8)
-        .y_labels(8)
-        .x_label_formatter(&fx)
-        .y_label_formatter(&fy)
+        .label_style(("sans-serif", TICK_PX))
+        .axis_desc_style(("sans-serif", DESC_PX))
         .draw()
         .map_err(e)?;
     let legend = draw_curves(&mut chart, fig, &series).map_err(e)?;
@@ -328,11 +625,7 @@ fn data_ranges(series: &[Vec<Drawn>], log_y: bool) -> Result<((f64, f64), (f64, 
 /// its colour (a line right after a data series, not a reference, takes that series'
 /// colour); returns the legend's entries (label, colour, drawn as a line) of the labelled.
 fn draw_curves<'f, DB: DrawingBackend>(
-    chart: &mut ChartContext<
-        '_,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
+    chart: &mut ChartContext<'_, DB, Cartesian2d<Axis, Axis>>,
     fig: &'f Figure,
     series: &[Vec<Drawn>],
 ) -> Result<Vec<(&'f str, RGBColor, bool)>, DrawingAreaErrorKind<DB::ErrorType>> {
@@ -707,7 +1000,7 @@ fn draw_legend<DB: DrawingBackend>(
         return Ok(());
     }
     let (_, h) = area.dim_in_pixel();
-    let (top, bottom) = (40, h as i32 - 50);
+    let (top, bottom) = (10, h as i32 - 50);
     let fits = ((bottom - top) / LEGEND_ROW).max(1) as usize;
     let (shown, more) = if entries.len() > fits {
         (fits - 1, entries.len() - (fits - 1))
@@ -731,12 +1024,7 @@ fn draw_legend<DB: DrawingBackend>(
         } else {
             area.draw(&Circle::new((16, y), 3, colour.filled()))?;
         }
-        let text: String = if label.chars().count() > LEGEND_CHARS {
-            let t: String = label.chars().take(LEGEND_CHARS - 3).collect();
-            format!("{t}...")
-        } else {
-            label.to_string()
-        };
+        let text = legend_text(label);
         area.draw(&Text::new(text, (32, y - 7), font.clone()))?;
     }
     if more > 0 {
@@ -837,6 +1125,98 @@ mod tests {
         assert!(svg.contains("k=11 &lt;b&gt;"));
         assert!(!svg.contains("<b>"));
         assert!(!svg.contains("href"));
+    }
+
+    fn distinct_labels(t: &Ticks) -> bool {
+        let set: std::collections::BTreeSet<_> = t.labels.iter().collect();
+        set.len() == t.labels.len()
+    }
+
+    /// Linear ticks at 1, 2, 2.5, 5 x 10^k steps, 2 to 7 of them, labelled with one number
+    /// of decimals that tells them apart (the issue's `2e-3, 2e-3, 1e-3` axis).
+    #[test]
+    fn linear_ticks_are_round_and_distinct() {
+        let t = linear_ticks(0.00075, 0.00205);
+        assert_eq!(
+            t.labels,
+            ["0.0008", "0.0010", "0.0012", "0.0014", "0.0016", "0.0018", "0.0020"]
+        );
+        let t = linear_ticks(0.2995, 0.3405);
+        assert_eq!(t.labels, ["0.30", "0.31", "0.32", "0.33", "0.34"]);
+        let t = linear_ticks(-1.0, 16.7);
+        assert_eq!(t.labels, ["0", "2.5", "5.0", "7.5", "10.0", "12.5", "15.0"]);
+        let t = linear_ticks(1.2e-6, 3.9e-6);
+        assert_eq!(t.labels, ["1.5e-6", "2e-6", "2.5e-6", "3e-6", "3.5e-6"]);
+        let t = linear_ticks(-0.3, 0.3);
+        assert!(t.labels.contains(&"0".to_string()), "{t:?}");
+        for (a, b) in [(0.991, 1.0047), (1e5, 3.3e5), (-7.0, -6.9999), (0.0, 1e-12)] {
+            let t = linear_ticks(a, b);
+            assert!(t.at.len() >= 2 && t.at.len() <= 7, "{a} {b}: {t:?}");
+            assert!(distinct_labels(&t), "{a} {b}: {t:?}");
+            for (x, l) in t.at.iter().zip(&t.labels) {
+                let v: f64 = l.parse().unwrap();
+                assert!(
+                    (v - x).abs() <= (b - a).abs().max(1e-300) * 1e-5,
+                    "{l} for {x}"
+                );
+            }
+        }
+    }
+
+    /// Log ticks at 1-2-5 x 10^k (not 1.58, 2.51, 3.16), decades over wide ranges, labelled
+    /// 0.01 .. 1000 plainly and 1e-4 beyond.
+    #[test]
+    fn log_ticks_are_one_two_five() {
+        let l = |a: f64, b: f64| log_ticks(a.log10(), b.log10()).labels;
+        assert_eq!(l(0.9, 5.5), ["1", "2", "5"]);
+        assert_eq!(l(4.5, 22.0), ["5", "10", "20"]);
+        assert_eq!(
+            l(1e-3, 2e4),
+            ["0.001", "0.01", "0.1", "1", "10", "100", "1000", "10000"]
+        );
+        assert_eq!(l(1e-5, 2e4), ["1e-4", "0.01", "1", "100", "10000"]);
+        assert_eq!(
+            l(1e-12, 1e12),
+            ["1e-12", "1e-9", "1e-6", "0.001", "1", "1000", "1e6", "1e9", "1e12"]
+        );
+        // Less than a factor 2: round values as on a linear axis.
+        let t = log_ticks(0.991f64.log10(), 1.0047f64.log10());
+        assert!(t.at.len() >= 2 && distinct_labels(&t), "{t:?}");
+        assert!(t.labels.iter().all(|x| x.len() <= 6), "{t:?}");
+        for (x, lab) in t.at.iter().zip(&t.labels) {
+            assert!((10f64.powf(*x) - lab.parse::<f64>().unwrap()).abs() < 1e-9);
+        }
+    }
+
+    /// Titles wrap at spaces; a word longer than a line is cut.
+    #[test]
+    fn titles_wrap() {
+        assert_eq!(wrap("a bb ccc dddd", 8), ["a bb ccc", "dddd"]);
+        assert_eq!(wrap("abcdefghijk", 8), ["abcdefgh", "ijk"]);
+        assert_eq!(wrap("", 8), [""]);
+    }
+
+    /// A long title is drawn on several lines, each inside the image.
+    #[test]
+    fn long_title_wraps_inside_the_image() {
+        let title = "target-mixture [species.list.1.mass=2.0] - temperature: DSMC over the Maxwellian and the Sonine theory, and more words to need three lines of text at the least here";
+        let fig = Figure::new(
+            title.into(),
+            "t",
+            "T",
+            vec![Series {
+                label: "a".into(),
+                points: vec![(1.0, 2.0, 0.1), (2.0, 3.0, 0.1)],
+                line: false,
+            }],
+        );
+        let svg = svg_string(&fig).unwrap();
+        let lines = wrap(title, ((SIZE.0 - 24) / text_width(1, TITLE_PX)) as usize);
+        assert!(lines.len() >= 2);
+        for l in &lines {
+            assert!(svg.contains(&format!(">\n{l}\n</text>")), "{l:?} missing");
+            assert!(text_width(l.chars().count(), TITLE_PX) <= SIZE.0 - 24);
+        }
     }
 
     fn grid(rows: usize, cols: usize) -> Figure {

@@ -77,6 +77,7 @@ mod it {
     pub mod derived;
     pub mod docs;
     pub mod drills;
+    pub mod figure_quality;
     pub mod figures;
     pub mod growth;
     pub mod interrupt;

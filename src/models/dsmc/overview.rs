@@ -371,6 +371,40 @@ fn spans_decades(v: impl Iterator<Item = f64> + Clone) -> bool {
 }
 
 /// The across-sweep figures of every numeric sweep key.
+/// The physics name of a sweep key (its column name, `species_list_1_mass`, or its path,
+/// `species.list.1.mass`) on a figure's axis: `m_2` (list index 1 is species 2), `sigma_2`,
+/// `N_2`, `ε` (the restitution coefficient, as in the spec), `T(0)`, `V`, `N`, `n`, `θ`; any
+/// other key as it is.
+pub fn physics_name(key: &str) -> String {
+    let k = key.replace('.', "_");
+    if let Some(rest) = k.strip_prefix("species_list_") {
+        if let Some((i, what)) = rest.split_once('_') {
+            if let Ok(i) = i.parse::<u32>() {
+                let sym = match what {
+                    "mass" => Some("m"),
+                    "diameter" => Some("σ"),
+                    "count" => Some("N"),
+                    "temperature" => Some("T"),
+                    _ => None,
+                };
+                if let Some(sym) = sym {
+                    return format!("{sym}_{}", i + 1);
+                }
+            }
+        }
+    }
+    match k.as_str() {
+        "restitution_constant" | "restitution" => "ε",
+        "initial_temperature" => "T(0)",
+        "volume" => "V",
+        "n_particles" => "N",
+        "density" => "n",
+        "species_power_law_theta" => "θ",
+        _ => key,
+    }
+    .to_string()
+}
+
 pub fn across_sweep(name: &str, sweep: &Sweep, ends: &Ends) -> Vec<(String, Figure)> {
     let all: Vec<u32> = ends
         .values()
@@ -441,9 +475,10 @@ pub fn across_sweep(name: &str, sweep: &Sweep, ends: &Ends) -> Vec<(String, Figu
                     String::new()
                 };
                 let sym = q.symbol(&k.to_string());
+                let axis = physics_name(key);
                 let mut fig = Figure::new(
-                    format!("{name}: {sym} at t_end vs {key}{by}"),
-                    key,
+                    format!("{name}: {sym} at t_end vs {axis}{by}"),
+                    &axis,
                     &match q {
                         Quantity::Temperature => format!("temperature {sym}(t_end)"),
                         Quantity::Msd => format!("MSD {sym}(t_end)"),
@@ -560,6 +595,18 @@ mod tests {
 
     /// The figures: per shown species a temperature figure (and an MSD one for species 1),
     /// data then theory per method, names safe and distinct.
+    /// Sweep keys on axes by their physics names (species list index 1 is species 2).
+    #[test]
+    fn sweep_keys_get_physics_names() {
+        assert_eq!(physics_name("species_list_1_mass"), "m_2");
+        assert_eq!(physics_name("species.list.0.diameter"), "σ_1");
+        assert_eq!(physics_name("species.list.2.count"), "N_3");
+        assert_eq!(physics_name("restitution_constant"), "ε");
+        assert_eq!(physics_name("n_particles"), "N");
+        assert_eq!(physics_name("method"), "method");
+        assert_eq!(physics_name("species_list_x_mass"), "species_list_x_mass");
+    }
+
     #[test]
     fn across_sweep_figures_and_names() {
         let (sweep, ends) = synthetic();
