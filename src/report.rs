@@ -176,6 +176,7 @@ const CSS: &str = "body{font-family:sans-serif;margin:2em auto;max-width:1100px;
 h1{margin-bottom:0}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}
 table{border-collapse:collapse;margin:.5em 0;display:block;overflow-x:auto;max-width:100%}td,th{border:1px solid #ccc;padding:.2em .5em;text-align:left;vertical-align:top}
 td.n{text-align:right;font-variant-numeric:tabular-nums}
+tr.flagged td{background:#fff1e0}tr.flagged td.q{color:#b00;font-weight:bold}
 pre{background:#f6f6f6;border:1px solid #ddd;padding:.6em;overflow:auto;max-height:40em}
 .bar{display:flex;width:120px;height:12px;border:1px solid #999;background:#eee}
 .bar span{display:block;height:100%}

@@ -71,9 +71,15 @@ pub fn run(a: Args) -> i32 {
 fn print_fits(c: &Campaign, out: &Path, r: &crate::analysis::Report) {
     // Write errors (a closed pipe, `| head`) are not worth a panic.
     let mut o = std::io::stdout().lock();
+    let flagged = r.fits.iter().filter(|f| !f.flags.is_empty()).count();
+    let flagged = if flagged > 0 {
+        format!(" ({flagged} flagged [..]: not results, see the warnings)")
+    } else {
+        String::new()
+    };
     let _ = writeln!(
         o,
-        "{}: {} fits from {} of {} runs; {} files in {}",
+        "{}: {} fits{flagged} from {} of {} runs; {} files in {}",
         c.manifest.name,
         r.fits.len(),
         r.runs_done,
@@ -89,9 +95,16 @@ fn print_fits(c: &Campaign, out: &Path, r: &crate::analysis::Report) {
         let reference = f
             .reference
             .map_or("".into(), |x| format!("  (reference {x:.4})"));
+        // A flagged fit is marked (`[poor fit: chi2_r 10465]`): it is not a result.
+        let mark = f.mark();
+        let mark = if mark.is_empty() {
+            mark
+        } else {
+            format!("  {mark}")
+        };
         let _ = writeln!(
             o,
-            "  {:<22} {:<40} {:>10.4}{err}{chi}  n {}{reference}",
+            "  {:<22} {:<40} {:>10.4}{err}{chi}  n {}{reference}{mark}",
             f.quantity, f.key, f.value, f.n_points
         );
     }

@@ -85,21 +85,42 @@ pub fn number(v: f64) -> String {
     }
 }
 
-/// The rows of `batches` as an HTML table.
+/// A row's `quality` (a text column of that name, as in `analysis_fits`) when it is not
+/// "ok": the row is flagged, not a result.
+fn flagged(b: &RecordBatch, i: usize) -> bool {
+    b.column_by_name("quality")
+        .filter(|c| matches!(c.data_type(), DataType::Utf8))
+        .is_some_and(|c| !c.is_null(i) && c.as_string::<i32>().value(i) != "ok")
+}
+
+/// The rows of `batches` as an HTML table; a flagged row (see [`flagged`]) has the class
+/// `flagged` (shaded) and its quality cell the class `q` (in red).
 fn html_table(h: &mut String, batches: &[RecordBatch]) {
     let Some(first) = batches.first() else {
         return;
     };
+    let n_flagged: usize = batches
+        .iter()
+        .map(|b| (0..b.num_rows()).filter(|&i| flagged(b, i)).count())
+        .sum();
     h.push_str("<table>\n<tr>");
     for f in first.schema().fields() {
         let _ = write!(h, "<th>{}</th>", escape(f.name()));
     }
     h.push_str("</tr>\n");
     for b in batches {
+        let schema = b.schema();
         for i in 0..b.num_rows() {
-            h.push_str("<tr>");
-            for col in b.columns() {
-                let class = if matches!(col.data_type(), DataType::Utf8) {
+            let row_flagged = flagged(b, i);
+            h.push_str(if row_flagged {
+                "<tr class=\"flagged\">"
+            } else {
+                "<tr>"
+            });
+            for (field, col) in schema.fields().iter().zip(b.columns()) {
+                let class = if row_flagged && field.name() == "quality" {
+                    " class=\"q\""
+                } else if matches!(col.data_type(), DataType::Utf8) {
                     ""
                 } else {
                     " class=\"n\""
@@ -110,6 +131,13 @@ fn html_table(h: &mut String, batches: &[RecordBatch]) {
         }
     }
     h.push_str("</table>\n");
+    if n_flagged > 0 {
+        let _ = writeln!(
+            h,
+            "<p class=\"note\">{n_flagged} flagged rows (shaded; see their quality): not \
+             results.</p>"
+        );
+    }
 }
 
 const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -251,5 +279,41 @@ mod tests {
             "{h}"
         );
         assert!(h.contains("<td>x</td><td class=\"n\"></td>"), "{h}");
+        assert!(!h.contains("flagged"), "{h}");
+    }
+
+    /// A row whose `quality` is not "ok" is shaded (class `flagged`), its quality in red
+    /// (class `q`), and the table says how many are flagged; an "ok" row is plain.
+    #[test]
+    fn flagged_fits_marked() {
+        let rows = [
+            (
+                "C_R_exponent",
+                2.1411,
+                "poor_fit: chi2_r 10465 > 4.150 (p < 0.001 for 5 dof)",
+            ),
+            ("xi_2", 0.53, "ok"),
+        ];
+        let b = crate::store::cols::table(&rows, |c| {
+            vec![
+                c.str("quantity", |r| r.0),
+                c.f64("value", |r| r.1),
+                c.str("quality", |r| r.2),
+            ]
+        });
+        let mut h = String::new();
+        html_table(&mut h, &[b]);
+        assert!(h.contains("1 flagged rows"), "{h}");
+        assert!(
+            h.contains(
+                "<tr class=\"flagged\"><td>C_R_exponent</td><td class=\"n\">2.1411</td>\
+                 <td class=\"q\">poor_fit: chi2_r 10465 &gt; 4.150 (p &lt; 0.001 for 5 dof)</td></tr>"
+            ),
+            "{h}"
+        );
+        assert!(
+            h.contains("<tr><td>xi_2</td><td class=\"n\">0.53</td><td>ok</td></tr>"),
+            "{h}"
+        );
     }
 }

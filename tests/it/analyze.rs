@@ -1,7 +1,8 @@
 //! `granular analyze`: tiny 1D and 2D RFM campaigns -> analysis_fits with the expected
 //! columns and sane values (zeta_1 = 1 exactly by (3.19)), figures, a partly finished
-//! campaign (warning, exit 0), a cascade campaign's D_f, and the error cases (no campaign,
-//! a model without analysis, a missing table).
+//! campaign (warning, exit 0), a cascade campaign's D_f, a non-thesis system whose fits are
+//! flagged (the `quality` column, a warning, the summary's mark, the report's), and the error
+//! cases (no campaign, a model without analysis, a missing table).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -14,8 +15,19 @@ use serde_json::json;
 
 use super::util::{heavy, log_text, repo_root, run_capture, run_granular, write_json};
 
-/// (quantity, key) -> (value, error, chi2_reduced, n_points, window, reference).
-type Fits = BTreeMap<(String, String), (f64, Option<f64>, Option<f64>, u32, String, Option<f64>)>;
+/// (quantity, key) -> (value, error, chi2_reduced, n_points, window, reference, quality).
+type Fits = BTreeMap<
+    (String, String),
+    (
+        f64,
+        Option<f64>,
+        Option<f64>,
+        u32,
+        String,
+        Option<f64>,
+        String,
+    ),
+>;
 
 fn read_fits(path: &Path) -> Fits {
     let batches = granular::store::parquet_io::read_file(path, "analysis_fits").unwrap();
@@ -38,7 +50,8 @@ fn read_fits(path: &Path) -> Fits {
                 "chi2_reduced",
                 "n_points",
                 "window",
-                "reference"
+                "reference",
+                "quality"
             ]
         );
         let s = |n: &str| b.column_by_name(n).unwrap().as_string::<i32>().clone();
@@ -48,7 +61,7 @@ fn read_fits(path: &Path) -> Fits {
                 .as_primitive::<Float64Type>()
                 .clone()
         };
-        let (q, k, w) = (s("quantity"), s("key"), s("window"));
+        let (q, k, w, qu) = (s("quantity"), s("key"), s("window"), s("quality"));
         let (v, e, c, r) = (f("value"), f("error"), f("chi2_reduced"), f("reference"));
         let n = b
             .column_by_name("n_points")
@@ -66,6 +79,7 @@ fn read_fits(path: &Path) -> Fits {
                     n.value(i),
                     w.value(i).to_string(),
                     opt(&r, i),
+                    qu.value(i).to_string(),
                 ),
             );
         }
@@ -184,6 +198,14 @@ fn analyze_end_to_end() {
         format!("{key},N=120"),
     )];
     assert!(g.0.is_finite() && g.0 >= 0.0 && g.3 > 0);
+    // A number that is no fit (no parameter) is never flagged; xi_2 over N = 30..120 is (3
+    // points for 2 parameters, and N below the thesis's cut 398).
+    assert_eq!(g.6, "ok");
+    assert!(
+        xi2.6.contains("window: 3 points for 2 parameters") && xi2.6.contains("N from 30 < 398"),
+        "{}",
+        xi2.6
+    );
     assert!(a
         .join("analysis/figures/g1-bisection-eps_0.5_L__1_N_120.png")
         .is_file());
@@ -213,6 +235,13 @@ fn analyze_end_to_end() {
         .expect("D_f row");
     assert!(df.0 .1.starts_with("phi=0.4,L=0.07"), "{}", df.0 .1);
     assert_eq!(df.1 .3, 2);
+    // Two shells for two parameters: no residual freedom, flagged (and the box is below
+    // L_min: no shell in k < k_D).
+    assert!(
+        df.1 .6.contains("window: 2 points for 2 parameters"),
+        "{}",
+        df.1 .6
+    );
     assert!(df.1 .4.starts_with("k < 2 k_D"), "{}", df.1 .4);
     assert!(
         df.1 .0.is_finite() && df.1 .0 > -1.0 && df.1 .0 < 4.0,
@@ -319,4 +348,90 @@ fn analyze_refuses_what_it_cannot_analyse() {
         "{}",
         log_text(&log)
     );
+}
+
+/// A non-thesis system (issue 26): a nearly elastic 2D gas (eps_n = eps_t = 0.95) at phi =
+/// 0.1 in a box far below L_min = 2 pi/k_D (k_D (4.5) = 2.07 1/m: L_min = 3.04 m, the box
+/// 0.12 m), where the clustering law C(R) ~ R^D_f has no range. The C(R) fit is flagged in
+/// the `quality` column (the window by the law's validity, and a poor fit exactly when its
+/// chi2_r is above the 99.9 % quantile of its dof), a warning names it with what to do, the
+/// summary marks it, and the report shades it. Exit 0: a flag is no failure.
+#[test]
+fn analyze_flags_fits_outside_their_law() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log.txt");
+    let m = dir.path().join("m.json");
+    write_json(
+        &m,
+        &json!({
+            "name": "non-thesis",
+            "model": "rfm",
+            "seed": 11,
+            "replicas": 2,
+            "params": {
+                "dim": 2,
+                "n_particles": 200,
+                "packing_fraction": 0.1,
+                "restitution_normal": 0.95,
+                "restitution_tangential": 0.95,
+                "warmup": 0.05,
+                "duration": 0.1,
+                "sample_every": 1000,
+                "observables": ["structure_factor", "radial_distribution"],
+                "structure_factor": {"k_max": 10, "every": 2},
+                "radial_distribution": {"every": 5}
+            }
+        }),
+    );
+    let c = dir.path().join("C");
+    let c_s = c.to_str().unwrap();
+    let code = run(&["run", m.to_str().unwrap(), "--out", c_s, "--quiet"], &log);
+    assert_eq!(code, Some(0), "{}", log_text(&log));
+    let (code, out) = run_capture(&["analyze", c_s, "--no-figures"], &log);
+    assert_eq!(code, Some(0), "{out}\n{}", log_text(&log));
+    let fits = read_fits(&c.join("analysis").join("analysis_fits.parquet"));
+    let (key, f) = fits
+        .iter()
+        .find(|(k, _)| k.0 == "C_R_exponent")
+        .expect("C(R) row");
+    let quality = &f.6;
+    assert!(
+        quality.starts_with("window: box L = 0.1189 m < L_min = 2 pi/k_D = ")
+            && quality.contains("no k < k_D in the box"),
+        "{quality}"
+    );
+    let limit = granular::analysis::chi2_reduced_limit(f.3 - 2).unwrap();
+    let chi = f.2.expect("a weighted fit");
+    assert_eq!(
+        quality.contains("; poor_fit: chi2_r "),
+        chi > limit,
+        "chi2_r {chi}, limit {limit}: {quality}"
+    );
+    // Every fit here has the box below L_min: none is "ok".
+    assert!(fits.values().all(|v| v.6 != "ok"), "{fits:?}");
+    // The warning names the quantity, the reason and what to do.
+    let text = log_text(&log);
+    assert!(
+        text.contains(&format!("C_R_exponent [{}] = ", key.1))
+            && text.contains("is flagged, not a result: window: box L = 0.1189 m < L_min")
+            && text.contains("use a box larger than L_Eff = "),
+        "{text}"
+    );
+    // The summary marks it.
+    let line = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("C_R_exponent"))
+        .expect("C(R) in the summary");
+    assert!(line.contains("  [window: L < L_min"), "{out}");
+    assert!(out.contains("flagged [..]: not results"), "{out}");
+    // The report shades the row and names the flagged count.
+    let code = run(&["report", c_s], &log);
+    assert_eq!(code, Some(0), "{}", log_text(&log));
+    let html = std::fs::read_to_string(c.join("report.html")).unwrap();
+    assert!(
+        html.contains("<tr class=\"flagged\"><td>non-thesis</td><td>C_R_exponent</td>"),
+        "{html}"
+    );
+    assert!(html.contains("<td class=\"q\">window: box L = 0.1189 m"));
+    assert!(html.contains("flagged rows (shaded; see their quality): not results."));
 }

@@ -8,6 +8,10 @@
 //! `math::fit` and the power laws of `math::power`. This module reads the tables (the rows
 //! of the finished runs: `CampaignView::read_done`), groups points (1D: by everything but N),
 //! calls them and records the results; the parameters are the points' typed [`RfmParams`].
+//! A fit whose window is outside its law's validity (the spec's) is flagged on its row
+//! (`FitRow::outside`: xi_m and lambda below the thesis's N cut, the 2D structure fits in a box
+//! below L_min, the free-path fits below 5 L_min); the shared `analysis` adds the statistical
+//! flags (too few points, a zero error, chi2_r above its 99.9 % quantile) and warns.
 
 pub mod fractal;
 pub mod free_path;
@@ -19,7 +23,9 @@ use std::ops::{Deref, DerefMut};
 
 use super::tables as rt;
 use super::{Rfm, RfmParams};
-use crate::analysis::{fig, line, num, replica_stat, slug, Analysis, AnalysisError};
+use crate::analysis::{
+    fig, line, num, replica_stat, slug, Analysis, AnalysisError, FitRow, Options,
+};
 use crate::math::power;
 use crate::models::{CampaignView, Model};
 use crate::plot::{self, Series};
@@ -309,7 +315,7 @@ fn exponents(
         } else {
             "unweighted"
         };
-        ctx.fit(
+        let row = ctx.fit(
             format!("{sym}_{m}"),
             key,
             f.exponent,
@@ -322,6 +328,9 @@ fn exponents(
             ),
             reference,
         );
+        if sym == "xi" {
+            below_thesis_n(row, f.n_lo);
+        }
         per_m.push((m as f64, f.exponent / m as f64, f.error / m as f64));
         if sym == "xi" && m == 2 {
             lambda_and_collapse(ctx, key, pts[0].1, &f, &at_n, figs);
@@ -345,7 +354,7 @@ fn lambda_and_collapse(
     let scale = (r.noise_strength * lr / (r.mass * r.mass)).powf(2.0 / 3.0);
     let lambda = f.ln_amplitude.exp() / scale;
     let lam_err = lambda * f.fit.errors[0];
-    ctx.fit(
+    let row = ctx.fit(
         "lambda",
         key,
         lambda,
@@ -358,6 +367,7 @@ fn lambda_and_collapse(
         ),
         None,
     );
+    below_thesis_n(row, f.n_lo);
     figs.v2.push(Series {
         label: key.to_string(),
         points: at_n
@@ -489,7 +499,8 @@ fn bisection_comparison(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                      (no fit parameter; 0 = identical)"
                 ),
                 Some(0.0),
-            );
+            )
+            .params(0);
         }
         let (x0, x1) = (data[0].0, data[data.len() - 1].0.min(0.999));
         let series = vec![
@@ -555,7 +566,7 @@ fn structure_factor_fit(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &Rfm
         );
         match power::decay_exponent(&shells, 0.0, kp) {
             Some(f) => {
-                ctx.fit(
+                let row = ctx.fit(
                     "D_f_structure_factor",
                     key,
                     f.exponent,
@@ -565,6 +576,7 @@ fn structure_factor_fit(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &Rfm
                     window,
                     None,
                 );
+                below_l_min(row, r);
                 let data: Vec<(f64, f64, f64)> = shells
                     .iter()
                     .filter(|s| s.y > 0.0 && s.x * dd <= 25.0)
@@ -634,7 +646,7 @@ fn cumulative_count_fits(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &Rf
             line: false,
         }];
         if let Some(f) = power::growth_exponent(&r_, &cv, &ce, lo, hi) {
-            ctx.fit(
+            let row = ctx.fit(
                 "C_R_exponent",
                 key,
                 f.exponent,
@@ -644,6 +656,7 @@ fn cumulative_count_fits(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &Rf
                 window.clone(),
                 None,
             );
+            below_l_min(row, r);
         }
         series.push(Series {
             label: "n(R) = C(R) - n_bar".into(),
@@ -657,7 +670,7 @@ fn cumulative_count_fits(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &Rf
         });
         match power::growth_exponent(&r_, &nv, &ce, lo, hi) {
             Some(f) => {
-                ctx.fit(
+                let row = ctx.fit(
                     "D_f_n_R",
                     key,
                     f.exponent,
@@ -667,6 +680,7 @@ fn cumulative_count_fits(ctx: &mut Ctx, key: &str, p: u32, r: &RfmParams, d: &Rf
                     window,
                     None,
                 );
+                below_l_min(row, r);
                 let (la, e) = (f.ln_amplitude, f.exponent);
                 series.push(line(
                     format!("n(R) ~ R^{e:.2}"),
@@ -711,7 +725,8 @@ fn tail_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                 v.len(),
                 "inverse-variance mean of the accepted ranges (centre, half-width)",
                 None,
-            );
+            )
+            .params(1);
         }
     }
 }
@@ -750,16 +765,18 @@ fn alpha_fits(ctx: &mut Ctx, key: &str, folded: &[tails::FoldedBin], rule: &tail
     match tails::alpha_window(folded, rule) {
         Some(w) => {
             match w.centre_half_width(step) {
-                Some((c, h)) => ctx.fit(
-                    "alpha",
-                    key,
-                    c,
-                    Some(h),
-                    Some(w.best_chi2_reduced),
-                    w.n_bins,
-                    format!("accepted range (centre +- half-width); {}", window(&w)),
-                    None,
-                ),
+                Some((c, h)) => {
+                    ctx.fit(
+                        "alpha",
+                        key,
+                        c,
+                        Some(h),
+                        Some(w.best_chi2_reduced),
+                        w.n_bins,
+                        format!("accepted range (centre +- half-width); {}", window(&w)),
+                        None,
+                    );
+                }
                 None => ctx.warn(format!(
                     "{key}: no alpha has chi_r^2 < {} (best alpha {:.2}, chi_r^2 {:.2})",
                     rule.chi2_max, w.best_alpha, w.best_chi2_reduced
@@ -811,13 +828,19 @@ fn velocity_distribution(
         let chi = cr.fit.chi2_reduced;
         let n = cr.fit.n_points;
         let w = "(5.32), alpha = 1, ln P, bins with X >= 10";
-        ctx.fit("v_r", key, vr, Some(vre), chi, n, w, None);
-        ctx.fit("v_c", key, vc, Some(vce), chi, n, w, None);
+        // (5.32) has three free parameters (A, v_r, v_c); every row below is of that fit.
+        ctx.fit("v_r", key, vr, Some(vre), chi, n, w, None)
+            .params(3);
+        ctx.fit("v_c", key, vc, Some(vce), chi, n, w, None)
+            .params(3);
         let ratio = vc / vr;
         let ratio_err = ratio * ((vre / vr).powi(2) + (vce / vc).powi(2)).sqrt();
-        ctx.fit("v_c/v_r", key, ratio, Some(ratio_err), chi, n, w, None);
-        ctx.fit("P(v_c)/P(0)", key, cr.ratio_at_v_c(), None, chi, n, w, None);
-        ctx.fit("v_A", key, vr * vr / vc, None, chi, n, "v_r^2 / v_c", None);
+        ctx.fit("v_c/v_r", key, ratio, Some(ratio_err), chi, n, w, None)
+            .params(3);
+        ctx.fit("P(v_c)/P(0)", key, cr.ratio_at_v_c(), None, chi, n, w, None)
+            .params(3);
+        ctx.fit("v_A", key, vr * vr / vc, None, chi, n, "v_r^2 / v_c", None)
+            .params(3);
         let params = cr.fit.params.clone();
         let vmax = folded
             .iter()
@@ -959,7 +982,8 @@ fn free_path_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
         match free_path::fit_tail(&tail, None) {
             Some(f) => {
                 let w = window(&tail);
-                ctx.fit(
+                // (4.25): A_0, C, D_f free.
+                let row = ctx.fit(
                     "free_path_D_f",
                     &key,
                     f.params[2],
@@ -969,7 +993,8 @@ fn free_path_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                     w.clone(),
                     None,
                 );
-                ctx.fit(
+                free_path_box(row.params(3), r);
+                let row = ctx.fit(
                     "free_path_C",
                     &key,
                     f.params[1],
@@ -979,6 +1004,7 @@ fn free_path_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                     w,
                     None,
                 );
+                free_path_box(row.params(3), r);
                 let params = f.params.clone();
                 let (l0, l1) = (tail[0].l, tail[tail.len() - 1].l);
                 series.push(line(
@@ -995,7 +1021,7 @@ fn free_path_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
         }
         let df = ctx.opts.fixed_df;
         if let Some(f) = free_path::fit_tail(&tail, Some(df)) {
-            ctx.fit(
+            let row = ctx.fit(
                 "free_path_C_fixed_D_f",
                 &key,
                 f.params[1],
@@ -1005,6 +1031,7 @@ fn free_path_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
                 format!("D_f = {df} fixed; {}", window(&tail)),
                 None,
             );
+            free_path_box(row, r);
         }
         let fg = fig(
             ctx.title(&format!("free paths [{key}]")),
@@ -1013,5 +1040,86 @@ fn free_path_fits(ctx: &mut Ctx, rfm: &[(u32, &RfmParams)], d: &RfmData) {
             series,
         );
         ctx.figure(format!("free-path-{}", slug(&key)), plot::loglog(fg));
+    }
+}
+
+/// xi_m and lambda over N below the thesis's cut (N >= 398, [`Options::default`]'s
+/// `n_min`): the thesis drops smaller N for their large long-lived fluctuations (sec. 3.1.3;
+/// spec 2.10), so (3.8)/(3.13) are not taken to hold there.
+fn below_thesis_n(row: &mut FitRow, n_lo: f64) {
+    let cut = Options::default().n_min;
+    if n_lo < cut {
+        row.outside(
+            format!("N from {}", n_lo as u64),
+            format!(
+                "N from {} < {cut}: below the thesis's N cut, where <|v|^m> has large \
+                 long-lived fluctuations (sec. 3.1.3)",
+                n_lo as u64
+            ),
+            format!(
+                "run at least 3 values of N >= {cut} (--n-min {cut}, the default, then \
+                 uses only them)"
+            ),
+        );
+    }
+}
+
+/// The lengths (4.5)-(4.9) of a 2D point: (L, k_D, L_min = 2 pi/k_D, L_Eff).
+fn dissipative_lengths(r: &RfmParams) -> (f64, f64, f64, f64) {
+    let cfg = r.config();
+    let kd = fractal::k_dissipative(
+        r.restitution_normal,
+        r.restitution_tangential,
+        cfg.fill_fraction(),
+        cfg.diameter(),
+    );
+    (cfg.box_length(), kd, fractal::l_min(kd), fractal::l_eff(kd))
+}
+
+/// A 2D structure fit (S(k) (4.4), C(R) (4.16), n(R) (4.17)) in a box smaller than
+/// L_min = 2 pi/k_D: its lowest shell 2 pi/L is already beyond k_D, so the dissipative
+/// regime where the power law holds (k < k_D, spec 2.7; in real space its Hankel
+/// transform, spec 2.7-2.8) has no range in the box.
+fn below_l_min(row: &mut FitRow, r: &RfmParams) {
+    if r.dim != 2 {
+        return;
+    }
+    let (l, kd, l_min, l_eff) = dissipative_lengths(r);
+    if l < l_min {
+        row.outside(
+            "L < L_min",
+            format!(
+                "box L = {l:.4} m < L_min = 2 pi/k_D = {l_min:.4} m (k_D = {kd:.4} 1/m, \
+                 (4.5)-(4.8)): no k < k_D in the box, where the clustering power law holds"
+            ),
+            format!(
+                "use a box larger than L_Eff = {l_eff:.4} m (more particles at this \
+                 packing fraction), or check eps_n, eps_t and phi against the thesis's \
+                 (sec. 4.1)"
+            ),
+        );
+    }
+}
+
+/// A 2D free-path fit (4.25) in a box smaller than 5 L_min: the thesis sees the tail
+/// still change with L below L_c ~ 0.4 m ~ 5 L_min at phi = 0.353 (sec. 4.3; spec 2.9).
+fn free_path_box(row: &mut FitRow, r: &RfmParams) {
+    if r.dim != 2 {
+        return;
+    }
+    let (l, _, l_min, _) = dissipative_lengths(r);
+    if l < 5.0 * l_min {
+        row.outside(
+            "L < 5 L_min",
+            format!(
+                "box L = {l:.4} m < 5 L_min = {:.4} m: the free-path tail still changes \
+                 with L there (sec. 4.3)",
+                5.0 * l_min
+            ),
+            format!(
+                "use a box of at least 5 L_min = {:.4} m, or read the tail as finite-size",
+                5.0 * l_min
+            ),
+        );
     }
 }
