@@ -146,9 +146,11 @@ pub fn composite_nodes(breaks: &[f64]) -> (Vec<f64>, Vec<f64>) {
 
 /// Breakpoints on [a, b] (a < b) graded geometrically towards `a`: a, a + h, a + 2h, a + 4h, ...,
 /// b with the first panel of length `h` (ratio 2), or just [a, b] when h >= b - a.
+/// A first panel that is not a positive finite length (a degenerate time scale of the caller)
+/// would never reach `b`: then the one panel [a, b].
 pub fn graded_from(a: f64, b: f64, h: f64) -> Vec<f64> {
     let mut v = vec![a];
-    let mut d = h;
+    let mut d = if h > 0.0 && h.is_finite() { h } else { b - a };
     while a + d < b {
         v.push(a + d);
         d *= 2.0;
@@ -234,6 +236,15 @@ pub fn phi(x: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn graded_breaks_end_for_a_degenerate_first_panel() {
+        // Before: h <= 0 never reached b (a vector grown until memory ran out).
+        for h in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert_eq!(graded_from(0.0, 3.0, h), vec![0.0, 3.0], "h = {h}");
+        }
+        assert_eq!(graded_from(0.0, 3.0, 1.0), vec![0.0, 1.0, 2.0, 3.0]);
+    }
 
     /// Gauss-Legendre: weights sum to 2, exact for x^(2n-1), known 3-point nodes (1e-15).
     #[test]

@@ -65,7 +65,12 @@ pub fn xi_term(d0: f64, tau_v0: f64, tau0: f64, t: f64, delta: f64) -> f64 {
 
 /// The TAMSD (27) of a species with D_k(0) = `d0`, tau_v,k(0) = `tau_v0` in an HCS with
 /// relaxation time `tau0` (infinity: no cooling), measured over [0, t] at lag `delta`.
+/// Not a number where the HCS has no such time scales (tau_0 or tau_v,k(0) not positive: a
+/// start far from the HCS where a species heats up): (27) does not apply there.
 pub fn tamsd_hcs(d0: f64, tau_v0: f64, tau0: f64, t: f64, delta: f64) -> f64 {
+    if !(tau0 > 0.0 && tau_v0 > 0.0) {
+        return f64::NAN;
+    }
     tamsd_first_term(d0, tau0, t, delta) + xi_term(d0, tau_v0, tau0, t, delta)
 }
 
@@ -96,6 +101,14 @@ pub fn tamsd_hcs_species(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn no_hcs_time_scale_gives_no_tamsd() {
+        // A heated species (tau_0 or tau_v <= 0) is outside (27): NaN, never a hang.
+        assert!(tamsd_hcs(1.0, 1.0, -5.0, 100.0, 3.0).is_nan());
+        assert!(tamsd_hcs(1.0, 0.0, 5.0, 100.0, 3.0).is_nan());
+        assert!(tamsd_hcs(1.0, 1.0, 5.0, 100.0, 3.0).is_finite());
+    }
     use crate::theory::hcs::hcs_temperatures;
     use crate::theory::msd::msd_hcs;
 
