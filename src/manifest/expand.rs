@@ -274,11 +274,19 @@ pub fn label_targets(m: &Manifest) -> Vec<String> {
     fn paths(v: &Value, prefix: &str, out: &mut Vec<String>) {
         let children: Vec<(String, &Value)> = match v {
             Value::Object(o) => o.iter().map(|(k, v)| (k.clone(), v)).collect(),
-            Value::Array(a) => a.iter().enumerate().map(|(i, v)| (i.to_string(), v)).collect(),
+            Value::Array(a) => a
+                .iter()
+                .enumerate()
+                .map(|(i, v)| (i.to_string(), v))
+                .collect(),
             _ => return,
         };
         for (k, v) in children {
-            let p = if prefix.is_empty() { k } else { format!("{prefix}.{k}") };
+            let p = if prefix.is_empty() {
+                k
+            } else {
+                format!("{prefix}.{k}")
+            };
             out.push(p.clone());
             paths(v, &p, out);
         }

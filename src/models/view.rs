@@ -191,6 +191,9 @@ mod labels_tests {
             l.point_label(&[("species.list.1.mass", &a), ("packing_fraction", &b)]),
             "mass ratio=2, φ=0.1"
         );
-        assert_eq!(Labels::default().name("packing_fraction"), "packing_fraction");
+        assert_eq!(
+            Labels::default().name("packing_fraction"),
+            "packing_fraction"
+        );
     }
 }

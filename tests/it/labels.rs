@@ -86,7 +86,10 @@ fn labels_name_the_figures_and_change_no_run() {
     let (code, out) = run_capture(&["report", s(&c)], &log);
     assert_eq!(code, Some(0), "{out}\nlog:\n{}", log_text(&log));
     let html = std::fs::read_to_string(c.join("report.html")).unwrap();
-    assert!(html.contains("mass ratio"), "the report's figures name the label");
+    assert!(
+        html.contains("mass ratio"),
+        "the report's figures name the label"
+    );
 
     // Without labels: the same runs, the physics name on the axis.
     let bare = dir.path().join("bare.json");
@@ -103,7 +106,9 @@ fn labels_name_the_figures_and_change_no_run() {
     let other = dir.path().join("other.json");
     util::write_json(
         &other,
-        &mixture(Some(json!({"species_list_1_mass": "m_2/m_1", "temperature": "T"}))),
+        &mixture(Some(
+            json!({"species_list_1_mass": "m_2/m_1", "temperature": "T"}),
+        )),
     );
     assert_eq!(new_runs(&other, &c, &log), 0, "labels are no part of a run");
     let code = run_granular(&["run", s(&other), "--out", s(&c), "--quiet"], &log, LIMIT);
@@ -136,7 +141,10 @@ fn bad_labels_are_refused_at_their_keys() {
     let text = format!("{out}{}", log_text(&log));
     assert_eq!(code, Some(2), "{text}");
     assert!(text.contains("/labels/species.list.1.mas"), "{text}");
-    assert!(text.contains("`species.list.1.mass`"), "nearest name: {text}");
+    assert!(
+        text.contains("`species.list.1.mass`"),
+        "nearest name: {text}"
+    );
     assert!(text.contains("/labels/restitution.constant"), "{text}");
     assert!(text.contains("/labels/t_end"), "{text}");
     assert!(!c.exists(), "nothing written");

@@ -638,7 +638,10 @@ mod tests {
         let given = [
             ("restitution.constant".to_string(), "alpha".to_string()),
             ("method".to_string(), "scheme".to_string()),
-            ("temperature".to_string(), "granular temperature".to_string()),
+            (
+                "temperature".to_string(),
+                "granular temperature".to_string(),
+            ),
         ]
         .into();
         let figs = across_sweep("c", &sweep, &ends, &Labels::new(given, |_| None));
@@ -646,7 +649,11 @@ mod tests {
         assert_eq!(figs[0].0, "sweep-restitution_constant-temperature-k1");
         assert_eq!(f.x_label, "alpha");
         assert!(f.title.contains("vs alpha"), "{}", f.title);
-        assert!(f.y_label.starts_with("granular temperature "), "{}", f.y_label);
+        assert!(
+            f.y_label.starts_with("granular temperature "),
+            "{}",
+            f.y_label
+        );
         assert_eq!(f.series[0].label, "scheme=low_rank");
     }
 
