@@ -330,6 +330,16 @@ fn label_errors(m: &Manifest) -> Vec<(String, String)> {
     }
     let known = label_targets(m);
     let mut errors = Vec::new();
+    // A sweep key by its path and by its column name: one name, given once.
+    let mut by_column: std::collections::BTreeMap<String, &String> = Default::default();
+    for key in m.labels.keys() {
+        if let Some(first) = by_column.insert(key.replace('.', "_"), key) {
+            errors.push((
+                format!("/labels/{}", pointer_escape(key)),
+                format!("{key:?} and {first:?} name the same thing (a path and its column name): give one of them"),
+            ));
+        }
+    }
     for key in m.labels.keys() {
         if known.iter().any(|k| k == key) {
             continue;
