@@ -45,6 +45,8 @@
 //!   anchor rules); every property of the manifest's JSON Schema is named in docs/manifest.md;
 //!   the tutorial's manifest is its job and validates as shown (the rest of docs/tutorial.md:
 //!   scripts/tutorial_test.py).
+//! - `labels`: the manifest's `labels` name the figures of `plot` and `report`, change no run
+//!   (0 new runs), and a key naming nothing of the manifest is refused at `/labels/KEY`.
 //! - `figures`: the standard figures of tiny rfm, bisection, cascade and SPM campaigns, the
 //!   same in `plot` and `report`; analyze's outputs in the report; overlays split beyond 12
 //!   points.
@@ -81,6 +83,7 @@ mod it {
     pub mod figures;
     pub mod growth;
     pub mod interrupt;
+    pub mod labels;
     pub mod links;
     pub mod manifests;
     pub mod messages;

@@ -242,7 +242,7 @@ pub fn figures(
                 .zip(xs)
                 .filter_map(|(p, x)| Some((p?, x?)))
                 .collect();
-            (m.len() == view.sweep.num_rows()).then_some((name, m))
+            (m.len() == view.sweep.num_rows()).then_some((view.labels.name(&name), m))
         })
         .flatten();
     let mut out = Vec::new();
@@ -267,7 +267,8 @@ pub fn figures(
             }
         }
         let id = format!("derived-{}", qu.name);
-        let y_label = qu.name.as_str();
+        let y_name = view.labels.name(&qu.name);
+        let y_label = y_name.as_str();
         if qu.is_series() {
             let mut by_point: BTreeMap<u32, Vec<(f64, f64, f64)>> = BTreeMap::new();
             for (p, t, m, s) in rows {

@@ -603,6 +603,7 @@ impl Campaign {
         for r in done.keys() {
             *runs_done.entry(self.plan.run(*r).point_id).or_default() += 1;
         }
+        let labels = self.labels();
         CampaignView {
             name: &self.manifest.name,
             points: self
@@ -610,25 +611,38 @@ impl Campaign {
                 .points
                 .iter()
                 .filter(|p| p.current || !current_only)
-                .map(|p| PointView {
-                    point_id: p.point_id,
-                    params: &p.params,
-                    label: self.plan.label(p.point_id),
-                    swept: self
+                .map(|p| {
+                    let swept: Vec<(&str, &Value)> = self
                         .plan
                         .sweep_keys
                         .iter()
                         .map(String::as_str)
                         .zip(&p.values)
-                        .collect(),
-                    runs_done: runs_done.get(&p.point_id).copied().unwrap_or(0),
+                        .collect();
+                    PointView {
+                        point_id: p.point_id,
+                        params: &p.params,
+                        label: labels.point_label(&swept),
+                        swept,
+                        runs_done: runs_done.get(&p.point_id).copied().unwrap_or(0),
+                    }
                 })
                 .collect(),
             replicas: self.plan.runs_asked_per_point(),
+            labels,
             done,
             data,
             sweep: tables::sweep_batch(&self.plan),
         }
+    }
+
+    /// The names on the figures: the latest manifest's `labels` over the model's physics
+    /// names ([`crate::models::Labels`]).
+    pub fn labels(&self) -> crate::models::Labels {
+        crate::models::Labels::new(
+            self.manifest.labels.clone(),
+            self.plan.model.physics_names(),
+        )
     }
 
     /// Every table of the campaign (the model's and `runs`, `points`).

@@ -259,9 +259,101 @@ fn runs_errors(m: &Manifest) -> Vec<(String, String)> {
         }
     }
     errors.extend(target_errors(m));
+    errors.extend(label_errors(m));
     // The derived quantities' expressions, against the model's run tables.
     if let Err(e) = crate::derived::compile(&m.derived, &m.model.run_tables()) {
         errors.extend(e);
+    }
+    errors
+}
+
+/// The names a key of `labels` may give: the sweep keys (as paths and as their column names),
+/// every path into `params` (list indices from 0), the derived quantities and the columns of
+/// the model's run tables.
+pub fn label_targets(m: &Manifest) -> Vec<String> {
+    fn paths(v: &Value, prefix: &str, out: &mut Vec<String>) {
+        let children: Vec<(String, &Value)> = match v {
+            Value::Object(o) => o.iter().map(|(k, v)| (k.clone(), v)).collect(),
+            Value::Array(a) => a
+                .iter()
+                .enumerate()
+                .map(|(i, v)| (i.to_string(), v))
+                .collect(),
+            _ => return,
+        };
+        for (k, v) in children {
+            let p = if prefix.is_empty() {
+                k
+            } else {
+                format!("{prefix}.{k}")
+            };
+            out.push(p.clone());
+            paths(v, &p, out);
+        }
+    }
+    let mut out: Vec<String> = Vec::new();
+    for k in m.sweep.keys() {
+        out.push(k.clone());
+        out.push(k.replace('.', "_"));
+    }
+    paths(&Value::Object(m.params.clone()), "", &mut out);
+    out.extend(m.derived.keys().cloned());
+    for (_, schema) in m.model.run_tables() {
+        out.extend(schema.fields().iter().map(|f| f.name().clone()));
+    }
+    let mut seen = HashSet::new();
+    out.retain(|n| seen.insert(n.clone()));
+    out
+}
+
+/// The edit distance of two names (characters).
+fn distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != *cb)).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
+}
+
+/// Every key of `labels` must name something of the manifest ([`label_targets`]); an unknown
+/// key is reported at `/labels/KEY` with the nearest names it could be.
+fn label_errors(m: &Manifest) -> Vec<(String, String)> {
+    if m.labels.is_empty() {
+        return Vec::new();
+    }
+    let known = label_targets(m);
+    let mut errors = Vec::new();
+    // A sweep key by its path and by its column name: one name, given once.
+    let mut by_column: std::collections::BTreeMap<String, &String> = Default::default();
+    for key in m.labels.keys() {
+        if let Some(first) = by_column.insert(key.replace('.', "_"), key) {
+            errors.push((
+                format!("/labels/{}", pointer_escape(key)),
+                format!("{key:?} and {first:?} name the same thing (a path and its column name): give one of them"),
+            ));
+        }
+    }
+    for key in m.labels.keys() {
+        if known.iter().any(|k| k == key) {
+            continue;
+        }
+        let mut near: Vec<(usize, &String)> = known.iter().map(|k| (distance(key, k), k)).collect();
+        near.sort();
+        let near: Vec<String> = near.iter().take(3).map(|(_, k)| format!("`{k}`")).collect();
+        errors.push((
+            format!("/labels/{}", pointer_escape(key)),
+            format!(
+                "{key:?} names nothing of this manifest: expected a sweep key, a path into `params` (list indices from 0), a derived quantity or a column of the model's run tables; nearest: {}",
+                if near.is_empty() { "none".to_string() } else { near.join(", ") }
+            ),
+        ));
     }
     errors
 }

@@ -74,6 +74,13 @@ pub struct Manifest {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[schemars(with = "f64", range(min = 0.0))]
     pub max_core_hours: Option<f64>,
+    /// Names on the figures (`plot`, `report`): a sweep key, a parameter path, a derived
+    /// quantity or a column of the model's run tables -> the name its axes, legends and
+    /// titles show, e.g. `"species.list.1.mass": "m_2/m_1"` (1 to 60 characters). Over the
+    /// models' physics defaults (`m_2`, `ε`, `φ`, ...); like `description`, it changes no run.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    #[schemars(with = "std::collections::BTreeMap<String, LabelText>")]
+    pub labels: std::collections::BTreeMap<String, String>,
 }
 
 /// An error target on a derived quantity.
@@ -125,6 +132,11 @@ pub const DEFAULT_MAX_REPLICAS: u32 = 10_000;
 #[derive(JsonSchema)]
 #[allow(dead_code)]
 struct SweepValues(#[schemars(length(min = 1))] Vec<Value>);
+
+/// A figure name given in `labels`.
+#[derive(JsonSchema)]
+#[allow(dead_code)]
+struct LabelText(#[schemars(length(min = 1, max = 60))] String);
 
 impl Manifest {
     /// The runs each point asks for: `replicas` (default 1) or the given `seeds`.

@@ -174,9 +174,9 @@ fn envelope_by_value(mut value: Value) -> Value {
 }
 
 /// The manifest of `text` (valid JSON) with the members of `params` that `errors` (the schema's)
-/// point into left out, so that the checks the schema cannot express can still run beside its
+/// (or `labels`) point into left out, so that the checks the schema cannot express can still run beside its
 /// errors ("every error at once"), and the JSON pointers of the members left out. `None` where
-/// that cannot be: an error outside `params`, or a member left out that the schema requires
+/// that cannot be: an error outside `params` and `labels`, or a member left out that the schema requires
 /// (its absence is an error again). At most [`PRUNE_ROUNDS`] rounds of leaving out and
 /// checking the schema again.
 pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<String>)> {
@@ -187,7 +187,8 @@ pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<Str
     for _ in 0..PRUNE_ROUNDS {
         for e in &errors {
             let member = member_of(&value, &e.path)?;
-            if !member.starts_with("/params/") {
+            // A bad name in `labels` is left out like a bad member of `params`.
+            if !member.starts_with("/params/") && !member.starts_with("/labels/") {
                 return None;
             }
             if value.pointer(&member).is_some() {

@@ -135,6 +135,11 @@ pub trait Model {
     fn valued_columns(_p: &Self::Params) -> Vec<(&'static str, &'static str)> {
         Vec::new()
     }
+    /// The physics name figures give a sweep key or column (`species.list.1.mass` -> `m_2`),
+    /// where the manifest's `labels` name none; `None`: the key as it is (the default).
+    fn physics_name(_key: &str) -> Option<String> {
+        None
+    }
     /// Every run table the model can write (name and Arrow schema, from its declarations),
     /// whatever the observables: what a derived quantity of the manifest may read. None by
     /// default (no derived quantity).
@@ -229,6 +234,7 @@ impl<'a> CampaignView<'a, ModelParams> {
                 })
                 .collect(),
             replicas: self.replicas,
+            labels: self.labels.clone(),
             done: self.done,
             data: self.data,
             sweep: self.sweep.clone(),
@@ -344,6 +350,13 @@ macro_rules! models {
             pub fn tables(self, points: &[&ModelParams]) -> Vec<&'static str> {
                 match self {
                     $(ModelKind::$variant => <$model as Model>::tables(&typed::<$model>(points)),)+
+                }
+            }
+
+            /// The model's [`Model::physics_name`].
+            pub fn physics_names(self) -> fn(&str) -> Option<String> {
+                match self {
+                    $(ModelKind::$variant => <$model as Model>::physics_name,)+
                 }
             }
 

@@ -34,6 +34,8 @@ pub struct CampaignView<'a, P> {
     pub points: Vec<PointView<'a, P>>,
     /// Replicas per point (an upper bound on the runs per point).
     pub replicas: u32,
+    /// The names figures give sweep keys, derived quantities and columns.
+    pub labels: Labels,
     /// The runs finished with status done, and their replica numbers.
     pub done: &'a BTreeMap<u64, u32>,
     pub data: &'a Dataset,
@@ -97,6 +99,58 @@ impl<P> CampaignView<'_, P> {
     }
 }
 
+/// The names on the figures: the manifest's `labels` (sweep key, parameter path, derived
+/// quantity or column -> name) over the model's physics defaults (`Model::physics_name`).
+/// A sweep key is found as its path (`species.list.1.mass`) and as its column name
+/// (`species_list_1_mass`), whichever of the two the manifest's `labels` uses.
+#[derive(Clone, Debug, Default)]
+pub struct Labels {
+    given: BTreeMap<String, String>,
+    defaults: Option<fn(&str) -> Option<String>>,
+}
+
+impl Labels {
+    pub fn new(given: BTreeMap<String, String>, defaults: fn(&str) -> Option<String>) -> Self {
+        Labels {
+            given,
+            defaults: Some(defaults),
+        }
+    }
+
+    /// The name given to `key` in the manifest's `labels`, if any.
+    pub fn given(&self, key: &str) -> Option<&str> {
+        if let Some(v) = self.given.get(key) {
+            return Some(v);
+        }
+        let col = key.replace('.', "_");
+        self.given
+            .iter()
+            .find(|(k, _)| k.replace('.', "_") == col)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// The name of `key` on a figure: the manifest's label, else the model's physics name,
+    /// else the key itself.
+    pub fn name(&self, key: &str) -> String {
+        if let Some(v) = self.given(key) {
+            return v.to_string();
+        }
+        self.defaults
+            .and_then(|f| f(key))
+            .unwrap_or_else(|| key.to_string())
+    }
+
+    /// A point's legend: `name=value, ...` of its swept values (quotes dropped by the
+    /// callers that show it).
+    pub fn point_label(&self, swept: &[(&str, &Value)]) -> String {
+        swept
+            .iter()
+            .map(|(k, v)| format!("{}={v}", self.name(k)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
 /// One sweep point of a [`CampaignView`].
 pub struct PointView<'a, P> {
     pub point_id: u32,
@@ -108,4 +162,38 @@ pub struct PointView<'a, P> {
     pub swept: Vec<(&'a str, &'a Value)>,
     /// How many of the view's finished runs (`CampaignView::done`) are of this point.
     pub runs_done: u32,
+}
+
+#[cfg(test)]
+mod labels_tests {
+    use super::*;
+
+    fn defaults(key: &str) -> Option<String> {
+        (key == "packing_fraction").then(|| "φ".to_string())
+    }
+
+    #[test]
+    fn given_names_over_the_models_defaults() {
+        let given: BTreeMap<String, String> = [
+            ("species.list.1.mass".to_string(), "mass ratio".to_string()),
+            ("gamma".to_string(), "T_2/T_1".to_string()),
+        ]
+        .into();
+        let l = Labels::new(given, defaults);
+        // A sweep key by its path and by its column name.
+        assert_eq!(l.name("species.list.1.mass"), "mass ratio");
+        assert_eq!(l.name("species_list_1_mass"), "mass ratio");
+        assert_eq!(l.name("gamma"), "T_2/T_1");
+        assert_eq!(l.name("packing_fraction"), "φ");
+        assert_eq!(l.name("dt"), "dt");
+        let (a, b) = (Value::from(2), Value::from(0.1));
+        assert_eq!(
+            l.point_label(&[("species.list.1.mass", &a), ("packing_fraction", &b)]),
+            "mass ratio=2, φ=0.1"
+        );
+        assert_eq!(
+            Labels::default().name("packing_fraction"),
+            "packing_fraction"
+        );
+    }
 }

@@ -105,8 +105,9 @@ fn rfm_figures_and_analysis_in_the_report() {
             "radial-distribution",
         ])
     );
-    // Both points in the overlays' legends (in the SVG text).
-    assert!(html.contains("packing_fraction=0.1") && html.contains("packing_fraction=0.2"));
+    // Both points in the overlays' legends (in the SVG text), by the physics name of
+    // `packing_fraction` (issue 26, `labels`).
+    assert!(html.contains("φ=0.1") && html.contains("φ=0.2"));
     assert!(
         !html.contains("id=\"analysis\""),
         "no analysis section before analyze"

@@ -303,14 +303,12 @@ fn report_maps_deviations_and_plots_across_the_sweep() {
             "map row of point {p} missing"
         );
     }
-    // Series named by the other key's values (sweep columns), each with its theory line.
-    assert!(
-        html.contains("\ninitial_temperature=2\n"),
-        "series of the other key"
-    );
-    assert!(html.contains("\ninitial_temperature=1\n"));
+    // Series named by the other key's values (its physics name: issue 26, `labels`), each
+    // with its theory line.
+    assert!(html.contains("\nT(0)=2\n"), "series of the other key");
+    assert!(html.contains("\nT(0)=1\n"));
     assert!(html.contains("\ntheory\n"));
-    assert!(html.contains("\nrestitution_constant=0.9\n"));
+    assert!(html.contains("\nε=0.9\n"));
 
     let figs = tmp.path().join("figs");
     let code = run_granular(&["plot", s(&c), "--out", s(&figs)], &log, LIMIT);

@@ -197,6 +197,10 @@ impl Model for Dsmc {
         summary::write(c)
     }
 
+    fn physics_name(key: &str) -> Option<String> {
+        Some(overview::physics_name(key))
+    }
+
     fn figures(
         c: &CampaignView<'_, DsmcParams>,
     ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {

@@ -24,7 +24,7 @@ use arrow_array::{Array, BooleanArray, Float64Array, Int64Array, RecordBatch, St
 
 use super::params::DsmcParams;
 use super::tables::{DsmcSpeciesSummaryCols, DSMC_SPECIES_SUMMARY};
-use crate::models::{CampaignView, SweepKey, SweepKeyCols};
+use crate::models::{CampaignView, Labels, SweepKey, SweepKeyCols};
 use crate::plot::{Figure, Heatmap, Series};
 use crate::store::parquet_io::StoreError;
 
@@ -180,7 +180,7 @@ pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
         .map(|p| (p.point_id, p.label.clone()))
         .collect();
     let mut figs = deviation_maps(c.name, &labels, &ends);
-    figs.extend(across_sweep(c.name, &sweep_of(&c.sweep), &ends));
+    figs.extend(across_sweep(c.name, &sweep_of(&c.sweep), &ends, &c.labels));
     Ok(figs)
 }
 
@@ -405,7 +405,27 @@ pub fn physics_name(key: &str) -> String {
     .to_string()
 }
 
-pub fn across_sweep(name: &str, sweep: &Sweep, ends: &Ends) -> Vec<(String, Figure)> {
+///
+/// The manifest's `labels` (of a sweep key, `temperature` or `msd`) name the axes, legends
+/// and titles in place of the physics names.
+pub fn across_sweep(
+    name: &str,
+    sweep: &Sweep,
+    ends: &Ends,
+    labels: &Labels,
+) -> Vec<(String, Figure)> {
+    let axis_name = |key: &str| {
+        labels
+            .given(key)
+            .map(str::to_string)
+            .unwrap_or_else(|| physics_name(key))
+    };
+    // The curves' legends (`key=value`) by the names on the figure; the figures' ids by the
+    // sweep's columns.
+    let named = Sweep {
+        keys: sweep.keys.iter().map(|k| axis_name(k)).collect(),
+        points: sweep.points.clone(),
+    };
     let all: Vec<u32> = ends
         .values()
         .flat_map(|s| s.keys().copied())
@@ -415,16 +435,16 @@ pub fn across_sweep(name: &str, sweep: &Sweep, ends: &Ends) -> Vec<(String, Figu
     let shown = across_species(&all);
     let mut figs = Vec::new();
     for (j, key) in sweep.keys.iter().enumerate() {
-        let others: Vec<&str> = sweep
+        let others: Vec<String> = sweep
             .keys
             .iter()
             .enumerate()
             .filter(|&(i, _)| i != j)
-            .map(|(_, k)| k.as_str())
+            .map(|(_, k)| axis_name(k))
             .collect();
         for &k in &shown {
             for q in [Quantity::Temperature, Quantity::Msd] {
-                let Some(curves) = curves(sweep, j, ends, k, q) else {
+                let Some(curves) = curves(&named, j, ends, k, q) else {
                     continue;
                 };
                 if curves.iter().all(|c| c.data.is_empty()) {
@@ -475,14 +495,16 @@ pub fn across_sweep(name: &str, sweep: &Sweep, ends: &Ends) -> Vec<(String, Figu
                     String::new()
                 };
                 let sym = q.symbol(&k.to_string());
-                let axis = physics_name(key);
+                let axis = axis_name(key);
+                let (column, what) = match q {
+                    Quantity::Temperature => ("temperature", "temperature"),
+                    Quantity::Msd => ("msd", "MSD"),
+                };
+                let what = labels.given(column).unwrap_or(what);
                 let mut fig = Figure::new(
                     format!("{name}: {sym} at t_end vs {axis}{by}"),
                     &axis,
-                    &match q {
-                        Quantity::Temperature => format!("temperature {sym}(t_end)"),
-                        Quantity::Msd => format!("MSD {sym}(t_end)"),
-                    },
+                    &format!("{what} {sym}(t_end)"),
                     series,
                 );
                 fig.log_x = spans_decades(xs);
@@ -608,9 +630,37 @@ mod tests {
     }
 
     #[test]
+    fn across_sweep_names_from_the_labels() {
+        let (sweep, ends) = synthetic();
+        let plain = across_sweep("c", &sweep, &ends, &Labels::default());
+        assert_eq!(plain[0].1.x_label, "ε");
+        assert!(plain[0].1.title.contains("vs ε"), "{}", plain[0].1.title);
+        let given = [
+            ("restitution.constant".to_string(), "alpha".to_string()),
+            ("method".to_string(), "scheme".to_string()),
+            (
+                "temperature".to_string(),
+                "granular temperature".to_string(),
+            ),
+        ]
+        .into();
+        let figs = across_sweep("c", &sweep, &ends, &Labels::new(given, |_| None));
+        let f = &figs[0].1;
+        assert_eq!(figs[0].0, "sweep-restitution_constant-temperature-k1");
+        assert_eq!(f.x_label, "alpha");
+        assert!(f.title.contains("vs alpha"), "{}", f.title);
+        assert!(
+            f.y_label.starts_with("granular temperature "),
+            "{}",
+            f.y_label
+        );
+        assert_eq!(f.series[0].label, "scheme=low_rank");
+    }
+
+    #[test]
     fn across_sweep_figures_and_names() {
         let (sweep, ends) = synthetic();
-        let figs = across_sweep("c", &sweep, &ends);
+        let figs = across_sweep("c", &sweep, &ends, &Labels::default());
         let mut names: Vec<String> = figs.iter().map(|f| f.0.clone()).collect();
         assert_eq!(
             names,
@@ -638,7 +688,7 @@ mod tests {
             .unwrap()
             .temperature
             .theory = Some(7.0);
-        let figs2 = across_sweep("c", &sweep, &ends2);
+        let figs2 = across_sweep("c", &sweep, &ends2, &Labels::default());
         assert_eq!(
             labels(&figs2[0].1),
             ["method=low_rank", "theory", "method=bird", "theory"]
@@ -650,7 +700,7 @@ mod tests {
         for (p, v) in wide.points.iter_mut() {
             v[1] = Swept::Num(10f64.powi(*p as i32 % 3));
         }
-        let figs3 = across_sweep("c", &wide, &ends);
+        let figs3 = across_sweep("c", &wide, &ends, &Labels::default());
         assert!(figs3[0].1.log_x, "x over two decades");
         assert!(!figs3[0].1.log_y);
         names.push("sweep-restitution_constant-msd-k1".into());

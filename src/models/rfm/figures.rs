@@ -260,6 +260,31 @@ fn overlay<'a>(
 }
 
 /// The standard figures of a campaign (data only; `plot` draws them).
+/// The physics name of an rfm sweep key on the figures (legends `name=value`): `N`, `φ`
+/// (packing fraction), `L`, `L'` (reduced length), `r` (radius), `m`, `k` (spring constant), `D` (noise strength),
+/// `ε_n`, `ε_t`, `μ`, `Δt`, `d`; other keys as they are (`None`).
+pub fn physics_name(key: &str) -> Option<String> {
+    let name = match key.replace('.', "_").as_str() {
+        "n_particles" => "N",
+        "packing_fraction" => "φ",
+        "box_length" => "L",
+        "reduced_length" => "L'",
+        "radius" => "r",
+        "mass" => "m",
+        "spring_constant" => "k",
+        "noise_strength" => "D",
+        "restitution_normal" => "ε_n",
+        "restitution_tangential" => "ε_t",
+        "mu" => "μ",
+        "dt" => "Δt",
+        "dim" => "d",
+        "warmup" => "t_warmup",
+        "duration" => "t_run",
+        _ => return None,
+    };
+    Some(name.to_string())
+}
+
 pub fn figures(c: View) -> Result<Vec<(String, Figure)>, StoreError> {
     let mut figs = Vec::new();
     let ts = timeseries(&c.data.read(RFM_TIMESERIES_SUMMARY)?)?;

@@ -159,6 +159,10 @@ impl Model for Rfm {
         summary::write(c, &Self::tables(&points))
     }
 
+    fn physics_name(key: &str) -> Option<String> {
+        figures::physics_name(key)
+    }
+
     fn figures(
         c: &CampaignView<'_, RfmParams>,
     ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {
