@@ -41,7 +41,11 @@ fn reduced(mut job: Value) -> Value {
         "dsmc" => {
             // A horizon of at most 100 (mean free times of order 1): the output times, the
             // TAMSD lags and grid within it.
-            if let Some(t) = p.get("t_end").and_then(Value::as_f64).filter(|t| *t > 100.0) {
+            if let Some(t) = p
+                .get("t_end")
+                .and_then(Value::as_f64)
+                .filter(|t| *t > 100.0)
+            {
                 let end = 100.0_f64.min(t);
                 p["t_end"] = end.into();
                 if let Some(o) = p.get_mut("output_times") {

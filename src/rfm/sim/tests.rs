@@ -401,7 +401,10 @@ fn uniform_layout_is_one_try_at_a_time_on_any_threads() {
             let sim = pool(k)
                 .install(|| RfmSim::with_stream(cfg.clone(), 11, StreamVersion::V2).unwrap());
             assert!(sim.positions() == x, "N {n}, {k} threads: positions differ");
-            assert!(sim.velocities() == v, "N {n}, {k} threads: velocities differ");
+            assert!(
+                sim.velocities() == v,
+                "N {n}, {k} threads: velocities differ"
+            );
         }
     }
 }
