@@ -126,7 +126,8 @@ impl CampaignInfo {
         let text = fsutil::read_inside(root, "campaign.json").map_err(|e| {
             CampaignError::Refused(if e.kind() == std::io::ErrorKind::NotFound {
                 format!(
-                    "{}: not a granular campaign directory (no campaign.json in it)",
+                    "{}: not a granular campaign directory (no campaign.json in it): give the \
+                     directory that `granular run MANIFEST --out DIR` wrote",
                     root.display()
                 )
             } else {

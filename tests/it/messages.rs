@@ -294,6 +294,18 @@ fn refusals_say_what_to_do_next() {
         log_text(&log)
     );
 
+    // A directory that is not a campaign, given to a command that reads one.
+    let empty = d.join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let log = d.join("4.log");
+    let (code, _) = run_capture(&["status", s(&empty)], &log);
+    assert_eq!(code, Some(3), "{}", log_text(&log));
+    assert!(
+        log_text(&log).contains("give the directory that `granular run MANIFEST --out DIR` wrote"),
+        "{}",
+        log_text(&log)
+    );
+
     let mut bad = dsmc(json!({"restitution": 0.8}), json!({}));
     bad["model"] = json!("dsmcc");
     write_json(&m, &bad);
