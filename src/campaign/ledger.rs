@@ -1076,7 +1076,10 @@ fn take_lock_file(root: &Path, info: &LockInfo) -> Result<LockFile, LockError> {
     let name = format!("{}.lock", info.shard_tag);
     let path = root.join("locks").join(&name);
     let io = |e: std::io::Error| LockError::Io(format!("{}: {e}", path.display()));
-    for _ in 0..3 {
+    // Enough tries to outwait an unreadable lock file (its writer killed between creating and
+    // writing it: 100 ms a try) until it is old enough (5 s) to be taken for a crash; a live
+    // holder is answered at once, a stale lock is removed and the next try takes it.
+    for _ in 0..80 {
         match locks.create_new(&name) {
             Ok(mut f) => {
                 use std::io::Write;

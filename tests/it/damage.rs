@@ -403,6 +403,34 @@ fn a_lock_of_a_reused_pid_is_stale() {
     );
 }
 
+/// A lock file left empty (its writer killed between creating and writing it) is taken for a
+/// crash once it is 5 s old: the next command waits for that rather than giving up after a few
+/// tries with "another process keeps taking it" (which a kill at the wrong moment of the drill
+/// below once hit in CI).
+#[test]
+fn an_empty_lock_file_is_outwaited_and_taken_over() {
+    let _g = heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let m = dir.path().join("m.json");
+    write_json(&m, &manifest());
+    let c = dir.path().join("c");
+    assert_eq!(
+        run_granular(&["run", s(&m), "--out", s(&c), "--quiet"], &log, LIMIT),
+        Some(0),
+        "{}",
+        log_text(&log)
+    );
+    fs::write(c.join("locks").join("compact.lock"), "").unwrap();
+    let (code, out) = run_capture(&["compact", s(&c)], &log);
+    assert_eq!(code, Some(0), "{out}\n{}", log_text(&log));
+    assert!(
+        !log_text(&log).contains("keeps taking it"),
+        "{}",
+        log_text(&log)
+    );
+}
+
 /// `granular compact` killed (SIGKILL) at moments spread over its run: the next `compact`
 /// (or `resume`) finishes or redoes it; the tables equal the undamaged campaign's, `verify`
 /// passes, no record is left beside its folded group.
