@@ -370,7 +370,6 @@ fn spans_decades(v: impl Iterator<Item = f64> + Clone) -> bool {
     lo > 0.0 && hi > 10.0 * lo
 }
 
-/// The across-sweep figures of every numeric sweep key.
 /// The physics name of a sweep key (its column name, `species_list_1_mass`, or its path,
 /// `species.list.1.mass`) on a figure's axis: `m_2` (list index 1 is species 2), `sigma_2`,
 /// `N_2`, `ε` (the restitution coefficient, as in the spec), `T(0)`, `V`, `N`, `n`, `θ`; any
@@ -405,6 +404,7 @@ pub fn physics_name(key: &str) -> String {
     .to_string()
 }
 
+/// The across-sweep figures of every numeric sweep key.
 ///
 /// The manifest's `labels` (of a sweep key, `temperature` or `msd`) name the axes, legends
 /// and titles in place of the physics names.
