@@ -23,6 +23,7 @@
 //!   records, ledger; corrupt records; foreign and orphan files) named by `verify`, refused by
 //!   `compact`, healed by `resume` to identical tables; stale locks of reused pids; compaction
 //!   killed at any moment.
+//! - `machine`: what the Python module reads instead of text: `validate --json`.
 //! - `links`: the campaign directory is a closed world: a symbolic link where granular keeps
 //!   its own file or directory (`tables`, a table, a part, `quarantine`, a ledger shard,
 //!   `checkpoints`, `campaign.json`) is named by `verify`, refused by the readers, never
@@ -85,6 +86,7 @@ mod it {
     pub mod interrupt;
     pub mod labels;
     pub mod links;
+    pub mod machine;
     pub mod manifests;
     pub mod messages;
     pub mod models;
