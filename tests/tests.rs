@@ -23,7 +23,9 @@
 //!   records, ledger; corrupt records; foreign and orphan files) named by `verify`, refused by
 //!   `compact`, healed by `resume` to identical tables; stale locks of reused pids; compaction
 //!   killed at any moment.
-//! - `machine`: what the Python module reads instead of text: `validate --json`.
+//! - `machine`: what the Python module reads instead of text: `validate --json`; `tables
+//!   --json` (every table named and described, its files, rows and columns; damage refused;
+//!   a table link out of the campaign not followed).
 //! - `links`: the campaign directory is a closed world: a symbolic link where granular keeps
 //!   its own file or directory (`tables`, a table, a part, `quarantine`, a ledger shard,
 //!   `checkpoints`, `campaign.json`) is named by `verify`, refused by the readers, never

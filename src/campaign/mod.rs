@@ -648,13 +648,13 @@ impl Campaign {
 
     /// Every table of the campaign (the model's and `runs`, `points`).
     pub fn tables(&self) -> Vec<&'static str> {
-        let points: Vec<&ModelParams> = self.plan.points.iter().map(|p| &p.params).collect();
-        let mut t = vec![tables::RUNS, tables::POINTS, tables::REGISTERED_RUNS];
-        t.extend(self.plan.model.tables(&points));
-        if !self.manifest.derived.is_empty() {
-            t.extend([derived_tables::DERIVED, derived_tables::DERIVED_SUMMARY]);
-        }
-        t
+        tables_of(&self.manifest, &self.plan)
+    }
+
+    /// One line on what a row of the table `name` is and what it holds: the campaign's own
+    /// (`tables::description`), else the model's (`ModelKind::table_description`).
+    pub fn table_description(&self, name: &str) -> Option<&'static str> {
+        table_description(self.plan.model, name)
     }
 
     /// The manifest's derived quantities, compiled against the model's run tables (none
@@ -960,3 +960,22 @@ pub struct Outcome {
     /// Every run of the campaign (all shards) is finished and the summaries are written.
     pub complete: bool,
 }
+
+/// Every table a campaign of `manifest` with `plan` has ([`Campaign::tables`]).
+pub fn tables_of(manifest: &Manifest, plan: &Plan) -> Vec<&'static str> {
+    let points: Vec<&ModelParams> = plan.points.iter().map(|p| &p.params).collect();
+    let mut t = vec![tables::RUNS, tables::POINTS, tables::REGISTERED_RUNS];
+    t.extend(plan.model.tables(&points));
+    if !manifest.derived.is_empty() {
+        t.extend([derived_tables::DERIVED, derived_tables::DERIVED_SUMMARY]);
+    }
+    t
+}
+
+/// One line on what a row of the table `name` of a campaign of `model` is and what it holds:
+/// the campaign's own (`tables::description`, `granular analyze`'s included), else the
+/// model's (`ModelKind::table_description`).
+pub fn table_description(model: ModelKind, name: &str) -> Option<&'static str> {
+    tables::description(name).or_else(|| model.table_description(name))
+}
+

@@ -19,6 +19,22 @@ pub const RUNS: &str = RunsTable::TABLE;
 pub const POINTS: &str = "points";
 pub const REGISTERED_RUNS: &str = "registered_runs";
 
+/// One line on what a row of each of the campaign's own tables is and what it holds (those of
+/// every model, and of `granular analyze`), for `granular tables`; `None` for another name
+/// (a model's tables are described by the model: `ModelKind::table_description`).
+pub fn description(name: &str) -> Option<&'static str> {
+    Some(match name {
+        RUNS => "one row per finished run: point, replica, seed, done or failed (and why), wall seconds, work counts, the run it continued",
+        POINTS => "one row per point the campaign has ever had: its sweep values as typed columns, complete params as JSON, whether the latest manifest asks for it",
+        REGISTERED_RUNS => "one row per run ever registered, finished or not: point, replica, seed, the run it continues, whether (and as which replica) the latest manifest asks for it",
+        super::derived_tables::DERIVED => "one row per finished run (and time): the manifest's derived quantities",
+        super::derived_tables::DERIVED_SUMMARY => "one row per point (and time): each derived quantity's mean, standard error and n over replicas",
+        crate::analysis::ANALYSIS_FITS => "one row per fitted quantity of `granular analyze`: value, error, chi2, window and quality",
+        crate::analysis::ANALYSIS_CURVES => "one row per point of an analysis figure's curves: the data `granular analyze` drew",
+        _ => return None,
+    })
+}
+
 /// How a swept parameter is stored: as a typed column, never as a string of a number.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SweepKind {

@@ -38,6 +38,7 @@ mod slurm_round;
 mod slurm_task;
 mod status;
 mod submit;
+mod tables;
 mod theory;
 mod upgrade;
 mod validate;
@@ -88,6 +89,10 @@ enum Command {
     Resume(run::ResumeArgs),
     /// Done / running / pending / failed runs, per point, across all shards.
     Status(status::Args),
+    /// The campaign's tables, for programs and people: name, what a row is, the directory to
+    /// read (generation links resolved inside DIR, never followed out of it), files, rows
+    /// (from the Parquet footers) and columns (--json). Damage: exit 3, as `status`.
+    Tables(tables::Args),
     /// Print the manifest's JSON Schema (also committed as schemas/manifest.schema.json).
     Schema(schema::Args),
     /// Write the kinetic-theory predictions of a manifest (tables dsmc_theory and
@@ -149,6 +154,7 @@ pub fn main() -> i32 {
         Command::Upgrade(a) => upgrade::run(a),
         Command::Resume(a) => run::resume(a),
         Command::Status(a) => status::run(a),
+        Command::Tables(a) => tables::run(a),
         Command::Schema(a) => schema::run(a),
         Command::Theory(a) => theory::run(a),
         Command::Submit(a) => submit::run(a),

@@ -128,6 +128,9 @@ pub trait Model {
     /// Every table a campaign of these points has (raw, summaries, theory), in the order the
     /// parts of a commit are written.
     fn tables(points: &[&Self::Params]) -> Vec<&'static str>;
+    /// One line on what a row of the model's table `name` is and what it holds (`granular
+    /// tables`); `None` for a name that is not one of its tables.
+    fn table_description(name: &str) -> Option<&'static str>;
     /// The columns of its run tables, as (table, column), that a run of `p` fills with values
     /// although runs of other params leave them null (optional observables). A campaign
     /// written by an earlier granular may lack them: growth that would need one there is
@@ -350,6 +353,13 @@ macro_rules! models {
             pub fn tables(self, points: &[&ModelParams]) -> Vec<&'static str> {
                 match self {
                     $(ModelKind::$variant => <$model as Model>::tables(&typed::<$model>(points)),)+
+                }
+            }
+
+            /// See [`Model::table_description`].
+            pub fn table_description(self, name: &str) -> Option<&'static str> {
+                match self {
+                    $(ModelKind::$variant => <$model as Model>::table_description(name),)+
                 }
             }
 

@@ -86,3 +86,183 @@ fn validate_json_is_one_object() {
         "{v}"
     );
 }
+
+/// Every table a campaign of each job in `jobs/` (and each good test manifest) has is
+/// described, in one line (`granular tables`).
+#[test]
+fn every_table_of_every_job_has_a_description() {
+    let mut missing = Vec::new();
+    let mut seen = 0;
+    for sub in ["jobs", "tests/manifests/good"] {
+        let mut paths: Vec<_> = fs::read_dir(repo_root().join(sub))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "json"))
+            .collect();
+        paths.sort();
+        for p in paths {
+            let (m, plan) = granular::campaign::plan::load(&p)
+                .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            for t in granular::campaign::tables_of(&m, &plan) {
+                seen += 1;
+                match granular::campaign::table_description(plan.model, t) {
+                    Some(d) if !d.is_empty() && !d.contains('\n') => {}
+                    other => missing.push(format!("{}: {t}: {other:?}", p.display())),
+                }
+            }
+        }
+    }
+    assert!(seen > 50, "only {seen} tables seen");
+    assert!(missing.is_empty(), "{}", missing.join("\n"));
+}
+
+/// 2 points x 2 replicas of a few hundred particles: a finished campaign in a second.
+fn tiny_campaign(dir: &std::path::Path, log: &std::path::Path) -> std::path::PathBuf {
+    let m = dir.join("m.json");
+    util::write_json(
+        &m,
+        &serde_json::json!({
+            "name": "machine", "model": "dsmc", "seed": 27, "replicas": 2,
+            "params": {"method": "low_rank",
+                       "species": {"power_law": {"n1": 0.1, "N1": 400, "theta": 3}},
+                       "restitution": {"constant": 0.9}, "t_end": 20.0,
+                       "output_times": {"list": [1.0, 10.0]}, "observables": ["msd"]},
+            "sweep": {"restitution.constant": [0.8, 0.9]}
+        }),
+    );
+    let out = dir.join("c");
+    let code = util::run_granular(
+        &["run", s(&m), "--out", s(&out), "--quiet", "--flush-every", "0"],
+        log,
+        std::time::Duration::from_secs(120),
+    );
+    assert_eq!(code, Some(0), "{}", util::log_text(log));
+    out
+}
+
+fn tables_json(dir: &std::path::Path, log: &std::path::Path) -> (Option<i32>, Value) {
+    let (code, out) = util::run_capture(&["tables", s(dir), "--json"], log);
+    let v = serde_json::from_str(&out)
+        .unwrap_or_else(|e| panic!("{e}: {out}\nlog:\n{}", util::log_text(log)));
+    (code, v)
+}
+
+/// `tables --json` on a finished campaign names every table, each described, with the
+/// directory to read (inside the campaign), its files, and rows equal to the rows read from
+/// those files; columns with their Arrow types. Damage: exit 3 naming `granular resume`, as
+/// `status`. A table link out of the campaign is not followed: an error, no path.
+#[test]
+fn tables_json_lists_every_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log");
+    let c = {
+        let _g = util::heavy();
+        tiny_campaign(dir.path(), &log)
+    };
+    let (code, v) = tables_json(&c, &log);
+    assert_eq!(code, Some(0), "{v}\n{}", util::log_text(&log));
+    assert_eq!(v["name"], "machine", "{v}");
+    assert_eq!(v["model"], "dsmc", "{v}");
+    let tables = v["tables"].as_array().expect("tables");
+    let names: Vec<&str> = tables.iter().map(|t| t["name"].as_str().unwrap()).collect();
+    for want in [
+        "runs",
+        "points",
+        "registered_runs",
+        "dsmc_species",
+        "dsmc_species_summary",
+        "dsmc_theory",
+        "dsmc_theory_point",
+    ] {
+        assert!(names.contains(&want), "{want} not in {names:?}");
+    }
+    for t in tables {
+        let name = t["name"].as_str().unwrap();
+        assert!(t.get("error").is_none(), "{t}");
+        assert!(
+            t["description"].as_str().is_some_and(|d| !d.is_empty()),
+            "{t}"
+        );
+        assert_eq!(t["written"], true, "{t}");
+        let path = t["path"].as_str().unwrap_or_else(|| panic!("no path: {t}"));
+        let full = c.join(path);
+        assert!(full.is_dir(), "{t}");
+        // Resolved: a real directory inside the campaign, no link left in it.
+        assert!(
+            !fs::symlink_metadata(&full).unwrap().file_type().is_symlink(),
+            "{t}"
+        );
+        let n_files = fs::read_dir(&full)
+            .unwrap()
+            .filter(|e| {
+                let n = e.as_ref().unwrap().file_name().to_string_lossy().into_owned();
+                !n.starts_with('.') && n.ends_with(".parquet")
+            })
+            .count();
+        assert_eq!(t["files"], n_files as u64, "{t}");
+        let read = util::read_table(&c, name);
+        assert_eq!(read.files.len(), n_files, "{t}");
+        assert_eq!(t["rows"], read.rows.len() as u64, "{t}");
+        let cols = t["columns"].as_array().expect("columns");
+        assert_eq!(cols.len(), read.columns.len(), "{t}");
+        for (col, want) in cols.iter().zip(&read.columns) {
+            assert_eq!(col["name"], want.0.as_str(), "{t}");
+            assert_eq!(col["type"], want.1.to_string(), "{t}");
+        }
+    }
+    let runs = tables.iter().find(|t| t["name"] == "runs").unwrap();
+    assert_eq!(runs["rows"], 4, "{runs}");
+    let run_id = &runs["columns"][0];
+    assert_eq!(run_id["name"], "run_id", "{runs}");
+    assert_eq!(run_id["type"], "UInt64", "{runs}");
+    // The text form: one line per table (and a header).
+    let (code, text) = util::run_capture(&["tables", s(&c)], &log);
+    assert_eq!(code, Some(0));
+    assert_eq!(text.lines().count(), tables.len() + 1, "{text}");
+
+    // Damage (a part of `runs` deleted): exit 3 naming `granular resume`, as status.
+    let damaged = dir.path().join("damaged");
+    util::copy_dir(&c, &damaged);
+    let runs_dir = damaged.join(runs["path"].as_str().unwrap());
+    let part = fs::read_dir(&runs_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "parquet"))
+        .expect("a part of runs");
+    fs::remove_file(&part).unwrap();
+    fs::write(&log, "").unwrap();
+    let (code, _) = util::run_capture(&["tables", s(&damaged), "--json"], &log);
+    assert_eq!(code, Some(3), "{}", util::log_text(&log));
+    assert!(
+        util::log_text(&log).contains(&format!("`granular resume {}`", damaged.display())),
+        "{}",
+        util::log_text(&log)
+    );
+
+    // tables/runs replaced by a link to a directory outside: not followed.
+    let linked = dir.path().join("linked");
+    util::copy_dir(&c, &linked);
+    let outside = dir.path().join("outside");
+    util::copy_dir(&c.join(runs["path"].as_str().unwrap()), &outside);
+    let link = linked.join("tables/runs");
+    if fs::symlink_metadata(&link).unwrap().is_dir() {
+        fs::remove_dir_all(&link).unwrap();
+    } else {
+        fs::remove_file(&link).unwrap();
+    }
+    std::os::unix::fs::symlink(&outside, &link).unwrap();
+    fs::write(&log, "").unwrap();
+    let (code, v) = tables_json(&linked, &log);
+    assert_eq!(code, Some(3), "{v}\n{}", util::log_text(&log));
+    let runs = v["tables"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["name"] == "runs")
+        .unwrap();
+    assert!(runs["path"].is_null(), "{runs}");
+    assert_eq!(runs["written"], false, "{runs}");
+    assert_eq!(runs["rows"], 0, "{runs}");
+    let err = runs["error"].as_str().unwrap_or_else(|| panic!("{runs}"));
+    assert!(err.contains("not followed") && err.contains(s(&outside)), "{err}");
+}

@@ -88,6 +88,10 @@ impl Model for Bisection {
         vec![BISECTION_HISTOGRAM, BISECTION_MOMENTS]
     }
 
+    fn table_description(name: &str) -> Option<&'static str> {
+        tables::description(name)
+    }
+
     fn figures(
         c: &CampaignView<'_, BisectionParams>,
     ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {

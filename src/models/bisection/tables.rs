@@ -12,6 +12,16 @@ use crate::store::typed::{OptF64, F64, U32, U64};
 pub const BISECTION_HISTOGRAM: &str = BisectionHistogram::TABLE;
 pub const BISECTION_MOMENTS: &str = BisectionMoments::TABLE;
 
+/// One line on what a row of the table `name` is and what it holds (`granular tables`);
+/// `None` for a name that is not one of this model's tables.
+pub fn description(name: &str) -> Option<&'static str> {
+    Some(match name {
+        BISECTION_HISTOGRAM => "one row per run and length bin [x_lo, x_hi): count and density of the lengths over the run's realisations, its error and the exact density",
+        BISECTION_MOMENTS => "one row per run and order m: the moment <x^m> over realisations, its error, the exact value and z",
+        _ => return None,
+    })
+}
+
 declare_table! {
     /// `bisection_histogram`: the density of the lengths per bin (per run).
     pub struct BisectionHistogram in "bisection_histogram", read as BisectionHistogramCols {

@@ -122,6 +122,10 @@ impl Model for Cascade {
         v
     }
 
+    fn table_description(name: &str) -> Option<&'static str> {
+        tables::description(name)
+    }
+
     fn write_summaries(c: &CampaignView<'_, CascadeParams>) -> Result<(), StoreError> {
         summary::write(c)
     }

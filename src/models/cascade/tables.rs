@@ -15,6 +15,18 @@ pub const CASCADE_STRUCTURE_FACTOR_SUMMARY: &str = CascadeStructureFactorSummary
 pub const CASCADE_FIT: &str = CascadeFit::TABLE;
 pub const CASCADE_PLACEMENT: &str = CascadePlacement::TABLE;
 
+/// One line on what a row of the table `name` is and what it holds (`granular tables`);
+/// `None` for a name that is not one of this model's tables.
+pub fn description(name: &str) -> Option<&'static str> {
+    Some(match name {
+        CASCADE_STRUCTURE_FACTOR => "one row per run, source and k shell: the structure factor S(k) over realisations and its error",
+        CASCADE_STRUCTURE_FACTOR_SUMMARY => "one row per point, source and k shell: S(k) over the finished replicas and its error",
+        CASCADE_FIT => "one row per run, source and fit variant: the fractal dimension D_f with its error, k window and chi2, beside the thesis's",
+        CASCADE_PLACEMENT => "one row per run and placed disc: its position x, y",
+        _ => return None,
+    })
+}
+
 declare_table! {
     /// `cascade_structure_factor`: S(k) per source and shell (per run).
     pub struct CascadeStructureFactor in "cascade_structure_factor",

@@ -169,6 +169,10 @@ impl Model for Dsmc {
         t
     }
 
+    fn table_description(name: &str) -> Option<&'static str> {
+        tables::description(name)
+    }
+
     fn theory_tables(points: &[&DsmcParams]) -> Vec<&'static str> {
         let mut t = vec![DSMC_THEORY, DSMC_THEORY_POINT];
         if observes_tamsd(points) {

@@ -21,6 +21,23 @@ pub const DSMC_THEORY: &str = DsmcTheory::TABLE;
 pub const DSMC_THEORY_TAMSD: &str = DsmcTheoryTamsd::TABLE;
 pub const DSMC_THEORY_POINT: &str = DsmcTheoryPoint::TABLE;
 
+/// One line on what a row of the table `name` is and what it holds (`granular tables`);
+/// `None` for a name that is not one of this model's tables.
+pub fn description(name: &str) -> Option<&'static str> {
+    Some(match name {
+        DSMC_SPECIES => "one row per finished run, output time and species: mass, diameter, count, temperature, msd, collisions, a2",
+        DSMC_SPECIES_SUMMARY => "one row per point, output time and species: mean and standard error over replicas of temperature, msd, a2, beside the kinetic theory and the deviations from it",
+        DSMC_TAMSD => "one row per run, species and lag: the time-averaged mean-squared displacement",
+        DSMC_TAMSD_SUMMARY => "one row per point, species and lag: the TAMSD's mean and standard error over replicas, beside theory",
+        DSMC_SPEED_HISTOGRAM => "one row per run, histogram time, species and bin of the scaled speed: count and density",
+        DSMC_SPEED_HISTOGRAM_SUMMARY => "one row per point, histogram time, species and bin: the density's mean and standard error over replicas",
+        DSMC_THEORY => "one row per point, time and species: the kinetic-theory temperature, msd, tau_v and Sonine a2 and temperature",
+        DSMC_THEORY_TAMSD => "one row per point, species and lag: the kinetic-theory TAMSD (eq. 27)",
+        DSMC_THEORY_POINT => "one row per point: tau_0 and the initial temperatures the theory used",
+        _ => return None,
+    })
+}
+
 declare_table! {
     /// `dsmc_species`: per run, output time and species. The columns of an optional
     /// observable are nullable (null where it is not recorded) and `Absent` where tables

@@ -154,6 +154,10 @@ impl Model for Rfm {
         v
     }
 
+    fn table_description(name: &str) -> Option<&'static str> {
+        tables::description(name)
+    }
+
     fn write_summaries(c: &CampaignView<'_, RfmParams>) -> Result<(), StoreError> {
         let points: Vec<&RfmParams> = c.points.iter().map(|p| p.params).collect();
         summary::write(c, &Self::tables(&points))

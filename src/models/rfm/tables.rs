@@ -26,6 +26,30 @@ pub const RFM_SNAPSHOTS: &str = RfmSnapshots::TABLE;
 pub const RFM_FREE_PATH_MOMENTS: &str = RfmFreePathMoments::TABLE;
 pub const RFM_FREE_PATH_MOMENTS_SUMMARY: &str = RfmFreePathMomentsSummary::TABLE;
 
+/// One line on what a row of the table `name` is and what it holds (`granular tables`);
+/// `None` for a name that is not one of this model's tables.
+pub fn description(name: &str) -> Option<&'static str> {
+    Some(match name {
+        RFM_TIMESERIES => "one row per run and sample time: the temperature",
+        RFM_TIMESERIES_SUMMARY => "one row per point and sample time: the temperature's mean and standard error over replicas",
+        RFM_TEMPERATURE_BLOCKS => "one row per run and block (0..9): the block's time span and mean temperature",
+        RFM_SNAPSHOTS => "one row per run, snapshot time and particle: positions and velocities",
+        RFM_MOMENTS => "one row per run and order (1..12): the velocity moment <|v_c|^m> and its 10-block error",
+        RFM_MOMENTS_SUMMARY => "one row per point and order: the velocity moments' mean and standard error over replicas",
+        RFM_HISTOGRAMS => "one row per run, histogram kind (velocity, neighbour distance, free path, post-collision velocity), h and bin: count and density",
+        RFM_HISTOGRAMS_SUMMARY => "one row per point, histogram kind, h and bin: the density's mean and standard error over replicas",
+        RFM_NEIGHBOUR_MOMENTS => "one row per run, neighbour h and order: the moment <R^m> of the neighbour distance and its error",
+        RFM_NEIGHBOUR_MOMENTS_SUMMARY => "one row per point, neighbour h and order: the neighbour-distance moments' mean and standard error over replicas",
+        RFM_STRUCTURE_FACTOR => "one row per run and k shell (n2): the structure factor S(k) and its error",
+        RFM_STRUCTURE_FACTOR_SUMMARY => "one row per point and k shell: S(k)'s mean and standard error over replicas",
+        RFM_RADIAL => "one row per run and distance bin: pair count, g(r) and C(r)",
+        RFM_RADIAL_SUMMARY => "one row per point and distance bin: g(r)'s and C(r)'s mean and standard error over replicas",
+        RFM_FREE_PATH_MOMENTS => "one row per run and order: the free-path moments and the number of paths",
+        RFM_FREE_PATH_MOMENTS_SUMMARY => "one row per point and order: the free-path moments' mean and standard error over replicas",
+        _ => return None,
+    })
+}
+
 declare_table! {
     /// `rfm_timeseries`: the temperature per output time (per run).
     pub struct RfmTimeseries in "rfm_timeseries", read as RfmTimeseriesCols {

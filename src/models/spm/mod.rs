@@ -88,6 +88,10 @@ impl Model for Spm {
         vec![SPM_VELOCITY_HISTOGRAM, SPM_SUMMARY]
     }
 
+    fn table_description(name: &str) -> Option<&'static str> {
+        tables::description(name)
+    }
+
     fn figures(
         c: &CampaignView<'_, SpmParams>,
     ) -> Result<Option<Vec<(String, Figure)>>, StoreError> {

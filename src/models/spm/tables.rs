@@ -11,6 +11,16 @@ use crate::store::typed::{OptF64, Str, F64, U32, U64};
 pub const SPM_VELOCITY_HISTOGRAM: &str = SpmVelocityHistogram::TABLE;
 pub const SPM_SUMMARY: &str = SpmSummary::TABLE;
 
+/// One line on what a row of the table `name` is and what it holds (`granular tables`);
+/// `None` for a name that is not one of this model's tables.
+pub fn description(name: &str) -> Option<&'static str> {
+    Some(match name {
+        SPM_VELOCITY_HISTOGRAM => "one row per run and velocity bin: the time- and walk-weighted density P(v)",
+        SPM_SUMMARY => "one row per run: walks, samples, mean free path, the Gaussian tail fit and alpha, K, H predicted and measured",
+        _ => return None,
+    })
+}
+
 declare_table! {
     /// `spm_velocity_histogram`: time- and walk-weighted densities per velocity bin (per run).
     pub struct SpmVelocityHistogram in "spm_velocity_histogram", read as SpmVelocityHistogramCols {
