@@ -25,7 +25,8 @@
 //!   killed at any moment.
 //! - `machine`: what the Python module reads instead of text: `validate --json`; `tables
 //!   --json` (every table named and described, its files, rows and columns; damage refused;
-//!   a table link out of the campaign not followed).
+//!   a table link out of the campaign not followed); `run`/`resume --progress-json` (JSON
+//!   lines on stderr, finished never decreasing, the last complete).
 //! - `links`: the campaign directory is a closed world: a symbolic link where granular keeps
 //!   its own file or directory (`tables`, a table, a part, `quarantine`, a ledger shard,
 //!   `checkpoints`, `campaign.json`) is named by `verify`, refused by the readers, never

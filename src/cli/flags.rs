@@ -38,6 +38,14 @@ pub struct Runtime {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Besides the logs, write the progress to stderr as one JSON object per line, for
+    /// programs: {"progress": {"total", "finished", "failed", "running", "fraction"}} (total:
+    /// the runs this session plans, anew for each round of error targets; finished: done +
+    /// failed of them; fraction: (finished + running runs' fractions) / total, 1 when total is
+    /// 0). A line at the plan, at each finished run, at most every 0.25 s while runs progress,
+    /// and a last one at the end. No progress bar is drawn.
+    #[arg(long)]
+    pub progress_json: bool,
 }
 
 /// How a shard is executed: flags of `run`, `resume` and the hidden `slurm-task`.

@@ -1,7 +1,9 @@
 //! The progress bar and the log lines of a running campaign: `CliReporter` receives the
-//! campaign's events (`campaign::Reporter`).
+//! campaign's events (`campaign::Reporter`). With `--progress-json`, the progress as one JSON
+//! object per line on stderr instead of the bar (`JsonProgress`).
 
-use std::time::Duration;
+use std::io::Write;
+use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -13,11 +15,32 @@ pub struct CliReporter {
     bar: Option<ProgressBar>,
     running: std::collections::BTreeMap<u64, f64>,
     finished: u64,
+    json: Option<JsonProgress>,
 }
 
+/// What `--progress-json` writes: the runs this session plans (`Event::Plan`'s pending; a new
+/// plan, each round of an error-target campaign, starts the counts anew), how many of them
+/// finished and failed, and when the last line went out (lines of progress within a run at
+/// most every [`JSON_EVERY`]).
+struct JsonProgress {
+    planned: bool,
+    total: u64,
+    failed: u64,
+    last: Option<Instant>,
+}
+
+/// The least time between two lines of `--progress-json` written for runs' progress (a plan,
+/// a finished run and the end always get theirs).
+const JSON_EVERY: Duration = Duration::from_millis(250);
+
 impl CliReporter {
-    pub fn new(quiet: bool) -> Self {
-        let bar = if quiet || !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+    /// `quiet`: no progress bar; `progress_json`: the progress as JSON lines on stderr, and no
+    /// bar.
+    pub fn new(quiet: bool, progress_json: bool) -> Self {
+        let bar = if quiet
+            || progress_json
+            || !std::io::IsTerminal::is_terminal(&std::io::stderr())
+        {
             None
         } else {
             let b = ProgressBar::new(0);
@@ -32,7 +55,43 @@ impl CliReporter {
             bar,
             running: Default::default(),
             finished: 0,
+            json: progress_json.then_some(JsonProgress {
+                planned: false,
+                total: 0,
+                failed: 0,
+                last: None,
+            }),
         }
+    }
+
+    /// Write one line of `--progress-json` (whole, in one write of the locked stderr, so that
+    /// it never interleaves with a log line); `force`: whatever the time since the last.
+    fn json_line(&mut self, force: bool) {
+        let Some(j) = &mut self.json else { return };
+        if !j.planned {
+            return;
+        }
+        let now = Instant::now();
+        if !force && j.last.is_some_and(|l| now.duration_since(l) < JSON_EVERY) {
+            return;
+        }
+        j.last = Some(now);
+        let partial: f64 = self.running.values().sum();
+        let fraction = if j.total == 0 {
+            1.0
+        } else {
+            ((self.finished as f64 + partial) / j.total as f64).clamp(0.0, 1.0)
+        };
+        let mut line = serde_json::json!({"progress": {
+            "total": j.total,
+            "finished": self.finished,
+            "failed": j.failed,
+            "running": self.running.len(),
+            "fraction": fraction,
+        }})
+        .to_string();
+        line.push('\n');
+        let _ = std::io::stderr().lock().write_all(line.as_bytes());
     }
 
     fn update(&mut self) {
@@ -48,6 +107,9 @@ impl CliReporter {
         if let Some(b) = self.bar.take() {
             b.finish_and_clear();
         }
+        // The last line (after a plan: a campaign refused before it has none).
+        self.json_line(true);
+        self.json = None;
     }
 }
 
@@ -62,6 +124,11 @@ impl Reporter for CliReporter {
                 tracing::info!(total, already_finished = already, pending, "shard plan");
                 // Each round of an error-target campaign plans anew.
                 self.finished = 0;
+                if let Some(j) = &mut self.json {
+                    j.planned = true;
+                    j.total = *pending;
+                    j.failed = 0;
+                }
                 if let Some(b) = &self.bar {
                     b.set_length(pending * 1000);
                     b.set_style(
@@ -95,6 +162,9 @@ impl Reporter for CliReporter {
             } => {
                 self.running.remove(run_id);
                 self.finished += 1;
+                if let (Some(j), RunStatus::Failed) = (&mut self.json, status) {
+                    j.failed += 1;
+                }
                 match status {
                     RunStatus::Done => tracing::debug!(run_id, wall_seconds, "run done"),
                     RunStatus::Failed => {
@@ -124,5 +194,10 @@ impl Reporter for CliReporter {
             },
         }
         self.update();
+        match e {
+            Event::Plan { .. } | Event::Finished { .. } => self.json_line(true),
+            Event::Progress { .. } => self.json_line(false),
+            _ => {}
+        }
     }
 }

@@ -55,7 +55,7 @@ pub fn run(a: RunArgs) -> i32 {
             for n in &growth.notes {
                 tracing::warn!("{n}");
             }
-            execute(&c, opts, a.runtime.quiet, true)
+            execute(&c, opts, a.runtime.quiet, a.runtime.progress_json, true)
         }
         Err(e) => report_error(e),
     }
@@ -67,7 +67,7 @@ pub fn resume(a: ResumeArgs) -> i32 {
     match Campaign::open(&a.dir) {
         Ok(c) => {
             crate::campaign::test_hook::pause("resume-opened");
-            execute(&c, opts, a.runtime.quiet, true)
+            execute(&c, opts, a.runtime.quiet, a.runtime.progress_json, true)
         }
         Err(e) => report_error(e),
     }
@@ -87,9 +87,16 @@ pub(super) fn options(exec: &Execution, default_threads: usize, shard: Shard) ->
 
 /// Run the shard `opts.shard` of `c` to its end or an interruption, with the rounds of an
 /// error-target campaign where `decide` (`campaign::rounds::run`); the exit code.
-pub(super) fn execute(c: &Campaign, opts: RunOptions, quiet: bool, decide: bool) -> i32 {
+/// `quiet`: no progress bar; `progress_json`: the progress as JSON lines on stderr (and no bar).
+pub(super) fn execute(
+    c: &Campaign,
+    opts: RunOptions,
+    quiet: bool,
+    progress_json: bool,
+    decide: bool,
+) -> i32 {
     tracing::info!(campaign = %c.manifest.name, dir = %c.root.display(), shard = %opts.shard, "starting");
-    let mut reporter = CliReporter::new(quiet);
+    let mut reporter = CliReporter::new(quiet, progress_json);
     let result = campaign::rounds::run(c, &opts, &mut reporter, decide);
     reporter.finish();
     match result {

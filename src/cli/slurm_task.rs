@@ -47,7 +47,7 @@ pub fn run(a: Args) -> i32 {
     };
     let opts = run::options(&a.exec, 1, shard);
     match Campaign::open(&a.dir) {
-        Ok(c) => match run::execute(&c, opts, true, false) {
+        Ok(c) => match run::execute(&c, opts, true, false, false) {
             // Failed runs are finished runs (recorded in the runs table): the task
             // succeeded, so the afterok compaction still runs.
             exit_codes::RUNS_FAILED => exit_codes::OK,

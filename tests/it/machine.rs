@@ -266,3 +266,77 @@ fn tables_json_lists_every_table() {
     let err = runs["error"].as_str().unwrap_or_else(|| panic!("{runs}"));
     assert!(err.contains("not followed") && err.contains(s(&outside)), "{err}");
 }
+
+/// The `{"progress": ...}` lines of stderr, each parsed (a line that does not parse fails).
+fn progress_lines(stderr: &str) -> Vec<Value> {
+    stderr
+        .lines()
+        .filter(|l| l.starts_with("{\"progress\""))
+        .map(|l| serde_json::from_str::<Value>(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .map(|v| v["progress"].clone())
+        .collect()
+}
+
+fn assert_progress(lines: &[Value], runs: u64, stderr: &str) {
+    assert!(lines.len() >= 2, "{stderr}");
+    let mut last = 0;
+    for p in lines {
+        let f = p["finished"].as_u64().unwrap_or_else(|| panic!("{p}"));
+        assert!(f >= last, "finished went down: {stderr}");
+        last = f;
+        assert_eq!(p["total"], runs, "{p}");
+        assert!(p["running"].as_u64().is_some() && p["failed"] == 0, "{p}");
+        let x = p["fraction"].as_f64().unwrap_or_else(|| panic!("{p}"));
+        assert!((0.0..=1.0).contains(&x), "{p}");
+    }
+    let end = lines.last().unwrap();
+    assert_eq!(end["finished"], runs, "{stderr}");
+    assert_eq!(end["fraction"], 1.0, "{stderr}");
+    assert_eq!(end["running"], 0, "{stderr}");
+}
+
+/// `run --progress-json` (and `resume`) write the progress as JSON lines on stderr besides the
+/// logs: each parses, finished never goes down, the last has finished == total == the runs
+/// and fraction 1.
+#[test]
+fn run_and_resume_write_progress_as_json_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("m.json");
+    util::write_json(
+        &m,
+        &serde_json::json!({
+            "name": "progress", "model": "dsmc", "seed": 28, "replicas": 3,
+            "params": {"method": "low_rank",
+                       "species": {"power_law": {"n1": 0.1, "N1": 400, "theta": 3}},
+                       "restitution": {"constant": 0.9}, "t_end": 20.0,
+                       "output_times": {"list": [1.0, 10.0]}}
+        }),
+    );
+    let out = dir.path().join("c");
+    let _g = util::heavy();
+    let run = std::process::Command::new(util::bin())
+        .args(["run", s(&m), "--out", s(&out), "--progress-json", "--threads", "2"])
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    // Besides the logs, not instead of them.
+    assert!(stderr.contains("starting"), "{stderr}");
+    assert_progress(&progress_lines(&stderr), 3, &stderr);
+    // Nothing on stdout.
+    assert!(run.stdout.is_empty(), "{}", String::from_utf8_lossy(&run.stdout));
+
+    // resume of the finished campaign: nothing planned, at once complete.
+    let resume = std::process::Command::new(util::bin())
+        .args(["resume", s(&out), "--progress-json"])
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&resume.stderr).into_owned();
+    assert_eq!(resume.status.code(), Some(0), "{stderr}");
+    let lines = progress_lines(&stderr);
+    let end = lines.last().unwrap_or_else(|| panic!("no progress line: {stderr}"));
+    assert_eq!(end["total"], 0, "{stderr}");
+    assert_eq!(end["fraction"], 1.0, "{stderr}");
+}
