@@ -29,8 +29,8 @@ pub fn description(name: &str) -> Option<&'static str> {
         REGISTERED_RUNS => "one row per run ever registered, finished or not: point, replica, seed, the run it continues, whether (and as which replica) the latest manifest asks for it",
         super::derived_tables::DERIVED => "one row per finished run (and time): the manifest's derived quantities",
         super::derived_tables::DERIVED_SUMMARY => "one row per point (and time): each derived quantity's mean, standard error and n over replicas",
-        crate::analysis::ANALYSIS_FITS => "one row per fitted quantity of `granular analyze`: value, error, chi2, window and quality",
-        crate::analysis::ANALYSIS_CURVES => "one row per point of an analysis figure's curves: the data `granular analyze` drew",
+        crate::analysis::ANALYSIS_FITS => "one row per quantity fitted by `granular analyze` (and key): value, error, reduced chi2, points and window, reference, quality",
+        crate::analysis::ANALYSIS_CURVES => "one row per point of a curve `granular analyze` drew: figure, series, x, y, error",
         _ => return None,
     })
 }

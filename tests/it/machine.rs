@@ -112,6 +112,15 @@ fn every_table_of_every_job_has_a_description() {
             }
         }
     }
+    for t in ["analysis_fits", "analysis_curves"] {
+        for model in ["dsmc", "rfm", "cascade"] {
+            let model = serde_json::from_value(Value::from(model)).unwrap();
+            assert!(
+                granular::campaign::table_description(model, t).is_some(),
+                "{t}"
+            );
+        }
+    }
     assert!(seen > 50, "only {seen} tables seen");
     assert!(missing.is_empty(), "{}", missing.join("\n"));
 }
