@@ -978,4 +978,3 @@ pub fn tables_of(manifest: &Manifest, plan: &Plan) -> Vec<&'static str> {
 pub fn table_description(model: ModelKind, name: &str) -> Option<&'static str> {
     tables::description(name).or_else(|| model.table_description(name))
 }
-

@@ -37,9 +37,7 @@ impl CliReporter {
     /// `quiet`: no progress bar; `progress_json`: the progress as JSON lines on stderr, and no
     /// bar.
     pub fn new(quiet: bool, progress_json: bool) -> Self {
-        let bar = if quiet
-            || progress_json
-            || !std::io::IsTerminal::is_terminal(&std::io::stderr())
+        let bar = if quiet || progress_json || !std::io::IsTerminal::is_terminal(&std::io::stderr())
         {
             None
         } else {

@@ -160,7 +160,10 @@ fn list(c: &Campaign) -> std::io::Result<Vec<Entry>> {
                     count_file(d, &file, &mut e);
                 }
                 Some(k) => {
-                    e.error = Some(format!("{analysis}/{file}: {}; not read", d.describe(&file, k)))
+                    e.error = Some(format!(
+                        "{analysis}/{file}: {}; not read",
+                        d.describe(&file, k)
+                    ))
                 }
             },
             Err(why) => e.error = Some(format!("{analysis}: {why}; not followed")),
@@ -183,9 +186,7 @@ fn table_dir(tables: &Dir, e: &mut Entry) {
         Ok(Some(Kind::Link)) => match tables.read_link(&name) {
             Ok(target) => match generation_of(&name, &target) {
                 Some((_, gen)) => tables.sub(GEN_DIR).and_then(|g| match g {
-                    Some(g) => Ok(g
-                        .sub(&gen)?
-                        .map(|d| (d, format!("tables/{GEN_DIR}/{gen}")))),
+                    Some(g) => Ok(g.sub(&gen)?.map(|d| (d, format!("tables/{GEN_DIR}/{gen}")))),
                     None => Ok(None),
                 }),
                 None => {
@@ -266,7 +267,12 @@ fn count_file(dir: &Dir, name: &str, e: &mut Entry) {
 }
 
 fn write_text(out: &mut impl Write, entries: &[Entry]) -> std::io::Result<()> {
-    let w = entries.iter().map(|e| e.name.len()).max().unwrap_or(4).max(5);
+    let w = entries
+        .iter()
+        .map(|e| e.name.len())
+        .max()
+        .unwrap_or(4)
+        .max(5);
     let rows: Vec<String> = entries
         .iter()
         .map(|e| {
@@ -278,7 +284,11 @@ fn write_text(out: &mut impl Write, entries: &[Entry]) -> std::io::Result<()> {
         })
         .collect();
     let rw = rows.iter().map(String::len).max().unwrap_or(4).max(4);
-    writeln!(out, "{:<w$}  {:>rw$}  {:>5}  description", "table", "rows", "files")?;
+    writeln!(
+        out,
+        "{:<w$}  {:>rw$}  {:>5}  description",
+        "table", "rows", "files"
+    )?;
     for (e, r) in entries.iter().zip(&rows) {
         let files = if e.path.is_none() && e.error.is_some() {
             "-".to_string()

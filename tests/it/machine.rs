@@ -141,7 +141,15 @@ fn tiny_campaign(dir: &std::path::Path, log: &std::path::Path) -> std::path::Pat
     );
     let out = dir.join("c");
     let code = util::run_granular(
-        &["run", s(&m), "--out", s(&out), "--quiet", "--flush-every", "0"],
+        &[
+            "run",
+            s(&m),
+            "--out",
+            s(&out),
+            "--quiet",
+            "--flush-every",
+            "0",
+        ],
         log,
         std::time::Duration::from_secs(120),
     );
@@ -198,13 +206,21 @@ fn tables_json_lists_every_table() {
         assert!(full.is_dir(), "{t}");
         // Resolved: a real directory inside the campaign, no link left in it.
         assert!(
-            !fs::symlink_metadata(&full).unwrap().file_type().is_symlink(),
+            !fs::symlink_metadata(&full)
+                .unwrap()
+                .file_type()
+                .is_symlink(),
             "{t}"
         );
         let n_files = fs::read_dir(&full)
             .unwrap()
             .filter(|e| {
-                let n = e.as_ref().unwrap().file_name().to_string_lossy().into_owned();
+                let n = e
+                    .as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .into_owned();
                 !n.starts_with('.') && n.ends_with(".parquet")
             })
             .count();
@@ -273,7 +289,10 @@ fn tables_json_lists_every_table() {
     assert_eq!(runs["written"], false, "{runs}");
     assert_eq!(runs["rows"], 0, "{runs}");
     let err = runs["error"].as_str().unwrap_or_else(|| panic!("{runs}"));
-    assert!(err.contains("not followed") && err.contains(s(&outside)), "{err}");
+    assert!(
+        err.contains("not followed") && err.contains(s(&outside)),
+        "{err}"
+    );
 }
 
 /// The `{"progress": ...}` lines of stderr, each parsed (a line that does not parse fails).
@@ -324,7 +343,15 @@ fn run_and_resume_write_progress_as_json_lines() {
     let out = dir.path().join("c");
     let _g = util::heavy();
     let run = std::process::Command::new(util::bin())
-        .args(["run", s(&m), "--out", s(&out), "--progress-json", "--threads", "2"])
+        .args([
+            "run",
+            s(&m),
+            "--out",
+            s(&out),
+            "--progress-json",
+            "--threads",
+            "2",
+        ])
         .stdin(std::process::Stdio::null())
         .output()
         .unwrap();
@@ -334,7 +361,11 @@ fn run_and_resume_write_progress_as_json_lines() {
     assert!(stderr.contains("starting"), "{stderr}");
     assert_progress(&progress_lines(&stderr), 3, &stderr);
     // Nothing on stdout.
-    assert!(run.stdout.is_empty(), "{}", String::from_utf8_lossy(&run.stdout));
+    assert!(
+        run.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&run.stdout)
+    );
 
     // resume of the finished campaign: nothing planned, at once complete.
     let resume = std::process::Command::new(util::bin())
@@ -345,7 +376,9 @@ fn run_and_resume_write_progress_as_json_lines() {
     let stderr = String::from_utf8_lossy(&resume.stderr).into_owned();
     assert_eq!(resume.status.code(), Some(0), "{stderr}");
     let lines = progress_lines(&stderr);
-    let end = lines.last().unwrap_or_else(|| panic!("no progress line: {stderr}"));
+    let end = lines
+        .last()
+        .unwrap_or_else(|| panic!("no progress line: {stderr}"));
     assert_eq!(end["total"], 0, "{stderr}");
     assert_eq!(end["fraction"], 1.0, "{stderr}");
 }
