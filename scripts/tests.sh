@@ -4,7 +4,8 @@
 # compared with the campaign of its final manifest (scripts/compare_tables.py --current), the
 # report and the live dashboard in headless Chromium (scripts/browser-test.sh, which installs
 # Debian's chromium when missing), and the SLURM test. The tutorial's commands and queries
-# (scripts/tutorial_test.py) run before the browser test.
+# (scripts/tutorial_test.py) run before the browser test, then the Python package: its wheel
+# installed into a fresh virtualenv and its tests run with pytest (scripts/python-test.sh).
 # Needs scripts/setup.sh to have been run once (for .venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -72,6 +73,9 @@ echo "== compaction while readers read, then the tables again"
 
 echo "== the tutorial (docs/tutorial.md): every command and query run, every output shown checked"
 .venv/bin/python scripts/tutorial_test.py "$bin"
+
+echo "== the Python package: pip install . into a fresh venv, pytest (tests/python)"
+bash scripts/python-test.sh
 
 echo "== the report and the live dashboard in a real browser (headless Chromium)"
 bash scripts/browser-test.sh

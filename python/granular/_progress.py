@@ -1,0 +1,173 @@
+"""Running `granular run`/`resume` with its progress shown: an HTML bar updated in place in a
+notebook (Jupyter, VS Code), a one-line bar on a terminal, nothing otherwise.
+
+The binary reports progress with `--progress-json`: one JSON object per line on standard error,
+`{"progress": {"total", "finished", "failed", "running", "fraction"}}`; every other line (logs,
+warnings, errors) is passed on to Python's standard error and kept for the exception.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from typing import List, Optional, Sequence, Tuple
+
+
+def _in_notebook() -> bool:
+    ip = sys.modules.get("IPython")
+    if ip is None:
+        return False
+    try:
+        shell = ip.get_ipython()  # type: ignore[attr-defined]
+    except Exception:
+        return False
+    return shell is not None and type(shell).__name__ != "TerminalInteractiveShell"
+
+
+class _Display:
+    def __init__(self, mode: str, label: str) -> None:
+        self.mode = mode
+        self.label = label
+        self.handle = None
+        self.t0 = time.monotonic()
+        self.last = ""
+        if mode == "notebook":
+            from IPython.display import HTML, display  # type: ignore
+
+            self.handle = display(HTML(self._html(None)), display_id=True)
+
+    def _html(self, p: Optional[dict]) -> str:
+        label = html.escape(self.label)
+        if p is None:
+            return f"<div><b>{label}</b>: starting</div>"
+        total = max(int(p.get("total", 0)), 0)
+        frac = float(p.get("fraction", 0.0))
+        failed = int(p.get("failed", 0))
+        fail = f", <span style='color:#b00'>{failed} failed</span>" if failed else ""
+        return (
+            f"<div><b>{label}</b> <progress value='{frac:.4f}' max='1' style='width:40%'></progress> "
+            f"{100 * frac:.0f}%: {int(p.get('finished', 0))}/{total} runs finished, "
+            f"{int(p.get('running', 0))} running{fail}, {time.monotonic() - self.t0:.0f} s</div>"
+        )
+
+    def update(self, p: dict) -> None:
+        if self.mode == "notebook" and self.handle is not None:
+            from IPython.display import HTML  # type: ignore
+
+            self.handle.update(HTML(self._html(p)))
+        elif self.mode == "terminal":
+            frac = float(p.get("fraction", 0.0))
+            n = int(30 * min(max(frac, 0.0), 1.0))
+            line = (
+                f"\r{self.label} [{'#' * n}{'.' * (30 - n)}] {100 * frac:3.0f}% "
+                f"{int(p.get('finished', 0))}/{int(p.get('total', 0))} runs, "
+                f"{int(p.get('running', 0))} running"
+            )
+            if int(p.get("failed", 0)):
+                line += f", {int(p['failed'])} failed"
+            sys.stderr.write(line.ljust(len(self.last)))
+            sys.stderr.flush()
+            self.last = line
+
+    def message(self, line: str) -> None:
+        if self.mode == "terminal" and self.last:
+            sys.stderr.write("\n")
+            self.last = ""
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.mode == "terminal" and self.last:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def _pretty(line: str) -> str:
+    """A log line without its time stamp (`2026-..Z  INFO message` -> `info: message`)."""
+    parts = line.split(None, 2)
+    if (
+        len(parts) == 3
+        and parts[0][:4].isdigit()
+        and parts[0].endswith("Z")
+        and parts[1] in ("ERROR", "WARN", "INFO", "DEBUG", "TRACE")
+    ):
+        level = "warning" if parts[1] == "WARN" else parts[1].lower()
+        return f"{level}: {parts[2]}"
+    return line
+
+
+def run_with_progress(
+    cmd: Sequence[str], *, progress: Optional[bool], label: str
+) -> Tuple[int, str, str]:
+    """Run `cmd` (a `run`/`resume` command with `--progress-json`); returns its exit code, its
+    standard output and its standard error without the progress lines. Ctrl-C (a notebook's
+    interrupt) is passed on to the binary, which checkpoints and stops; the exit code is then
+    130."""
+    if progress is None:
+        mode = "notebook" if _in_notebook() else ("terminal" if sys.stderr.isatty() else "none")
+    elif progress:
+        mode = "notebook" if _in_notebook() else "terminal"
+    else:
+        mode = "none"
+    env = dict(os.environ)
+    env.setdefault("NO_COLOR", "1")
+    proc = subprocess.Popen(
+        list(cmd),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        env=env,
+        text=True,
+        bufsize=1,
+        # Its own process group: a terminal's Ctrl-C reaches only Python, which passes it on
+        # once (the binary then checkpoints and stops) instead of the binary seeing it twice.
+        start_new_session=True,
+    )
+    out: List[str] = []
+    reader = threading.Thread(target=lambda: out.append(proc.stdout.read()), daemon=True)
+    reader.start()
+    display = _Display(mode, label)
+    kept: List[str] = []
+    interrupted = False
+    try:
+        while True:
+            try:
+                line = proc.stderr.readline()
+            except KeyboardInterrupt:
+                if not interrupted:
+                    interrupted = True
+                    proc.send_signal(signal.SIGINT)
+                continue
+            if not line:
+                break
+            line = line.rstrip("\n")
+            if line.startswith('{"progress"'):
+                try:
+                    display.update(json.loads(line)["progress"])
+                    continue
+                except (ValueError, KeyError, TypeError):
+                    pass
+            kept.append(line)
+            if mode != "none":
+                display.message(_pretty(line))
+        while True:
+            try:
+                code = proc.wait()
+                break
+            except KeyboardInterrupt:
+                if not interrupted:
+                    interrupted = True
+                    proc.send_signal(signal.SIGINT)
+    finally:
+        display.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    reader.join()
+    return code, "".join(out), "\n".join(kept)

@@ -1,0 +1,200 @@
+"""The Python API against the files: every table read through `Campaign.table`, `.arrow` and
+`.duckdb` holds exactly the rows DuckDB reads from the table's Parquet files, plus the point's
+sweep columns; the refusals raise exceptions that say what to do. The campaign is tiny and
+deterministic (fixed seed), so no test here is statistical."""
+
+import json
+import os
+import shutil
+import subprocess
+
+import duckdb
+import polars as pl
+import pytest
+
+import granular
+from granular import CampaignDamaged, CampaignError, ManifestError, TableNotWritten
+
+
+def direct(campaign_dir, name):
+    """The table as DuckDB reads its files directly, through the table's link."""
+    glob = str(campaign_dir / "tables" / name / "*.parquet").replace("'", "''")
+    return duckdb.sql(f"select * from read_parquet('{glob}')").pl()
+
+
+def canonical(df):
+    """Rows in one order (every column a sort key), for comparing row sets."""
+    return df.sort(df.columns, nulls_last=True)
+
+
+def test_every_table_has_the_files_rows_and_the_sweep_columns(finished):
+    c = granular.open(finished)
+    listing = c.tables()
+    written = listing.filter(pl.col("written"))["name"].to_list()
+    # The tiny dsmc campaign has these (a table missing from the listing would not be read).
+    for t in ["runs", "points", "registered_runs", "dsmc_species", "dsmc_species_summary", "dsmc_theory"]:
+        assert t in written, (t, written)
+    assert all(d for d in listing["description"]), listing
+    points = c.points
+    assert c.sweep_columns == ["method"]
+    method_of = dict(zip(points["point_id"].to_list(), points["method"].to_list()))
+    views = c.duckdb()
+    for name in written:
+        got = c.table(name).collect()
+        files = direct(finished, name)
+        assert got.height == files.height > 0, name
+        assert listing.filter(pl.col("name") == name)["rows"][0] == files.height, name
+        own = files.columns
+        added = [col for col in got.columns if col not in own]
+        if name != "points" and "point_id" in own:
+            # Every table with a point gets the sweep columns, right after point_id.
+            assert set(added) | set(own) >= {"method"}, name
+            i = got.columns.index("point_id")
+            assert got.columns[i + 1 : i + 1 + len(added)] == added, (name, got.columns)
+            assert [method_of[p] for p in got["point_id"]] == got["method"].to_list(), name
+        else:
+            assert added == [], name
+        # Exactly the files' rows, no row lost, doubled or changed.
+        assert canonical(got.select(own)).equals(canonical(files), null_equal=True), name
+        # The same through pyarrow and through the DuckDB view.
+        arrow = pl.from_arrow(c.arrow(name).to_table())
+        assert arrow.columns == got.columns, name
+        assert canonical(arrow).equals(canonical(got), null_equal=True), name
+        view = views.sql(f'select * from "{name}"').pl()
+        assert view.columns == got.columns, name
+        assert canonical(view).equals(canonical(got), null_equal=True), name
+
+
+def test_a_raw_table_is_queried_by_its_swept_parameter(finished):
+    c = granular.open(finished)
+    bird = c.table("dsmc_species").filter(pl.col("method") == "bird").collect()
+    runs = c.table("runs").filter(pl.col("method") == "bird").collect()
+    assert runs.height == 2  # 2 replicas of the bird point
+    assert set(bird["run_id"].unique().to_list()) == set(runs["run_id"].to_list())
+    # The view, filtered by the swept parameter in SQL, has the frame's rows.
+    n = c.duckdb().sql("select count(*) from dsmc_species where method = 'bird'").fetchall()[0][0]
+    assert n == bird.height > 0
+    summary = c.table("dsmc_species_summary").filter(pl.col("method") == "bird").collect()
+    assert summary["n_replicas"].unique().to_list() == [2]
+
+
+def test_the_acceptance_line(finished):
+    # The issue's acceptance: `c.table('dsmc_species_summary').collect().shape`.
+    shape = granular.open(finished).table("dsmc_species_summary").collect().shape
+    assert shape[0] == direct(finished, "dsmc_species_summary").height
+    assert shape[1] == len(direct(finished, "dsmc_species_summary").columns)  # summaries carry the sweep
+
+
+def test_an_invalid_manifest_raises_every_error_with_its_path_and_writes_nothing(tmp_path, tiny_manifest):
+    m = tiny_manifest
+    m["params"]["initial_temperature"] = -1
+    m["params"]["observables"] = ["temperature", "bogus"]
+    m["sweep"] = {"method": ["low_rank", "nope"]}
+    out = tmp_path / "never"
+    with pytest.raises(ManifestError) as e:
+        granular.run(m, out=out, progress=False)
+    # All three at once, each at its JSON path.
+    paths = {p.path for p in e.value.errors}
+    assert paths == {"/params/initial_temperature", "/params/observables/1", "/sweep/method/1"}, e.value.errors
+    assert any("bogus" in p.message for p in e.value.errors), e.value.errors
+    assert e.value.file == "<manifest dict>"
+    assert "granular-manifest-" not in str(e.value)  # the temporary file is not named
+    assert not out.exists()
+    with pytest.raises(ManifestError) as v:
+        granular.validate(m)
+    assert {p.path for p in v.value.errors} == paths
+
+
+def test_validate_a_path_and_a_dict(tmp_path, tiny_manifest):
+    v = granular.validate(tiny_manifest)
+    assert v["campaign"]["runs"] == 4 and v["campaign"]["points"] == 2
+    f = tmp_path / "m.json"
+    f.write_text(json.dumps(tiny_manifest))
+    assert granular.validate(f)["campaign"]["name"] == "py-tiny"
+    with pytest.raises(ManifestError) as e:
+        granular.validate(tmp_path / "missing.json")
+    assert e.value.errors[0].path == "/"
+
+
+def test_a_damaged_campaign_raises_naming_resume_and_resume_heals_it(finished, fresh_copy):
+    c = granular.open(fresh_copy)
+    before = canonical(c.table("dsmc_species").collect())
+    part = sorted((fresh_copy / "tables" / "dsmc_species").glob("*.parquet"))[0]
+    with open(part, "r+b") as f:
+        f.truncate(100)
+    for read in (lambda: c.table("dsmc_species"), lambda: c.table("dsmc_species_summary"), c.duckdb, c.status):
+        with pytest.raises(CampaignDamaged) as e:
+            read()
+        assert f"granular resume {fresh_copy}" in str(e.value)
+        assert e.value.exit_code == 3
+    # Healing runs the damaged runs again, bit-identically.
+    c.resume(progress=False)
+    assert canonical(c.table("dsmc_species").collect()).equals(before)
+
+
+def test_a_link_out_of_the_campaign_is_not_followed(fresh_copy, tmp_path):
+    outside = tmp_path / "outside"
+    shutil.copytree(fresh_copy / "tables" / "runs", outside)
+    link = fresh_copy / "tables" / "runs"
+    link.unlink()
+    link.symlink_to(outside)
+    with pytest.raises(CampaignError):
+        granular.open(fresh_copy).table("runs").collect()
+
+
+def test_not_a_campaign_and_unknown_tables(finished, tmp_path):
+    with pytest.raises(CampaignError) as e:
+        granular.open(tmp_path / "nothing")
+    assert "not a campaign directory" in str(e.value)
+    with pytest.raises(TableNotWritten) as e:
+        granular.open(finished).table("dsmc_nope")
+    assert "dsmc_species" in str(e.value)  # the tables there are named
+    with pytest.raises(ValueError):
+        granular.open(finished).table("../runs")
+
+
+def test_an_unfinished_campaign_has_no_summary_yet(tmp_path, tiny_manifest):
+    f = tmp_path / "m.json"
+    f.write_text(json.dumps(tiny_manifest))
+    out = tmp_path / "half"
+    # Shard 1 of 2 runs half the runs: the campaign is unfinished.
+    subprocess.run([granular.binary(), "run", str(f), "--out", str(out), "--shard", "1/2", "--quiet"], check=True)
+    c = granular.open(out)
+    assert c.table("runs").collect().height == 2
+    with pytest.raises(TableNotWritten) as e:
+        c.table("dsmc_species_summary")
+    assert "granular resume" in str(e.value)
+    assert "2/4 runs finished" in c._repr_html_()
+    c.resume(progress=False)
+    assert c.table("dsmc_species_summary").collect().height > 0
+    assert "4/4 runs finished (complete)" in c._repr_html_()
+
+
+def test_run_shows_progress_and_returns_the_campaign(tmp_path, tiny_manifest, capsys):
+    c = granular.run(tiny_manifest, out=tmp_path / "p", threads=1, progress=True)
+    err = capsys.readouterr().err
+    assert "4/4 runs" in err and "100%" in err, err
+    assert c.name == "py-tiny" and c.model == "dsmc"
+    # The same manifest again adds nothing and returns the same campaign.
+    again = granular.run(tiny_manifest, out=tmp_path / "p", progress=False)
+    assert again.table("runs").collect().height == 4
+
+
+def test_report_and_repr(finished, tmp_path):
+    c = granular.open(finished)
+    page = c.report(out=tmp_path / "r.html")
+    assert page.read_text().lstrip().lower().startswith("<!doctype html")
+    h = c._repr_html_()
+    assert "py-tiny" in h and "4/4 runs finished (complete)" in h
+    assert "py-tiny" in repr(c)
+
+
+def test_the_binary_is_the_one_installed_with_the_package():
+    b = granular.binary()
+    out = subprocess.run([b, "--version"], capture_output=True, text=True, check=True).stdout
+    assert out.startswith("granular ")
+    if "GRANULAR_BIN" not in os.environ:
+        # The wheel put it beside the interpreter of this environment, not a system one.
+        import sysconfig
+
+        assert os.path.dirname(b) == sysconfig.get_path("scripts")
