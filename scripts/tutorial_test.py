@@ -8,7 +8,9 @@ The tutorial marks what is executed with the info string of its fenced blocks:
 
 - ```sh run        a shell block, run with `bash -euo pipefail` in a temporary directory that
                    holds a copy of the repository's `jobs/`, with `granular` (the binary given)
-                   and `python` (this interpreter, the repository's .venv) first on PATH; the
+                   and `python` (this interpreter, the repository's .venv) first on PATH, and
+                   `import granular` finding the repository's python/ package (running the
+                   binary given, through GRANULAR_BIN); the
                    blocks run in order and share that directory. A block that exits non-zero
                    fails the test.
 - ```text output   what the preceding `sh run` block printed (stdout and stderr together). Every
@@ -114,6 +116,11 @@ def main():
         os.chmod(os.path.join(bindir, "python"), 0o755)
         shutil.copytree(os.path.join(repo, "jobs"), os.path.join(work, "jobs"))
         env = dict(os.environ, PATH=bindir + os.pathsep + os.environ.get("PATH", ""))
+        # `import granular` in the tutorial's Python is this checkout's package (python/),
+        # running the binary given (scripts/python-test.sh tests the installed wheel).
+        env["PYTHONPATH"] = os.path.join(repo, "python") + (
+            os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        env["GRANULAR_BIN"] = binary
         env.pop("GRANULAR_LOG", None)
         last, ran, checked = None, 0, 0
         for info, body, line in blocks(text):
