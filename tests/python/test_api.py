@@ -198,3 +198,58 @@ def test_the_binary_is_the_one_installed_with_the_package():
         import sysconfig
 
         assert os.path.dirname(b) == sysconfig.get_path("scripts")
+
+
+def test_ctrl_c_checkpoints_raises_interrupted_and_resume_finishes(tmp_path, tiny_manifest):
+    # Runs long enough (N1 = 30 000 to t_end = 300: several seconds) that the interrupt,
+    # raised in this process 1.5 s after the start as Ctrl-C or a notebook's interrupt button
+    # would, comes while the binary runs; it must be passed on, checkpointed and reported.
+    import signal
+    import threading
+
+    m = tiny_manifest
+    m["params"]["species"]["power_law"]["N1"] = 30000
+    m["params"]["t_end"] = 300.0
+    m["params"]["output_times"] = {"log": {"from": 0.01, "to": 300.0, "per_decade": 2}}
+    out = tmp_path / "int"
+    timer = threading.Timer(1.5, lambda: signal.raise_signal(signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(granular.Interrupted) as e:
+            granular.run(m, out=out, threads=1, progress=False)
+    finally:
+        timer.cancel()
+    assert e.value.exit_code == 130
+    assert f"granular resume {out}" in str(e.value)
+    c = e.value.campaign
+    s = c.status()
+    assert s["done"] < 4, s
+    c.resume(threads=2, progress=False)
+    assert c.status()["done"] == 4
+    assert c.table("runs").collect().height == 4
+
+
+def test_progress_in_a_notebook_updates_one_html_display(tmp_path, tiny_manifest, monkeypatch):
+    # A stand-in for IPython.display: the notebook mode must create one display and update
+    # it in place, ending at 100 %.
+    import sys
+    import types
+
+    from granular import _progress
+
+    shown = []
+
+    class Handle:
+        def update(self, obj):
+            shown.append(obj.data)
+
+    display_mod = types.ModuleType("IPython.display")
+    display_mod.HTML = type("HTML", (), {"__init__": lambda self, data: setattr(self, "data", data)})
+    display_mod.display = lambda obj, display_id=False: (shown.append(obj.data), Handle())[1]
+    monkeypatch.setitem(sys.modules, "IPython", types.ModuleType("IPython"))
+    monkeypatch.setitem(sys.modules, "IPython.display", display_mod)
+    monkeypatch.setattr(_progress, "_in_notebook", lambda: True)
+    granular.run(tiny_manifest, out=tmp_path / "nb", threads=1)
+    assert "starting" in shown[0]
+    assert len(shown) >= 3, shown
+    assert "<progress value='1.0000'" in shown[-1] and "4/4 runs finished" in shown[-1], shown[-1]
