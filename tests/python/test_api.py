@@ -253,3 +253,20 @@ def test_progress_in_a_notebook_updates_one_html_display(tmp_path, tiny_manifest
     assert "starting" in shown[0]
     assert len(shown) >= 3, shown
     assert "<progress value='1.0000'" in shown[-1] and "4/4 runs finished" in shown[-1], shown[-1]
+
+
+def test_verify_and_plot(finished, fresh_copy, tmp_path):
+    c = granular.open(finished)
+    assert "check out" in c.verify() and "check out" in c.verify(quick=True)
+    pngs = c.plot(out=tmp_path / "figs")
+    assert pngs and all(p.suffix == ".png" and p.stat().st_size > 0 for p in pngs)
+    # A flipped byte (same size) escapes the quick check, not the full one.
+    part = sorted((fresh_copy / "tables" / "runs").glob("*.parquet"))[0]
+    data = bytearray(part.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    part.write_bytes(bytes(data))
+    d = granular.open(fresh_copy)
+    assert "check out" in d.verify(quick=True)
+    with pytest.raises(CampaignDamaged) as e:
+        d.verify()
+    assert "SHA-256" in str(e.value) and f"granular resume {fresh_copy}" in str(e.value)
