@@ -18,6 +18,17 @@ pub fn check(text: &str, file: &str) -> Result<(Manifest, Expansion), ManifestEr
     Ok((manifest, expansion))
 }
 
+/// Whether `message` names `key` as a whole word (`t_end (1)`, `` `t_end` ``, `"t_end"`; not
+/// `t_end_max`).
+fn names_word(message: &str, key: &str) -> bool {
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    !key.is_empty()
+        && message.match_indices(key).any(|(i, _)| {
+            !message[..i].chars().next_back().is_some_and(ident)
+                && !message[i + key.len()..].chars().next().is_some_and(ident)
+        })
+}
+
 /// Every error at once: where the schema found errors in `params`, the checks it cannot
 /// express (cross-field rules, sweep values, limits, the model's checks) run on the manifest
 /// with the offending members left out (`validate::pruned`), and those of their errors that
@@ -43,8 +54,7 @@ fn with_checks_beside(text: &str, e: ManifestErrors) -> ManifestErrors {
             };
             near(path)
                 || swept.is_some_and(|p| near(&p))
-                || message.contains(&format!("`{key}`"))
-                || message.contains(&format!("\"{key}\""))
+                || names_word(message, key)
                 || message.contains(out.as_str())
         })
     };

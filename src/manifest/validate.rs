@@ -175,17 +175,32 @@ fn envelope_by_value(mut value: Value) -> Value {
 
 /// The manifest of `text` (valid JSON) with the members of `params` that `errors` (the schema's)
 /// (or `labels`) point into left out, so that the checks the schema cannot express can still run beside its
-/// errors ("every error at once"), and the JSON pointers of the members left out. `None` where
-/// that cannot be: an error outside `params` and `labels`, or a member left out that the schema requires
-/// (its absence is an error again). At most [`PRUNE_ROUNDS`] rounds of leaving out and
-/// checking the schema again.
+/// errors ("every error at once"), and the JSON pointers of the members left out. A member of
+/// `params` that the schema requires (missing, or left out here) is put back as a stand-in made
+/// from the schema ([`stand_in`]) and counted as left out, so the errors of its absence are the
+/// schema's alone. `None` where that cannot be: an error outside `params` and `labels`, a
+/// required member deeper than `params` itself. At most [`PRUNE_ROUNDS`] rounds of leaving out
+/// and checking the schema again.
 pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<String>)> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut value: Value = serde_json::from_str(text).ok()?;
     let mut left_out: Vec<String> = Vec::new();
     let mut errors = errors.to_vec();
+    let schema = json_schema();
     for _ in 0..PRUNE_ROUNDS {
         for e in &errors {
+            if let Some(key) = required_key(&e.message).filter(|_| e.path == "/params") {
+                let member = format!("/params/{}", key.replace('~', "~0").replace('/', "~1"));
+                let stand_in = stand_in(&schema, &value, &key)?;
+                value
+                    .pointer_mut("/params")?
+                    .as_object_mut()?
+                    .insert(key, stand_in);
+                if !left_out.contains(&member) {
+                    left_out.push(member);
+                }
+                continue;
+            }
             let member = member_of(&value, &e.path)?;
             // A bad name in `labels` is left out like a bad member of `params`.
             if !member.starts_with("/params/") && !member.starts_with("/labels/") {
@@ -196,13 +211,45 @@ pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<Str
                 left_out.push(member);
             }
         }
-        errors = schema_errors(&json_schema(), &value, "");
+        errors = schema_errors(&schema, &value, "");
         if errors.is_empty() {
             let m = crate::models::from_value_at(envelope_by_value(value), "").ok()?;
             return Some((m, left_out));
         }
     }
     None
+}
+
+/// The key of a schema error `"KEY" is a required property`.
+fn required_key(message: &str) -> Option<String> {
+    let quoted = message.strip_suffix(" is a required property")?;
+    serde_json::from_str::<String>(quoted).ok()
+}
+
+/// A value for the required member `key` of the manifest's `params`, made from the model's
+/// params schema ([`forms::example`]: its required members only, numbers in range), so that
+/// the checks the schema cannot express run on the rest; `None` for an unknown model or key.
+fn stand_in(schema: &Value, manifest: &Value, key: &str) -> Option<Value> {
+    let model = manifest.get("model")?.as_str()?;
+    let branch = schema.get("allOf")?.as_array()?.iter().find(|b| {
+        b.pointer("/if/properties/model/const")
+            .and_then(Value::as_str)
+            == Some(model)
+    })?;
+    let mut params = branch.pointer("/then/properties/params")?;
+    for _ in 0..16 {
+        match params
+            .get("$ref")
+            .and_then(Value::as_str)
+            .and_then(|r| r.strip_prefix('#'))
+            .and_then(|p| schema.pointer(p))
+        {
+            Some(target) => params = target,
+            None => break,
+        }
+    }
+    let member = params.get("properties")?.get(key)?;
+    Some(forms::example(schema, member, None))
 }
 
 /// How many times [`pruned`] leaves members out and checks again.

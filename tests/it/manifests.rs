@@ -134,6 +134,43 @@ fn schema_errors_and_checks_are_reported_together_each_once() {
     );
 }
 
+/// A missing required parameter (or one left out for its own error, like a restitution of the
+/// wrong form) does not hide the other errors: the checks run with a stand-in made from the
+/// schema, and none of the stand-in's consequences is reported (97f6d98: the bad sweep value
+/// and the bad initial temperature went unreported while `t_end` was missing, or `species`;
+/// a stand-in `t_end` of 1 must not give "output time after t_end").
+#[test]
+fn a_missing_required_parameter_hides_no_other_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.json");
+    let base = serde_json::json!({
+        "name": "req", "model": "dsmc", "seed": 1,
+        "params": {"method": "low_rank",
+                   "species": {"power_law": {"n1": 0.1, "N1": 2000, "theta": 3}},
+                   "restitution": 0.8, "initial_temperature": 1.0,
+                   "output_times": {"log": {"from": 0.01, "to": 10.0, "per_decade": 5}}},
+        "sweep": {"method": ["low_rank", "nope"]}
+    });
+    util::write_json(&path, &base);
+    let e = load_manifest(&path).unwrap_err();
+    let paths: Vec<&str> = e.errors.iter().map(|x| x.path.as_str()).collect();
+    assert_eq!(
+        paths,
+        vec!["/params/restitution", "/params", "/sweep/method/1"],
+        "{e}"
+    );
+    assert!(e.errors[1].message.contains("\"t_end\""), "{e}");
+    // Without `species`: its absence and the sweep value's error.
+    let mut m = base.clone();
+    m["params"]["t_end"] = serde_json::json!(10.0);
+    m["params"]["restitution"] = serde_json::json!({"constant": 0.5});
+    m["params"].as_object_mut().unwrap().remove("species");
+    util::write_json(&path, &m);
+    let e = load_manifest(&path).unwrap_err();
+    let paths: Vec<&str> = e.errors.iter().map(|x| x.path.as_str()).collect();
+    assert_eq!(paths, vec!["/params", "/sweep/method/1"], "{e}");
+}
+
 #[test]
 fn bad_manifests_report_every_expected_error() {
     let files = json_files(&repo_root().join("tests/manifests/bad"));
