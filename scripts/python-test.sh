@@ -46,4 +46,4 @@ if [ "$passed" -eq 0 ]; then
     echo "python: no test passed" >&2
     exit 1
 fi
-echo "python: $passed tests passed"
+echo "python: $passed tests passed ($(( $(date +%s) - start )) s for the wheel, the venv and the tests)"
