@@ -69,7 +69,14 @@ def run(
     cmd = command(args)
     env = dict(os.environ)
     env.setdefault("NO_COLOR", "1")
-    p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    p = subprocess.run(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        encoding="utf-8",
+        errors="replace",
+    )
     if p.returncode not in ok:
         raise error_of(p.returncode, p.stderr, cmd)
     return p

@@ -102,6 +102,16 @@ def _pretty(line: str) -> str:
     return line
 
 
+def _terminate_with_parent() -> None:  # pragma: no cover (runs in the child)
+    """In the child before exec (Linux): SIGTERM when the parent dies (PR_SET_PDEATHSIG)."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass
+
+
 def run_with_progress(
     cmd: Sequence[str], *, progress: Optional[bool], label: str
 ) -> Tuple[int, str, str]:
@@ -123,51 +133,61 @@ def run_with_progress(
         stderr=subprocess.PIPE,
         stdin=subprocess.DEVNULL,
         env=env,
-        text=True,
+        encoding="utf-8",
+        errors="replace",
         bufsize=1,
-        # Its own process group: a terminal's Ctrl-C reaches only Python, which passes it on
-        # once (the binary then checkpoints and stops) instead of the binary seeing it twice.
+        # Its own session: a terminal's Ctrl-C reaches only Python, which passes it on once
+        # (the binary then checkpoints and stops; a second signal would stop it at once).
         start_new_session=True,
+        # And if Python dies (a notebook kernel restarted or killed), the binary is sent
+        # SIGTERM: it checkpoints and stops instead of running on, holding the campaign's lock.
+        preexec_fn=_terminate_with_parent if sys.platform.startswith("linux") else None,
     )
     out: List[str] = []
     reader = threading.Thread(target=lambda: out.append(proc.stdout.read()), daemon=True)
     reader.start()
-    display = _Display(mode, label)
     kept: List[str] = []
     interrupted = False
+    display: Optional[_Display] = None
+    code: Optional[int] = None
     try:
+        # Every step under one handler: a Ctrl-C while a line is drawn (a notebook's display
+        # update goes through ZMQ) is passed on like one while waiting for a line.
         while True:
             try:
+                if display is None:
+                    display = _Display(mode, label)
                 line = proc.stderr.readline()
+                if not line:
+                    break
+                line = line.rstrip("\n")
+                if line.startswith('{"progress"'):
+                    try:
+                        display.update(json.loads(line)["progress"])
+                        continue
+                    except (ValueError, KeyError, TypeError):
+                        pass
+                kept.append(line)
+                if mode != "none":
+                    display.message(_pretty(line))
             except KeyboardInterrupt:
                 if not interrupted:
                     interrupted = True
                     proc.send_signal(signal.SIGINT)
-                continue
-            if not line:
-                break
-            line = line.rstrip("\n")
-            if line.startswith('{"progress"'):
-                try:
-                    display.update(json.loads(line)["progress"])
-                    continue
-                except (ValueError, KeyError, TypeError):
-                    pass
-            kept.append(line)
-            if mode != "none":
-                display.message(_pretty(line))
-        while True:
+        while code is None:
             try:
                 code = proc.wait()
-                break
             except KeyboardInterrupt:
                 if not interrupted:
                     interrupted = True
                     proc.send_signal(signal.SIGINT)
     finally:
-        display.close()
-        if proc.poll() is None:
-            proc.kill()
+        if display is not None:
+            display.close()
+        if code is None and proc.poll() is None:
+            # An error of this module (not an interrupt, which is passed on above): stop the
+            # binary the way Ctrl-C does, so it checkpoints, then wait for it.
+            proc.send_signal(signal.SIGINT)
             proc.wait()
     reader.join()
     return code, "".join(out), "\n".join(kept)

@@ -43,7 +43,9 @@ class Campaign:
     """
 
     def __init__(self, path: PathLike) -> None:
-        p = Path(os.fspath(path))
+        # Absolute: the frames and views open their files when queried, whatever the working
+        # directory is then (a notebook's %cd).
+        p = Path(os.path.abspath(os.fspath(path)))
         cj = p / "campaign.json"
         if not cj.exists():
             why = "does not exist" if not p.exists() else "holds no campaign.json"
@@ -124,7 +126,7 @@ class Campaign:
         import polars as pl
 
         self._tables_info(refresh=True)
-        return pl.read_parquet(self._files("points"))
+        return pl.read_parquet(self._files("points"), glob=False, hive_partitioning=False)
 
     @property
     def sweep_columns(self) -> List[str]:
@@ -197,12 +199,22 @@ class Campaign:
         `granular.run` for `threads`, `progress` and `check`."""
         from . import _api
 
-        return _api._execute(["resume", self.path], self.path, threads, progress, check, label=self.name or str(self.path))
+        return _api._execute(["resume", self.path], self.path, threads, progress, check, label=self._label())
 
     # --- display ------------------------------------------------------------------------------
 
+    def _label(self) -> str:
+        # A damaged manifest.json (which `resume` heals) must not stop `resume` or `repr`.
+        try:
+            return self.name or str(self.path)
+        except GranularError:
+            return str(self.path)
+
     def __repr__(self) -> str:
-        return f"granular.Campaign({str(self.path)!r}, name={self.name!r}, model={self.model!r})"
+        try:
+            return f"granular.Campaign({str(self.path)!r}, name={self.name!r}, model={self.model!r})"
+        except GranularError:
+            return f"granular.Campaign({str(self.path)!r})"
 
     def _repr_html_(self) -> str:
         esc = html.escape
@@ -307,14 +319,12 @@ class Campaign:
     def _sweep_of_points(self) -> List[str]:
         import polars as pl
 
-        names = pl.read_parquet_schema(self._files("points")[0]).keys()
+        names = _column_names(self._files("points")[0])
         return [c for c in names if c not in POINT_COLUMNS_NOT_SWEPT]
 
     @staticmethod
     def _schema_names(files: List[str]) -> List[str]:
-        import polars as pl
-
-        return list(pl.read_parquet_schema(files[0]).keys())
+        return _column_names(files[0])
 
     @staticmethod
     def _added(name: str, cols: List[str], sweep: List[str]) -> List[str]:
@@ -327,12 +337,12 @@ class Campaign:
 
         self._tables_info(refresh=refresh)
         files = self._files(name)
-        lf = pl.scan_parquet(files, glob=False)
+        lf = pl.scan_parquet(files, glob=False, hive_partitioning=False)
         cols = self._schema_names(files)
         add = self._added(name, cols, self._sweep_of_points())
         if not add:
             return lf
-        pts = pl.scan_parquet(self._files("points"), glob=False).select(["point_id", *add])
+        pts = pl.scan_parquet(self._files("points"), glob=False, hive_partitioning=False).select(["point_id", *add])
         kw: Dict[str, Any] = {}
         try:
             import inspect
@@ -350,9 +360,25 @@ def _ident(name: str) -> str:
     return '"' + name.replace('"', '""') + '"'
 
 
+def _column_names(file: str) -> List[str]:
+    """The columns of one Parquet file, from its footer (the path is a path, not a pattern)."""
+    import pyarrow.parquet as pq
+
+    return list(pq.read_schema(file).names)
+
+
+def _glob_escaped(path: str) -> str:
+    """`path` as a DuckDB glob that matches only itself: `*`, `?` and `[` each as a one-character
+    class (a campaign in `runs/x*` must not read `runs/xy`)."""
+    return "".join("[" + ch + "]" if ch in "*?[" else ch for ch in path)
+
+
 def _parquet_sql(files: List[str]) -> str:
-    """`read_parquet([...])` of these files, each path a quoted SQL string literal."""
-    return "read_parquet([" + ", ".join("'" + f.replace("'", "''") + "'" for f in files) + "])"
+    """`read_parquet([...])` of exactly these files: each path glob-escaped and a quoted SQL
+    string literal, and no hive partitioning (a campaign under `runs/method=foo/` must not
+    have its `method` column overwritten by the directory's name)."""
+    lits = ", ".join("'" + _glob_escaped(f).replace("'", "''") + "'" for f in files)
+    return f"read_parquet([{lits}], hive_partitioning = false)"
 
 
 def _check_run_code(code: int, stderr: str, cmd: List[str], campaign: "Campaign") -> None:

@@ -270,3 +270,83 @@ def test_verify_and_plot(finished, fresh_copy, tmp_path):
     with pytest.raises(CampaignDamaged) as e:
         d.verify()
     assert "SHA-256" in str(e.value) and f"granular resume {fresh_copy}" in str(e.value)
+
+
+def long_manifest(m):
+    """The tiny manifest made to run for several seconds on one thread (N1 = 30 000 to
+    t_end = 300), so that an interrupt comes while runs run."""
+    m["params"]["species"]["power_law"]["N1"] = 30000
+    m["params"]["t_end"] = 300.0
+    m["params"]["output_times"] = {"log": {"from": 0.01, "to": 300.0, "per_decade": 2}}
+    return m
+
+
+def test_hostile_directory_names_read_only_the_campaigns_files(finished, tmp_path, monkeypatch):
+    # `method=foo` would be taken for a hive partition (overwriting the method column), and
+    # `c[1]*` for a glob matching the sibling `c1x` (doubling every table's rows).
+    parent = tmp_path / "method=foo"
+    parent.mkdir()
+    d = parent / "c[1]*"
+    shutil.copytree(finished, d, symlinks=True)
+    shutil.copytree(finished, parent / "c1x", symlinks=True)
+    monkeypatch.chdir(parent)
+    c = granular.open("c[1]*")  # relative, then the working directory changes
+    monkeypatch.chdir(tmp_path)
+    assert c.points.height == 2
+    runs = c.table("runs").collect()
+    assert runs.height == 4 and sorted(set(runs["method"])) == ["bird", "low_rank"]
+    con = c.duckdb()
+    assert con.sql("select count(*) from runs").fetchall()[0][0] == 4
+    assert sorted(r[0] for r in con.sql("select distinct method from dsmc_species").fetchall()) == ["bird", "low_rank"]
+    assert con.sql("select count(*) from dsmc_species").fetchall()[0][0] == direct(finished, "dsmc_species").height
+
+
+def test_ctrl_c_while_progress_is_drawn_is_passed_on(tmp_path, tiny_manifest, monkeypatch):
+    # An interrupt that lands while a progress line is being drawn (not while waiting for one)
+    # must be passed on to the binary too: it checkpoints and `run` raises Interrupted.
+    from granular import _progress
+
+    calls = []
+    real = _progress._Display.update
+
+    def update(self, p):
+        calls.append(p)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        real(self, p)
+
+    monkeypatch.setattr(_progress._Display, "update", update)
+    out = tmp_path / "int2"
+    with pytest.raises(granular.Interrupted):
+        granular.run(long_manifest(tiny_manifest), out=out, threads=1, progress=False)
+    c = granular.open(out)
+    assert c.status()["done"] < 4
+    assert c.status()["live_shards"] == []
+
+
+def test_the_binary_stops_when_python_dies(tmp_path, tiny_manifest):
+    # A notebook kernel killed mid-run: the binary gets SIGTERM (parent death), checkpoints and
+    # lets the campaign go, instead of running on holding its lock.
+    import sys
+    import time
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("parent-death signal: Linux only")
+    f = tmp_path / "m.json"
+    f.write_text(json.dumps(long_manifest(tiny_manifest)))
+    out = tmp_path / "orphan"
+    code = f"import granular; granular.run({str(f)!r}, out={str(out)!r}, threads=1, progress=False)"
+    py = subprocess.Popen([sys.executable, "-c", code])
+    deadline = time.monotonic() + 20
+    while not (out / "locks").exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(1.0)
+    py.kill()
+    py.wait()
+    c = granular.open(out)
+    while c.status()["live_shards"] and time.monotonic() < deadline:
+        time.sleep(0.2)
+    s = c.status()
+    assert s["live_shards"] == [] and s["done"] < 4, s
+    c.resume(threads=2, progress=False)
+    assert c.status()["done"] == 4
