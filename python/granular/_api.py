@@ -6,11 +6,10 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
+from typing import Any, Dict, Mapping, Optional, Union
 
 from . import _binary
-from ._progress import run_with_progress
-from .campaign import Campaign, PathLike, _check_run_code
+from .campaign import Campaign, PathLike, execute
 from .errors import GranularError, ManifestError, Problem
 
 Manifest = Union[PathLike, Mapping[str, Any]]
@@ -81,27 +80,6 @@ def validate(manifest: Manifest) -> Dict[str, Any]:
         return _validate(mf)
 
 
-def _threads_args(threads: Optional[int]) -> List[str]:
-    if threads is None:
-        return []
-    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
-        raise ValueError(f"threads: expected a whole number >= 0 (0 = all cores), got {threads!r}")
-    return ["--threads", str(threads)]
-
-
-def _execute(
-    args: List[Any], out: Path, threads: Optional[int], progress: Optional[bool], check: bool, label: str
-) -> Campaign:
-    cmd = _binary.command([*args, *_threads_args(threads), "--progress-json"])
-    code, _stdout, stderr = run_with_progress(cmd, progress=progress, label=label)
-    if code in (0, 1, 130):
-        campaign = Campaign(out)
-        if code == 0 or (code == 1 and not check):
-            return campaign
-        _check_run_code(code, stderr, cmd, campaign)
-    raise _binary.error_of(code, stderr, cmd)
-
-
 def run(
     manifest: Manifest,
     out: PathLike,
@@ -125,7 +103,9 @@ def run(
         v = _validate(mf)
         label = str(v.get("campaign", {}).get("name") or out_path)
         try:
-            return _execute(["run", mf.path, "--out", out_path], out_path, threads, progress, check, label)
+            return execute(
+                ["run", mf.path, "--out", out_path], out_path, threads=threads, progress=progress, check=check, label=label
+            )
         except GranularError as e:
             e.message = mf.rename(e.message)
             e.args = (e.message,)

@@ -12,7 +12,7 @@ import subprocess
 import sys
 import sysconfig
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Tuple
 
 from .errors import CampaignDamaged, CampaignError, GranularError
 
@@ -92,22 +92,27 @@ def error_of(code: int, stderr: str, cmd: Sequence[str]) -> GranularError:
     return GranularError(text, exit_code=code, command=cmd)
 
 
+_LEVELS = {"ERROR": "error", "WARN": "warning", "INFO": "info", "DEBUG": "debug", "TRACE": "trace"}
+
+
+def log_line(line: str) -> Tuple[Optional[str], str]:
+    """The level and message of a log line of the binary (`2026-..Z  WARN message` ->
+    `("warning", "message")`); `(None, line)` for any other line."""
+    parts = line.split(None, 2)
+    if len(parts) == 3 and parts[0][:4].isdigit() and parts[0].endswith("Z") and parts[1] in _LEVELS:
+        return _LEVELS[parts[1]], parts[2]
+    return None, line
+
+
+def pretty(line: str) -> str:
+    """A line of the binary's standard error as shown: a log line without its time stamp
+    (`warning: message`), any other line as it is."""
+    level, message = log_line(line)
+    return f"{level}: {message}" if level else line
+
+
 def _strip_log_prefixes(text: str) -> str:
-    """The messages of log lines (`2026-...Z ERROR message` -> `error: message`), other lines
-    as they are."""
-    out = []
-    for line in text.splitlines():
-        parts = line.split(None, 2)
-        if (
-            len(parts) == 3
-            and parts[0][:4].isdigit()
-            and parts[0].endswith("Z")
-            and parts[1] in ("ERROR", "WARN", "INFO", "DEBUG", "TRACE")
-        ):
-            level = parts[1].lower()
-            if level in ("info", "debug", "trace"):
-                continue
-            out.append(f"{'warning' if level == 'warn' else level}: {parts[2]}")
-        else:
-            out.append(line)
-    return "\n".join(out)
+    """What the binary said that matters for an exception: its lines without the time stamps
+    of log lines, and without the info, debug and trace logs."""
+    lines = text.splitlines()
+    return "\n".join(pretty(x) for x in lines if log_line(x)[0] not in ("info", "debug", "trace"))

@@ -18,6 +18,8 @@ import threading
 import time
 from typing import List, Optional, Sequence, Tuple
 
+from ._binary import pretty
+
 
 def _in_notebook() -> bool:
     ip = sys.modules.get("IPython")
@@ -88,20 +90,6 @@ class _Display:
             sys.stderr.flush()
 
 
-def _pretty(line: str) -> str:
-    """A log line without its time stamp (`2026-..Z  INFO message` -> `info: message`)."""
-    parts = line.split(None, 2)
-    if (
-        len(parts) == 3
-        and parts[0][:4].isdigit()
-        and parts[0].endswith("Z")
-        and parts[1] in ("ERROR", "WARN", "INFO", "DEBUG", "TRACE")
-    ):
-        level = "warning" if parts[1] == "WARN" else parts[1].lower()
-        return f"{level}: {parts[2]}"
-    return line
-
-
 def _terminate_with_parent() -> None:  # pragma: no cover (runs in the child)
     """In the child before exec (Linux): SIGTERM when the parent dies (PR_SET_PDEATHSIG)."""
     import ctypes
@@ -169,7 +157,7 @@ def run_with_progress(
                         pass
                 kept.append(line)
                 if mode != "none":
-                    display.message(_pretty(line))
+                    display.message(pretty(line))
             except KeyboardInterrupt:
                 if not interrupted:
                     interrupted = True

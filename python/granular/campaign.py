@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Dict, List, Optional, Union
 
 from . import _binary
+from ._progress import run_with_progress
 from .errors import CampaignError, GranularError, Interrupted, RunsFailed, TableNotWritten
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -131,7 +132,8 @@ class Campaign:
     @property
     def sweep_columns(self) -> List[str]:
         """The names of the sweep columns (the latest manifest's sweep keys, `.` as `_`)."""
-        return [c for c in self.points.columns if c not in POINT_COLUMNS_NOT_SWEPT]
+        self._tables_info(refresh=True)
+        return self._sweep_of_points()
 
     def table(self, name: str) -> "pl.LazyFrame":
         """The table `name` as a Polars LazyFrame, with the point's sweep columns joined right
@@ -197,9 +199,7 @@ class Campaign:
     def resume(self, *, threads: Optional[int] = None, progress: Optional[bool] = None, check: bool = True) -> "Campaign":
         """Continue the campaign (`granular resume DIR`) with its progress shown; see
         `granular.run` for `threads`, `progress` and `check`."""
-        from . import _api
-
-        return _api._execute(["resume", self.path], self.path, threads, progress, check, label=self._label())
+        return execute(["resume", self.path], self.path, threads=threads, progress=progress, check=check, label=self._label())
 
     # --- display ------------------------------------------------------------------------------
 
@@ -317,8 +317,6 @@ class Campaign:
         return files
 
     def _sweep_of_points(self) -> List[str]:
-        import polars as pl
-
         names = _column_names(self._files("points")[0])
         return [c for c in names if c not in POINT_COLUMNS_NOT_SWEPT]
 
@@ -381,24 +379,34 @@ def _parquet_sql(files: List[str]) -> str:
     return f"read_parquet([{lits}], hive_partitioning = false)"
 
 
-def _check_run_code(code: int, stderr: str, cmd: List[str], campaign: "Campaign") -> None:
-    if code == 0:
-        return
+def execute(
+    args: List[Any], out: Path, *, threads: Optional[int], progress: Optional[bool], check: bool, label: str
+) -> Campaign:
+    """Run `granular run ...` or `granular resume ...` (`args`) for the campaign in `out` with
+    its progress shown, and return the campaign; each exit code but 0 (and 1 with
+    `check=False`) raises its exception."""
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 0):
+        raise ValueError(f"threads: expected a whole number >= 0 (0 = all cores), got {threads!r}")
+    threads_args = [] if threads is None else ["--threads", str(threads)]
+    cmd = _binary.command([*args, *threads_args, "--progress-json"])
+    code, _stdout, stderr = run_with_progress(cmd, progress=progress, label=label)
+    if code not in (0, 1, 130):
+        raise _binary.error_of(code, stderr, cmd)
+    campaign = Campaign(out)
     text = _binary._strip_log_prefixes(stderr).strip()
-    if code == 1:
+    said = text + "\n" if text else ""
+    if code == 1 and check:
         raise RunsFailed(
-            (text + "\n" if text else "")
-            + f"{campaign.path}: some runs failed; their reasons are in the runs table "
+            said + f"{campaign.path}: some runs failed; their reasons are in the runs table "
             "(`status = 'failed'`); pass check=False to get the campaign without this exception",
             campaign,
             command=cmd,
         )
     if code == 130:
         raise Interrupted(
-            (text + "\n" if text else "")
-            + f"{campaign.path}: stopped after checkpointing; `Campaign.resume()` or "
+            said + f"{campaign.path}: stopped after checkpointing; `Campaign.resume()` or "
             f"`granular resume {campaign.path}` continues it",
             campaign,
             command=cmd,
         )
-    raise _binary.error_of(code, stderr, cmd)
+    return campaign

@@ -269,17 +269,23 @@ pub(crate) fn tables_checked(
     if found.clean() {
         return Ok(());
     }
-    for p in found.problems() {
+    Err(refuse_damage(&c.root, &found.problems()))
+}
+
+/// Name each problem the integrity check found in `dir` and refuse it (exit 3), naming
+/// `granular resume DIR`, which heals it: `status`, `tables`, `plot`, `analyze`.
+pub(crate) fn refuse_damage(dir: &std::path::Path, problems: &[String]) -> i32 {
+    for p in problems {
         eprintln!("error: damage: {p}");
     }
-    Err(fail(
+    fail(
         exit_codes::DIRECTORY_REFUSED,
         format!(
             "{}: the tables do not match the ledger; `granular resume {}` heals it (runs whose rows are damaged run again)",
-            c.root.display(),
-            c.root.display()
+            dir.display(),
+            dir.display()
         ),
-    ))
+    )
 }
 
 /// The exit code of an error's class: the one place where errors become exit codes (README

@@ -36,15 +36,7 @@ pub fn run(a: Args) -> i32 {
     if s.damage.is_empty() {
         return exit_codes::OK;
     }
-    for d in &s.damage {
-        eprintln!("error: damage: {d}");
-    }
-    eprintln!(
-        "{}: the tables do not match the ledger; `granular resume {}` heals it (runs whose rows are damaged run again)",
-        a.dir.display(),
-        a.dir.display()
-    );
-    exit_codes::DIRECTORY_REFUSED
+    super::refuse_damage(&a.dir, &s.damage)
 }
 
 fn write_text(out: &mut impl Write, s: &CampaignStatus) -> std::io::Result<()> {

@@ -116,15 +116,7 @@ pub fn run(a: Args) -> i32 {
     if found.clean() {
         return exit_codes::OK;
     }
-    for p in found.problems() {
-        eprintln!("error: damage: {p}");
-    }
-    eprintln!(
-        "{}: the tables do not match the ledger; `granular resume {}` heals it (runs whose rows are damaged run again)",
-        a.dir.display(),
-        a.dir.display()
-    );
-    exit_codes::DIRECTORY_REFUSED
+    super::refuse_damage(&a.dir, &found.problems())
 }
 
 /// Every table the campaign has (`Campaign::tables`) and those of `granular analyze` in

@@ -26,7 +26,7 @@ pub fn alternatives_at<'a>(root: &'a Value, keyword_path: &str) -> Option<&'a Ve
 }
 
 /// `schema` with its `$ref` (a local `#/...` pointer) followed, repeatedly.
-fn resolve<'a>(root: &'a Value, mut schema: &'a Value) -> &'a Value {
+pub fn resolve<'a>(root: &'a Value, mut schema: &'a Value) -> &'a Value {
     for _ in 0..16 {
         match schema
             .get("$ref")

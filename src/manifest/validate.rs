@@ -236,18 +236,7 @@ fn stand_in(schema: &Value, manifest: &Value, key: &str) -> Option<Value> {
             .and_then(Value::as_str)
             == Some(model)
     })?;
-    let mut params = branch.pointer("/then/properties/params")?;
-    for _ in 0..16 {
-        match params
-            .get("$ref")
-            .and_then(Value::as_str)
-            .and_then(|r| r.strip_prefix('#'))
-            .and_then(|p| schema.pointer(p))
-        {
-            Some(target) => params = target,
-            None => break,
-        }
-    }
+    let params = forms::resolve(schema, branch.pointer("/then/properties/params")?);
     let member = params.get("properties")?.get(key)?;
     Some(forms::example(schema, member, None))
 }
