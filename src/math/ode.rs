@@ -211,12 +211,16 @@ impl Lu {
                 }
             }
             let d = a[k * n + k];
-            for i in k + 1..n {
-                let l = a[i * n + k] / d;
-                a[i * n + k] = l;
+            // Rows k+1.. minus l times row k: slices without bounds checks, so the update
+            // vectorises (the same operations on each element, so the same bits).
+            let (top, below) = a.split_at_mut((k + 1) * n);
+            let row_k = &top[k * n + k + 1..];
+            for row in below.chunks_exact_mut(n) {
+                let l = row[k] / d;
+                row[k] = l;
                 if l != 0.0 {
-                    for j in k + 1..n {
-                        a[i * n + j] -= l * a[k * n + j];
+                    for (x, &u) in row[k + 1..].iter_mut().zip(row_k) {
+                        *x -= l * u;
                     }
                 }
             }
@@ -232,15 +236,15 @@ impl Lu {
         }
         for i in 0..n {
             let mut s = b[i];
-            for j in 0..i {
-                s -= self.a[i * n + j] * b[j];
+            for (a, x) in self.a[i * n..i * n + i].iter().zip(&b[..i]) {
+                s -= a * x;
             }
             b[i] = s;
         }
         for i in (0..n).rev() {
             let mut s = b[i];
-            for j in i + 1..n {
-                s -= self.a[i * n + j] * b[j];
+            for (a, x) in self.a[i * n + i + 1..(i + 1) * n].iter().zip(&b[i + 1..]) {
+                s -= a * x;
             }
             b[i] = s / self.a[i * n + i];
         }
@@ -280,18 +284,22 @@ impl CLu {
             }
             let (dr, di) = (re[k * n + k], im[k * n + k]);
             let dd = dr * dr + di * di;
-            for i in k + 1..n {
-                let (xr, xi) = (re[i * n + k], im[i * n + k]);
+            // As in Lu::new: slices, so the row update vectorises (the same bits).
+            let (re_top, re_below) = re.split_at_mut((k + 1) * n);
+            let (im_top, im_below) = im.split_at_mut((k + 1) * n);
+            let (re_k, im_k) = (&re_top[k * n + k + 1..], &im_top[k * n + k + 1..]);
+            for (rr, ri) in re_below.chunks_exact_mut(n).zip(im_below.chunks_exact_mut(n)) {
+                let (xr, xi) = (rr[k], ri[k]);
                 // l = x / d
                 let lr = (xr * dr + xi * di) / dd;
                 let li = (xi * dr - xr * di) / dd;
-                re[i * n + k] = lr;
-                im[i * n + k] = li;
+                rr[k] = lr;
+                ri[k] = li;
                 if lr != 0.0 || li != 0.0 {
-                    for j in k + 1..n {
-                        let (ur, ui) = (re[k * n + j], im[k * n + j]);
-                        re[i * n + j] -= lr * ur - li * ui;
-                        im[i * n + j] -= lr * ui + li * ur;
+                    let row = rr[k + 1..].iter_mut().zip(ri[k + 1..].iter_mut());
+                    for ((x, y), (&ur, &ui)) in row.zip(re_k.iter().zip(im_k)) {
+                        *x -= lr * ur - li * ui;
+                        *y -= lr * ui + li * ur;
                     }
                 }
             }
@@ -307,20 +315,21 @@ impl CLu {
         }
         for i in 0..n {
             let (mut sr, mut si) = (br[i], bi[i]);
-            for j in 0..i {
-                let (lr, li) = (self.re[i * n + j], self.im[i * n + j]);
-                sr -= lr * br[j] - li * bi[j];
-                si -= lr * bi[j] + li * br[j];
+            let l = self.re[i * n..i * n + i].iter().zip(&self.im[i * n..i * n + i]);
+            for ((&lr, &li), (&xr, &xi)) in l.zip(br[..i].iter().zip(&bi[..i])) {
+                sr -= lr * xr - li * xi;
+                si -= lr * xi + li * xr;
             }
             br[i] = sr;
             bi[i] = si;
         }
         for i in (0..n).rev() {
             let (mut sr, mut si) = (br[i], bi[i]);
-            for j in i + 1..n {
-                let (ur, ui) = (self.re[i * n + j], self.im[i * n + j]);
-                sr -= ur * br[j] - ui * bi[j];
-                si -= ur * bi[j] + ui * br[j];
+            let row = i * n + i + 1..(i + 1) * n;
+            let u = self.re[row.clone()].iter().zip(&self.im[row]);
+            for ((&ur, &ui), (&xr, &xi)) in u.zip(br[i + 1..].iter().zip(&bi[i + 1..])) {
+                sr -= ur * xr - ui * xi;
+                si -= ur * xi + ui * xr;
             }
             let (dr, di) = (self.re[i * n + i], self.im[i * n + i]);
             let dd = dr * dr + di * di;

@@ -376,6 +376,11 @@ pub(crate) struct PairTable<'a> {
     pre: Vec<(f64, f64, f64, f64)>,
     /// m_k mu_i per pair (the first product of gamma's numerator, so the same bits).
     mk_mu: Vec<f64>,
+    /// The columns of `pre` as separate arrays (p0, mu, a1, a2), row-major k * m + i, when
+    /// every pair's eps is constant (empty otherwise): the loop of
+    /// [`PairTable::cooling_rates`] over them has no branch and vectorises (sqrt and divide
+    /// are correctly rounded in every lane, so the same bits).
+    soa: [Vec<f64>; 4],
 }
 
 impl<'a> PairTable<'a> {
@@ -398,12 +403,23 @@ impl<'a> PairTable<'a> {
         let mk_mu = (0..m * m)
             .map(|ki| species[ki / m].mass * pre[ki].1)
             .collect();
+        let soa = if pre.iter().all(|p| !p.2.is_nan()) {
+            [
+                pre.iter().map(|p| p.0).collect(),
+                pre.iter().map(|p| p.1).collect(),
+                pre.iter().map(|p| p.2).collect(),
+                pre.iter().map(|p| p.3).collect(),
+            ]
+        } else {
+            Default::default()
+        };
         PairTable {
             m,
             species,
             r,
             pre,
             mk_mu,
+            soa,
         }
     }
 
@@ -452,9 +468,39 @@ impl<'a> PairTable<'a> {
         (p * (a1 - 0.5 * gam * a2), p * 0.25 * gam * a2)
     }
 
-    /// xi_k (14) of every species.
+    /// xi_k (14) of every species: the sums of [`PairTable::rates_tm`]'s xi_ki over i in
+    /// order. With constant restitution the pair terms of a row are computed first, in one
+    /// branch-free loop (the same operations, so the same bits), then summed in the same order.
     pub(crate) fn cooling_rates(&self, t: &[f64]) -> Vec<f64> {
         let tm = self.t_over_m(t);
+        let m = self.m;
+        if !self.soa[0].is_empty() {
+            let [p0s, mus, a1s, a2s] = &self.soa;
+            let mut terms = vec![0.0; m];
+            return (0..m)
+                .map(|k| {
+                    let (tk, tmk) = (t[k], tm[k]);
+                    let row = k * m..(k + 1) * m;
+                    let pairs = p0s[row.clone()]
+                        .iter()
+                        .zip(&mus[row.clone()])
+                        .zip(&a1s[row.clone()])
+                        .zip(&a2s[row.clone()])
+                        .zip(&self.mk_mu[row])
+                        .zip(&tm[..m]);
+                    for (x, (((((&p0, &mu), &a1), &a2), &kmu), &tmi)) in
+                        terms.iter_mut().zip(pairs)
+                    {
+                        let u2 = tmk + tmi;
+                        let u = u2.sqrt();
+                        let gam = kmu * u2 / tk;
+                        let p = p0 * u * mu;
+                        *x = p * (a1 - 0.5 * gam * a2);
+                    }
+                    terms.iter().sum()
+                })
+                .collect();
+        }
         (0..self.m)
             .map(|k| {
                 (0..self.m)
@@ -654,6 +700,35 @@ mod tests {
                         "pair ({k}, {i})"
                     );
                 }
+            }
+        }
+    }
+
+    /// The cooling rates of the ODEs' right-hand side (with constant restitution: the pair
+    /// terms of a row in one branch-free loop, then summed) have the same bits as the sums of
+    /// [`PairTable::rates`] over i in order, for one eps, per-pair eps and a series eps (the
+    /// theory tables must not move by one bit).
+    #[test]
+    fn cooling_rates_are_bit_identical() {
+        let s: Vec<Species> = (1..=37)
+            .map(|k| sp(k as f64 * 1.37, 0.1 / (k as f64).powf(2.5)))
+            .collect();
+        let t: Vec<f64> = (0..37)
+            .map(|k| 0.013 * (1.0 + k as f64).powf(1.9) + 1e-3)
+            .collect();
+        let pairs = (0..37)
+            .map(|k| (0..37).map(|i| 0.3 + 0.01 * ((k * 7 + i * 3) % 41) as f64).collect())
+            .collect();
+        for r in [
+            PairRestitution::Constant(0.5),
+            PairRestitution::ConstantPairs(pairs),
+            PairRestitution::series(&s, 0.09, vec![0.0, -1.15344, 0.0, 0.79826]),
+        ] {
+            let table = PairTable::new(&s, &r);
+            let got = table.cooling_rates(&t);
+            for k in 0..s.len() {
+                let want: f64 = (0..s.len()).map(|i| table.rates(k, t[k], i, t[i]).0).sum();
+                assert_eq!(want.to_bits(), got[k].to_bits(), "{r:?}: species {k}");
             }
         }
     }
