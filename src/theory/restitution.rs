@@ -476,9 +476,16 @@ impl<'a> PairTable<'a> {
         let m = self.m;
         if !self.soa[0].is_empty() {
             let [p0s, mus, a1s, a2s] = &self.soa;
-            let mut terms = vec![0.0; m];
-            return (0..m)
-                .map(|k| {
+            // Four rows at a time: their terms, then their sums side by side (four
+            // independent chains of additions, each in the order of `Iterator::sum`, from its
+            // starting value: the same bits).
+            let zero: f64 = std::iter::empty::<f64>().sum();
+            let mut terms = vec![0.0; 4 * m];
+            let mut xi = vec![0.0; m];
+            for k0 in (0..m).step_by(4) {
+                let rows = (m - k0).min(4);
+                for (r, buf) in terms.chunks_exact_mut(m).take(rows).enumerate() {
+                    let k = k0 + r;
                     let (tk, tmk) = (t[k], tm[k]);
                     let row = k * m..(k + 1) * m;
                     let pairs = p0s[row.clone()]
@@ -489,7 +496,7 @@ impl<'a> PairTable<'a> {
                         .zip(&self.mk_mu[row])
                         .zip(&tm[..m]);
                     for (x, (((((&p0, &mu), &a1), &a2), &kmu), &tmi)) in
-                        terms.iter_mut().zip(pairs)
+                        buf.iter_mut().zip(pairs)
                     {
                         let u2 = tmk + tmi;
                         let u = u2.sqrt();
@@ -497,9 +504,26 @@ impl<'a> PairTable<'a> {
                         let p = p0 * u * mu;
                         *x = p * (a1 - 0.5 * gam * a2);
                     }
-                    terms.iter().sum()
-                })
-                .collect();
+                }
+                if rows == 4 {
+                    let (b01, b23) = terms.split_at(2 * m);
+                    let (b0, b1) = b01.split_at(m);
+                    let (b2, b3) = b23.split_at(m);
+                    let mut acc = [zero; 4];
+                    for (((x0, x1), x2), x3) in b0.iter().zip(b1).zip(b2).zip(b3) {
+                        acc[0] += x0;
+                        acc[1] += x1;
+                        acc[2] += x2;
+                        acc[3] += x3;
+                    }
+                    xi[k0..k0 + 4].copy_from_slice(&acc);
+                } else {
+                    for (r, buf) in terms.chunks_exact(m).take(rows).enumerate() {
+                        xi[k0 + r] = buf.iter().sum();
+                    }
+                }
+            }
+            return xi;
         }
         (0..self.m)
             .map(|k| {
