@@ -255,7 +255,7 @@ fn kick_block_counter<const D: usize>(
     add_kicks(v, zs, sigma)
 }
 
-struct BlockScratch {
+pub(super) struct BlockScratch {
     /// Candidate words, normals, slow slots.
     words: (Vec<u64>, Vec<f64>, Vec<u32>),
 }
@@ -382,6 +382,69 @@ impl Kicks {
         let s = self.sigma;
         let (sum, m) = add_kicks(v, &self.buf, s);
         (std::array::from_fn(|k| s * (sum[k] / n as f64)), m)
+    }
+}
+
+/// Stream version 2's kicks for a caller that runs the work blocks itself (the RFM step's
+/// fused drift and kick pass): the same blocks, the same sums combined in the same order as
+/// [`Kicks::kick_counter`], so the same bits.
+pub(super) struct CounterBlocks<'a> {
+    key: &'a [u32; 8],
+    sigma: f64,
+}
+
+impl Kicks {
+    /// The shared part of [`Kicks::kick_counter`] and the scratch of its first `nb` work
+    /// blocks, apart (each block's scratch goes to the thread that kicks it).
+    pub(super) fn counter_blocks(&mut self, nb: usize) -> (CounterBlocks<'_>, &mut [BlockScratch]) {
+        while self.blocks.len() < nb {
+            self.blocks.push(BlockScratch {
+                words: Default::default(),
+            });
+        }
+        let sigma = self.sigma;
+        (
+            CounterBlocks {
+                key: &self.key,
+                sigma,
+            },
+            &mut self.blocks[..nb],
+        )
+    }
+}
+
+impl CounterBlocks<'_> {
+    /// Work block `b` (particles `v`, the first being particle `b KICK_BLOCK`) of step
+    /// `step`, as [`Kicks::kick_counter`] kicks it: its sum of z per component and the
+    /// largest |v|^2 after.
+    pub(super) fn kick<const D: usize>(
+        &self,
+        step: u64,
+        b: usize,
+        v: &mut [[f64; D]],
+        sc: &mut BlockScratch,
+    ) -> ([f64; D], f64) {
+        kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma, &mut sc.words)
+    }
+
+    /// The blocks' results, in block order, combined as [`Kicks::kick_counter`] combines
+    /// them: the shift c of N = `n` particles and the largest |v|^2.
+    pub(super) fn combine<const D: usize>(
+        &self,
+        res: impl Iterator<Item = ([f64; D], f64)>,
+        n: usize,
+    ) -> ([f64; D], f64) {
+        let mut sum = [0.0; D];
+        let mut m: f64 = 0.0;
+        for (bs, bm) in res {
+            for k in 0..D {
+                sum[k] += bs[k];
+            }
+            if bm > m {
+                m = bm;
+            }
+        }
+        (std::array::from_fn(|k| self.sigma * (sum[k] / n as f64)), m)
     }
 }
 

@@ -13,7 +13,7 @@ use super::contact::ContactLaw;
 use super::freepath::{FreePathAcc, FreePathConfig, FreePathMomentRow, FreePaths};
 use super::integrate::PairPropagator;
 use super::neighbours::{wrap, NeighbourList};
-use super::noise::Kicks;
+use super::noise::{BlockScratch, CounterBlocks, Kicks, KICK_BLOCK};
 use super::params::{InitialLayout, RfmConfig};
 use crate::physics::SimError;
 use crate::rng::stream::WordStream;
@@ -24,10 +24,43 @@ pub const PARALLEL_MIN_PARTICLES: usize = 4096;
 /// Pairs per work block of the 2D pair pass (fixed: the corrections are applied in pair order
 /// whatever the thread count).
 const PAIR_BLOCK: usize = 4096;
-/// Particles per work block of the drift (and of the contact corrections' application).
-const DRIFT_BLOCK: usize = 4096;
+/// Particles per work block of the drift (and of the contact corrections' application): the
+/// version-2 kicks' blocks, so that one pass drifts a block and kicks it for the next step.
+const DRIFT_BLOCK: usize = KICK_BLOCK;
 /// Tries per batch of the random sequential addition of the uniform initial layout.
 const RSA_BATCH: usize = 4096;
+
+/// Run `f` on every job, the jobs cut into `parts` contiguous runs of about equal length,
+/// the first run on the calling thread and the others handed out by `rayon::join`: a step's
+/// passes give each thread the same range of blocks step after step (its particles and pairs
+/// stay in its core's cache; rayon's adaptive splitting handed them to a different thread in
+/// each pass). Which thread runs a job never changes its result.
+fn run_parts<J: Send>(jobs: &mut [J], parts: usize, f: &(impl Fn(&mut J) + Sync)) {
+    if parts <= 1 || jobs.len() <= 1 {
+        for j in jobs.iter_mut() {
+            f(j);
+        }
+        return;
+    }
+    let lo = parts / 2;
+    let mid = jobs.len() * lo / parts;
+    let (a, b) = jobs.split_at_mut(mid);
+    rayon::join(|| run_parts(a, lo, f), || run_parts(b, parts - lo, f));
+}
+
+/// One particle block of the corrections-and-drift pass (block `b` of [`DRIFT_BLOCK`]
+/// particles): its positions, velocities and references (empty in 1D), the scratch of its
+/// version-2 kick when the pass kicks the next step, and what the pass found (the largest
+/// displacement squared; the kick's sum of z and largest |v|^2).
+struct DriftJob<'a, const D: usize> {
+    b: usize,
+    x: &'a mut [[f64; D]],
+    v: &'a mut [[f64; D]],
+    r: &'a [[f64; D]],
+    sc: Option<&'a mut BlockScratch>,
+    m: f64,
+    kick: ([f64; D], f64),
+}
 
 /// One contacting pair's correction: x_i += dx - dv h, v_i += dv; j gets the opposite. `t` is
 /// the in-step contact interval (for free-path tracking).
@@ -136,6 +169,17 @@ fn drift_block<const D: usize>(
         }
     }
     m.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a })
+}
+
+/// The 1D drift x += (v - c) h.
+fn drift_1d<const D: usize>(x: &mut [[f64; D]], v: &mut [[f64; D]], c: [f64; D], h: f64) {
+    for (x, v) in x.iter_mut().zip(v.iter_mut()) {
+        for k in 0..D {
+            let vk = v[k] - c[k];
+            v[k] = vk;
+            x[k] += vk * h;
+        }
+    }
 }
 
 /// Skin of the 2D neighbour list, in diameters.
@@ -303,7 +347,6 @@ impl<const D: usize> Core<D> {
     /// collects its corrections in pair order; free-path tracking then sees them in pair
     /// order (before any is applied, as in the one-thread pass).
     fn pair_pass_parallel(&mut self, vmax: f64) {
-        use rayon::prelude::*;
         self.corr.clear();
         let cut = self.d + 2.5 * vmax * self.h;
         let cut2 = cut * cut;
@@ -317,17 +360,21 @@ impl<const D: usize> Core<D> {
         }
         let npb = self.x.len().div_ceil(DRIFT_BLOCK);
         let (x, v, prop, d, h) = (&self.x, &self.v, &self.prop, self.d, self.h);
-        pairs
-            .par_chunks(PAIR_BLOCK)
-            .zip(self.corr_blocks[..nb].par_iter_mut())
-            .zip(self.half_blocks[..nb].par_iter_mut())
-            .for_each(|((ps, out), halves)| {
+        let mut jobs: Vec<_> = pairs
+            .chunks(PAIR_BLOCK)
+            .zip(self.corr_blocks[..nb].iter_mut())
+            .zip(self.half_blocks[..nb].iter_mut())
+            .collect();
+        run_parts(
+            &mut jobs,
+            rayon::current_num_threads(),
+            &|((ps, out), halves): &mut ((&[super::neighbours::Pair<D>], &mut Vec<Corr<D>>), &mut Vec<Vec<Half<D>>>)| {
                 out.clear();
                 halves.resize_with(npb, Vec::new);
                 for hb in halves.iter_mut() {
                     hb.clear();
                 }
-                for p in ps {
+                for p in ps.iter() {
                     let (i, j) = (p.i as usize, p.j as usize);
                     let r: [f64; D] = std::array::from_fn(|k| x[i][k] - x[j][k] + p.shift[k]);
                     let rho2: f64 = r.iter().map(|a| a * a).sum();
@@ -350,7 +397,8 @@ impl<const D: usize> Core<D> {
                         out.push(c);
                     }
                 }
-            });
+            },
+        );
         for b in self.corr_blocks[nb..].iter_mut() {
             b.clear();
         }
@@ -436,11 +484,10 @@ impl<const D: usize> Core<D> {
         self.nl.pairs = pairs;
     }
 
-    fn step_once(&mut self) {
-        let par = self.parallel();
-        // Kick without the symmetrising shift c (pair flows see velocity differences only);
-        // the shift is subtracted in the drift pass below.
-        let (c, vmax2) = if self.kicks.active() {
+    /// This step's kicks, without the symmetrising shift c (pair flows see velocity
+    /// differences only; the shift is subtracted in the drift): (c, largest |v|^2).
+    fn kick_now(&mut self, par: bool) -> ([f64; D], f64) {
+        if self.kicks.active() {
             if self.stream == StreamVersion::V1 {
                 self.kicks.kick(&mut self.rng, &mut self.v)
             } else {
@@ -448,7 +495,25 @@ impl<const D: usize> Core<D> {
             }
         } else {
             ([0.0; D], if D > 1 { self.vmax2() } else { 0.0 })
-        };
+        }
+    }
+
+    /// Whether [`advance`](Self::advance) kicks step s + 1 in the drift pass of step s:
+    /// version-2 noise (a function of (step, slot), so drawing it particle block by
+    /// particle block after the drift changes nothing) and no free-path tracking (which reads
+    /// the whole state between the drift and the next kick).
+    fn fusable(&self) -> bool {
+        self.stream != StreamVersion::V1 && self.kicks.active() && self.fp.is_none()
+    }
+
+    /// The rest of the step after its kicks `kicked` = (c, largest |v|^2): the rebuild
+    /// check, the pair pass, the corrections and the drift; with `kick_next`, the drift pass
+    /// also kicks the next step block by block and returns its (c, largest |v|^2) (each
+    /// particle drifted before it is kicked, the kicks' block sums combined in block order:
+    /// the values the next step's own kick would give).
+    fn finish_step(&mut self, kicked: ([f64; D], f64), kick_next: bool) -> ([f64; D], f64) {
+        let par = self.parallel();
+        let (c, vmax2) = kicked;
         let vmax = if D > 1 {
             // Bound on the largest shifted speed.
             vmax2.sqrt() + c.iter().map(|a| a * a).sum::<f64>().sqrt()
@@ -470,81 +535,154 @@ impl<const D: usize> Core<D> {
             self.pair_pass(vmax);
         }
         let h = self.h;
-        if par_pairs {
-            // The corrections and the drift in one pass over the particle blocks: each block
-            // applies its particles' halves (pair blocks in order, each in pair order: every
-            // particle's updates in pair order, as below), then drifts them.
-            use rayon::prelude::*;
-            let nb = self.nl.pairs.len().div_ceil(PAIR_BLOCK);
-            let halves = &self.half_blocks[..nb];
-            let m = self
-                .x
-                .par_chunks_mut(DRIFT_BLOCK)
-                .zip(self.v.par_chunks_mut(DRIFT_BLOCK))
-                .zip(self.x_ref.par_chunks(DRIFT_BLOCK))
-                .enumerate()
-                .map(|(b, ((x, v), r))| {
-                    let base = b * DRIFT_BLOCK;
-                    for hs in halves {
-                        for e in &hs[b] {
-                            let p = e.p as usize - base;
-                            for k in 0..D {
-                                x[p][k] += e.ex[k];
-                                v[p][k] += e.dv[k];
-                            }
-                        }
-                    }
-                    drift_block(x, v, r, c, h, 0.0)
-                })
-                .reduce(|| 0.0, |a: f64, b: f64| if b > a { b } else { a });
-            self.max_disp2 = if m > self.max_disp2 {
-                m
-            } else {
-                self.max_disp2
-            };
-            if let Some(fp) = self.fp.as_mut() {
-                fp.post(&self.x, &self.v, h, self.step);
-            }
-            self.step += 1;
-            return;
+        if par_pairs || kick_next {
+            return self.drift_pass(c, par, par_pairs, kick_next);
         }
         // A pair's (dx, dv) enters as x += dx - dv h, v += dv now, so that the drift below
         // with the corrected velocity gives x + (v - c) h + dx. Always in pair order.
-        {
-            let (x, v) = (&mut self.x, &mut self.v);
-            for c in &self.corr {
-                let (i, j) = (c.i as usize, c.j as usize);
-                for k in 0..D {
-                    let ex = c.dx[k] - c.dv[k] * h;
-                    x[i][k] += ex;
-                    v[i][k] += c.dv[k];
-                    x[j][k] -= ex;
-                    v[j][k] -= c.dv[k];
-                }
-            }
-        }
+        self.apply_corrections();
         if D > 1 {
             // Drift and the largest displacement since the list build.
             self.max_disp2 =
                 drift_block(&mut self.x, &mut self.v, &self.x_ref, c, h, self.max_disp2);
         } else {
-            for (x, v) in self.x.iter_mut().zip(self.v.iter_mut()) {
-                for k in 0..D {
-                    let vk = v[k] - c[k];
-                    v[k] = vk;
-                    x[k] += vk * h;
-                }
-            }
+            drift_1d(&mut self.x, &mut self.v, c, h);
         }
         if let Some(fp) = self.fp.as_mut() {
             fp.post(&self.x, &self.v, h, self.step);
         }
         self.step += 1;
+        ([0.0; D], 0.0)
     }
 
+    /// This step's corrections (one thread's list), in pair order.
+    fn apply_corrections(&mut self) {
+        let h = self.h;
+        let (x, v) = (&mut self.x, &mut self.v);
+        for c in &self.corr {
+            let (i, j) = (c.i as usize, c.j as usize);
+            for k in 0..D {
+                let ex = c.dx[k] - c.dv[k] * h;
+                x[i][k] += ex;
+                v[i][k] += c.dv[k];
+                x[j][k] -= ex;
+                v[j][k] -= c.dv[k];
+            }
+        }
+    }
+
+    /// The corrections and the drift of this step in particle blocks of [`DRIFT_BLOCK`]
+    /// (on the pool's threads with `par`, each thread the same blocks every step), and with
+    /// `kick_next` the next step's kicks of each block after its drift. With `halves` (the
+    /// parallel pair pass's) each block applies its particles' halves (pair blocks in order,
+    /// each in pair order: every particle's updates in pair order, as one thread applies
+    /// them) before its drift; else one thread applies the corrections in pair order first.
+    fn drift_pass(
+        &mut self,
+        c: [f64; D],
+        par: bool,
+        halves: bool,
+        kick_next: bool,
+    ) -> ([f64; D], f64) {
+        if !halves {
+            self.apply_corrections();
+        }
+        let h = self.h;
+        let n = self.x.len();
+        let nb = n.div_ceil(DRIFT_BLOCK);
+        let next = self.step + 1;
+        let npairb = self.nl.pairs.len().div_ceil(PAIR_BLOCK);
+        let hb: &[Vec<Vec<Half<D>>>] = if halves {
+            &self.half_blocks[..npairb]
+        } else {
+            &[]
+        };
+        let (kicker, scratch): (Option<CounterBlocks<'_>>, &mut [BlockScratch]) = if kick_next {
+            let (k, sc) = self.kicks.counter_blocks(nb);
+            (Some(k), sc)
+        } else {
+            (None, &mut [])
+        };
+        let mut scs = scratch.iter_mut();
+        let mut rs = self.x_ref.chunks(DRIFT_BLOCK);
+        let mut jobs: Vec<DriftJob<'_, D>> = self
+            .x
+            .chunks_mut(DRIFT_BLOCK)
+            .zip(self.v.chunks_mut(DRIFT_BLOCK))
+            .enumerate()
+            .map(|(b, (x, v))| DriftJob {
+                b,
+                x,
+                v,
+                r: if D > 1 { rs.next().unwrap_or(&[]) } else { &[] },
+                sc: scs.next(),
+                m: 0.0,
+                kick: ([0.0; D], 0.0),
+            })
+            .collect();
+        let kicker = kicker.as_ref();
+        let parts = if par { rayon::current_num_threads() } else { 1 };
+        run_parts(&mut jobs, parts, &|j: &mut DriftJob<'_, D>| {
+            let base = j.b * DRIFT_BLOCK;
+            for hs in hb {
+                for e in &hs[j.b] {
+                    let p = e.p as usize - base;
+                    for k in 0..D {
+                        j.x[p][k] += e.ex[k];
+                        j.v[p][k] += e.dv[k];
+                    }
+                }
+            }
+            if D > 1 {
+                j.m = drift_block(j.x, j.v, j.r, c, h, 0.0);
+            } else {
+                drift_1d(j.x, j.v, c, h);
+            }
+            if let (Some(k), Some(sc)) = (kicker, j.sc.as_deref_mut()) {
+                j.kick = k.kick(next, j.b, j.v, sc);
+            }
+        });
+        let m = jobs
+            .iter()
+            .fold(0.0, |a: f64, j| if j.m > a { j.m } else { a });
+        let kicked = match kicker {
+            Some(k) => k.combine(jobs.iter().map(|j| j.kick), n),
+            None => ([0.0; D], 0.0),
+        };
+        drop(jobs);
+        if D > 1 {
+            self.max_disp2 = if m > self.max_disp2 {
+                m
+            } else {
+                self.max_disp2
+            };
+        }
+        if let Some(fp) = self.fp.as_mut() {
+            fp.post(&self.x, &self.v, h, self.step);
+        }
+        self.step += 1;
+        kicked
+    }
+
+    /// Advance by `steps` steps. Stream version 2 without free-path tracking kicks step
+    /// s + 1 in step s's drift pass (one pass over the particles fewer per step); the state
+    /// between calls is the same bits as one step at a time.
     pub fn advance(&mut self, steps: u64) {
-        for _ in 0..steps {
-            self.step_once();
+        if steps == 0 {
+            return;
+        }
+        let fuse = self.fusable();
+        let mut kicked = self.kick_now(self.parallel());
+        for s in 0..steps {
+            let more = s + 1 < steps;
+            let next = self.finish_step(kicked, fuse && more);
+            if more {
+                kicked = if fuse {
+                    next
+                } else {
+                    self.kick_now(self.parallel())
+                };
+            }
         }
     }
 

@@ -556,3 +556,75 @@ fn old_checkpoints_restore_as_v1() {
 
 /// `state_bytes` of granular c713da0, see [`old_checkpoints_restore_as_v1`].
 const OLD_STATE_HEX: &str = "0205068739520ebbe9853fec0292ed7234663f9bbb7d48514a883f4032471a7f00913fa07a1b0d53c0793f303eb9f091b19a3f063e1a9b33736da1bf148651b9b09796bfdaea8036863aa93f9dc19a9ee17ca1bf7142970b4c348fbfa68443fbb9c8ac3f06d69ee0aad2e9853f0219b68d9f34663fc9acaf962f4a883f6280a0478b00913fa4cd9a3767c0793f4b6d5b2f80b19a3ff3ee1ef7d0013b3d0b540000";
+
+/// FNV-1a 64 of a run's checkpoint bytes (positions, velocities, reference, stream, step).
+fn fnv(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// The runs of [`states_are_those_of_545c337`]: (label, config, stream, free paths, steps,
+/// advance chunk).
+fn golden_runs() -> Vec<(&'static str, RfmConfig, StreamVersion, bool, u64, u64)> {
+    let one_d = RfmConfig {
+        reduced_length: Some(0.05),
+        ..RfmConfig::thesis_1d(3000, 0.3)
+    };
+    vec![
+        ("2d v2 N5000", dense_2d(5000), StreamVersion::V2, false, 240, 80),
+        ("2d v2 N5000 fp", dense_2d(5000), StreamVersion::V2, true, 120, 60),
+        ("2d v1 N5000", dense_2d(5000), StreamVersion::V1, false, 150, 150),
+        ("2d v2 N1500", dense_2d(1500), StreamVersion::V2, false, 300, 100),
+        ("1d v2 N3000", one_d.clone(), StreamVersion::V2, false, 300, 150),
+        ("1d v1 N3000", one_d, StreamVersion::V1, false, 200, 200),
+    ]
+}
+
+/// Runs of stream versions 1 and 2 (1D, 2D below and above the parallel threshold, with
+/// free-path tracking) end in the checkpoint bytes that granular 545c337 gave, on 1 and 2
+/// threads, whether advanced in chunks or one step at a time: the stepping may change,
+/// the bits may not (hashes recorded at 545c337).
+#[test]
+fn states_are_those_of_545c337() {
+    const WANT: [u64; 6] = [
+        0x2fc1_3367_d4d9_0d0a,
+        0x00d9_39ee_297d_96af,
+        0xb539_3222_de78_0fb1,
+        0x5baf_2dbb_0a14_2f60,
+        0x7f6a_6b02_dc6b_f10c,
+        0x461d_014b_417f_f150,
+    ];
+    let mut got = Vec::new();
+    for (label, cfg, stream, fp, steps, chunk) in golden_runs() {
+        let mut hashes = Vec::new();
+        for (k, chunk) in [(1, chunk), (2, chunk), (2, 1)] {
+            let h = pool(k).install(|| {
+                let mut s = RfmSim::with_stream(cfg.clone(), 13, stream).unwrap();
+                if fp {
+                    s.track_free_paths(FreePathConfig {
+                        paths: true,
+                        lo: 1e-9,
+                        hi: 1.0,
+                        bins_per_decade: 20,
+                        velocity: Some(([-5.0, 5.0], 200)),
+                        from_step: 0,
+                        sample_every: 50,
+                    });
+                }
+                let mut done = 0;
+                while done < steps {
+                    let c = chunk.min(steps - done);
+                    s.advance(c);
+                    done += c;
+                }
+                fnv(&s.state_bytes())
+            });
+            hashes.push(h);
+        }
+        println!("{label}: {hashes:x?}");
+        assert!(hashes.iter().all(|&h| h == hashes[0]), "{label}: {hashes:x?}");
+        got.push(hashes[0]);
+    }
+    assert_eq!(got, WANT, "{got:#x?}");
+}
