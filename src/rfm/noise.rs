@@ -240,8 +240,7 @@ impl Lanes {
                     acc0 = _mm256_add_pd(acc0, z0);
                     acc1 = _mm256_add_pd(acc1, z1);
                     let v0 = _mm256_add_pd(_mm256_loadu_pd(vp.add(done)), _mm256_mul_pd(s, z0));
-                    let v1 =
-                        _mm256_add_pd(_mm256_loadu_pd(vp.add(done + 4)), _mm256_mul_pd(s, z1));
+                    let v1 = _mm256_add_pd(_mm256_loadu_pd(vp.add(done + 4)), _mm256_mul_pd(s, z1));
                     _mm256_storeu_pd(vp.add(done), v0);
                     _mm256_storeu_pd(vp.add(done + 4), v1);
                     // Particles 0, 2, 1, 3 of the group: x^2 + y^2.
@@ -553,7 +552,12 @@ mod tests {
         let mut words = vec![0u64; n.div_ceil(2)];
         fill_counter(key, step & !CONTINUATION, (p0 * D / 16) as u64, &mut words);
         let mut more = vec![0u64; 4096];
-        fill_counter(key, step | CONTINUATION, ((p0 / KICK_BLOCK) as u64) << 40, &mut more);
+        fill_counter(
+            key,
+            step | CONTINUATION,
+            ((p0 / KICK_BLOCK) as u64) << 40,
+            &mut more,
+        );
         let mut taken = 0;
         let (mut slow, mut tail) = (0, 0);
         let z: Vec<f64> = (0..n)
@@ -607,9 +611,8 @@ mod tests {
         let sigma = 0.37;
         let mut want = v0.clone();
         let (wr, slow, tail) = reference_block(&key, step, b * KICK_BLOCK, &mut want, sigma);
-        let bits = |v: &[[f64; D]]| -> Vec<u64> {
-            v.as_flattened().iter().map(|x| x.to_bits()).collect()
-        };
+        let bits =
+            |v: &[[f64; D]]| -> Vec<u64> { v.as_flattened().iter().map(|x| x.to_bits()).collect() };
         let same = |(s, m): ([f64; D], f64), what: &str| {
             let (ws, wm) = wr;
             for k in 0..D {
@@ -620,10 +623,16 @@ mod tests {
         let what = format!("D {D} seed {seed} step {step} block {b} n {n}");
         let mut got = v0.clone();
         let mut sc = Default::default();
-        same(kick_block_counter(&key, step, b * KICK_BLOCK, &mut got, sigma, &mut sc), &what);
+        same(
+            kick_block_counter(&key, step, b * KICK_BLOCK, &mut got, sigma, &mut sc),
+            &what,
+        );
         assert!(bits(&got) == bits(&want), "{what}: velocities");
         let mut got = v0.clone();
-        same(kick_block_body::<D, false>(&key, step, b * KICK_BLOCK, &mut got, sigma), &what);
+        same(
+            kick_block_body::<D, false>(&key, step, b * KICK_BLOCK, &mut got, sigma),
+            &what,
+        );
         assert!(bits(&got) == bits(&want), "{what}: portable velocities");
         (slow, tail)
     }
@@ -633,7 +642,15 @@ mod tests {
         let (mut slow, mut tail) = (0, 0);
         for seed in [0u64, 5, 0xdead_beef] {
             for step in [0u64, 1, 977, (1 << 63) + 3, u64::MAX] {
-                for (b, n) in [(0, KICK_BLOCK), (3, KICK_BLOCK), (1, 1), (2, 7), (0, 129), (5, 1000), (1, 2047)] {
+                for (b, n) in [
+                    (0, KICK_BLOCK),
+                    (3, KICK_BLOCK),
+                    (1, 1),
+                    (2, 7),
+                    (0, 129),
+                    (5, 1000),
+                    (1, 2047),
+                ] {
                     let (s, t) = fused_matches::<2>(seed, step, b, n);
                     slow += s;
                     tail += t;

@@ -246,7 +246,9 @@ fn masked_candidates<const AVX2: bool>(t: &Tables, halves: &[u32], out: &mut [f6
     if AVX2 {
         while k + 4 <= n {
             // SAFETY: slots k .. k + 4 are in bounds; AVX2 is there (the caller's promise).
-            let m = unsafe { candidates4_avx2(&t.pairs, halves.as_ptr().add(k), out.as_mut_ptr().add(k)) };
+            let m = unsafe {
+                candidates4_avx2(&t.pairs, halves.as_ptr().add(k), out.as_mut_ptr().add(k))
+            };
             mask |= (m as u64) << k;
             k += 4;
         }
@@ -319,7 +321,8 @@ pub(crate) fn chunk_candidates<const AVX2: bool>(
     #[cfg(target_endian = "little")]
     // SAFETY: u64 has the size of two u32 and a stricter alignment; on little-endian hosts
     // the low half of each word comes first.
-    let halves: &[u32; 4 * BLOCK] = unsafe { &*(words as *const [u64; 4 * BLOCK / 2] as *const [u32; 4 * BLOCK]) };
+    let halves: &[u32; 4 * BLOCK] =
+        unsafe { &*(words as *const [u64; 4 * BLOCK / 2] as *const [u32; 4 * BLOCK]) };
     #[cfg(not(target_endian = "little"))]
     let halves: &[u32; 4 * BLOCK] =
         &std::array::from_fn(|j| (words[j / 2] >> (32 * (j % 2))) as u32);
