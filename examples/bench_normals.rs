@@ -2,7 +2,8 @@
 //! N = 5000): stream version 1's `rfm::noise::fill_normals_with` (one 64-bit word per normal,
 //! the words included) against `rng::normal` (two normals per word: `normal_candidates`, then
 //! `finish_slow` for the listed slots) on counter-addressed words from
-//! `rng::stream::fill_counter` (one ChaCha8 stream per step), words included and excluded.
+//! `rng::stream::fill_counter` (one ChaCha8 stream per step), words included and excluded,
+//! and the whole version-2 kick of a step (`rfm::noise::Kicks::kick_counter`).
 //! Run: `cargo run --release --example bench_normals [calls]`; the best of 5 rounds is shown.
 
 use std::hint::black_box;
@@ -105,6 +106,18 @@ fn main() {
                 out[j] = finish_slow((w[j / 2] >> (32 * (j % 2))) as u32, &mut || more.u64());
             }
             black_box(&out);
+        },
+    );
+    // The whole version-2 kick of one step (N = 5000 2D particles: 1e4 normals): words,
+    // normals, slow slots and kicks in one fused pass per chunk, on one thread.
+    let mut kicks = granular::rfm::noise::Kicks::new(1e-8, 1.0, 1e-6);
+    kicks.set_seed(42);
+    let mut v = vec![[0.0f64; 2]; N / 2];
+    best(
+        "v2 Kicks::kick_counter, 2D N 5000 (words + normals + kicks)",
+        calls,
+        |s| {
+            black_box(kicks.kick_counter(s as u64, &mut v, false));
         },
     );
     best("v2 normal_candidates alone (words excluded)", calls, |c| {

@@ -180,53 +180,154 @@ impl Continuation {
 /// order) and the largest |v|^2 after. The kick loop of both stream versions.
 #[inline(always)]
 fn add_kicks<const D: usize>(v: &mut [[f64; D]], zs: &[f64], sigma: f64) -> ([f64; D], f64) {
+    let mut lanes = Lanes::new();
+    lanes.add::<D>(v.as_flattened_mut(), zs, sigma);
+    lanes.finish()
+}
+
+/// The running sums and maxima of [`add_kicks`]: eight lanes, lane j taking slot j mod 8.
+struct Lanes {
+    acc: [f64; 8],
+    mx: [f64; 8],
+}
+
+impl Lanes {
     const W: usize = 8;
-    let vf = v.as_flattened_mut();
-    let mut acc = [0.0; W];
-    let mut mx = [0.0; W];
-    let mut vc = vf.chunks_exact_mut(W);
-    let mut zc = zs.chunks_exact(W);
-    for (vv, zz) in (&mut vc).zip(&mut zc) {
-        for j in 0..W {
-            acc[j] += zz[j];
-            vv[j] += sigma * zz[j];
+
+    fn new() -> Self {
+        Lanes {
+            acc: [0.0; 8],
+            mx: [0.0; 8],
         }
-        for p in 0..W / D {
+    }
+
+    /// Kick the slots `vf` (flattened velocities, whole particles) by `sigma zs`. Every call
+    /// but the last must have a multiple of 8 slots (the slots continue the lanes); the last
+    /// one's leftover particles go to lanes 0..D as in one call over all slots.
+    #[inline(always)]
+    fn add<const D: usize>(&mut self, vf: &mut [f64], zs: &[f64], sigma: f64) {
+        self.add_with::<D, false>(vf, zs, sigma)
+    }
+
+    /// [`add`](Self::add); with `AVX2` (only where the CPU has it, from code compiled with
+    /// it) the whole groups of 8 slots of 2D particles go four lanes per register: the same
+    /// IEEE operations per lane (|v|^2 as x^2 + y^2 by a horizontal add; the maxima kept in
+    /// another lane order, which a maximum does not see).
+    #[inline(always)]
+    fn add_with<const D: usize, const AVX2: bool>(
+        &mut self,
+        vf: &mut [f64],
+        zs: &[f64],
+        sigma: f64,
+    ) {
+        const W: usize = Lanes::W;
+        let n = vf.len().min(zs.len());
+        let (vf, zs) = (&mut vf[..n], &zs[..n]);
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 && D == 2 {
+            // SAFETY: AVX2 is there (the caller's promise); every access is below n.
+            unsafe {
+                use std::arch::x86_64::*;
+                let (a, m) = (self.acc.as_mut_ptr(), self.mx.as_mut_ptr());
+                let (mut acc0, mut acc1) = (_mm256_loadu_pd(a), _mm256_loadu_pd(a.add(4)));
+                let (mut mx0, mut mx1) = (_mm256_loadu_pd(m), _mm256_loadu_pd(m.add(4)));
+                let s = _mm256_set1_pd(sigma);
+                let (vp, zp) = (vf.as_mut_ptr(), zs.as_ptr());
+                while done + W <= n {
+                    let z0 = _mm256_loadu_pd(zp.add(done));
+                    let z1 = _mm256_loadu_pd(zp.add(done + 4));
+                    acc0 = _mm256_add_pd(acc0, z0);
+                    acc1 = _mm256_add_pd(acc1, z1);
+                    let v0 = _mm256_add_pd(_mm256_loadu_pd(vp.add(done)), _mm256_mul_pd(s, z0));
+                    let v1 = _mm256_add_pd(_mm256_loadu_pd(vp.add(done + 4)), _mm256_mul_pd(s, z1));
+                    _mm256_storeu_pd(vp.add(done), v0);
+                    _mm256_storeu_pd(vp.add(done + 4), v1);
+                    // Particles 0, 2, 1, 3 of the group: x^2 + y^2.
+                    let a2 = _mm256_hadd_pd(_mm256_mul_pd(v0, v0), _mm256_mul_pd(v1, v1));
+                    // max(a2, mx) is `a2 > mx ? a2 : mx`, the scalar test.
+                    if done & W == 0 {
+                        mx0 = _mm256_max_pd(a2, mx0);
+                    } else {
+                        mx1 = _mm256_max_pd(a2, mx1);
+                    }
+                    done += W;
+                }
+                _mm256_storeu_pd(a, acc0);
+                _mm256_storeu_pd(a.add(4), acc1);
+                _mm256_storeu_pd(m, mx0);
+                _mm256_storeu_pd(m.add(4), mx1);
+            }
+        }
+        let (acc, mx) = (&mut self.acc, &mut self.mx);
+        let mut vc = vf[done..].chunks_exact_mut(W);
+        let mut zc = zs[done..].chunks_exact(W);
+        for (vv, zz) in (&mut vc).zip(&mut zc) {
+            for j in 0..W {
+                acc[j] += zz[j];
+                vv[j] += sigma * zz[j];
+            }
+            for p in 0..W / D {
+                let mut a2 = 0.0;
+                for k in 0..D {
+                    a2 += vv[p * D + k] * vv[p * D + k];
+                }
+                if a2 > mx[p] {
+                    mx[p] = a2;
+                }
+            }
+        }
+        for (vv, zz) in vc
+            .into_remainder()
+            .chunks_exact_mut(D)
+            .zip(zc.remainder().chunks_exact(D))
+        {
             let mut a2 = 0.0;
             for k in 0..D {
-                a2 += vv[p * D + k] * vv[p * D + k];
+                acc[k] += zz[k];
+                vv[k] += sigma * zz[k];
+                a2 += vv[k] * vv[k];
             }
-            if a2 > mx[p] {
-                mx[p] = a2;
+            if a2 > mx[0] {
+                mx[0] = a2;
             }
         }
     }
-    for (vv, zz) in vc
-        .into_remainder()
-        .chunks_exact_mut(D)
-        .zip(zc.remainder().chunks_exact(D))
-    {
-        let mut a2 = 0.0;
-        for k in 0..D {
-            acc[k] += zz[k];
-            vv[k] += sigma * zz[k];
-            a2 += vv[k] * vv[k];
+
+    /// The sum of the z per component (lanes in order) and the largest |v|^2.
+    fn finish<const D: usize>(&self) -> ([f64; D], f64) {
+        let mut sum = [0.0; D];
+        for j in 0..Self::W {
+            sum[j % D] += self.acc[j];
         }
-        if a2 > mx[0] {
-            mx[0] = a2;
-        }
+        let m = self
+            .mx
+            .iter()
+            .fold(0.0, |a: f64, &b| if b > a { b } else { a });
+        (sum, m)
     }
-    let mut sum = [0.0; D];
-    for j in 0..W {
-        sum[j % D] += acc[j];
-    }
-    let m = mx.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a });
-    (sum, m)
+}
+
+/// Slots per chunk of the fused version-2 kick: one ChaCha8 chunk (16 blocks of 8 words, two
+/// slots per word).
+const CHUNK_SLOTS: usize = 256;
+
+/// One chunk's words and normals (3 KiB, in L1 throughout).
+#[repr(C, align(64))]
+struct Chunk {
+    words: [u64; CHUNK_SLOTS / 2],
+    z: [f64; CHUNK_SLOTS],
 }
 
 /// One version-2 work block: particles `v` (the first is particle `p0`) of step `step` get
 /// `sigma z`; returns the sum of their z per component (eight partial sums in slot order,
 /// lane j holding component j % D, then the lanes in order) and the largest |v|^2 after.
+///
+/// One fused pass, a ChaCha8 chunk (256 slots) at a time: its words, their candidates, its
+/// slow slots finished in slot order from the block's continuation, and the kicks, all in
+/// L1 (the same operations in the same order as words, candidates, slow slots and kicks
+/// over the whole block: bit-identical, `fused_kicks_match_the_reference`). AVX2 when the
+/// CPU has it. `sc` is no longer used (kept for the callers).
 #[allow(clippy::too_many_arguments)]
 fn kick_block_counter<const D: usize>(
     key: &[u32; 8],
@@ -236,23 +337,68 @@ fn kick_block_counter<const D: usize>(
     sigma: f64,
     sc: &mut (Vec<u64>, Vec<f64>, Vec<u32>),
 ) -> ([f64; D], f64) {
-    let (words, zs, slow) = sc;
+    let _ = sc;
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { kick_block_avx2(key, step, p0, v, sigma) };
+        }
+    }
+    kick_block_body::<D, false>(key, step, p0, v, sigma)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn kick_block_avx2<const D: usize>(
+    key: &[u32; 8],
+    step: u64,
+    p0: usize,
+    v: &mut [[f64; D]],
+    sigma: f64,
+) -> ([f64; D], f64) {
+    kick_block_body::<D, true>(key, step, p0, v, sigma)
+}
+
+#[inline(always)]
+fn kick_block_body<const D: usize, const AVX2: bool>(
+    key: &[u32; 8],
+    step: u64,
+    p0: usize,
+    v: &mut [[f64; D]],
+    sigma: f64,
+) -> ([f64; D], f64) {
+    const { assert!(D >= 1 && CHUNK_SLOTS % D == 0 && 16 % D == 0) };
     let first = (p0 * D) as u64;
     // Two slots per 64-bit word: slot j's candidate is half j % 2 of word j / 2.
     debug_assert_eq!(first % 16, 0);
-    let n = v.len() * D;
-    words.resize(n.div_ceil(2), 0);
-    zs.resize(n, 0.0);
-    fill_counter(key, step & !CONTINUATION, first / 16, words);
-    crate::rng::normal::normal_candidates(words, zs, slow);
+    let mut block = first / 16;
+    let stream = step & !CONTINUATION;
     // The slow slots, in slot order, read the work block's continuation words in turn.
     let mut cont = Continuation::new(step, (p0 / KICK_BLOCK) as u64);
-    for &j in slow.iter() {
-        let j = j as usize;
-        let half = (words[j / 2] >> (32 * (j % 2))) as u32;
-        zs[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
+    let mut c = Chunk {
+        words: [0; CHUNK_SLOTS / 2],
+        z: [0.0; CHUNK_SLOTS],
+    };
+    let mut masks = [0u64; 4];
+    let mut lanes = Lanes::new();
+    for vc in v.as_flattened_mut().chunks_mut(CHUNK_SLOTS) {
+        fill_counter(key, stream, block, &mut c.words);
+        block += (CHUNK_SLOTS / 16) as u64;
+        let z = &mut c.z[..vc.len()];
+        crate::rng::normal::chunk_candidates::<AVX2>(&c.words, z, &mut masks);
+        for (q, &m) in masks.iter().enumerate() {
+            let mut m = m;
+            while m != 0 {
+                let j = 64 * q + m.trailing_zeros() as usize;
+                let half = (c.words[j / 2] >> (32 * (j % 2))) as u32;
+                z[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
+                m &= m - 1;
+            }
+        }
+        lanes.add_with::<D, AVX2>(vc, z, sigma);
     }
-    add_kicks(v, zs, sigma)
+    lanes.finish()
 }
 
 pub(super) struct BlockScratch {
@@ -451,6 +597,171 @@ impl CounterBlocks<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Stream version 2's work block written out the straightforward way (545c337's order of
+    /// operations, one slot at a time): all of the block's words, each slot's normal by
+    /// `finish_slow` (which draws words only for slow slots), the continuation's words from
+    /// one `fill_counter` of its stream, then the kick loop with its eight lanes. Also
+    /// returns the number of slow slots and of those in the tail layer (layer 0).
+    fn reference_block<const D: usize>(
+        key: &[u32; 8],
+        step: u64,
+        p0: usize,
+        v: &mut [[f64; D]],
+        sigma: f64,
+    ) -> (([f64; D], f64), usize, usize) {
+        let vf = v.as_flattened_mut();
+        let n = vf.len();
+        let mut words = vec![0u64; n.div_ceil(2)];
+        fill_counter(key, step & !CONTINUATION, (p0 * D / 16) as u64, &mut words);
+        let mut more = vec![0u64; 4096];
+        fill_counter(
+            key,
+            step | CONTINUATION,
+            ((p0 / KICK_BLOCK) as u64) << 40,
+            &mut more,
+        );
+        let mut taken = 0;
+        let (mut slow, mut tail) = (0, 0);
+        let z: Vec<f64> = (0..n)
+            .map(|j| {
+                let h = (words[j / 2] >> (32 * (j % 2))) as u32;
+                let before = taken;
+                let z = crate::rng::normal::finish_slow(h, &mut || {
+                    taken += 1;
+                    more[taken - 1]
+                });
+                if taken > before {
+                    slow += 1;
+                    tail += (h & 255 == 0) as usize;
+                }
+                z
+            })
+            .collect();
+        let mut acc = [0.0; 8];
+        let mut mx = [0.0; 8];
+        for (i, zz) in z.iter().enumerate() {
+            let lane = if i < n - n % 8 { i % 8 } else { i % D };
+            acc[lane] += zz;
+            vf[i] += sigma * zz;
+            if i % D == D - 1 {
+                let p = i / D;
+                let a2 = (0..D).fold(0.0, |a, k| a + vf[p * D + k] * vf[p * D + k]);
+                let l = if i < n - n % 8 { p % (8 / D) } else { 0 };
+                if a2 > mx[l] {
+                    mx[l] = a2;
+                }
+            }
+        }
+        let mut sum = [0.0; D];
+        for j in 0..8 {
+            sum[j % D] += acc[j];
+        }
+        let m = mx.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a });
+        ((sum, m), slow, tail)
+    }
+
+    /// The fused kick (the path this CPU takes, and the portable one) gives the reference's
+    /// bits: velocities, sums and maximum, in 1D and 2D, for whole work blocks and short last
+    /// ones (lengths not a multiple of 8, of a chunk, of a word), steps with and without the
+    /// top bit, several seeds and work blocks; slow and tail slots occur.
+    fn fused_matches<const D: usize>(seed: u64, step: u64, b: usize, n: usize) -> (usize, usize) {
+        let key = crate::rng::stream::key_of(seed);
+        let mut r = crate::rng::RunRng::new(seed ^ step);
+        let v0: Vec<[f64; D]> = (0..n)
+            .map(|_| std::array::from_fn(|_| r.f64() - 0.5))
+            .collect();
+        let sigma = 0.37;
+        let mut want = v0.clone();
+        let (wr, slow, tail) = reference_block(&key, step, b * KICK_BLOCK, &mut want, sigma);
+        let bits =
+            |v: &[[f64; D]]| -> Vec<u64> { v.as_flattened().iter().map(|x| x.to_bits()).collect() };
+        let same = |(s, m): ([f64; D], f64), what: &str| {
+            let (ws, wm) = wr;
+            for k in 0..D {
+                assert_eq!(s[k].to_bits(), ws[k].to_bits(), "{what}: sum {k}");
+            }
+            assert_eq!(m.to_bits(), wm.to_bits(), "{what}: max");
+        };
+        let what = format!("D {D} seed {seed} step {step} block {b} n {n}");
+        let mut got = v0.clone();
+        let mut sc = Default::default();
+        same(
+            kick_block_counter(&key, step, b * KICK_BLOCK, &mut got, sigma, &mut sc),
+            &what,
+        );
+        assert!(bits(&got) == bits(&want), "{what}: velocities");
+        let mut got = v0.clone();
+        same(
+            kick_block_body::<D, false>(&key, step, b * KICK_BLOCK, &mut got, sigma),
+            &what,
+        );
+        assert!(bits(&got) == bits(&want), "{what}: portable velocities");
+        (slow, tail)
+    }
+
+    #[test]
+    fn fused_kicks_match_the_reference() {
+        let (mut slow, mut tail) = (0, 0);
+        for seed in [0u64, 5, 0xdead_beef] {
+            for step in [0u64, 1, 977, (1 << 63) + 3, u64::MAX] {
+                for (b, n) in [
+                    (0, KICK_BLOCK),
+                    (3, KICK_BLOCK),
+                    (1, 1),
+                    (2, 7),
+                    (0, 129),
+                    (5, 1000),
+                    (1, 2047),
+                ] {
+                    let (s, t) = fused_matches::<2>(seed, step, b, n);
+                    slow += s;
+                    tail += t;
+                    let (s, t) = fused_matches::<1>(seed, step, b, n);
+                    slow += s;
+                    tail += t;
+                }
+            }
+        }
+        eprintln!("slow slots {slow}, of them tail {tail}");
+        assert!(slow > 1000 && tail > 3, "slow {slow}, tail {tail}");
+    }
+
+    /// `Kicks::kick_counter` over several work blocks (a short last one) on one thread and on
+    /// a 3-thread pool is the reference's blocks combined in block order.
+    #[test]
+    fn kick_counter_is_the_reference_blocks_in_order() {
+        let n = 3 * KICK_BLOCK + 777;
+        let mut k = Kicks::new(0.5, 1.0, 0.3);
+        k.set_seed(11);
+        let key = crate::rng::stream::key_of(11);
+        let mut r = crate::rng::RunRng::new(3);
+        let v0: Vec<[f64; 2]> = (0..n).map(|_| [r.f64(), -r.f64()]).collect();
+        let mut want = v0.clone();
+        let mut sum = [0.0; 2];
+        let mut m: f64 = 0.0;
+        for (b, vb) in want.chunks_mut(KICK_BLOCK).enumerate() {
+            let ((s, bm), _, _) = reference_block(&key, 42, b * KICK_BLOCK, vb, k.sigma);
+            sum[0] += s[0];
+            sum[1] += s[1];
+            m = m.max(bm);
+        }
+        let shift = [k.sigma * (sum[0] / n as f64), k.sigma * (sum[1] / n as f64)];
+        let mut got = v0.clone();
+        let (c, gm) = k.kick_counter(42, &mut got, false);
+        assert_eq!(c.map(f64::to_bits), shift.map(f64::to_bits));
+        assert_eq!(gm.to_bits(), m.to_bits());
+        assert!(got == want);
+        let mut par = v0.clone();
+        let (c, gm) = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap()
+            .install(|| k.kick_counter(42, &mut par, true));
+        assert_eq!(c.map(f64::to_bits), shift.map(f64::to_bits));
+        assert_eq!(gm.to_bits(), m.to_bits());
+        assert!(par == want);
+    }
 
     /// Mean, variance and fourth moment of 1e6 bulk normals within 5 standard errors
     /// (SE: 1e-3, 1.41e-3 and 9.8e-3 for 3).

@@ -44,7 +44,15 @@ struct Tables {
     inner: [u32; LAYERS],
     f: [f64; LAYERS + 1],
     r: f64,
+    /// `[scale[i], inner[i]]` (the threshold as an f64, exact: at most 2^23) per layer, 16
+    /// bytes each: the candidate pass's one table, read by scalar-indexed 16-byte loads (AVX2
+    /// gathers are microcoded on AMD Zen; two of them and a 32-bit one per 8 slots cost more
+    /// than the eight loads).
+    pairs: Pairs,
 }
+
+#[repr(C, align(64))]
+struct Pairs([[f64; 2]; LAYERS]);
 
 /// Integral of f over [r, inf): f(r) times Mills' ratio (continued fraction, r > 3).
 fn tail_area(r: f64) -> f64 {
@@ -112,7 +120,14 @@ impl Tables {
             }
             k as u32
         });
-        Tables { scale, inner, f, r }
+        let pairs = Pairs(std::array::from_fn(|i| [scale[i], inner[i] as f64]));
+        Tables {
+            scale,
+            inner,
+            f,
+            r,
+            pairs,
+        }
     }
 
     fn get() -> &'static Tables {
@@ -185,39 +200,139 @@ pub fn normal_candidates(words: &[u64], out: &mut [f64], slow: &mut Vec<u32>) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn candidates_avx2(t: &Tables, halves: &[u32], out: &mut [f64], slow: &mut Vec<u32>) {
-    candidates_body(t, halves, out, slow)
+    for (b, (hc, oc)) in halves.chunks(BLOCK).zip(out.chunks_mut(BLOCK)).enumerate() {
+        let mask = masked_candidates::<true>(t, hc, oc);
+        push_slots(slow, (b * BLOCK) as u32, mask);
+    }
 }
 
 fn candidates_portable(t: &Tables, halves: &[u32], out: &mut [f64], slow: &mut Vec<u32>) {
-    candidates_body(t, halves, out, slow)
+    for (b, (hc, oc)) in halves.chunks(BLOCK).zip(out.chunks_mut(BLOCK)).enumerate() {
+        let mask = masked_candidates::<false>(t, hc, oc);
+        push_slots(slow, (b * BLOCK) as u32, mask);
+    }
 }
 
-/// The candidate pass, block by block: candidates and a mask of the slow slots (vectorised),
-/// then the mask's set bits appended to `slow` (capacity reserved by the caller).
+/// Append `base + k` for each set bit k of `mask`, in increasing order (capacity reserved by
+/// the caller: at most one entry per slot).
 #[inline(always)]
-fn candidates_body(t: &Tables, halves: &[u32], out: &mut [f64], slow: &mut Vec<u32>) {
-    for (b, (hc, oc)) in halves.chunks(BLOCK).zip(out.chunks_mut(BLOCK)).enumerate() {
-        let mut mask = 0u64;
-        for (k, (o, &h)) in oc.iter_mut().zip(hc).enumerate() {
-            let i = (h & (LAYERS as u32 - 1)) as usize;
-            let u = h >> VALUE_SHIFT;
-            // u < 2^23: exact as i32 and as f64 (the conversion vectorises).
-            let x = (u as i32) as f64 * t.scale[i];
-            *o = signed(x, h);
-            mask |= ((u >= t.inner[i]) as u64) << k;
+fn push_slots(slow: &mut Vec<u32>, base: u32, mut mask: u64) {
+    while mask != 0 {
+        let len = slow.len();
+        debug_assert!(len < slow.capacity());
+        // SAFETY: at most one entry per slot, and the caller reserved one per slot.
+        unsafe {
+            slow.as_mut_ptr()
+                .add(len)
+                .write(base + mask.trailing_zeros());
+            slow.set_len(len + 1);
         }
-        let base = (b * BLOCK) as u32;
-        while mask != 0 {
-            let len = slow.len();
-            // SAFETY: at most one entry per slot, and the caller reserved one per slot.
-            unsafe {
-                slow.as_mut_ptr()
-                    .add(len)
-                    .write(base + mask.trailing_zeros());
-                slow.set_len(len + 1);
-            }
-            mask &= mask - 1;
+        mask &= mask - 1;
+    }
+}
+
+/// The candidates of at most 64 slots `halves` into `out` (as long), and the mask of their
+/// slow slots (bit k: slot k). `AVX2` (only where the CPU has it; the caller is compiled
+/// with it) takes four slots at a time with vector arithmetic; both paths perform the same
+/// IEEE operations (the integer value converted exactly, one multiply, the sign bit set),
+/// and the fast test `u < inner[i]` is made on exact f64 copies of both integers.
+#[inline(always)]
+fn masked_candidates<const AVX2: bool>(t: &Tables, halves: &[u32], out: &mut [f64]) -> u64 {
+    let n = halves.len().min(out.len());
+    debug_assert!(n <= BLOCK);
+    let mut mask = 0u64;
+    let mut k = 0;
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        while k + 4 <= n {
+            // SAFETY: slots k .. k + 4 are in bounds; AVX2 is there (the caller's promise).
+            let m = unsafe {
+                candidates4_avx2(&t.pairs, halves.as_ptr().add(k), out.as_mut_ptr().add(k))
+            };
+            mask |= (m as u64) << k;
+            k += 4;
         }
+    }
+    while k < n {
+        let h = halves[k];
+        let [sc, inner] = t.pairs.0[(h & (LAYERS as u32 - 1)) as usize];
+        // u < 2^23: exact as i32 and as f64.
+        let u = ((h >> VALUE_SHIFT) as i32) as f64;
+        out[k] = signed(u * sc, h);
+        mask |= ((u >= inner) as u64) << k;
+        k += 1;
+    }
+    mask
+}
+
+/// Slots `h[0..4]` into `out[0..4]`; returns their slow bits (bit k: slot k). The four
+/// layers' `[scale, inner]` pairs come by scalar-indexed 16-byte loads.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn candidates4_avx2(pairs: &Pairs, h: *const u32, out: *mut f64) -> u32 {
+    use std::arch::x86_64::*;
+    let p = pairs.0.as_ptr() as *const f64;
+    let hb = h as *const u8;
+    // The layer of half k is its low byte (little-endian).
+    let (i0, i1, i2, i3) = (
+        *hb as usize,
+        *hb.add(4) as usize,
+        *hb.add(8) as usize,
+        *hb.add(12) as usize,
+    );
+    let ac = _mm256_insertf128_pd::<1>(
+        _mm256_castpd128_pd256(_mm_load_pd(p.add(2 * i0))),
+        _mm_load_pd(p.add(2 * i2)),
+    );
+    let bd = _mm256_insertf128_pd::<1>(
+        _mm256_castpd128_pd256(_mm_load_pd(p.add(2 * i1))),
+        _mm_load_pd(p.add(2 * i3)),
+    );
+    let scale = _mm256_unpacklo_pd(ac, bd);
+    let inner = _mm256_unpackhi_pd(ac, bd);
+    let hv = _mm_loadu_si128(h as *const __m128i);
+    let u = _mm256_cvtepi32_pd(_mm_srli_epi32::<{ VALUE_SHIFT as i32 }>(hv));
+    let x = _mm256_mul_pd(u, scale);
+    let slow = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GE_OQ>(u, inner)) as u32;
+    // Bit 8 of each half to bit 63 of its lane.
+    let sign = _mm256_and_si256(
+        _mm256_slli_epi64::<55>(_mm256_cvtepu32_epi64(hv)),
+        _mm256_set1_epi64x(i64::MIN),
+    );
+    let z = _mm256_or_pd(x, _mm256_castsi256_pd(sign));
+    _mm256_storeu_pd(out, z);
+    slow
+}
+
+/// Candidates of one chunk of at most 256 slots (into `out`, as long) for the fused
+/// RFM kick (`crate::rfm::noise`): `masks[k / 64]` bit `k % 64` is set when slot k is slow
+/// (to finish by [`finish_slow`]). `AVX2` only where the CPU has it, from code compiled with
+/// it; bit-identical to [`normal_candidates`] either way.
+/// The slots are the halves of `words` (slot `2k`: low half of `words[k]`), the first
+/// `out.len()` of them.
+#[inline(always)]
+pub(crate) fn chunk_candidates<const AVX2: bool>(
+    words: &[u64; 4 * BLOCK / 2],
+    out: &mut [f64],
+    masks: &mut [u64; 4],
+) {
+    let t = Tables::get();
+    #[cfg(target_endian = "little")]
+    // SAFETY: u64 has the size of two u32 and a stricter alignment; on little-endian hosts
+    // the low half of each word comes first.
+    let halves: &[u32; 4 * BLOCK] =
+        unsafe { &*(words as *const [u64; 4 * BLOCK / 2] as *const [u32; 4 * BLOCK]) };
+    #[cfg(not(target_endian = "little"))]
+    let halves: &[u32; 4 * BLOCK] =
+        &std::array::from_fn(|j| (words[j / 2] >> (32 * (j % 2))) as u32);
+    let halves = &halves[..out.len()];
+    *masks = [0; 4];
+    for (m, (hc, oc)) in masks
+        .iter_mut()
+        .zip(halves.chunks(BLOCK).zip(out.chunks_mut(BLOCK)))
+    {
+        *m = masked_candidates::<AVX2>(t, hc, oc);
     }
 }
 
@@ -376,8 +491,9 @@ mod tests {
         assert!(slow.iter().all(|&j| (j as usize) < n));
     }
 
-    /// The AVX2 pass and the portable pass give bit-identical candidates and slow lists
-    /// (random words, and words with every layer, sign and extreme value).
+    /// The AVX2 pass and the portable pass give bit-identical candidates and slow lists, and
+    /// both the one-slot-at-a-time form's (random words, and words with every layer, sign and
+    /// extreme value).
     #[test]
     fn avx2_and_portable_agree() {
         let mut words = vec![0u64; 100_003];
@@ -401,6 +517,18 @@ mod tests {
             let mut a = vec![0.0; n];
             let mut sa = Vec::with_capacity(n);
             candidates_portable(t, &halves[..n], &mut a, &mut sa);
+            // The one-slot-at-a-time form (integer threshold, separate scale table).
+            let mut sr = Vec::new();
+            for (j, &h) in halves[..n].iter().enumerate() {
+                let i = (h & 255) as usize;
+                let u = h >> VALUE_SHIFT;
+                let x = signed((u as i32) as f64 * t.scale[i], h);
+                assert_eq!(x.to_bits(), a[j].to_bits(), "n {n} slot {j}");
+                if u >= t.inner[i] {
+                    sr.push(j as u32);
+                }
+            }
+            assert_eq!(sa, sr, "n {n}");
             let mut c = vec![0.0; n];
             let mut sc = Vec::new();
             normal_candidates(&words, &mut c, &mut sc);
