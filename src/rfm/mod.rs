@@ -48,6 +48,7 @@ pub mod blocks;
 pub mod contact;
 pub mod freepath;
 pub mod integrate;
+mod layout;
 pub mod neighbours;
 pub mod noise;
 pub mod observe;

@@ -27,8 +27,6 @@ const PAIR_BLOCK: usize = 4096;
 /// Particles per work block of the drift (and of the contact corrections' application): the
 /// version-2 kicks' blocks, so that one pass drifts a block and kicks it for the next step.
 const DRIFT_BLOCK: usize = KICK_BLOCK;
-/// Tries per batch of the random sequential addition of the uniform initial layout.
-const RSA_BATCH: usize = 4096;
 
 /// Run `f` on every job, the jobs cut into `parts` contiguous runs of about equal length,
 /// the first run on the calling thread and the others handed out by `rayon::join`: a step's
@@ -1070,82 +1068,8 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, SimE
             }
         }
         InitialLayout::Uniform => {
-            // Random sequential addition with a cell grid (cells >= d): try t draws the
-            // point (u l, u' l) (two uniforms, accepted or not) and keeps it if it overlaps no
-            // point kept before it. The tries are taken in batches of RSA_BATCH: on several
-            // threads (N of at least PARALLEL_MIN_PARTICLES), a batch's tries are first tested
-            // in parallel against the points kept before the batch (a hit there rejects the
-            // try for sure), then the rest in order against all kept points. The kept points,
-            // their order and the stream's position after them are those of one try at a time
-            // whatever the thread count.
-            use rayon::prelude::*;
-            let nc = ((l / sp).floor() as usize)
-                .min((2.0 * (n as f64).sqrt()) as usize)
-                .max(1);
-            let side = l / nc as f64;
-            let mut cells: Vec<Vec<u32>> = vec![Vec::new(); nc * nc];
-            let overlaps = |p: [f64; 2], cells: &[Vec<u32>], x: &[f64]| -> bool {
-                let cx = ((p[0] / side) as usize).min(nc - 1);
-                let cy = ((p[1] / side) as usize).min(nc - 1);
-                for dy in -1isize..=1 {
-                    for dx in -1isize..=1 {
-                        let ix = (cx as isize + dx).rem_euclid(nc as isize) as usize;
-                        let iy = (cy as isize + dy).rem_euclid(nc as isize) as usize;
-                        for &q in &cells[iy * nc + ix] {
-                            let q = q as usize;
-                            let rx = super::neighbours::min_image(p[0] - x[2 * q], l);
-                            let ry = super::neighbours::min_image(p[1] - x[2 * q + 1], l);
-                            if rx * rx + ry * ry < sp * sp {
-                                return true;
-                            }
-                        }
-                    }
-                }
-                false
-            };
-            let par = n >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1;
-            let mut tries = 0u64;
-            let max_tries = 10_000 * n as u64 + 100_000;
-            let mut cand: Vec<[f64; 2]> = Vec::with_capacity(RSA_BATCH);
-            let mut hit: Vec<bool> = Vec::with_capacity(RSA_BATCH);
-            while x.len() < 2 * n {
-                let start = rng.position();
-                cand.clear();
-                cand.extend((0..RSA_BATCH).map(|_| [rng.f64() * l, rng.f64() * l]));
-                hit.clear();
-                if par {
-                    let (cells, x) = (&cells, &x);
-                    cand.par_iter()
-                        .with_min_len(RSA_BATCH / 16)
-                        .map(|&p| overlaps(p, cells, x))
-                        .collect_into_vec(&mut hit);
-                } else {
-                    hit.resize(RSA_BATCH, false);
-                }
-                for (t, (&p, &h)) in cand.iter().zip(&hit).enumerate() {
-                    tries += 1;
-                    if tries > max_tries {
-                        return Err(
-                            "packing_fraction: too dense for the uniform (random) layout".into(),
-                        );
-                    }
-                    if h || overlaps(p, &cells, &x) {
-                        continue;
-                    }
-                    let cx = ((p[0] / side) as usize).min(nc - 1);
-                    let cy = ((p[1] / side) as usize).min(nc - 1);
-                    cells[cy * nc + cx].push((x.len() / 2) as u32);
-                    x.extend_from_slice(&p);
-                    if x.len() == 2 * n {
-                        // The last point: leave the stream just after its try.
-                        *rng = RunRng::restore(&start);
-                        for _ in 0..2 * (t + 1) {
-                            rng.u64();
-                        }
-                        break;
-                    }
-                }
-            }
+            // Random sequential addition (the rule and how it runs: `super::layout`).
+            x = super::layout::uniform(n, l, sp, rng)?;
         }
     }
     Ok(x)
