@@ -42,11 +42,13 @@ side() { # side BIN DIR JOB
     touch "$dir.done"
 }
 
-# The report's clock readings and versions: lines that differ between any two runs.
+# The report's clock readings and versions: lines that differ between any two runs (the
+# finished runs' measured core-hours in the cost line are a clock reading too).
 scrub() {
     sed -E -e "s#$2#<dir>#g" -e 's/([0-9]+(\.[0-9]+)? ?(h|min|ms|s)\b ?)+/<time>/g' \
         -e 's/20[0-9]{2}-[0-9]{2}-[0-9]{2}[T ][0-9:.Z+-]+/<date>/g' \
         -e 's/granular [0-9]+\.[0-9]+\.[0-9]+[^ <"]*/granular <version>/g' \
+        -e 's/took [0-9.eE+-]+ \(ratio [0-9.]+\)/took <core-hours>/g' \
         -e 's#(<td>s[0-9]+of[0-9]+</td>[[:space:]]*<td class="n">)[0-9]+#\1<commits>#g' "$1"
 }
 
