@@ -34,7 +34,9 @@ fn main() {
         }
         table1.push(Species::new(k as f64, (k as f64).cbrt(), count / volume));
     }
-    let times: Vec<f64> = (0..=12).map(|j| 10f64.powf(-1.0 + j as f64 / 4.0)).collect();
+    let times: Vec<f64> = (0..=12)
+        .map(|j| 10f64.powf(-1.0 + j as f64 / 4.0))
+        .collect();
     let r = PairRestitution::Constant(0.5);
     let t0 = vec![1.0; table1.len()];
     best(
@@ -51,7 +53,9 @@ fn main() {
         },
     );
     let binary = [Species::new(1.0, 1.0, 0.1), Species::new(100.0, 1.0, 0.1)];
-    let times: Vec<f64> = (0..=40).map(|j| 10f64.powf(-1.0 + j as f64 / 4.0)).collect();
+    let times: Vec<f64> = (0..=40)
+        .map(|j| 10f64.powf(-1.0 + j as f64 / 4.0))
+        .collect();
     best("Fig 1 binary to t = 1e9", reps, || {
         temperature::evolve_temperatures(&binary, &r, &[1.0, 1.0], &times)
             .unwrap()

@@ -288,7 +288,10 @@ impl CLu {
             let (re_top, re_below) = re.split_at_mut((k + 1) * n);
             let (im_top, im_below) = im.split_at_mut((k + 1) * n);
             let (re_k, im_k) = (&re_top[k * n + k + 1..], &im_top[k * n + k + 1..]);
-            for (rr, ri) in re_below.chunks_exact_mut(n).zip(im_below.chunks_exact_mut(n)) {
+            for (rr, ri) in re_below
+                .chunks_exact_mut(n)
+                .zip(im_below.chunks_exact_mut(n))
+            {
                 let (xr, xi) = (rr[k], ri[k]);
                 // l = x / d
                 let lr = (xr * dr + xi * di) / dd;
@@ -315,7 +318,9 @@ impl CLu {
         }
         for i in 0..n {
             let (mut sr, mut si) = (br[i], bi[i]);
-            let l = self.re[i * n..i * n + i].iter().zip(&self.im[i * n..i * n + i]);
+            let l = self.re[i * n..i * n + i]
+                .iter()
+                .zip(&self.im[i * n..i * n + i]);
             for ((&lr, &li), (&xr, &xi)) in l.zip(br[..i].iter().zip(&bi[..i])) {
                 sr -= lr * xr - li * xi;
                 si -= lr * xi + li * xr;

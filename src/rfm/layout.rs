@@ -391,15 +391,26 @@ mod tests {
                 assert_eq!(w.to_string(), g.to_string());
                 return;
             }
-            (w, g) => panic!("N={n} phi={phi} seed={seed}: {:?} vs {:?}", w.err(), g.err()),
+            (w, g) => panic!(
+                "N={n} phi={phi} seed={seed}: {:?} vs {:?}",
+                w.err(),
+                g.err()
+            ),
         };
         assert_eq!(want.len(), got.len(), "N={n} phi={phi} seed={seed}");
         let same = want
             .iter()
             .zip(&got)
             .all(|(a, b)| a.to_bits() == b.to_bits());
-        assert!(same, "points differ: N={n} phi={phi} seed={seed} threads={threads}");
-        assert_eq!(r0.position(), r1.position(), "stream position: N={n} phi={phi}");
+        assert!(
+            same,
+            "points differ: N={n} phi={phi} seed={seed} threads={threads}"
+        );
+        assert_eq!(
+            r0.position(),
+            r1.position(),
+            "stream position: N={n} phi={phi}"
+        );
         assert_eq!(r0.u64(), r1.u64());
     }
 

@@ -129,6 +129,37 @@ fn drift_block<const D: usize>(
     h: f64,
     m0: f64,
 ) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if D == 2
+        && x.len() == v.len()
+        && x.len() == r.len()
+        && std::arch::is_x86_feature_detected!("avx2")
+    {
+        let c: &[f64] = &c;
+        // SAFETY: AVX2 is available (checked just above); the three slices have equal lengths.
+        return unsafe {
+            drift2_avx2(
+                x.as_flattened_mut(),
+                v.as_flattened_mut(),
+                r.as_flattened(),
+                [c[0], c[1]],
+                h,
+                m0,
+            )
+        };
+    }
+    drift_portable(x, v, r, c, h, m0)
+}
+
+/// [`drift_block`] on any CPU (and the reference of its AVX2 path).
+fn drift_portable<const D: usize>(
+    x: &mut [[f64; D]],
+    v: &mut [[f64; D]],
+    r: &[[f64; D]],
+    c: [f64; D],
+    h: f64,
+    m0: f64,
+) -> f64 {
     let mut m = [m0; 4];
     let mut xs = x.chunks_exact_mut(4);
     let mut vs = v.chunks_exact_mut(4);
@@ -178,6 +209,70 @@ fn drift_1d<const D: usize>(x: &mut [[f64; D]], v: &mut [[f64; D]], c: [f64; D],
             x[k] += vk * h;
         }
     }
+}
+
+/// [`drift_block`] in 2D with AVX2 (flat x, y pairs, all of the same length): two particles per
+/// register, the same IEEE operations per component as the portable loop (v - c, then
+/// x + (v h) as a product and a sum, never fused; d2 = dx^2 + dy^2, one rounded sum as
+/// 0 + dx^2 + dy^2 gives), so the same positions and velocities bit for bit. The maxima: per
+/// lane `max_pd(d2, m)`, which is `if d2 > m { m = d2 }` exactly (a NaN d2 never replaces m, a
+/// NaN m stays), folded as the portable loop folds its lanes; which lane sees which particle
+/// does not matter, since every lane starts at `m0` and the fold takes the largest non-NaN.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn drift2_avx2(
+    x: &mut [f64],
+    v: &mut [f64],
+    r: &[f64],
+    c: [f64; 2],
+    h: f64,
+    m0: f64,
+) -> f64 {
+    use std::arch::x86_64::*;
+    let len = x.len();
+    assert!(v.len() == len && r.len() == len && len % 2 == 0);
+    let (xp, vp, rp) = (x.as_mut_ptr(), v.as_mut_ptr(), r.as_ptr());
+    let cv = _mm256_setr_pd(c[0], c[1], c[0], c[1]);
+    let hv = _mm256_set1_pd(h);
+    let mut m = _mm256_set1_pd(m0);
+    let mut k = 0;
+    // Four particles (eight numbers) at a time.
+    while k + 8 <= len {
+        let v0 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k)), cv);
+        let v1 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k + 4)), cv);
+        _mm256_storeu_pd(vp.add(k), v0);
+        _mm256_storeu_pd(vp.add(k + 4), v1);
+        let x0 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k)), _mm256_mul_pd(v0, hv));
+        let x1 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k + 4)), _mm256_mul_pd(v1, hv));
+        _mm256_storeu_pd(xp.add(k), x0);
+        _mm256_storeu_pd(xp.add(k + 4), x1);
+        let d0 = _mm256_sub_pd(x0, _mm256_loadu_pd(rp.add(k)));
+        let d1 = _mm256_sub_pd(x1, _mm256_loadu_pd(rp.add(k + 4)));
+        // [dx0^2 + dy0^2, dx2^2 + dy2^2, dx1^2 + dy1^2, dx3^2 + dy3^2]
+        let d2 = _mm256_hadd_pd(_mm256_mul_pd(d0, d0), _mm256_mul_pd(d1, d1));
+        m = _mm256_max_pd(d2, m);
+        k += 8;
+    }
+    let mut lanes = [0.0f64; 4];
+    _mm256_storeu_pd(lanes.as_mut_ptr(), m);
+    // The rest, one particle at a time into lane 0 (as the portable loop's remainder).
+    while k < len {
+        let mut d2 = 0.0;
+        for q in 0..2 {
+            let vk = v[k + q] - c[q];
+            v[k + q] = vk;
+            x[k + q] += vk * h;
+            let dd = x[k + q] - r[k + q];
+            d2 += dd * dd;
+        }
+        if d2 > lanes[0] {
+            lanes[0] = d2;
+        }
+        k += 2;
+    }
+    lanes
+        .iter()
+        .fold(0.0, |a: f64, &b| if b > a { b } else { a })
 }
 
 /// Skin of the 2D neighbour list, in diameters.
@@ -366,7 +461,10 @@ impl<const D: usize> Core<D> {
         run_parts(
             &mut jobs,
             rayon::current_num_threads(),
-            &|((ps, out), halves): &mut ((&[super::neighbours::Pair<D>], &mut Vec<Corr<D>>), &mut Vec<Vec<Half<D>>>)| {
+            &|((ps, out), halves): &mut (
+                (&[super::neighbours::Pair<D>], &mut Vec<Corr<D>>),
+                &mut Vec<Vec<Half<D>>>,
+            )| {
                 out.clear();
                 halves.resize_with(npb, Vec::new);
                 for hb in halves.iter_mut() {

@@ -495,9 +495,7 @@ impl<'a> PairTable<'a> {
                         .zip(&a2s[row.clone()])
                         .zip(&self.mk_mu[row])
                         .zip(&tm[..m]);
-                    for (x, (((((&p0, &mu), &a1), &a2), &kmu), &tmi)) in
-                        buf.iter_mut().zip(pairs)
-                    {
+                    for (x, (((((&p0, &mu), &a1), &a2), &kmu), &tmi)) in buf.iter_mut().zip(pairs) {
                         let u2 = tmk + tmi;
                         let u = u2.sqrt();
                         let gam = kmu * u2 / tk;
@@ -741,7 +739,11 @@ mod tests {
             .map(|k| 0.013 * (1.0 + k as f64).powf(1.9) + 1e-3)
             .collect();
         let pairs = (0..37)
-            .map(|k| (0..37).map(|i| 0.3 + 0.01 * ((k * 7 + i * 3) % 41) as f64).collect())
+            .map(|k| {
+                (0..37)
+                    .map(|i| 0.3 + 0.01 * ((k * 7 + i * 3) % 41) as f64)
+                    .collect()
+            })
             .collect();
         for r in [
             PairRestitution::Constant(0.5),

@@ -572,11 +572,46 @@ fn golden_runs() -> Vec<(&'static str, RfmConfig, StreamVersion, bool, u64, u64)
         ..RfmConfig::thesis_1d(3000, 0.3)
     };
     vec![
-        ("2d v2 N5000", dense_2d(5000), StreamVersion::V2, false, 240, 80),
-        ("2d v2 N5000 fp", dense_2d(5000), StreamVersion::V2, true, 120, 60),
-        ("2d v1 N5000", dense_2d(5000), StreamVersion::V1, false, 150, 150),
-        ("2d v2 N1500", dense_2d(1500), StreamVersion::V2, false, 300, 100),
-        ("1d v2 N3000", one_d.clone(), StreamVersion::V2, false, 300, 150),
+        (
+            "2d v2 N5000",
+            dense_2d(5000),
+            StreamVersion::V2,
+            false,
+            240,
+            80,
+        ),
+        (
+            "2d v2 N5000 fp",
+            dense_2d(5000),
+            StreamVersion::V2,
+            true,
+            120,
+            60,
+        ),
+        (
+            "2d v1 N5000",
+            dense_2d(5000),
+            StreamVersion::V1,
+            false,
+            150,
+            150,
+        ),
+        (
+            "2d v2 N1500",
+            dense_2d(1500),
+            StreamVersion::V2,
+            false,
+            300,
+            100,
+        ),
+        (
+            "1d v2 N3000",
+            one_d.clone(),
+            StreamVersion::V2,
+            false,
+            300,
+            150,
+        ),
         ("1d v1 N3000", one_d, StreamVersion::V1, false, 200, 200),
     ]
 }
@@ -623,8 +658,56 @@ fn states_are_those_of_545c337() {
             hashes.push(h);
         }
         println!("{label}: {hashes:x?}");
-        assert!(hashes.iter().all(|&h| h == hashes[0]), "{label}: {hashes:x?}");
+        assert!(
+            hashes.iter().all(|&h| h == hashes[0]),
+            "{label}: {hashes:x?}"
+        );
         got.push(hashes[0]);
     }
     assert_eq!(got, WANT, "{got:#x?}");
+}
+
+/// The AVX2 drift is the portable drift bit for bit: positions, velocities and the largest
+/// displacement, for block lengths with every remainder (0..=9 particles past a multiple of
+/// four), start maxima of 0, of a value above every displacement and NaN, and a NaN position.
+#[test]
+fn avx2_drift_is_the_portable_drift() {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = crate::rng::RunRng::new(77);
+        for n in (0..=9).chain([64, 2048, 2049, 2051]) {
+            for (case, m0) in [0.0, 1e9, f64::NAN, 0.0].into_iter().enumerate() {
+                let mut x: Vec<[f64; 2]> =
+                    (0..n).map(|_| [rng.f64() * 3.0, rng.f64() * 3.0]).collect();
+                let mut v: Vec<[f64; 2]> =
+                    (0..n).map(|_| [rng.f64() - 0.5, rng.f64() - 0.5]).collect();
+                let r: Vec<[f64; 2]> = x
+                    .iter()
+                    .map(|p| [p[0] + rng.f64() * 0.1, p[1] - rng.f64() * 0.1])
+                    .collect();
+                if case == 3 && n > 5 {
+                    x[5][1] = f64::NAN;
+                }
+                let c = [rng.f64() * 1e-3, -rng.f64() * 1e-3];
+                let h = 1e-3 * (1.0 + rng.f64());
+                let (mut xa, mut va) = (x.clone(), v.clone());
+                let a = super::drift_block(&mut xa, &mut va, &r, c, h, m0);
+                let b = super::drift_portable(&mut x, &mut v, &r, c, h, m0);
+                assert_eq!(
+                    a.to_bits(),
+                    b.to_bits(),
+                    "n {n} case {case}: max {a} vs {b}"
+                );
+                for i in 0..n {
+                    for k in 0..2 {
+                        assert_eq!(xa[i][k].to_bits(), x[i][k].to_bits(), "n {n} x[{i}][{k}]");
+                        assert_eq!(va[i][k].to_bits(), v[i][k].to_bits(), "n {n} v[{i}][{k}]");
+                    }
+                }
+            }
+        }
+    }
 }
