@@ -190,6 +190,7 @@ pub(crate) struct Lu {
 impl Lu {
     /// Factorises the row-major n x n matrix `a`; None when it is singular.
     pub(crate) fn new(n: usize, mut a: Vec<f64>) -> Option<Lu> {
+        debug_assert_eq!(a.len(), n * n, "Lu::new: an n x n matrix");
         let mut piv = vec![0; n];
         for k in 0..n {
             let mut p = k;
@@ -261,6 +262,10 @@ struct CLu {
 
 impl CLu {
     fn new(n: usize, mut re: Vec<f64>, mut im: Vec<f64>) -> Option<CLu> {
+        debug_assert!(
+            re.len() == n * n && im.len() == n * n,
+            "CLu::new: n x n matrices"
+        );
         let mut piv = vec![0; n];
         for k in 0..n {
             let mut p = k;

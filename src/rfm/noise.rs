@@ -327,17 +327,14 @@ struct Chunk {
 /// slow slots finished in slot order from the block's continuation, and the kicks, all in
 /// L1 (the same operations in the same order as words, candidates, slow slots and kicks
 /// over the whole block: bit-identical, `fused_kicks_match_the_reference`). AVX2 when the
-/// CPU has it. `sc` is no longer used (kept for the callers).
-#[allow(clippy::too_many_arguments)]
+/// CPU has it.
 fn kick_block_counter<const D: usize>(
     key: &[u32; 8],
     step: u64,
     p0: usize,
     v: &mut [[f64; D]],
     sigma: f64,
-    sc: &mut (Vec<u64>, Vec<f64>, Vec<u32>),
 ) -> ([f64; D], f64) {
-    let _ = sc;
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") {
@@ -401,11 +398,6 @@ fn kick_block_body<const D: usize, const AVX2: bool>(
     lanes.finish()
 }
 
-pub(super) struct BlockScratch {
-    /// Candidate words, normals, slow slots.
-    words: (Vec<u64>, Vec<f64>, Vec<u32>),
-}
-
 /// Generates the symmetrised kicks of one step.
 pub struct Kicks {
     /// Standard deviation sqrt(2 D h) / M of one component.
@@ -413,9 +405,8 @@ pub struct Kicks {
     buf: Vec<f64>,
     words: Vec<u64>,
     rejected: Vec<u32>,
-    /// Stream version 2: the ChaCha8 key of the run's seed, and per work block its scratch.
+    /// Stream version 2: the ChaCha8 key of the run's seed.
     key: [u32; 8],
-    blocks: Vec<BlockScratch>,
 }
 
 impl Kicks {
@@ -426,14 +417,12 @@ impl Kicks {
             words: Vec::new(),
             rejected: Vec::new(),
             key: crate::rng::stream::key_of(0),
-            blocks: Vec::new(),
         }
     }
 
     /// Key the version-2 noise by the run's seed.
     pub fn set_seed(&mut self, seed: u64) {
         self.key = crate::rng::stream::key_of(seed);
-        self.blocks.clear();
     }
 
     /// Stream version 2: [`kick`](Self::kick) with counter-addressed normals. The normal of
@@ -468,42 +457,19 @@ impl Kicks {
         use rayon::prelude::*;
         let n = v.len();
         let nb = n.div_ceil(KICK_BLOCK);
-        while self.blocks.len() < nb {
-            self.blocks.push(BlockScratch {
-                words: Default::default(),
-            });
-        }
-        let (s, key) = (self.sigma, &self.key);
+        let k = self.counter_blocks();
         let mut res = vec![([0.0; D], 0.0); nb];
         if parallel {
             v.par_chunks_mut(KICK_BLOCK)
-                .zip(self.blocks.par_iter_mut())
                 .zip(res.par_iter_mut())
                 .enumerate()
-                .for_each(|(b, ((vb, sc), r))| {
-                    *r = kick_block_counter(key, step, b * KICK_BLOCK, vb, s, &mut sc.words);
-                });
+                .for_each(|(b, (vb, r))| *r = k.kick(step, b, vb));
         } else {
-            for (b, ((vb, sc), r)) in v
-                .chunks_mut(KICK_BLOCK)
-                .zip(self.blocks.iter_mut())
-                .zip(res.iter_mut())
-                .enumerate()
-            {
-                *r = kick_block_counter(key, step, b * KICK_BLOCK, vb, s, &mut sc.words);
+            for (b, (vb, r)) in v.chunks_mut(KICK_BLOCK).zip(res.iter_mut()).enumerate() {
+                *r = k.kick(step, b, vb);
             }
         }
-        let mut sum = [0.0; D];
-        let mut m: f64 = 0.0;
-        for (bs, bm) in &res {
-            for k in 0..D {
-                sum[k] += bs[k];
-            }
-            if *bm > m {
-                m = *bm;
-            }
-        }
-        (std::array::from_fn(|k| s * (sum[k] / n as f64)), m)
+        k.combine(res.into_iter(), n)
     }
 
     /// Whether the model has noise at all.
@@ -540,22 +506,13 @@ pub(super) struct CounterBlocks<'a> {
 }
 
 impl Kicks {
-    /// The shared part of [`Kicks::kick_counter`] and the scratch of its first `nb` work
-    /// blocks, apart (each block's scratch goes to the thread that kicks it).
-    pub(super) fn counter_blocks(&mut self, nb: usize) -> (CounterBlocks<'_>, &mut [BlockScratch]) {
-        while self.blocks.len() < nb {
-            self.blocks.push(BlockScratch {
-                words: Default::default(),
-            });
+    /// The work blocks of [`Kicks::kick_counter`], for a caller that runs them itself (and
+    /// for `kick_counter`, so both combine the blocks the same way).
+    pub(super) fn counter_blocks(&self) -> CounterBlocks<'_> {
+        CounterBlocks {
+            key: &self.key,
+            sigma: self.sigma,
         }
-        let sigma = self.sigma;
-        (
-            CounterBlocks {
-                key: &self.key,
-                sigma,
-            },
-            &mut self.blocks[..nb],
-        )
     }
 }
 
@@ -568,9 +525,8 @@ impl CounterBlocks<'_> {
         step: u64,
         b: usize,
         v: &mut [[f64; D]],
-        sc: &mut BlockScratch,
     ) -> ([f64; D], f64) {
-        kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma, &mut sc.words)
+        kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma)
     }
 
     /// The blocks' results, in block order, combined as [`Kicks::kick_counter`] combines
@@ -685,9 +641,8 @@ mod tests {
         };
         let what = format!("D {D} seed {seed} step {step} block {b} n {n}");
         let mut got = v0.clone();
-        let mut sc = Default::default();
         same(
-            kick_block_counter(&key, step, b * KICK_BLOCK, &mut got, sigma, &mut sc),
+            kick_block_counter(&key, step, b * KICK_BLOCK, &mut got, sigma),
             &what,
         );
         assert!(bits(&got) == bits(&want), "{what}: velocities");

@@ -13,7 +13,7 @@ use super::contact::ContactLaw;
 use super::freepath::{FreePathAcc, FreePathConfig, FreePathMomentRow, FreePaths};
 use super::integrate::PairPropagator;
 use super::neighbours::{wrap, NeighbourList};
-use super::noise::{BlockScratch, CounterBlocks, Kicks, KICK_BLOCK};
+use super::noise::{CounterBlocks, Kicks, KICK_BLOCK};
 use super::params::{InitialLayout, RfmConfig};
 use crate::physics::SimError;
 use crate::rng::stream::WordStream;
@@ -47,15 +47,14 @@ fn run_parts<J: Send>(jobs: &mut [J], parts: usize, f: &(impl Fn(&mut J) + Sync)
 }
 
 /// One particle block of the corrections-and-drift pass (block `b` of [`DRIFT_BLOCK`]
-/// particles): its positions, velocities and references (empty in 1D), the scratch of its
-/// version-2 kick when the pass kicks the next step, and what the pass found (the largest
+/// particles): its positions, velocities and references (empty in 1D), and what the pass
+/// found (the largest
 /// displacement squared; the kick's sum of z and largest |v|^2).
 struct DriftJob<'a, const D: usize> {
     b: usize,
     x: &'a mut [[f64; D]],
     v: &'a mut [[f64; D]],
     r: &'a [[f64; D]],
-    sc: Option<&'a mut BlockScratch>,
     m: f64,
     kick: ([f64; D], f64),
 }
@@ -685,7 +684,6 @@ impl<const D: usize> Core<D> {
         }
         let h = self.h;
         let n = self.x.len();
-        let nb = n.div_ceil(DRIFT_BLOCK);
         let next = self.step + 1;
         let npairb = self.nl.pairs.len().div_ceil(PAIR_BLOCK);
         let hb: &[Vec<Vec<Half<D>>>] = if halves {
@@ -693,13 +691,7 @@ impl<const D: usize> Core<D> {
         } else {
             &[]
         };
-        let (kicker, scratch): (Option<CounterBlocks<'_>>, &mut [BlockScratch]) = if kick_next {
-            let (k, sc) = self.kicks.counter_blocks(nb);
-            (Some(k), sc)
-        } else {
-            (None, &mut [])
-        };
-        let mut scs = scratch.iter_mut();
+        let kicker: Option<CounterBlocks<'_>> = kick_next.then(|| self.kicks.counter_blocks());
         let mut rs = self.x_ref.chunks(DRIFT_BLOCK);
         let mut jobs: Vec<DriftJob<'_, D>> = self
             .x
@@ -711,7 +703,6 @@ impl<const D: usize> Core<D> {
                 x,
                 v,
                 r: if D > 1 { rs.next().unwrap_or(&[]) } else { &[] },
-                sc: scs.next(),
                 m: 0.0,
                 kick: ([0.0; D], 0.0),
             })
@@ -734,8 +725,8 @@ impl<const D: usize> Core<D> {
             } else {
                 drift_1d(j.x, j.v, c, h);
             }
-            if let (Some(k), Some(sc)) = (kicker, j.sc.as_deref_mut()) {
-                j.kick = k.kick(next, j.b, j.v, sc);
+            if let Some(k) = kicker {
+                j.kick = k.kick(next, j.b, j.v);
             }
         });
         let m = jobs
@@ -1089,6 +1080,11 @@ impl RfmSim {
         let n = cfg.n_particles * cfg.dim as usize;
         if st.dim != cfg.dim || st.x.len() != n || st.v.len() != n {
             return Err("checkpoint does not match the run's dimension or particle count".into());
+        }
+        // A largest displacement that is not a finite number >= 0 cannot come from a step
+        // (a NaN would also keep the neighbour list from ever being rebuilt).
+        if !(st.max_disp2.is_finite() && st.max_disp2 >= 0.0) {
+            return Err("checkpoint's largest displacement is not a finite number >= 0".into());
         }
         if let Some(a) = &st.free_paths {
             if a.in_contact.len() != cfg.n_particles || a.start.len() != n || a.dim != cfg.dim {
