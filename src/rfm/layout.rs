@@ -11,7 +11,7 @@
 //! - the tries are taken in batches (4096 tries, doubled while few are kept, up to 2^18); a
 //!   batch's words are made in bulk straight from the counter-based ChaCha8 block function
 //!   (`rng::stream::WordStream` at the word's position), in chunks, on the current rayon pool
-//!   from `PARALLEL_MIN_PARTICLES` points, and the stream is then moved past the batch (or to
+//!   from `sim::PARALLEL_MIN_PARTICLES` points, and the stream is then moved past the batch (or to
 //!   just after the last point's try) without drawing the words again;
 //! - each chunk pre-tests its tries against the points kept before the batch: first a bitmap
 //!   of fine cells (side ~sp/6) each lying wholly, with a margin, inside the exclusion disk
@@ -28,7 +28,6 @@
 use rayon::prelude::*;
 
 use super::neighbours::min_image;
-use super::sim::PARALLEL_MIN_PARTICLES;
 use crate::physics::SimError;
 use crate::rng::stream::WordStream;
 use crate::rng::{unit_f64, RngPosition, RunRng};
@@ -48,7 +47,16 @@ const COVER_MARGIN: f64 = 1e-9;
 
 /// The uniform layout of `n` points in the periodic square of side `l`, no two closer than
 /// `sp` (flat positions), drawn from `rng` as the plain rule does.
-pub(super) fn uniform(n: usize, l: f64, sp: f64, rng: &mut RunRng) -> Result<Vec<f64>, SimError> {
+///
+/// `par`: make the words and pre-test on the current rayon pool (the caller decides; the
+/// result is the same either way).
+pub(super) fn uniform(
+    n: usize,
+    l: f64,
+    sp: f64,
+    rng: &mut RunRng,
+    par: bool,
+) -> Result<Vec<f64>, SimError> {
     let mut x: Vec<f64> = Vec::with_capacity(2 * n);
     if n == 0 {
         return Ok(x);
@@ -56,7 +64,6 @@ pub(super) fn uniform(n: usize, l: f64, sp: f64, rng: &mut RunRng) -> Result<Vec
     let grid = Grid::new(n, l, sp);
     let mut cells: Vec<Vec<u32>> = vec![Vec::new(); grid.nc * grid.nc];
     let mut cover = Cover::new(&grid, n, l, sp);
-    let par = n >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1;
     let max_tries = 10_000 * n as u64 + 100_000;
     let mut tries = 0u64;
     let mut batch = RSA_BATCH;
@@ -110,38 +117,16 @@ pub(super) fn uniform(n: usize, l: f64, sp: f64, rng: &mut RunRng) -> Result<Vec
             cover.mark(p);
             if x.len() == 2 * n {
                 // The last point: leave the stream just after its try.
-                advance(rng, 2 * (t as u64 + 1));
+                rng.skip(2 * (t as u64 + 1));
                 return Ok(x);
             }
         }
         tries += b as u64;
-        advance(rng, 2 * b as u64);
+        rng.skip(2 * b as u64);
         if x.len() / 2 - base < b / 64 {
             batch = (2 * batch).min(RSA_BATCH_MAX);
         }
     }
-}
-
-/// Move `rng` on by `k` >= 1 words, leaving it exactly as `k` calls of `RunRng::u64` do
-/// (buffer position and index included: a checkpoint records them), without making them.
-fn advance(rng: &mut RunRng, k: u64) {
-    const BUF: u128 = 256;
-    let pos = rng.position();
-    let total = pos.idx as u128 + k as u128;
-    if total <= BUF {
-        *rng = RunRng::restore(&RngPosition {
-            idx: total as u32,
-            ..pos
-        });
-        return;
-    }
-    // Each refill (at an exhausted buffer) moves the buffer on by BUF words.
-    let refills = (total - 1) / BUF;
-    *rng = RunRng::restore(&RngPosition {
-        seed: pos.seed,
-        filled_at: pos.filled_at + 2 * BUF * refills,
-        idx: (total - BUF * refills) as u32,
-    });
 }
 
 /// The coarse cells of the plain rule (side >= sp).
@@ -384,7 +369,11 @@ mod tests {
             .num_threads(threads)
             .build()
             .unwrap();
-        let got = pool.install(|| uniform(n, l, sp, &mut r1));
+        let got = pool.install(|| {
+            let par =
+                n >= crate::rfm::sim::PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1;
+            uniform(n, l, sp, &mut r1, par)
+        });
         let (want, got) = match (want, got) {
             (Ok(w), Ok(g)) => (w, g),
             (Err(w), Err(g)) => {
@@ -435,32 +424,12 @@ mod tests {
         check(27_000, 0.3, 9, 255, 2);
     }
 
-    /// `advance` leaves the stream exactly as that many single draws do.
-    #[test]
-    fn advance_is_single_draws() {
-        for &skip in &[0usize, 1, 200, 255, 256, 300] {
-            for &k in &[1u64, 2, 55, 256, 257, 511, 512, 513, 100_000] {
-                let mut a = RunRng::new(3);
-                for _ in 0..skip {
-                    a.u64();
-                }
-                let mut b = RunRng::restore(&a.position());
-                for _ in 0..k {
-                    a.u64();
-                }
-                advance(&mut b, k);
-                assert_eq!(a.position(), b.position(), "skip {skip} k {k}");
-                assert_eq!(a.u64(), b.u64());
-            }
-        }
-    }
-
     /// Too dense: the same error as before, after the same number of tries.
     #[test]
     fn too_dense_is_refused() {
         let (l, sp) = geometry(50, 0.8);
         let mut r = RunRng::new(1);
-        let e = uniform(50, l, sp, &mut r).unwrap_err();
+        let e = uniform(50, l, sp, &mut r, false).unwrap_err();
         assert_eq!(
             e.to_string(),
             "packing_fraction: too dense for the uniform (random) layout"

@@ -1163,7 +1163,8 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, SimE
         }
         InitialLayout::Uniform => {
             // Random sequential addition (the rule and how it runs: `super::layout`).
-            x = super::layout::uniform(n, l, sp, rng)?;
+            let par = n >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1;
+            x = super::layout::uniform(n, l, sp, rng, par)?;
         }
     }
     Ok(x)

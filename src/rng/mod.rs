@@ -156,6 +156,29 @@ impl RunRng {
         debug_assert!(self.idx <= BUF);
     }
 
+    /// Move on by `k` >= 1 words, leaving the stream exactly as `k` calls of [`RunRng::u64`]
+    /// do (buffer position and index included: a checkpoint records them), without making
+    /// them.
+    pub fn skip(&mut self, k: u64) {
+        let buf = BUF as u128;
+        let pos = self.position();
+        let total = pos.idx as u128 + k as u128;
+        if total <= buf {
+            *self = RunRng::restore(&RngPosition {
+                idx: total as u32,
+                ..pos
+            });
+            return;
+        }
+        // Each refill (at an exhausted buffer) moves the buffer on by BUF words.
+        let refills = (total - 1) / buf;
+        *self = RunRng::restore(&RngPosition {
+            seed: pos.seed,
+            filled_at: pos.filled_at + 2 * buf * refills,
+            idx: (total - buf * refills) as u32,
+        });
+    }
+
     /// Move the unread words to the front of the buffer and fill the rest.
     #[cold]
     fn shift(&mut self) {
@@ -358,5 +381,25 @@ mod tests {
     #[test]
     fn different_seeds_differ() {
         assert_ne!(RunRng::new(1).u64(), RunRng::new(2).u64());
+    }
+
+    /// `skip` leaves the stream exactly as that many single draws do.
+    #[test]
+    fn skip_is_single_draws() {
+        for &skip in &[0usize, 1, 200, 255, 256, 300] {
+            for &k in &[1u64, 2, 55, 256, 257, 511, 512, 513, 100_000] {
+                let mut a = RunRng::new(3);
+                for _ in 0..skip {
+                    a.u64();
+                }
+                let mut b = RunRng::restore(&a.position());
+                for _ in 0..k {
+                    a.u64();
+                }
+                b.skip(k);
+                assert_eq!(a.position(), b.position(), "skip {skip} k {k}");
+                assert_eq!(a.u64(), b.u64());
+            }
+        }
     }
 }

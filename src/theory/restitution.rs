@@ -695,17 +695,24 @@ mod tests {
         }
     }
 
+    /// `n` species of masses 1.37 k and number densities 0.1 k^-2.5 (k = 1..n) at temperatures
+    /// spread over three decades: the mixtures of the bit-identity tests.
+    fn spread_mixture(n: usize) -> (Vec<Species>, Vec<f64>) {
+        let s = (1..=n)
+            .map(|k| sp(k as f64 * 1.37, 0.1 / (k as f64).powf(2.5)))
+            .collect();
+        let t = (0..n)
+            .map(|k| 0.013 * (1.0 + k as f64).powf(1.9) + 1e-3)
+            .collect();
+        (s, t)
+    }
+
     /// The hot path of the ODEs (T/m divided once per species, m_k mu_i premultiplied) gives
     /// the same bits as the per-pair formula, constant and velocity-dependent, over a range
     /// of masses and temperatures (the theory tables must not move by one bit).
     #[test]
     fn rates_tm_is_bit_identical() {
-        let s: Vec<Species> = (1..=40)
-            .map(|k| sp(k as f64 * 1.37, 0.1 / (k as f64).powf(2.5)))
-            .collect();
-        let t: Vec<f64> = (0..40)
-            .map(|k| 0.013 * (1.0 + k as f64).powf(1.9) + 1e-3)
-            .collect();
+        let (s, t) = spread_mixture(40);
         for r in [
             PairRestitution::Constant(0.5),
             PairRestitution::series(&s, 0.09, vec![0.0, -1.15344, 0.0, 0.79826]),
@@ -732,12 +739,7 @@ mod tests {
     /// theory tables must not move by one bit).
     #[test]
     fn cooling_rates_are_bit_identical() {
-        let s: Vec<Species> = (1..=37)
-            .map(|k| sp(k as f64 * 1.37, 0.1 / (k as f64).powf(2.5)))
-            .collect();
-        let t: Vec<f64> = (0..37)
-            .map(|k| 0.013 * (1.0 + k as f64).powf(1.9) + 1e-3)
-            .collect();
+        let (s, t) = spread_mixture(37);
         let pairs = (0..37)
             .map(|k| {
                 (0..37)
