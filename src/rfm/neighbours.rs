@@ -35,6 +35,24 @@ pub fn wrap(x: f64, l: f64) -> f64 {
     }
 }
 
+/// The cell grid of [`NeighbourList::build`] for `n` particles in a periodic box of side `l`
+/// with list radius `reach`: (cells per side, cell side), or None when the list takes all
+/// pairs (fewer than 3 cells per side).
+pub fn cell_grid<const D: usize>(n: usize, l: f64, reach: f64) -> Option<(usize, f64)> {
+    // Cells of side >= reach, at most ~4 N of them.
+    let cap = ((4 * n.max(16)) as f64).powf(1.0 / D as f64).floor() as usize;
+    let nc = ((l / reach).floor() as usize).min(cap);
+    (nc >= 3).then(|| (nc, l / nc as f64))
+}
+
+/// The flat index of the cell (of a [`cell_grid`] of `nc` cells of side `side` per side) that
+/// holds the wrapped position `p`: the first component varies fastest.
+#[inline]
+pub fn cell_index<const D: usize>(p: &[f64; D], nc: usize, side: f64) -> usize {
+    let c: [usize; D] = std::array::from_fn(|k| ((p[k] / side) as usize).min(nc - 1));
+    c.iter().rev().fold(0, |acc, &ck| acc * nc + ck)
+}
+
 /// Verlet list built from a periodic cell grid.
 #[derive(Default, Clone, Debug)]
 pub struct NeighbourList<const D: usize> {
@@ -52,9 +70,7 @@ impl<const D: usize> NeighbourList<D> {
     pub fn build(&mut self, x: &[[f64; D]], l: f64, reach: f64) {
         self.pairs.clear();
         let n = x.len();
-        // Cells of side >= reach, at most ~4 N of them.
-        let cap = ((4 * n.max(16)) as f64).powf(1.0 / D as f64).floor() as usize;
-        let nc = ((l / reach).floor() as usize).min(cap);
+        let grid = cell_grid::<D>(n, l, reach);
         let r2 = reach * reach;
         let push = |i: usize, j: usize, pairs: &mut Vec<Pair<D>>| {
             let (i, j) = if i < j { (i, j) } else { (j, i) };
@@ -74,27 +90,23 @@ impl<const D: usize> NeighbourList<D> {
                 });
             }
         };
-        if nc < 3 {
+        let Some((nc, side)) = grid else {
             for i in 0..n {
                 for j in i + 1..n {
                     push(i, j, &mut self.pairs);
                 }
             }
             return;
-        }
+        };
         let ncells = nc.pow(D as u32);
         self.head.clear();
         self.head.resize(ncells, NONE);
         self.next.clear();
         self.next.resize(n, NONE);
-        let side = l / nc as f64;
-        let cell_of = |p: &[f64; D]| -> [usize; D] {
-            std::array::from_fn(|k| ((p[k] / side) as usize).min(nc - 1))
-        };
         let flat = |c: [usize; D]| c.iter().rev().fold(0, |acc, &ck| acc * nc + ck);
         // Insert in reverse so each cell's chain runs in increasing particle index.
         for i in (0..n).rev() {
-            let c = flat(cell_of(&x[i]));
+            let c = cell_index(&x[i], nc, side);
             self.next[i] = self.head[c];
             self.head[c] = i as u32;
         }

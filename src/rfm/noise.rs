@@ -294,6 +294,25 @@ impl Lanes {
         }
     }
 
+    /// The sums of [`add_with`](Self::add_with) alone (the same lanes in the same order, so
+    /// the same bits): for normals that are kicked later, in another order.
+    #[inline(always)]
+    fn add_sums<const D: usize>(&mut self, zs: &[f64]) {
+        const W: usize = Lanes::W;
+        let acc = &mut self.acc;
+        let mut zc = zs.chunks_exact(W);
+        for zz in &mut zc {
+            for j in 0..W {
+                acc[j] += zz[j];
+            }
+        }
+        for zz in zc.remainder().chunks_exact(D) {
+            for k in 0..D {
+                acc[k] += zz[k];
+            }
+        }
+    }
+
     /// The sum of the z per component (lanes in order) and the largest |v|^2.
     fn finish<const D: usize>(&self) -> ([f64; D], f64) {
         let mut sum = [0.0; D];
@@ -365,6 +384,26 @@ fn kick_block_body<const D: usize, const AVX2: bool>(
     v: &mut [[f64; D]],
     sigma: f64,
 ) -> ([f64; D], f64) {
+    let mut lanes = Lanes::new();
+    block_normals::<D, AVX2, false>(key, step, p0, v.as_flattened_mut(), &mut |vc, z| {
+        lanes.add_with::<D, AVX2>(vc, z, sigma)
+    });
+    lanes.finish()
+}
+
+/// The normals of one version-2 work block (its first particle `p0`), a ChaCha8 chunk (256
+/// slots) at a time: its words, their candidates, its slow slots finished in slot order
+/// from the block's continuation; `sink` gets each chunk's slots of `out` (whole particles)
+/// with their normals (with `INTO_OUT` the normals are written into `out` itself, and
+/// `sink` gets an empty slice and them).
+#[inline(always)]
+fn block_normals<const D: usize, const AVX2: bool, const INTO_OUT: bool>(
+    key: &[u32; 8],
+    step: u64,
+    p0: usize,
+    out: &mut [f64],
+    sink: &mut impl FnMut(&mut [f64], &[f64]),
+) {
     const { assert!(D >= 1 && CHUNK_SLOTS % D == 0 && 16 % D == 0) };
     let first = (p0 * D) as u64;
     // Two slots per 64-bit word: slot j's candidate is half j % 2 of word j / 2.
@@ -378,24 +417,107 @@ fn kick_block_body<const D: usize, const AVX2: bool>(
         z: [0.0; CHUNK_SLOTS],
     };
     let mut masks = [0u64; 4];
-    let mut lanes = Lanes::new();
-    for vc in v.as_flattened_mut().chunks_mut(CHUNK_SLOTS) {
+    for vc in out.chunks_mut(CHUNK_SLOTS) {
         fill_counter(key, stream, block, &mut c.words);
         block += (CHUNK_SLOTS / 16) as u64;
-        let z = &mut c.z[..vc.len()];
-        crate::rng::normal::chunk_candidates::<AVX2>(&c.words, z, &mut masks);
-        for (q, &m) in masks.iter().enumerate() {
-            let mut m = m;
-            while m != 0 {
-                let j = 64 * q + m.trailing_zeros() as usize;
-                let half = (c.words[j / 2] >> (32 * (j % 2))) as u32;
-                z[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
-                m &= m - 1;
+        let mut finish = |z: &mut [f64]| {
+            crate::rng::normal::chunk_candidates::<AVX2>(&c.words, z, &mut masks);
+            for (q, &m) in masks.iter().enumerate() {
+                let mut m = m;
+                while m != 0 {
+                    let j = 64 * q + m.trailing_zeros() as usize;
+                    let half = (c.words[j / 2] >> (32 * (j % 2))) as u32;
+                    z[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
+                    m &= m - 1;
+                }
+            }
+        };
+        if INTO_OUT {
+            // The normals are the output itself.
+            finish(vc);
+            sink(&mut [], vc);
+        } else {
+            let z = &mut c.z[..vc.len()];
+            finish(z);
+            sink(vc, z);
+        }
+    }
+}
+
+/// Work block `b`'s normals of step `step` into `z` (its D slots per particle, in slot
+/// order) and their sum per component as [`kick_block_counter`] sums them.
+fn normals_block_counter<const D: usize>(
+    key: &[u32; 8],
+    step: u64,
+    b: usize,
+    z: &mut [f64],
+) -> [f64; D] {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { normals_block_avx2::<D>(key, step, b, z) };
+        }
+    }
+    normals_block_body::<D, false>(key, step, b, z)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn normals_block_avx2<const D: usize>(
+    key: &[u32; 8],
+    step: u64,
+    b: usize,
+    z: &mut [f64],
+) -> [f64; D] {
+    normals_block_body::<D, true>(key, step, b, z)
+}
+
+#[inline(always)]
+fn normals_block_body<const D: usize, const AVX2: bool>(
+    key: &[u32; 8],
+    step: u64,
+    b: usize,
+    z: &mut [f64],
+) -> [f64; D] {
+    let mut lanes = Lanes::new();
+    block_normals::<D, AVX2, true>(key, step, b * KICK_BLOCK, z, &mut |_, zn| {
+        lanes.add_sums::<D>(zn)
+    });
+    lanes.finish::<D>().0
+}
+
+/// How many particles ahead [`kick_gathered`] asks for its normals.
+const GATHER_AHEAD: usize = 16;
+
+/// Kick particles `v` by `sigma z[id D + k]` (particle `id` = `ids[i]` of the normals `z` in
+/// slot order, component k): the same operations per particle as [`Lanes::add_with`]
+/// (v + sigma z, then |v|^2 as 0 + x^2 + y^2); returns the largest |v|^2 after, which no
+/// order of the particles changes.
+fn kick_gathered<const D: usize>(v: &mut [[f64; D]], ids: &[u32], z: &[f64], sigma: f64) -> f64 {
+    let mut m: f64 = 0.0;
+    for (i, (vv, &id)) in v.iter_mut().zip(ids).enumerate() {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(&ahead) = ids.get(i + GATHER_AHEAD) {
+            // SAFETY: a prefetch never faults; the address is inside z for a valid id.
+            unsafe {
+                use std::arch::x86_64::*;
+                _mm_prefetch::<_MM_HINT_T0>(
+                    z.as_ptr().wrapping_add(ahead as usize * D) as *const i8
+                );
             }
         }
-        lanes.add_with::<D, AVX2>(vc, z, sigma);
+        let zz = &z[id as usize * D..id as usize * D + D];
+        let mut a2 = 0.0;
+        for k in 0..D {
+            vv[k] += sigma * zz[k];
+            a2 += vv[k] * vv[k];
+        }
+        if a2 > m {
+            m = a2;
+        }
     }
-    lanes.finish()
+    m
 }
 
 /// Generates the symmetrised kicks of one step.
@@ -529,6 +651,24 @@ impl CounterBlocks<'_> {
         kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma)
     }
 
+    /// Work block `b`'s normals of step `step` (slots `b KICK_BLOCK D ..`) into `z`, and
+    /// their sum per component as [`kick`](Self::kick) takes it: for runs that keep their
+    /// particles in another order than their slots.
+    pub(super) fn normals<const D: usize>(&self, step: u64, b: usize, z: &mut [f64]) -> [f64; D] {
+        normals_block_counter::<D>(self.key, step, b, z)
+    }
+
+    /// Kick particles `v`, particle i taking the normals of slot particle `ids[i]` from `z`
+    /// (all of a step's normals, in slot order): the largest |v|^2 after.
+    pub(super) fn kick_gathered<const D: usize>(
+        &self,
+        v: &mut [[f64; D]],
+        ids: &[u32],
+        z: &[f64],
+    ) -> f64 {
+        kick_gathered(v, ids, z, self.sigma)
+    }
+
     /// The blocks' results, in block order, combined as [`Kicks::kick_counter`] combines
     /// them: the shift c of N = `n` particles and the largest |v|^2.
     pub(super) fn combine<const D: usize>(
@@ -617,7 +757,8 @@ mod tests {
         ((sum, m), slow, tail)
     }
 
-    /// The fused kick (the path this CPU takes, and the portable one) gives the reference's
+    /// The fused kick (the path this CPU takes, and the portable one), and the normals made
+    /// ahead and kicked onto particles in another storage order, give the reference's
     /// bits: velocities, sums and maximum, in 1D and 2D, for whole work blocks and short last
     /// ones (lengths not a multiple of 8, of a chunk, of a word), steps with and without the
     /// top bit, several seeds and work blocks; slow and tail slots occur.
@@ -652,6 +793,36 @@ mod tests {
             &what,
         );
         assert!(bits(&got) == bits(&want), "{what}: portable velocities");
+        // The normals made ahead into a buffer (slot order) and kicked onto particles stored
+        // in slot order and in reverse order: the same velocities, sums and maximum.
+        let k = CounterBlocks { key: &key, sigma };
+        let mut z = vec![0.0; n * D];
+        for avx2 in [true, false] {
+            z.fill(f64::NAN);
+            let sums = if avx2 {
+                k.normals::<D>(step, b, &mut z)
+            } else {
+                normals_block_body::<D, false>(&key, step, b, &mut z)
+            };
+            for reversed in [false, true] {
+                let ids: Vec<u32> = if reversed {
+                    (0..n as u32).rev().collect()
+                } else {
+                    (0..n as u32).collect()
+                };
+                let mut got: Vec<[f64; D]> = ids.iter().map(|&p| v0[p as usize]).collect();
+                let m = k.kick_gathered(&mut got, &ids, &z);
+                same(
+                    (sums, m),
+                    &format!("{what} buffered (avx2 {avx2}, reversed {reversed})"),
+                );
+                let mut by_id = got.clone();
+                for (t, &p) in ids.iter().enumerate() {
+                    by_id[p as usize] = got[t];
+                }
+                assert!(bits(&by_id) == bits(&want), "{what}: buffered velocities");
+            }
+        }
         (slow, tail)
     }
 

@@ -12,7 +12,7 @@ use super::blocks::HistRow;
 use super::contact::ContactLaw;
 use super::freepath::{FreePathAcc, FreePathConfig, FreePathMomentRow, FreePaths};
 use super::integrate::PairPropagator;
-use super::neighbours::{wrap, NeighbourList};
+use super::neighbours::{cell_grid, cell_index, wrap, NeighbourList};
 use super::noise::{CounterBlocks, Kicks, KICK_BLOCK};
 use super::params::{InitialLayout, RfmConfig};
 use crate::physics::SimError;
@@ -55,8 +55,31 @@ struct DriftJob<'a, const D: usize> {
     x: &'a mut [[f64; D]],
     v: &'a mut [[f64; D]],
     r: &'a [[f64; D]],
+    /// Particles stored by cell: the block's particle numbers, and the slots of block `b`
+    /// of the normals two steps on, with their sum (see [`Core::noise`]).
+    ids: &'a [u32],
+    ahead: Option<(&'a mut [f64], &'a mut [f64; D])>,
     m: f64,
     kick: ([f64; D], f64),
+}
+
+/// One step's version-2 normals for particles stored out of slot order (see
+/// [`Core::noise`]): all slots in slot order and each kick block's sum, for step `step`
+/// (`u64::MAX`: none yet).
+struct StepNoise<const D: usize> {
+    step: u64,
+    z: Vec<f64>,
+    sums: Vec<[f64; D]>,
+}
+
+impl<const D: usize> Default for StepNoise<D> {
+    fn default() -> Self {
+        StepNoise {
+            step: u64::MAX,
+            z: Vec::new(),
+            sums: Vec::new(),
+        }
+    }
 }
 
 /// One contacting pair's correction: x_i += dx - dv h, v_i += dv; j gets the opposite. `t` is
@@ -327,6 +350,21 @@ pub struct Core<const D: usize> {
     pub builds: u64,
     /// Free-path / post-collision velocity tracking (None: no work in the step).
     fp: Option<Box<FreePaths<D>>>,
+    /// Storage order: empty when particle i is stored at index i; else the particle
+    /// stored at each index (`ids`) and where each particle is stored (`at`). See
+    /// [`sort_by_cell`](Self::sort_by_cell).
+    ids: Vec<u32>,
+    at: Vec<u32>,
+    /// Never store the particles by cell (a test's reference).
+    keep_order: bool,
+    /// Particles stored by cell: the normals of two steps, in slot order (see
+    /// [`noise`](Self::noise)).
+    noise: [StepNoise<D>; 2],
+    /// Scratch of the sort: cells, cell starts, the new order, a gathered array.
+    sort_cell: Vec<u32>,
+    sort_start: Vec<u32>,
+    sort_ids: Vec<u32>,
+    sort_tmp: Vec<[f64; D]>,
 }
 
 impl<const D: usize> Core<D> {
@@ -364,6 +402,14 @@ impl<const D: usize> Core<D> {
             cand: Vec::new(),
             builds: 0,
             fp: None,
+            ids: Vec::new(),
+            at: Vec::new(),
+            keep_order: false,
+            noise: Default::default(),
+            sort_cell: Vec::new(),
+            sort_start: Vec::new(),
+            sort_ids: Vec::new(),
+            sort_tmp: Vec::new(),
         };
         if D > 1 {
             c.rebuild();
@@ -391,7 +437,152 @@ impl<const D: usize> Core<D> {
         }
         self.x_ref.clone_from(&self.x);
         self.max_disp2 = 0.0;
+        if self.by_cell() {
+            self.sort_by_cell();
+        }
         self.build_from_ref();
+    }
+
+    /// Whether the particles are kept stored by cell: 2D version-2 runs of at least
+    /// [`PARALLEL_MIN_PARTICLES`] without free-path tracking (which follows particles by
+    /// their storage index).
+    fn by_cell(&self) -> bool {
+        D > 1
+            && self.stream != StreamVersion::V1
+            && self.fp.is_none()
+            && !self.keep_order
+            && self.x.len() >= PARALLEL_MIN_PARTICLES
+    }
+
+    /// Store the particles in the order of their cells in the neighbour list's grid (at a
+    /// list build, positions equal to the references), particle numbers increasing within
+    /// a cell. A thread's pairs then reach mostly the particles of its own blocks, which
+    /// its core wrote in the last drift (in the particles' random numbering, every pair
+    /// pass read lines that the other core had just written, and every drift wrote lines
+    /// the other core had read).
+    ///
+    /// The run is the same bits in any storage order: the list built from this order has
+    /// the pairs of the list built in particle order, in the same order (each cell's chain
+    /// runs in increasing particle number either way, and the cells in the same order); a
+    /// pair of two cells may be stored the other way round (i in the lower cell), which
+    /// negates r, g and the correction exactly (IEEE negation; round() is symmetric), so
+    /// each particle gets the same halves in the same order. The kicks take each
+    /// particle's own slot's normal ([`noise`](Self::noise)); sums over particles run in
+    /// particle order ([`by_id`](Self::by_id)); maxima do not see the order.
+    fn sort_by_cell(&mut self) {
+        let n = self.x.len();
+        let Some((nc, side)) = cell_grid::<D>(n, self.l, self.d + self.skin) else {
+            self.unsort();
+            return;
+        };
+        if self.ids.is_empty() {
+            self.ids = (0..n as u32).collect();
+            self.at = self.ids.clone();
+        }
+        let ncells = nc.pow(D as u32);
+        self.sort_cell.clear();
+        self.sort_cell
+            .extend(self.x_ref.iter().map(|p| cell_index(p, nc, side) as u32));
+        self.sort_start.clear();
+        self.sort_start.resize(ncells + 1, 0);
+        for &c in &self.sort_cell {
+            self.sort_start[c as usize + 1] += 1;
+        }
+        for c in 0..ncells {
+            self.sort_start[c + 1] += self.sort_start[c];
+        }
+        self.sort_ids.clear();
+        self.sort_ids.resize(n, 0);
+        for p in 0..n {
+            let c = self.sort_cell[self.at[p] as usize] as usize;
+            let t = self.sort_start[c];
+            self.sort_start[c] += 1;
+            self.sort_ids[t as usize] = p as u32;
+        }
+        // Index t now holds particle sort_ids[t], stored at at[sort_ids[t]] before.
+        let at = &self.at;
+        let from = |t: usize| at[self.sort_ids[t] as usize] as usize;
+        self.sort_tmp.clear();
+        self.sort_tmp.extend((0..n).map(|t| self.x[from(t)]));
+        std::mem::swap(&mut self.x, &mut self.sort_tmp);
+        self.sort_tmp.clear();
+        self.sort_tmp.extend((0..n).map(|t| self.v[from(t)]));
+        std::mem::swap(&mut self.v, &mut self.sort_tmp);
+        self.x_ref.clone_from(&self.x);
+        std::mem::swap(&mut self.ids, &mut self.sort_ids);
+        for (t, &p) in self.ids.iter().enumerate() {
+            self.at[p as usize] = t as u32;
+        }
+    }
+
+    /// Store particle i at index i again (and rebuild the list in that order: the same
+    /// pairs, so not counted as a build).
+    fn unsort(&mut self) {
+        if self.ids.is_empty() {
+            return;
+        }
+        self.x = self.by_id(&self.x).into_owned();
+        self.v = self.by_id(&self.v).into_owned();
+        self.x_ref = self.by_id(&self.x_ref).into_owned();
+        self.ids.clear();
+        self.at.clear();
+        if D > 1 {
+            self.nl.build(&self.x_ref, self.l, self.d + self.skin);
+        }
+    }
+
+    /// A per-particle array in particle order.
+    fn by_id<'a>(&self, a: &'a [[f64; D]]) -> std::borrow::Cow<'a, [[f64; D]]> {
+        if self.ids.is_empty() {
+            return std::borrow::Cow::Borrowed(a);
+        }
+        let mut out = vec![[0.0; D]; a.len()];
+        for (p, &i) in a.iter().zip(&self.ids) {
+            out[i as usize] = *p;
+        }
+        std::borrow::Cow::Owned(out)
+    }
+
+    /// Set the positions from an array in particle order.
+    fn set_x_by_id(&mut self, x: Vec<[f64; D]>) {
+        self.x = if self.ids.is_empty() {
+            x
+        } else {
+            self.ids.iter().map(|&p| x[p as usize]).collect()
+        };
+    }
+
+    /// Start (or stop) free-path tracking, which needs particle i stored at index i.
+    fn set_free_paths(&mut self, fp: Option<Box<FreePaths<D>>>) {
+        if fp.is_some() {
+            self.unsort();
+        }
+        self.fp = fp;
+    }
+
+    /// Particles stored by cell: make the normals of step `step` (all slots, in slot order,
+    /// and each kick block's sum, exactly as the kick would draw and sum them) unless they
+    /// are there. The fused pass makes those of two steps on, block by block.
+    fn noise(&mut self, step: u64, par: bool) {
+        let buf = &mut self.noise[(step % 2) as usize];
+        if buf.step == step {
+            return;
+        }
+        let n = self.x.len();
+        buf.z.resize(n * D, 0.0);
+        buf.sums.resize(n.div_ceil(KICK_BLOCK), [0.0; D]);
+        let k = self.kicks.counter_blocks();
+        let mut jobs: Vec<_> = buf
+            .z
+            .chunks_mut(KICK_BLOCK * D)
+            .zip(buf.sums.iter_mut())
+            .enumerate()
+            .collect();
+        let parts = if par { rayon::current_num_threads() } else { 1 };
+        run_parts(&mut jobs, parts, &|(b, (z, sum))| {
+            **sum = k.normals::<D>(step, *b, z)
+        });
+        buf.step = step;
     }
 
     fn build_from_ref(&mut self) {
@@ -583,6 +774,27 @@ impl<const D: usize> Core<D> {
     /// differences only; the shift is subtracted in the drift): (c, largest |v|^2).
     fn kick_now(&mut self, par: bool) -> ([f64; D], f64) {
         if self.kicks.active() {
+            if !self.ids.is_empty() {
+                let step = self.step;
+                self.noise(step, par);
+                let buf = &self.noise[(step % 2) as usize];
+                let k = self.kicks.counter_blocks();
+                let ids = &self.ids;
+                let mut jobs: Vec<_> = self
+                    .v
+                    .chunks_mut(KICK_BLOCK)
+                    .zip(ids.chunks(KICK_BLOCK))
+                    .map(|(v, i)| (v, i, 0.0))
+                    .collect();
+                let parts = if par { rayon::current_num_threads() } else { 1 };
+                run_parts(&mut jobs, parts, &|(v, i, m)| {
+                    *m = k.kick_gathered(v, i, &buf.z)
+                });
+                return k.combine(
+                    buf.sums.iter().zip(&jobs).map(|(s, j)| (*s, j.2)),
+                    self.x.len(),
+                );
+            }
             if self.stream == StreamVersion::V1 {
                 self.kicks.kick(&mut self.rng, &mut self.v)
             } else {
@@ -685,6 +897,10 @@ impl<const D: usize> Core<D> {
         let h = self.h;
         let n = self.x.len();
         let next = self.step + 1;
+        let sorted = !self.ids.is_empty();
+        if kick_next && sorted {
+            self.noise(next, par);
+        }
         let npairb = self.nl.pairs.len().div_ceil(PAIR_BLOCK);
         let hb: &[Vec<Vec<Half<D>>>] = if halves {
             &self.half_blocks[..npairb]
@@ -693,6 +909,31 @@ impl<const D: usize> Core<D> {
         };
         let kicker: Option<CounterBlocks<'_>> = kick_next.then(|| self.kicks.counter_blocks());
         let mut rs = self.x_ref.chunks(DRIFT_BLOCK);
+        let mut idb = self.ids.chunks(DRIFT_BLOCK);
+        // Particles stored by cell: kick from the normals of step next, and make those of
+        // step next + 1 (the buffer of the step just kicked) block by block.
+        let (now, ahead) = {
+            let [a, b] = &mut self.noise;
+            if next % 2 == 0 {
+                (&*a, b)
+            } else {
+                (&*b, a)
+            }
+        };
+        let mut aheads = if kick_next && sorted {
+            let n = self.x.len();
+            ahead.step = next + 1;
+            ahead.z.resize(n * D, 0.0);
+            ahead.sums.resize(n.div_ceil(KICK_BLOCK), [0.0; D]);
+            Some(
+                ahead
+                    .z
+                    .chunks_mut(KICK_BLOCK * D)
+                    .zip(ahead.sums.iter_mut()),
+            )
+        } else {
+            None
+        };
         let mut jobs: Vec<DriftJob<'_, D>> = self
             .x
             .chunks_mut(DRIFT_BLOCK)
@@ -703,10 +944,13 @@ impl<const D: usize> Core<D> {
                 x,
                 v,
                 r: if D > 1 { rs.next().unwrap_or(&[]) } else { &[] },
+                ids: idb.next().unwrap_or(&[]),
+                ahead: aheads.as_mut().and_then(|a| a.next()),
                 m: 0.0,
                 kick: ([0.0; D], 0.0),
             })
             .collect();
+        let zn = &now.z;
         let kicker = kicker.as_ref();
         let parts = if par { rayon::current_num_threads() } else { 1 };
         run_parts(&mut jobs, parts, &|j: &mut DriftJob<'_, D>| {
@@ -726,7 +970,14 @@ impl<const D: usize> Core<D> {
                 drift_1d(j.x, j.v, c, h);
             }
             if let Some(k) = kicker {
-                j.kick = k.kick(next, j.b, j.v);
+                if sorted {
+                    j.kick = (now.sums[j.b], k.kick_gathered(j.v, j.ids, zn));
+                    if let Some((z, sum)) = j.ahead.as_mut() {
+                        **sum = k.normals::<D>(next + 1, j.b, z);
+                    }
+                } else {
+                    j.kick = k.kick(next, j.b, j.v);
+                }
             }
         });
         let m = jobs
@@ -775,7 +1026,7 @@ impl<const D: usize> Core<D> {
 
     pub fn mean_velocity(&self) -> [f64; D] {
         let mut m = [0.0; D];
-        for v in &self.v {
+        for v in self.by_id(&self.v).iter() {
             for k in 0..D {
                 m[k] += v[k];
             }
@@ -786,7 +1037,7 @@ impl<const D: usize> Core<D> {
     /// (2.19): (1/N) sum_i |v_i - <v>|^2.
     pub fn temperature(&self) -> f64 {
         let m = self.mean_velocity();
-        self.v
+        self.by_id(&self.v)
             .iter()
             .map(|v| (0..D).map(|k| (v[k] - m[k]).powi(2)).sum::<f64>())
             .sum::<f64>()
@@ -970,7 +1221,7 @@ impl RfmSim {
     pub fn positions(&self) -> Vec<f64> {
         match &self.inner {
             Inner::D1(c) => flatten(&c.x),
-            Inner::D2(c) => flatten(&c.x),
+            Inner::D2(c) => flatten(&c.by_id(&c.x)),
         }
     }
 
@@ -978,7 +1229,7 @@ impl RfmSim {
     pub fn velocities(&self) -> Vec<f64> {
         match &self.inner {
             Inner::D1(c) => flatten(&c.v),
-            Inner::D2(c) => flatten(&c.v),
+            Inner::D2(c) => flatten(&c.by_id(&c.v)),
         }
     }
 
@@ -997,7 +1248,7 @@ impl RfmSim {
         let acc = FreePathAcc::new(cfg, n, dim);
         match &mut self.inner {
             Inner::D1(c) => c.fp = Some(Box::new(FreePaths::new(acc))),
-            Inner::D2(c) => c.fp = Some(Box::new(FreePaths::new(acc))),
+            Inner::D2(c) => c.set_free_paths(Some(Box::new(FreePaths::new(acc)))),
         }
     }
 
@@ -1041,9 +1292,9 @@ impl RfmSim {
             Inner::D2(c) => RfmState {
                 dim: 2,
                 step: c.step,
-                x: flatten(&c.x),
-                v: flatten(&c.v),
-                x_ref: flatten(&c.x_ref),
+                x: flatten(&c.by_id(&c.x)),
+                v: flatten(&c.by_id(&c.v)),
+                x_ref: flatten(&c.by_id(&c.x_ref)),
                 max_disp2: c.max_disp2,
                 rng: c.rng.position(),
                 free_paths: c.fp.as_ref().map(|f| f.acc.clone()),
@@ -1105,11 +1356,11 @@ impl RfmSim {
                 }
                 let mut c =
                     Core::<2>::new(&cfg, unflatten(&st.x_ref), unflatten(&st.v), rng, stream);
-                c.x = unflatten(&st.x);
+                c.set_x_by_id(unflatten(&st.x));
                 c.max_disp2 = st.max_disp2;
                 c.step = st.step;
+                c.set_free_paths(st.free_paths.map(|a| Box::new(FreePaths::new(a))));
                 c.builds = 0;
-                c.fp = st.free_paths.map(|a| Box::new(FreePaths::new(a)));
                 Inner::D2(c)
             }
         };
