@@ -27,6 +27,10 @@ const PAIR_BLOCK: usize = 4096;
 /// Particles per work block of the drift (and of the contact corrections' application): the
 /// version-2 kicks' blocks, so that one pass drifts a block and kicks it for the next step.
 const DRIFT_BLOCK: usize = KICK_BLOCK;
+/// Particles per work block of the drift pass when they are stored by cell (the kicks then
+/// take their normals from a buffer, so the blocks need not be the kick blocks): smaller
+/// blocks share the particles out more evenly between the threads.
+const SORTED_DRIFT_BLOCK: usize = KICK_BLOCK / 2;
 
 /// Run `f` on every job, the jobs cut into `parts` contiguous runs of about equal length,
 /// the first run on the calling thread and the others handed out by `rayon::join`: a step's
@@ -46,7 +50,8 @@ fn run_parts<J: Send>(jobs: &mut [J], parts: usize, f: &(impl Fn(&mut J) + Sync)
     rayon::join(|| run_parts(a, lo, f), || run_parts(b, parts - lo, f));
 }
 
-/// One particle block of the corrections-and-drift pass (block `b` of [`DRIFT_BLOCK`]
+/// One particle block of the corrections-and-drift pass (block `b` of [`DRIFT_BLOCK`] or,
+/// particles stored by cell, [`SORTED_DRIFT_BLOCK`]
 /// particles): its positions, velocities and references (empty in 1D), and what the pass
 /// found (the largest
 /// displacement squared; the kick's sum of z and largest |v|^2).
@@ -443,6 +448,15 @@ impl<const D: usize> Core<D> {
         self.build_from_ref();
     }
 
+    /// Particles per block of the drift pass (and of the halves of the pair pass).
+    fn drift_block_len(&self) -> usize {
+        if self.ids.is_empty() {
+            DRIFT_BLOCK
+        } else {
+            SORTED_DRIFT_BLOCK
+        }
+    }
+
     /// Whether the particles are kept stored by cell: 2D version-2 runs of at least
     /// [`PARALLEL_MIN_PARTICLES`] without free-path tracking (which follows particles by
     /// their storage index).
@@ -641,7 +655,8 @@ impl<const D: usize> Core<D> {
         if self.half_blocks.len() < nb {
             self.half_blocks.resize_with(nb, Vec::new);
         }
-        let npb = self.x.len().div_ceil(DRIFT_BLOCK);
+        let db = self.drift_block_len();
+        let npb = self.x.len().div_ceil(db);
         let (x, v, prop, d, h) = (&self.x, &self.v, &self.prop, self.d, self.h);
         let mut jobs: Vec<_> = pairs
             .chunks(PAIR_BLOCK)
@@ -670,12 +685,12 @@ impl<const D: usize> Core<D> {
                     let g: [f64; D] = std::array::from_fn(|k| v[i][k] - v[j][k]);
                     if let Some(c) = pair_eval(prop, d, i, j, r, g) {
                         let ex: [f64; D] = std::array::from_fn(|k| c.dx[k] - c.dv[k] * h);
-                        halves[i / DRIFT_BLOCK].push(Half {
+                        halves[i / db].push(Half {
                             p: c.i,
                             ex,
                             dv: c.dv,
                         });
-                        halves[j / DRIFT_BLOCK].push(Half {
+                        halves[j / db].push(Half {
                             p: c.j,
                             ex: ex.map(|a| -a),
                             dv: c.dv.map(|a| -a),
@@ -908,8 +923,11 @@ impl<const D: usize> Core<D> {
             &[]
         };
         let kicker: Option<CounterBlocks<'_>> = kick_next.then(|| self.kicks.counter_blocks());
-        let mut rs = self.x_ref.chunks(DRIFT_BLOCK);
-        let mut idb = self.ids.chunks(DRIFT_BLOCK);
+        let db = self.drift_block_len();
+        // Drift blocks per kick block.
+        let per_kick = KICK_BLOCK / db;
+        let mut rs = self.x_ref.chunks(db);
+        let mut idb = self.ids.chunks(db);
         // Particles stored by cell: kick from the normals of step next, and make those of
         // step next + 1 (the buffer of the step just kicked) block by block.
         let (now, ahead) = {
@@ -936,8 +954,8 @@ impl<const D: usize> Core<D> {
         };
         let mut jobs: Vec<DriftJob<'_, D>> = self
             .x
-            .chunks_mut(DRIFT_BLOCK)
-            .zip(self.v.chunks_mut(DRIFT_BLOCK))
+            .chunks_mut(db)
+            .zip(self.v.chunks_mut(db))
             .enumerate()
             .map(|(b, (x, v))| DriftJob {
                 b,
@@ -945,7 +963,12 @@ impl<const D: usize> Core<D> {
                 v,
                 r: if D > 1 { rs.next().unwrap_or(&[]) } else { &[] },
                 ids: idb.next().unwrap_or(&[]),
-                ahead: aheads.as_mut().and_then(|a| a.next()),
+                // The first drift block of each kick block makes that kick block's normals.
+                ahead: if b % per_kick == 0 {
+                    aheads.as_mut().and_then(|a| a.next())
+                } else {
+                    None
+                },
                 m: 0.0,
                 kick: ([0.0; D], 0.0),
             })
@@ -954,7 +977,7 @@ impl<const D: usize> Core<D> {
         let kicker = kicker.as_ref();
         let parts = if par { rayon::current_num_threads() } else { 1 };
         run_parts(&mut jobs, parts, &|j: &mut DriftJob<'_, D>| {
-            let base = j.b * DRIFT_BLOCK;
+            let base = j.b * db;
             for hs in hb {
                 for e in &hs[j.b] {
                     let p = e.p as usize - base;
@@ -971,9 +994,9 @@ impl<const D: usize> Core<D> {
             }
             if let Some(k) = kicker {
                 if sorted {
-                    j.kick = (now.sums[j.b], k.kick_gathered(j.v, j.ids, zn));
+                    j.kick = ([0.0; D], k.kick_gathered(j.v, j.ids, zn));
                     if let Some((z, sum)) = j.ahead.as_mut() {
-                        **sum = k.normals::<D>(next + 1, j.b, z);
+                        **sum = k.normals::<D>(next + 1, j.b / per_kick, z);
                     }
                 } else {
                     j.kick = k.kick(next, j.b, j.v);
@@ -984,6 +1007,15 @@ impl<const D: usize> Core<D> {
             .iter()
             .fold(0.0, |a: f64, j| if j.m > a { j.m } else { a });
         let kicked = match kicker {
+            // The sums of the kick blocks in block order (made with the normals), the
+            // largest |v|^2 of all (the same as the fused kick's blocks give).
+            Some(k) if sorted => {
+                let (c, _) = k.combine(now.sums.iter().map(|s| (*s, 0.0)), n);
+                let m = jobs
+                    .iter()
+                    .fold(0.0, |a: f64, j| if j.kick.1 > a { j.kick.1 } else { a });
+                (c, m)
+            }
             Some(k) => k.combine(jobs.iter().map(|j| j.kick), n),
             None => ([0.0; D], 0.0),
         };
