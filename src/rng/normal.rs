@@ -49,7 +49,18 @@ struct Tables {
     /// gathers are microcoded on AMD Zen; two of them and a 32-bit one per 8 slots cost more
     /// than the eight loads).
     pairs: Pairs,
+    /// The wedge test's squeeze per layer: lines `lo(x) = a + b x` and `hi(x) = c + d x`
+    /// (`[a, b, c, d]`) with `lo(x) < exp(-x^2/2) < hi(x)` on the layer's wedge
+    /// `[x[i + 1], x[i]]` by a margin of `SQUEEZE_MARGIN f[i + 1]` (far above the round-off
+    /// of exp and of the lines), so that `y < lo(x)` accepts and `y >= hi(x)` rejects exactly
+    /// where `y < exp(-x^2/2)` does; between them exp decides. f is convex beyond x = 1
+    /// (tangent below, chord above) and concave before it (chord below, tangent above); the
+    /// layer across x = 1 and the base layer have no squeeze (lines at -inf and +inf).
+    squeeze: [[f64; 4]; LAYERS],
 }
+
+/// The squeeze's margin, relative to the layer's largest density value.
+const SQUEEZE_MARGIN: f64 = 1e-12;
 
 #[repr(C, align(64))]
 struct Pairs([[f64; 2]; LAYERS]);
@@ -121,12 +132,34 @@ impl Tables {
             k as u32
         });
         let pairs = Pairs(std::array::from_fn(|i| [scale[i], inner[i] as f64]));
+        let squeeze = std::array::from_fn(|i| {
+            let none = [f64::NEG_INFINITY, 0.0, f64::INFINITY, 0.0];
+            if i == 0 {
+                return none;
+            }
+            // The wedge [x0, x1] with f(x0) = f0 >= f(x1) = f1.
+            let (x0, x1, f0, f1) = (x[i + 1], x[i], f[i + 1], f[i]);
+            let m = SQUEEZE_MARGIN * f0;
+            let slope = (f1 - f0) / (x1 - x0);
+            // The chord f0 + slope (x - x0), and a tangent at t: f(t) (1 - t (x - t)).
+            let chord = [f0 - slope * x0, slope];
+            let tangent = |t: f64, ft: f64| [ft * (1.0 + t * t), -ft * t];
+            let (lo, hi) = if x0 >= 1.0 {
+                (tangent(x1, f1), chord)
+            } else if x1 <= 1.0 {
+                (chord, tangent(x0, f0))
+            } else {
+                return none;
+            };
+            [lo[0] - m, lo[1], hi[0] + m, hi[1]]
+        });
         Tables {
             scale,
             inner,
             f,
             r,
             pairs,
+            squeeze,
         }
     }
 
@@ -371,11 +404,25 @@ pub fn finish_slow(slot_candidate_bits: u32, more: &mut impl FnMut() -> u64) -> 
             }
         }
         let y = t.f[i] + (t.f[i + 1] - t.f[i]) * unit_f64(more());
-        if y < (-0.5 * x * x).exp() {
+        if wedge_accepts(t, i, x, y) {
             return signed(x, h);
         }
         h = more() as u32;
     }
+}
+
+/// The wedge test of layer `i` (i >= 1) for candidate `x` and height `y`: exactly
+/// `y < exp(-x^2/2)`, deciding by the layer's squeeze lines where they do.
+#[inline(always)]
+fn wedge_accepts(t: &Tables, i: usize, x: f64, y: f64) -> bool {
+    let [a, b, c, d] = t.squeeze[i];
+    if y < a + b * x {
+        return true;
+    }
+    if y >= c + d * x {
+        return false;
+    }
+    y < (-0.5 * x * x).exp()
 }
 
 /// Standard normals for all of `out` from `words` (as [`normal_candidates`]) with the slow
@@ -450,6 +497,54 @@ mod tests {
             assert!(k == 1 << VALUE_BITS || !inside(k), "layer {i}");
         }
         assert_eq!(t.inner[LAYERS - 1], 0);
+    }
+
+    /// The wedge test with its squeeze decides as `y < exp(-x^2/2)` alone, in every layer:
+    /// at random candidates of the wedge with random heights, and with heights within a few
+    /// ulps of exp(-x^2/2) (where only exp can decide), at the wedge's ends too; and the
+    /// squeeze decides most random tests without exp.
+    #[test]
+    fn wedge_squeeze_is_the_exp_test() {
+        let t = Tables::get();
+        let mut rng = RunRng::new(41);
+        let (mut tests, mut squeezed) = (0u64, 0u64);
+        for i in 1..LAYERS {
+            let lo_u = t.inner[i] as u64;
+            let top = 1u64 << VALUE_BITS;
+            for k in 0..4000 {
+                let u = match k {
+                    0 => lo_u,
+                    1 => top - 1,
+                    _ => lo_u + rng.u64() % (top - lo_u),
+                };
+                let x = (u as i32) as f64 * t.scale[i];
+                let g = (-0.5 * x * x).exp();
+                let mut ys = vec![t.f[i] + (t.f[i + 1] - t.f[i]) * unit_f64(rng.u64())];
+                let mut y = g;
+                let mut z = g;
+                for _ in 0..3 {
+                    y = f64::from_bits(y.to_bits() + 1);
+                    z = f64::from_bits(z.to_bits() - 1);
+                    ys.extend([y, z]);
+                }
+                ys.push(g);
+                for (n, &y) in ys.iter().enumerate() {
+                    assert_eq!(
+                        wedge_accepts(t, i, x, y),
+                        y < g,
+                        "layer {i} x {x:e} y {y:e} g {g:e}"
+                    );
+                    if n == 0 {
+                        tests += 1;
+                        let [a, b, c, d] = t.squeeze[i];
+                        squeezed += (y < a + b * x || y >= c + d * x) as u64;
+                    }
+                }
+            }
+        }
+        let share = squeezed as f64 / tests as f64;
+        eprintln!("squeeze decides {share:.4} of random wedge tests");
+        assert!(share > 0.9, "{share}");
     }
 
     /// A slot inside its inner rectangle is its candidate, and `finish_slow` draws nothing.
