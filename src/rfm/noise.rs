@@ -420,26 +420,36 @@ fn block_normals<const D: usize, const AVX2: bool, const INTO_OUT: bool>(
     for vc in out.chunks_mut(CHUNK_SLOTS) {
         fill_counter(key, stream, block, &mut c.words);
         block += (CHUNK_SLOTS / 16) as u64;
-        let mut finish = |z: &mut [f64]| {
-            crate::rng::normal::chunk_candidates::<AVX2>(&c.words, z, &mut masks);
-            for (q, &m) in masks.iter().enumerate() {
-                let mut m = m;
-                while m != 0 {
-                    let j = 64 * q + m.trailing_zeros() as usize;
-                    let half = (c.words[j / 2] >> (32 * (j % 2))) as u32;
-                    z[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
-                    m &= m - 1;
-                }
-            }
-        };
         if INTO_OUT {
             // The normals are the output itself.
-            finish(vc);
+            chunk_normals::<AVX2>(key, &c.words, vc, &mut masks, &mut cont);
             sink(&mut [], vc);
         } else {
             let z = &mut c.z[..vc.len()];
-            finish(z);
+            chunk_normals::<AVX2>(key, &c.words, z, &mut masks, &mut cont);
             sink(vc, z);
+        }
+    }
+}
+
+/// One chunk's normals `z` from its words: the candidates, then the slow slots finished in
+/// slot order from the continuation `cont`.
+#[inline(always)]
+fn chunk_normals<const AVX2: bool>(
+    key: &[u32; 8],
+    words: &[u64; CHUNK_SLOTS / 2],
+    z: &mut [f64],
+    masks: &mut [u64; 4],
+    cont: &mut Continuation,
+) {
+    crate::rng::normal::chunk_candidates::<AVX2>(words, z, masks);
+    for (q, &m) in masks.iter().enumerate() {
+        let mut m = m;
+        while m != 0 {
+            let j = 64 * q + m.trailing_zeros() as usize;
+            let half = (words[j / 2] >> (32 * (j % 2))) as u32;
+            z[j] = crate::rng::normal::finish_slow(half, &mut || cont.next(key));
+            m &= m - 1;
         }
     }
 }
