@@ -70,9 +70,9 @@ struct DriftJob<'a, const D: usize> {
 
 /// One step's version-2 normals for particles stored out of slot order (see
 /// [`Core::noise`]): all slots in slot order and each kick block's sum, for step `step`
-/// (`u64::MAX`: none yet).
+/// (None: none yet).
 struct StepNoise<const D: usize> {
-    step: u64,
+    step: Option<u64>,
     z: Vec<f64>,
     sums: Vec<[f64; D]>,
 }
@@ -80,7 +80,7 @@ struct StepNoise<const D: usize> {
 impl<const D: usize> Default for StepNoise<D> {
     fn default() -> Self {
         StepNoise {
-            step: u64::MAX,
+            step: None,
             z: Vec::new(),
             sums: Vec::new(),
         }
@@ -444,6 +444,10 @@ impl<const D: usize> Core<D> {
         self.max_disp2 = 0.0;
         if self.by_cell() {
             self.sort_by_cell();
+        } else {
+            // Particle order again (a sorted run now on one thread): the list below must be
+            // built in particle order (or by cell at this build), never in an older order.
+            self.restore_order();
         }
         self.build_from_ref();
     }
@@ -483,13 +487,16 @@ impl<const D: usize> Core<D> {
     /// runs in increasing particle number either way, and the cells in the same order); a
     /// pair of two cells may be stored the other way round (i in the lower cell), which
     /// negates r, g and the correction exactly (IEEE negation; round() is symmetric), so
-    /// each particle gets the same halves in the same order. The kicks take each
+    /// each particle gets the same halves in the same order. (One exception, of no
+    /// consequence: a component of r that is exactly 0 is +0 both ways round, so a zero
+    /// component of that pair's correction may come with the other sign, which changes a
+    /// sum only where the position or velocity component it is added to is exactly -0.) The kicks take each
     /// particle's own slot's normal ([`noise`](Self::noise)); sums over particles run in
     /// particle order ([`by_id`](Self::by_id)); maxima do not see the order.
     fn sort_by_cell(&mut self) {
         let n = self.x.len();
         let Some((nc, side)) = cell_grid::<D>(n, self.l, self.d + self.skin) else {
-            self.unsort();
+            self.restore_order();
             return;
         };
         if self.ids.is_empty() {
@@ -535,17 +542,23 @@ impl<const D: usize> Core<D> {
     /// Store particle i at index i again (and rebuild the list in that order: the same
     /// pairs, so not counted as a build).
     fn unsort(&mut self) {
+        if self.restore_order() && D > 1 {
+            self.nl.build(&self.x_ref, self.l, self.d + self.skin);
+        }
+    }
+
+    /// Store particle i at index i again (the list is left to the caller); whether the
+    /// order changed.
+    fn restore_order(&mut self) -> bool {
         if self.ids.is_empty() {
-            return;
+            return false;
         }
         self.x = self.by_id(&self.x).into_owned();
         self.v = self.by_id(&self.v).into_owned();
         self.x_ref = self.by_id(&self.x_ref).into_owned();
         self.ids.clear();
         self.at.clear();
-        if D > 1 {
-            self.nl.build(&self.x_ref, self.l, self.d + self.skin);
-        }
+        true
     }
 
     /// A per-particle array in particle order.
@@ -582,7 +595,7 @@ impl<const D: usize> Core<D> {
     /// are there. The fused pass makes those of two steps on, block by block.
     fn noise(&mut self, step: u64, par: bool) {
         let buf = &mut self.noise[(step % 2) as usize];
-        if buf.step == step {
+        if buf.step == Some(step) {
             return;
         }
         let n = self.x.len();
@@ -599,7 +612,7 @@ impl<const D: usize> Core<D> {
         run_parts(&mut jobs, parts, &|(b, (z, sum))| {
             **sum = k.normals::<D>(step, *b, z)
         });
-        buf.step = step;
+        buf.step = Some(step);
     }
 
     fn build_from_ref(&mut self) {
@@ -943,7 +956,7 @@ impl<const D: usize> Core<D> {
         };
         let mut aheads = if kick_next && sorted {
             let n = self.x.len();
-            ahead.step = next + 1;
+            ahead.step = Some(next + 1);
             ahead.z.resize(n * D, 0.0);
             ahead.sums.resize(n.div_ceil(KICK_BLOCK), [0.0; D]);
             Some(

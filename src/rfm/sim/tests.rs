@@ -768,7 +768,21 @@ fn stored_by_cell_is_the_run_in_particle_order() {
             s.advance(1300);
             s
         });
+        let Inner::D2(c) = &s.inner else {
+            unreachable!()
+        };
+        assert!(!c.ids.is_empty());
+        let builds = c.builds;
         pool(1).install(|| s.advance(1400));
+        let Inner::D2(c) = &s.inner else {
+            unreachable!()
+        };
+        // A build on one thread put the particles back in particle order.
+        assert!(
+            c.builds > builds && c.ids.is_empty(),
+            "{} builds",
+            c.builds - builds
+        );
         pool(2).install(|| s.advance(1300));
         s.state_bytes()
     };
