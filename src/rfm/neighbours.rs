@@ -59,6 +59,8 @@ pub struct NeighbourList<const D: usize> {
     pub pairs: Vec<Pair<D>>,
     head: Vec<u32>,
     next: Vec<u32>,
+    /// [`build_by_cell`](Self::build_by_cell)'s pairs per part of the cells.
+    part_pairs: Vec<Vec<Pair<D>>>,
 }
 
 const NONE: u32 = u32::MAX;
@@ -161,10 +163,183 @@ impl<const D: usize> NeighbourList<D> {
     }
 }
 
+impl<const D: usize> NeighbourList<D> {
+    /// [`build`](Self::build) for positions stored by cell: `x` in the order of the cells of
+    /// `grid` (the [`cell_grid`] of `x.len()`, `l`, `reach`), cell c holding
+    /// `x[starts[c]..starts[c + 1]]`. Each cell's particles are then its chain of `build` in
+    /// order, so the pairs are `build`'s, in its order; the cells are cut into `parts`
+    /// ranges of about equal numbers of particles, whose pairs are found on the current
+    /// rayon pool and joined in cell order (the same list for any `parts`).
+    pub fn build_by_cell(
+        &mut self,
+        x: &[[f64; D]],
+        l: f64,
+        reach: f64,
+        (nc, side): (usize, f64),
+        starts: &[u32],
+        parts: usize,
+    ) {
+        use rayon::prelude::*;
+        let ncells = nc.pow(D as u32);
+        debug_assert_eq!(starts.len(), ncells + 1);
+        debug_assert_eq!(starts[ncells] as usize, x.len());
+        let _ = side;
+        let n = x.len();
+        let parts = parts.clamp(1, ncells);
+        // Cell c0 of each part: the first cell whose start reaches k n / parts.
+        let mut bounds = vec![0usize; parts + 1];
+        bounds[parts] = ncells;
+        for (k, b) in bounds.iter_mut().enumerate().take(parts).skip(1) {
+            let want = (k * n / parts) as u32;
+            *b = starts[..ncells].partition_point(|&s| s < want);
+        }
+        for k in 1..=parts {
+            bounds[k] = bounds[k].max(bounds[k - 1]);
+        }
+        self.part_pairs.resize_with(parts, Vec::new);
+        let r2 = reach * reach;
+        let work = |k: usize, out: &mut Vec<Pair<D>>| {
+            out.clear();
+            for c in bounds[k]..bounds[k + 1] {
+                cell_pairs(x, l, r2, nc, starts, c, out);
+            }
+        };
+        if parts == 1 {
+            work(0, &mut self.part_pairs[0]);
+        } else {
+            self.part_pairs[..parts]
+                .par_iter_mut()
+                .enumerate()
+                .for_each(|(k, out)| work(k, out));
+        }
+        self.pairs.clear();
+        for p in &self.part_pairs[..parts] {
+            self.pairs.extend_from_slice(p);
+        }
+    }
+}
+
+/// The pairs that [`NeighbourList::build`] finds from cell `c` (positions stored by cell,
+/// `starts` as in [`NeighbourList::build_by_cell`]), in its order, appended to `out`.
+fn cell_pairs<const D: usize>(
+    x: &[[f64; D]],
+    l: f64,
+    r2: f64,
+    nc: usize,
+    starts: &[u32],
+    c: usize,
+    out: &mut Vec<Pair<D>>,
+) {
+    let flat = |c: [usize; D]| c.iter().rev().fold(0, |acc, &ck| acc * nc + ck);
+    let push = |i: usize, j: usize, pairs: &mut Vec<Pair<D>>| {
+        let (i, j) = if i < j { (i, j) } else { (j, i) };
+        let mut d2 = 0.0;
+        let mut shift = [0.0; D];
+        for k in 0..D {
+            let dx = x[i][k] - x[j][k];
+            let m = min_image(dx, l);
+            shift[k] = m - dx;
+            d2 += m * m;
+        }
+        if d2 < r2 {
+            pairs.push(Pair {
+                i: i as u32,
+                j: j as u32,
+                shift,
+            });
+        }
+    };
+    let n_off = 3usize.pow(D as u32);
+    let mut cc = [0usize; D];
+    let mut rem = c;
+    for ck in cc.iter_mut() {
+        *ck = rem % nc;
+        rem /= nc;
+    }
+    let (s0, e0) = (starts[c] as usize, starts[c + 1] as usize);
+    for o in 0..n_off {
+        let mut nb = [0usize; D];
+        let mut r = o;
+        for k in 0..D {
+            let off = (r % 3) as isize - 1;
+            r /= 3;
+            nb[k] = ((cc[k] as isize + off).rem_euclid(nc as isize)) as usize;
+        }
+        let c2 = flat(nb);
+        if c2 < c {
+            continue;
+        }
+        if c2 == c {
+            if o != (n_off - 1) / 2 {
+                continue;
+            }
+            for i in s0..e0 {
+                for j in i + 1..e0 {
+                    push(i, j, out);
+                }
+            }
+        } else {
+            let (s2, e2) = (starts[c2] as usize, starts[c2 + 1] as usize);
+            for i in s0..e0 {
+                for j in s2..e2 {
+                    push(i, j, out);
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::rng::RunRng;
+
+    /// For points stored by cell (cell order, index order within a cell), the list built
+    /// by cell ranges on 1, 2 and 3 parts is `build`'s list, pair for pair and bit for bit
+    /// (shifts included), in its order; also with a grid of 3 cells per side (wrapping
+    /// stencils) and points on cell boundaries.
+    #[test]
+    fn build_by_cell_is_build() {
+        let mut rng = RunRng::new(8);
+        for (n, l, reach) in [(3000usize, 1.0, 0.05), (400, 1.0, 0.3), (2000, 0.2, 0.011)] {
+            let mut x: Vec<[f64; 2]> = (0..n)
+                .map(|k| {
+                    if k % 50 == 0 {
+                        // On a cell boundary.
+                        let (nc, side) = cell_grid::<2>(n, l, reach).unwrap();
+                        [(k % nc) as f64 * side, rng.f64() * l]
+                    } else {
+                        [rng.f64() * l, rng.f64() * l]
+                    }
+                })
+                .collect();
+            let (nc, side) = cell_grid::<2>(n, l, reach).unwrap();
+            let mut keyed: Vec<(usize, usize)> =
+                (0..n).map(|i| (cell_index(&x[i], nc, side), i)).collect();
+            keyed.sort();
+            x = keyed.iter().map(|&(_, i)| x[i]).collect();
+            let mut starts = vec![0u32; nc * nc + 1];
+            for &(c, _) in &keyed {
+                starts[c + 1] += 1;
+            }
+            for c in 0..nc * nc {
+                starts[c + 1] += starts[c];
+            }
+            let mut want = NeighbourList::<2>::default();
+            want.build(&x, l, reach);
+            assert!(!want.pairs.is_empty());
+            let bits = |p: &Pair<2>| (p.i, p.j, p.shift.map(f64::to_bits));
+            for parts in [1, 2, 3] {
+                let mut got = NeighbourList::<2>::default();
+                got.build_by_cell(&x, l, reach, (nc, side), &starts, parts);
+                assert_eq!(got.pairs.len(), want.pairs.len(), "n {n} parts {parts}");
+                assert!(
+                    got.pairs.iter().map(bits).eq(want.pairs.iter().map(bits)),
+                    "n {n} parts {parts}"
+                );
+            }
+        }
+    }
 
     /// The cell-built list equals the all-pairs list (as sets) for random points, in 2D with
     /// several grid sizes including the all-pairs fallback.

@@ -370,6 +370,9 @@ pub struct Core<const D: usize> {
     sort_start: Vec<u32>,
     sort_ids: Vec<u32>,
     sort_tmp: Vec<[f64; D]>,
+    /// Stored by cell: the grid of the last sort and where each of its cells starts.
+    cell_grid: Option<(usize, f64)>,
+    cell_starts: Vec<u32>,
 }
 
 impl<const D: usize> Core<D> {
@@ -415,6 +418,8 @@ impl<const D: usize> Core<D> {
             sort_start: Vec::new(),
             sort_ids: Vec::new(),
             sort_tmp: Vec::new(),
+            cell_grid: None,
+            cell_starts: Vec::new(),
         };
         if D > 1 {
             c.rebuild();
@@ -537,6 +542,12 @@ impl<const D: usize> Core<D> {
         for (t, &p) in self.ids.iter().enumerate() {
             self.at[p as usize] = t as u32;
         }
+        // After the placement each cell's counter stands at the next cell's start.
+        self.cell_starts.clear();
+        self.cell_starts.push(0);
+        self.cell_starts
+            .extend_from_slice(&self.sort_start[..ncells]);
+        self.cell_grid = Some((nc, side));
     }
 
     /// Store particle i at index i again (and rebuild the list in that order: the same
@@ -550,6 +561,7 @@ impl<const D: usize> Core<D> {
     /// Store particle i at index i again (the list is left to the caller); whether the
     /// order changed.
     fn restore_order(&mut self) -> bool {
+        self.cell_grid = None;
         if self.ids.is_empty() {
             return false;
         }
@@ -616,7 +628,20 @@ impl<const D: usize> Core<D> {
     }
 
     fn build_from_ref(&mut self) {
-        self.nl.build(&self.x_ref, self.l, self.d + self.skin);
+        let reach = self.d + self.skin;
+        match self.cell_grid {
+            // Stored by cell at this build: the list by cell ranges, on the threads.
+            Some(grid) if !self.ids.is_empty() => {
+                let parts = if self.parallel() {
+                    rayon::current_num_threads()
+                } else {
+                    1
+                };
+                self.nl
+                    .build_by_cell(&self.x_ref, self.l, reach, grid, &self.cell_starts, parts)
+            }
+            _ => self.nl.build(&self.x_ref, self.l, reach),
+        }
         self.builds += 1;
     }
 
