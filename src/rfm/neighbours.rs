@@ -75,22 +75,7 @@ impl<const D: usize> NeighbourList<D> {
         let grid = cell_grid::<D>(n, l, reach);
         let r2 = reach * reach;
         let push = |i: usize, j: usize, pairs: &mut Vec<Pair<D>>| {
-            let (i, j) = if i < j { (i, j) } else { (j, i) };
-            let mut d2 = 0.0;
-            let mut shift = [0.0; D];
-            for k in 0..D {
-                let dx = x[i][k] - x[j][k];
-                let m = min_image(dx, l);
-                shift[k] = m - dx;
-                d2 += m * m;
-            }
-            if d2 < r2 {
-                pairs.push(Pair {
-                    i: i as u32,
-                    j: j as u32,
-                    shift,
-                });
-            }
+            pairs.extend(near_pair(x, l, r2, i, j));
         };
         let Some((nc, side)) = grid else {
             for i in 0..n {
@@ -105,67 +90,36 @@ impl<const D: usize> NeighbourList<D> {
         self.head.resize(ncells, NONE);
         self.next.clear();
         self.next.resize(n, NONE);
-        let flat = |c: [usize; D]| c.iter().rev().fold(0, |acc, &ck| acc * nc + ck);
         // Insert in reverse so each cell's chain runs in increasing particle index.
         for i in (0..n).rev() {
             let c = cell_index(&x[i], nc, side);
             self.next[i] = self.head[c];
             self.head[c] = i as u32;
         }
-        let n_off = 3usize.pow(D as u32);
         for c in 0..ncells {
-            let mut cc = [0usize; D];
-            let mut rem = c;
-            for ck in cc.iter_mut() {
-                *ck = rem % nc;
-                rem /= nc;
-            }
-            for o in 0..n_off {
-                // Offsets in {-1, 0, 1}^D; keep the half stencil: neighbour cell index > c,
-                // plus the cell itself.
-                let mut nb = [0usize; D];
-                let mut r = o;
-                for k in 0..D {
-                    let off = (r % 3) as isize - 1;
-                    r /= 3;
-                    nb[k] = ((cc[k] as isize + off).rem_euclid(nc as isize)) as usize;
-                }
-                let c2 = flat(nb);
-                if c2 < c {
-                    continue;
-                }
-                if c2 == c {
-                    if o != (n_off - 1) / 2 {
-                        continue; // only the zero offset maps a cell onto itself (nc >= 3)
+            half_stencil::<D>(c, nc, |c2| {
+                let mut i = self.head[c];
+                while i != NONE {
+                    // The cell itself: each pair once (j after i in the chain).
+                    let mut j = if c2 == c {
+                        self.next[i as usize]
+                    } else {
+                        self.head[c2]
+                    };
+                    while j != NONE {
+                        push(i as usize, j as usize, &mut self.pairs);
+                        j = self.next[j as usize];
                     }
-                    let mut i = self.head[c];
-                    while i != NONE {
-                        let mut j = self.next[i as usize];
-                        while j != NONE {
-                            push(i as usize, j as usize, &mut self.pairs);
-                            j = self.next[j as usize];
-                        }
-                        i = self.next[i as usize];
-                    }
-                } else {
-                    let mut i = self.head[c];
-                    while i != NONE {
-                        let mut j = self.head[c2];
-                        while j != NONE {
-                            push(i as usize, j as usize, &mut self.pairs);
-                            j = self.next[j as usize];
-                        }
-                        i = self.next[i as usize];
-                    }
+                    i = self.next[i as usize];
                 }
-            }
+            });
         }
     }
 }
 
 impl<const D: usize> NeighbourList<D> {
     /// [`build`](Self::build) for positions stored by cell: `x` in the order of the cells of
-    /// `grid` (the [`cell_grid`] of `x.len()`, `l`, `reach`), cell c holding
+    /// the [`cell_grid`] of `x.len()`, `l`, `reach` (`nc` cells per side), cell c holding
     /// `x[starts[c]..starts[c + 1]]`. Each cell's particles are then its chain of `build` in
     /// order, so the pairs are `build`'s, in its order; the cells are cut into `parts`
     /// ranges of about equal numbers of particles, whose pairs are found on the current
@@ -175,7 +129,7 @@ impl<const D: usize> NeighbourList<D> {
         x: &[[f64; D]],
         l: f64,
         reach: f64,
-        (nc, side): (usize, f64),
+        nc: usize,
         starts: &[u32],
         parts: usize,
     ) {
@@ -183,7 +137,6 @@ impl<const D: usize> NeighbourList<D> {
         let ncells = nc.pow(D as u32);
         debug_assert_eq!(starts.len(), ncells + 1);
         debug_assert_eq!(starts[ncells] as usize, x.len());
-        let _ = side;
         let n = x.len();
         let parts = parts.clamp(1, ncells);
         // Cell c0 of each part: the first cell whose start reaches k n / parts.
@@ -230,25 +183,51 @@ fn cell_pairs<const D: usize>(
     c: usize,
     out: &mut Vec<Pair<D>>,
 ) {
-    let flat = |c: [usize; D]| c.iter().rev().fold(0, |acc, &ck| acc * nc + ck);
-    let push = |i: usize, j: usize, pairs: &mut Vec<Pair<D>>| {
-        let (i, j) = if i < j { (i, j) } else { (j, i) };
-        let mut d2 = 0.0;
-        let mut shift = [0.0; D];
-        for k in 0..D {
-            let dx = x[i][k] - x[j][k];
-            let m = min_image(dx, l);
-            shift[k] = m - dx;
-            d2 += m * m;
+    let (s0, e0) = (starts[c] as usize, starts[c + 1] as usize);
+    half_stencil::<D>(c, nc, |c2| {
+        let e2 = starts[c2 + 1] as usize;
+        for i in s0..e0 {
+            // The cell itself: each pair once (j after i).
+            let s2 = if c2 == c { i + 1 } else { starts[c2] as usize };
+            for j in s2..e2 {
+                out.extend(near_pair(x, l, r2, i, j));
+            }
         }
-        if d2 < r2 {
-            pairs.push(Pair {
-                i: i as u32,
-                j: j as u32,
-                shift,
-            });
-        }
-    };
+    });
+}
+
+/// The pair (i, j), ordered by index, with its image shift, if closer than sqrt(`r2`) under
+/// the minimum image.
+#[inline(always)]
+fn near_pair<const D: usize>(
+    x: &[[f64; D]],
+    l: f64,
+    r2: f64,
+    i: usize,
+    j: usize,
+) -> Option<Pair<D>> {
+    let (i, j) = if i < j { (i, j) } else { (j, i) };
+    let mut d2 = 0.0;
+    let mut shift = [0.0; D];
+    for k in 0..D {
+        let dx = x[i][k] - x[j][k];
+        let m = min_image(dx, l);
+        shift[k] = m - dx;
+        d2 += m * m;
+    }
+    (d2 < r2).then_some(Pair {
+        i: i as u32,
+        j: j as u32,
+        shift,
+    })
+}
+
+/// The half stencil of cell `c` in a periodic grid of `nc >= 3` cells per side: `f` gets,
+/// in the order of the offsets in {-1, 0, 1}^D (first component fastest), every neighbour
+/// cell with an index above c, and c itself at the zero offset (the only offset that maps
+/// a cell onto itself when nc >= 3).
+#[inline(always)]
+fn half_stencil<const D: usize>(c: usize, nc: usize, mut f: impl FnMut(usize)) {
     let n_off = 3usize.pow(D as u32);
     let mut cc = [0usize; D];
     let mut rem = c;
@@ -256,7 +235,6 @@ fn cell_pairs<const D: usize>(
         *ck = rem % nc;
         rem /= nc;
     }
-    let (s0, e0) = (starts[c] as usize, starts[c + 1] as usize);
     for o in 0..n_off {
         let mut nb = [0usize; D];
         let mut r = o;
@@ -265,26 +243,9 @@ fn cell_pairs<const D: usize>(
             r /= 3;
             nb[k] = ((cc[k] as isize + off).rem_euclid(nc as isize)) as usize;
         }
-        let c2 = flat(nb);
-        if c2 < c {
-            continue;
-        }
-        if c2 == c {
-            if o != (n_off - 1) / 2 {
-                continue;
-            }
-            for i in s0..e0 {
-                for j in i + 1..e0 {
-                    push(i, j, out);
-                }
-            }
-        } else {
-            let (s2, e2) = (starts[c2] as usize, starts[c2 + 1] as usize);
-            for i in s0..e0 {
-                for j in s2..e2 {
-                    push(i, j, out);
-                }
-            }
+        let c2 = nb.iter().rev().fold(0, |acc, &ck| acc * nc + ck);
+        if c2 > c || (c2 == c && o == (n_off - 1) / 2) {
+            f(c2);
         }
     }
 }
@@ -331,7 +292,7 @@ mod tests {
             let bits = |p: &Pair<2>| (p.i, p.j, p.shift.map(f64::to_bits));
             for parts in [1, 2, 3] {
                 let mut got = NeighbourList::<2>::default();
-                got.build_by_cell(&x, l, reach, (nc, side), &starts, parts);
+                got.build_by_cell(&x, l, reach, nc, &starts, parts);
                 assert_eq!(got.pairs.len(), want.pairs.len(), "n {n} parts {parts}");
                 assert!(
                     got.pairs.iter().map(bits).eq(want.pairs.iter().map(bits)),

@@ -631,14 +631,14 @@ impl<const D: usize> Core<D> {
         let reach = self.d + self.skin;
         match self.cell_grid {
             // Stored by cell at this build: the list by cell ranges, on the threads.
-            Some(grid) if !self.ids.is_empty() => {
+            Some((nc, _)) if !self.ids.is_empty() => {
                 let parts = if self.parallel() {
                     rayon::current_num_threads()
                 } else {
                     1
                 };
                 self.nl
-                    .build_by_cell(&self.x_ref, self.l, reach, grid, &self.cell_starts, parts)
+                    .build_by_cell(&self.x_ref, self.l, reach, nc, &self.cell_starts, parts)
             }
             _ => self.nl.build(&self.x_ref, self.l, reach),
         }
