@@ -21,9 +21,25 @@ use crate::rng::{RngPosition, RunRng, StreamVersion};
 
 /// Runs with fewer particles step on the calling thread alone (no rayon call at all).
 pub const PARALLEL_MIN_PARTICLES: usize = 4096;
-/// Pairs per work block of the 2D pair pass (fixed: the corrections are applied in pair order
-/// whatever the thread count).
+/// Pairs per work block of the 2D pair pass, at most. The list is cut into a multiple of the
+/// pool's thread count of blocks of equal length (to one pair; see [`pair_blocks`]), so
+/// that each thread gets as many pairs (cut into 4096-pair blocks, 9 blocks over 2 threads
+/// gave one thread 25 % more pairs and the other a wait in every step). The cut changes no
+/// result: the corrections are applied in pair order whatever the blocks.
 const PAIR_BLOCK: usize = 4096;
+
+/// The 2D pair pass's blocks of a list of `pairs` pairs on `threads` threads: the least
+/// multiple of `threads` of blocks of at most [`PAIR_BLOCK`] pairs, block k the pairs
+/// [k pairs / nb, (k + 1) pairs / nb). Returns nb.
+fn pair_blocks(pairs: usize, threads: usize) -> usize {
+    let t = threads.max(1);
+    t * pairs.div_ceil(t * PAIR_BLOCK).max(1)
+}
+
+/// Pair block `k` of `nb` of a list of `pairs` pairs (see [`pair_blocks`]).
+fn pair_block(pairs: usize, nb: usize, k: usize) -> std::ops::Range<usize> {
+    k * pairs / nb..(k + 1) * pairs / nb
+}
 /// Particles per work block of the drift (and of the contact corrections' application): the
 /// version-2 kicks' blocks, so that one pass drifts a block and kicks it for the next step.
 const DRIFT_BLOCK: usize = KICK_BLOCK;
@@ -343,8 +359,12 @@ pub struct Core<const D: usize> {
     nl: NeighbourList<D>,
     /// This step's pair corrections, in pair order (one step on one thread).
     corr: Vec<Corr<D>>,
-    /// This step's pair corrections per work block of [`PAIR_BLOCK`] pairs (several threads).
+    /// This step's pair corrections per work block of pairs (several threads; see
+    /// [`pair_blocks`]).
     corr_blocks: Vec<Vec<Corr<D>>>,
+    /// The pair blocks of this step's parallel pair pass (the first `pair_nb` of
+    /// `corr_blocks` and `half_blocks`).
+    pair_nb: usize,
     /// The same corrections as halves, per pair block and per particle block of
     /// [`DRIFT_BLOCK`] particles, each list in pair order (several threads): the particle
     /// blocks apply them in parallel, each particle its own halves in pair order.
@@ -406,6 +426,7 @@ impl<const D: usize> Core<D> {
             nl: NeighbourList::default(),
             corr: Vec::new(),
             corr_blocks: Vec::new(),
+            pair_nb: 0,
             half_blocks: Vec::new(),
             cand: Vec::new(),
             builds: 0,
@@ -681,7 +702,7 @@ impl<const D: usize> Core<D> {
         self.x.len() >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1
     }
 
-    /// The 2D pair pass on the current rayon pool: each work block of [`PAIR_BLOCK`] pairs
+    /// The 2D pair pass on the current rayon pool: each work block of pairs ([`pair_blocks`])
     /// collects its corrections in pair order; free-path tracking then sees them in pair
     /// order (before any is applied, as in the one-thread pass).
     fn pair_pass_parallel(&mut self, vmax: f64) {
@@ -689,7 +710,9 @@ impl<const D: usize> Core<D> {
         let cut = self.d + 2.5 * vmax * self.h;
         let cut2 = cut * cut;
         let pairs = &self.nl.pairs;
-        let nb = pairs.len().div_ceil(PAIR_BLOCK);
+        let np = pairs.len();
+        let nb = pair_blocks(np, rayon::current_num_threads());
+        self.pair_nb = nb;
         if self.corr_blocks.len() < nb {
             self.corr_blocks.resize_with(nb, Vec::new);
         }
@@ -699,8 +722,8 @@ impl<const D: usize> Core<D> {
         let db = self.drift_block_len();
         let npb = self.x.len().div_ceil(db);
         let (x, v, prop, d, h) = (&self.x, &self.v, &self.prop, self.d, self.h);
-        let mut jobs: Vec<_> = pairs
-            .chunks(PAIR_BLOCK)
+        let mut jobs: Vec<_> = (0..nb)
+            .map(|k| &pairs[pair_block(np, nb, k)])
             .zip(self.corr_blocks[..nb].iter_mut())
             .zip(self.half_blocks[..nb].iter_mut())
             .collect();
@@ -957,9 +980,8 @@ impl<const D: usize> Core<D> {
         if kick_next && sorted {
             self.noise(next, par);
         }
-        let npairb = self.nl.pairs.len().div_ceil(PAIR_BLOCK);
         let hb: &[Vec<Vec<Half<D>>>] = if halves {
-            &self.half_blocks[..npairb]
+            &self.half_blocks[..self.pair_nb]
         } else {
             &[]
         };

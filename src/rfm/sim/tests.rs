@@ -799,3 +799,35 @@ fn stored_by_cell_is_the_run_in_particle_order() {
         assert_eq!(got.3.to_bits(), want.3.to_bits());
     }
 }
+
+/// The parallel pair pass's blocks cover the list once, in order, in a multiple of the
+/// thread count of blocks of at most PAIR_BLOCK pairs whose lengths differ by at most one
+/// (so that each thread of the pool gets as many pairs, to one block's rounding).
+#[test]
+fn pair_blocks_share_the_pairs_evenly() {
+    for pairs in [0, 1, 5, 4095, 4096, 4097, 36_865, 38_000, 100_003] {
+        for threads in [1, 2, 3, 4, 7] {
+            let nb = pair_blocks(pairs, threads);
+            assert_eq!(nb % threads, 0, "{pairs} pairs, {threads} threads: nb {nb}");
+            let mut next = 0;
+            let (mut lo, mut hi) = (usize::MAX, 0);
+            for k in 0..nb {
+                let r = pair_block(pairs, nb, k);
+                assert_eq!(r.start, next, "{pairs} pairs, {threads} threads: block {k}");
+                assert!(r.len() <= PAIR_BLOCK);
+                lo = lo.min(r.len());
+                hi = hi.max(r.len());
+                next = r.end;
+            }
+            assert_eq!(
+                next, pairs,
+                "{pairs} pairs, {threads} threads: not all covered"
+            );
+            assert!(hi - lo <= 1, "{pairs} pairs, {threads} threads: {lo}..{hi}");
+            // The least such multiple: one block set fewer would exceed PAIR_BLOCK.
+            if nb > threads {
+                assert!(pairs.div_ceil(nb - threads) > PAIR_BLOCK);
+            }
+        }
+    }
+}
