@@ -55,6 +55,7 @@ pub mod observe;
 pub mod params;
 pub mod sim;
 pub mod structure;
+mod team;
 
 pub use params::{InitialLayout, RfmConfig};
 pub use sim::{RfmSim, RfmState};

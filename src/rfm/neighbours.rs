@@ -123,7 +123,7 @@ impl<const D: usize> NeighbourList<D> {
     /// `x[starts[c]..starts[c + 1]]`. Each cell's particles are then its chain of `build` in
     /// order, so the pairs are `build`'s, in its order; the cells are cut into `parts`
     /// ranges of about equal numbers of particles, whose pairs are found on the current
-    /// rayon pool and joined in cell order (the same list for any `parts`).
+    /// rayon pool or team and joined in cell order (the same list for any `parts`).
     pub fn build_by_cell(
         &mut self,
         x: &[[f64; D]],
@@ -133,7 +133,6 @@ impl<const D: usize> NeighbourList<D> {
         starts: &[u32],
         parts: usize,
     ) {
-        use rayon::prelude::*;
         let ncells = nc.pow(D as u32);
         debug_assert_eq!(starts.len(), ncells + 1);
         debug_assert_eq!(starts[ncells] as usize, x.len());
@@ -157,14 +156,8 @@ impl<const D: usize> NeighbourList<D> {
                 cell_pairs(x, l, r2, nc, starts, c, out);
             }
         };
-        if parts == 1 {
-            work(0, &mut self.part_pairs[0]);
-        } else {
-            self.part_pairs[..parts]
-                .par_iter_mut()
-                .enumerate()
-                .for_each(|(k, out)| work(k, out));
-        }
+        let mut jobs: Vec<_> = self.part_pairs[..parts].iter_mut().enumerate().collect();
+        super::team::run_parts(&mut jobs, parts, &|(k, out)| work(*k, out));
         self.pairs.clear();
         for p in &self.part_pairs[..parts] {
             self.pairs.extend_from_slice(p);

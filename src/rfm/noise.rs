@@ -579,28 +579,24 @@ impl Kicks {
     /// thread count). The sum of the
     /// normals (for the symmetrisation) is taken per work block of [`KICK_BLOCK`] particles
     /// and combined in block order: a function of N, never of the thread count. With
-    /// `parallel`, the blocks run on the current rayon pool (same result).
+    /// `parallel`, the blocks run on the current rayon pool or team (same result).
     pub fn kick_counter<const D: usize>(
         &mut self,
         step: u64,
         v: &mut [[f64; D]],
         parallel: bool,
     ) -> ([f64; D], f64) {
-        use rayon::prelude::*;
         let n = v.len();
         let nb = n.div_ceil(KICK_BLOCK);
         let k = self.counter_blocks();
         let mut res = vec![([0.0; D], 0.0); nb];
-        if parallel {
-            v.par_chunks_mut(KICK_BLOCK)
-                .zip(res.par_iter_mut())
-                .enumerate()
-                .for_each(|(b, (vb, r))| *r = k.kick(step, b, vb));
-        } else {
-            for (b, (vb, r)) in v.chunks_mut(KICK_BLOCK).zip(res.iter_mut()).enumerate() {
-                *r = k.kick(step, b, vb);
-            }
-        }
+        let mut jobs: Vec<_> = v
+            .chunks_mut(KICK_BLOCK)
+            .zip(res.iter_mut())
+            .enumerate()
+            .collect();
+        let parts = if parallel { super::team::threads() } else { 1 };
+        super::team::run_parts(&mut jobs, parts, &|(b, (vb, r))| **r = k.kick(step, *b, vb));
         k.combine(res.into_iter(), n)
     }
 

@@ -15,6 +15,7 @@ use super::integrate::PairPropagator;
 use super::neighbours::{cell_grid, cell_index, wrap, NeighbourList};
 use super::noise::{CounterBlocks, Kicks, KICK_BLOCK};
 use super::params::{InitialLayout, RfmConfig};
+use super::team::{self, run_parts};
 use crate::physics::SimError;
 use crate::rng::stream::WordStream;
 use crate::rng::{RngPosition, RunRng, StreamVersion};
@@ -47,24 +48,6 @@ const DRIFT_BLOCK: usize = KICK_BLOCK;
 /// take their normals from a buffer, so the blocks need not be the kick blocks): smaller
 /// blocks share the particles out more evenly between the threads.
 const SORTED_DRIFT_BLOCK: usize = KICK_BLOCK / 2;
-
-/// Run `f` on every job, the jobs cut into `parts` contiguous runs of about equal length,
-/// the first run on the calling thread and the others handed out by `rayon::join`: a step's
-/// passes give each thread the same range of blocks step after step (its particles and pairs
-/// stay in its core's cache; rayon's adaptive splitting handed them to a different thread in
-/// each pass). Which thread runs a job never changes its result.
-fn run_parts<J: Send>(jobs: &mut [J], parts: usize, f: &(impl Fn(&mut J) + Sync)) {
-    if parts <= 1 || jobs.len() <= 1 {
-        for j in jobs.iter_mut() {
-            f(j);
-        }
-        return;
-    }
-    let lo = parts / 2;
-    let mid = jobs.len() * lo / parts;
-    let (a, b) = jobs.split_at_mut(mid);
-    rayon::join(|| run_parts(a, lo, f), || run_parts(b, parts - lo, f));
-}
 
 /// One particle block of the corrections-and-drift pass (block `b` of [`DRIFT_BLOCK`] or,
 /// particles stored by cell, [`SORTED_DRIFT_BLOCK`]
@@ -498,7 +481,7 @@ impl<const D: usize> Core<D> {
             && self.fp.is_none()
             && !self.keep_order
             && self.x.len() >= PARALLEL_MIN_PARTICLES
-            && rayon::current_num_threads() > 1
+            && team::threads() > 1
     }
 
     /// Store the particles in the order of their cells in the neighbour list's grid (at a
@@ -641,7 +624,7 @@ impl<const D: usize> Core<D> {
             .zip(buf.sums.iter_mut())
             .enumerate()
             .collect();
-        let parts = if par { rayon::current_num_threads() } else { 1 };
+        let parts = if par { team::threads() } else { 1 };
         run_parts(&mut jobs, parts, &|(b, (z, sum))| {
             **sum = k.normals::<D>(step, *b, z)
         });
@@ -653,11 +636,7 @@ impl<const D: usize> Core<D> {
         match self.cell_grid {
             // Stored by cell at this build: the list by cell ranges, on the threads.
             Some((nc, _)) if !self.ids.is_empty() => {
-                let parts = if self.parallel() {
-                    rayon::current_num_threads()
-                } else {
-                    1
-                };
+                let parts = if self.parallel() { team::threads() } else { 1 };
                 self.nl
                     .build_by_cell(&self.x_ref, self.l, reach, nc, &self.cell_starts, parts)
             }
@@ -699,7 +678,7 @@ impl<const D: usize> Core<D> {
     /// Whether this step runs on the current rayon pool: N of at least
     /// [`PARALLEL_MIN_PARTICLES`] and a pool of several threads. Both ways give the same bits.
     fn parallel(&self) -> bool {
-        self.x.len() >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1
+        self.x.len() >= PARALLEL_MIN_PARTICLES && team::threads() > 1
     }
 
     /// The 2D pair pass on the current rayon pool: each work block of pairs ([`pair_blocks`])
@@ -711,7 +690,7 @@ impl<const D: usize> Core<D> {
         let cut2 = cut * cut;
         let pairs = &self.nl.pairs;
         let np = pairs.len();
-        let nb = pair_blocks(np, rayon::current_num_threads());
+        let nb = pair_blocks(np, team::threads());
         self.pair_nb = nb;
         if self.corr_blocks.len() < nb {
             self.corr_blocks.resize_with(nb, Vec::new);
@@ -727,43 +706,39 @@ impl<const D: usize> Core<D> {
             .zip(self.corr_blocks[..nb].iter_mut())
             .zip(self.half_blocks[..nb].iter_mut())
             .collect();
-        run_parts(
-            &mut jobs,
-            rayon::current_num_threads(),
-            &|((ps, out), halves): &mut (
-                (&[super::neighbours::Pair<D>], &mut Vec<Corr<D>>),
-                &mut Vec<Vec<Half<D>>>,
-            )| {
-                out.clear();
-                halves.resize_with(npb, Vec::new);
-                for hb in halves.iter_mut() {
-                    hb.clear();
+        run_parts(&mut jobs, team::threads(), &|((ps, out), halves): &mut (
+            (&[super::neighbours::Pair<D>], &mut Vec<Corr<D>>),
+            &mut Vec<Vec<Half<D>>>,
+        )| {
+            out.clear();
+            halves.resize_with(npb, Vec::new);
+            for hb in halves.iter_mut() {
+                hb.clear();
+            }
+            for p in ps.iter() {
+                let (i, j) = (p.i as usize, p.j as usize);
+                let r: [f64; D] = std::array::from_fn(|k| x[i][k] - x[j][k] + p.shift[k]);
+                let rho2: f64 = r.iter().map(|a| a * a).sum();
+                if rho2 >= cut2 {
+                    continue;
                 }
-                for p in ps.iter() {
-                    let (i, j) = (p.i as usize, p.j as usize);
-                    let r: [f64; D] = std::array::from_fn(|k| x[i][k] - x[j][k] + p.shift[k]);
-                    let rho2: f64 = r.iter().map(|a| a * a).sum();
-                    if rho2 >= cut2 {
-                        continue;
-                    }
-                    let g: [f64; D] = std::array::from_fn(|k| v[i][k] - v[j][k]);
-                    if let Some(c) = pair_eval(prop, d, i, j, r, g) {
-                        let ex: [f64; D] = std::array::from_fn(|k| c.dx[k] - c.dv[k] * h);
-                        halves[i / db].push(Half {
-                            p: c.i,
-                            ex,
-                            dv: c.dv,
-                        });
-                        halves[j / db].push(Half {
-                            p: c.j,
-                            ex: ex.map(|a| -a),
-                            dv: c.dv.map(|a| -a),
-                        });
-                        out.push(c);
-                    }
+                let g: [f64; D] = std::array::from_fn(|k| v[i][k] - v[j][k]);
+                if let Some(c) = pair_eval(prop, d, i, j, r, g) {
+                    let ex: [f64; D] = std::array::from_fn(|k| c.dx[k] - c.dv[k] * h);
+                    halves[i / db].push(Half {
+                        p: c.i,
+                        ex,
+                        dv: c.dv,
+                    });
+                    halves[j / db].push(Half {
+                        p: c.j,
+                        ex: ex.map(|a| -a),
+                        dv: c.dv.map(|a| -a),
+                    });
+                    out.push(c);
                 }
-            },
-        );
+            }
+        });
         for b in self.corr_blocks[nb..].iter_mut() {
             b.clear();
         }
@@ -865,7 +840,7 @@ impl<const D: usize> Core<D> {
                     .zip(ids.chunks(KICK_BLOCK))
                     .map(|(v, i)| (v, i, 0.0))
                     .collect();
-                let parts = if par { rayon::current_num_threads() } else { 1 };
+                let parts = if par { team::threads() } else { 1 };
                 run_parts(&mut jobs, parts, &|(v, i, m)| {
                     *m = k.kick_gathered(v, i, &buf.z)
                 });
@@ -1038,7 +1013,7 @@ impl<const D: usize> Core<D> {
             .collect();
         let zn = &now.z;
         let kicker = kicker.as_ref();
-        let parts = if par { rayon::current_num_threads() } else { 1 };
+        let parts = if par { team::threads() } else { 1 };
         run_parts(&mut jobs, parts, &|j: &mut DriftJob<'_, D>| {
             let base = j.b * db;
             for hs in hb {
@@ -1104,19 +1079,22 @@ impl<const D: usize> Core<D> {
         if steps == 0 {
             return;
         }
-        let fuse = self.fusable();
-        let mut kicked = self.kick_now(self.parallel());
-        for s in 0..steps {
-            let more = s + 1 < steps;
-            let next = self.finish_step(kicked, fuse && more);
-            if more {
-                kicked = if fuse {
-                    next
-                } else {
-                    self.kick_now(self.parallel())
-                };
+        // The steps' passes run on a team of the pool's threads (same bits).
+        team::with_team(self.parallel(), || {
+            let fuse = self.fusable();
+            let mut kicked = self.kick_now(self.parallel());
+            for s in 0..steps {
+                let more = s + 1 < steps;
+                let next = self.finish_step(kicked, fuse && more);
+                if more {
+                    kicked = if fuse {
+                        next
+                    } else {
+                        self.kick_now(self.parallel())
+                    };
+                }
             }
-        }
+        })
     }
 
     pub fn mean_velocity(&self) -> [f64; D] {
@@ -1509,7 +1487,7 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, SimE
         }
         InitialLayout::Uniform => {
             // Random sequential addition (the rule and how it runs: `super::layout`).
-            let par = n >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1;
+            let par = n >= PARALLEL_MIN_PARTICLES && team::threads() > 1;
             x = super::layout::uniform(n, l, sp, rng, par)?;
         }
     }
