@@ -18,16 +18,51 @@ pub struct Pair<const D: usize> {
     pub shift: [f64; D],
 }
 
-/// `dx` mapped to its minimum image in a periodic interval of length `l`.
+/// `dx` mapped to its minimum image in a periodic interval of length `l`:
+/// dx - l round(dx / l), bit for bit.
 #[inline]
 pub fn min_image(dx: f64, l: f64) -> f64 {
-    dx - l * (dx / l).round()
+    dx - l * round_near(dx / l)
+}
+
+/// `q.round()` (halves away from zero, the sign of a zero result kept), without the libm
+/// call for |q| < 1.5 (every difference of two wrapped positions); `tests::fast_rounding`.
+#[inline(always)]
+fn round_near(q: f64) -> f64 {
+    if q >= 0.5 {
+        if q < 1.5 {
+            1.0
+        } else {
+            q.round()
+        }
+    } else if q <= -0.5 {
+        if q > -1.5 {
+            -1.0
+        } else {
+            q.round()
+        }
+    } else if q.is_nan() {
+        q
+    } else {
+        0.0f64.copysign(q)
+    }
+}
+
+/// `q.floor()`, without the libm call for q in [0, 1) (every wrapped position);
+/// `tests::fast_rounding`.
+#[inline(always)]
+fn floor_near(q: f64) -> f64 {
+    if (0.0..1.0).contains(&q) {
+        0.0f64.copysign(q)
+    } else {
+        q.floor()
+    }
 }
 
 /// Wrap into [0, l).
 #[inline]
 pub fn wrap(x: f64, l: f64) -> f64 {
-    let y = x - l * (x / l).floor();
+    let y = x - l * floor_near(x / l);
     if y >= l {
         0.0
     } else {
@@ -97,6 +132,9 @@ impl<const D: usize> NeighbourList<D> {
             self.head[c] = i as u32;
         }
         for c in 0..ncells {
+            if self.head[c] == NONE {
+                continue;
+            }
             half_stencil::<D>(c, nc, |c2| {
                 let mut i = self.head[c];
                 while i != NONE {
@@ -177,6 +215,9 @@ fn cell_pairs<const D: usize>(
     out: &mut Vec<Pair<D>>,
 ) {
     let (s0, e0) = (starts[c] as usize, starts[c + 1] as usize);
+    if s0 == e0 {
+        return;
+    }
     half_stencil::<D>(c, nc, |c2| {
         let e2 = starts[c2 + 1] as usize;
         for i in s0..e0 {
@@ -232,9 +273,16 @@ fn half_stencil<const D: usize>(c: usize, nc: usize, mut f: impl FnMut(usize)) {
         let mut nb = [0usize; D];
         let mut r = o;
         for k in 0..D {
-            let off = (r % 3) as isize - 1;
+            // cc[k] + off wrapped into [0, nc) (off in {-1, 0, 1}, nc >= 3): no division.
+            let off = r % 3;
             r /= 3;
-            nb[k] = ((cc[k] as isize + off).rem_euclid(nc as isize)) as usize;
+            nb[k] = match off {
+                0 if cc[k] == 0 => nc - 1,
+                0 => cc[k] - 1,
+                1 => cc[k],
+                _ if cc[k] + 1 == nc => 0,
+                _ => cc[k] + 1,
+            };
         }
         let c2 = nb.iter().rev().fold(0, |acc, &ck| acc * nc + ck);
         if c2 > c || (c2 == c && o == (n_off - 1) / 2) {
@@ -247,6 +295,79 @@ fn half_stencil<const D: usize>(c: usize, nc: usize, mut f: impl FnMut(usize)) {
 mod tests {
     use super::*;
     use crate::rng::RunRng;
+
+    /// `round_near` and `floor_near` are `round` and `floor` bit for bit (signs of zero
+    /// and NaN included): at the branch edges (+-0.5, +-1.5, 0, 1 and their neighbouring
+    /// doubles), at special values, and at 10^6 draws spread over (-3, 3) and over the
+    /// differences of wrapped positions. A wrong edge (e.g. `q > 0.5`) or a lost zero sign
+    /// fails here.
+    #[test]
+    fn fast_rounding() {
+        let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+        let up = |x: f64| {
+            f64::from_bits(if x >= 0.0 {
+                x.to_bits() + 1
+            } else {
+                x.to_bits() - 1
+            })
+        };
+        let down = |x: f64| {
+            if x == 0.0 {
+                -f64::from_bits(1)
+            } else {
+                f64::from_bits(if x > 0.0 {
+                    x.to_bits() - 1
+                } else {
+                    x.to_bits() + 1
+                })
+            }
+        };
+        let mut qs = vec![
+            0.0,
+            -0.0,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MIN_POSITIVE,
+            -f64::MIN_POSITIVE,
+            f64::from_bits(1),
+            -f64::from_bits(1),
+            1e300,
+            -1e300,
+        ];
+        for e in [0.5, 1.5, 1.0, 2.5, -0.5, -1.5, -1.0, -2.5] {
+            qs.extend([e, up(e), down(e), up(up(e)), down(down(e))]);
+        }
+        let mut rng = RunRng::new(11);
+        for _ in 0..1_000_000 {
+            qs.push(6.0 * rng.f64() - 3.0);
+            let (a, b) = (rng.f64(), rng.f64());
+            qs.push((a - b) / 1.0);
+        }
+        for &q in &qs {
+            assert!(
+                same(round_near(q), q.round()),
+                "round {q:e}: {}",
+                round_near(q)
+            );
+            assert!(
+                same(floor_near(q), q.floor()),
+                "floor {q:e}: {}",
+                floor_near(q)
+            );
+        }
+        // min_image and wrap as their formulas with the libm calls.
+        for w in qs.chunks_exact(2) {
+            let (dx, l) = (w[0], 3.7);
+            assert!(
+                same(min_image(dx, l), dx - l * (dx / l).round()),
+                "min_image {dx:e}"
+            );
+            let y = w[1] - l * (w[1] / l).floor();
+            let want = if y >= l { 0.0 } else { y };
+            assert!(same(wrap(w[1], l), want), "wrap {:e}", w[1]);
+        }
+    }
 
     /// For points stored by cell (cell order, index order within a cell), the list built
     /// by cell ranges on 1, 2 and 3 parts is `build`'s list, pair for pair and bit for bit
