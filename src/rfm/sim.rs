@@ -1079,8 +1079,10 @@ impl<const D: usize> Core<D> {
         if steps == 0 {
             return;
         }
-        // The steps' passes run on a team of the pool's threads (same bits).
-        team::with_team(self.parallel(), || {
+        // The steps' passes run on a team of the pool's threads (same bits), when there
+        // are parallel passes: 2D, or 1D with the version-2 kicks.
+        let passes = D > 1 || (self.kicks.active() && self.stream != StreamVersion::V1);
+        team::with_team(self.parallel() && passes, || {
             let fuse = self.fusable();
             let mut kicked = self.kick_now(self.parallel());
             for s in 0..steps {
