@@ -595,7 +595,11 @@ impl Kicks {
             .zip(res.iter_mut())
             .enumerate()
             .collect();
-        let parts = if parallel { super::team::threads() } else { 1 };
+        let parts = if parallel {
+            rayon::current_num_threads()
+        } else {
+            1
+        };
         super::team::run_parts(&mut jobs, parts, &|(b, (vb, r))| **r = k.kick(step, *b, vb));
         k.combine(res.into_iter(), n)
     }

@@ -481,7 +481,7 @@ impl<const D: usize> Core<D> {
             && self.fp.is_none()
             && !self.keep_order
             && self.x.len() >= PARALLEL_MIN_PARTICLES
-            && team::threads() > 1
+            && rayon::current_num_threads() > 1
     }
 
     /// Store the particles in the order of their cells in the neighbour list's grid (at a
@@ -624,7 +624,7 @@ impl<const D: usize> Core<D> {
             .zip(buf.sums.iter_mut())
             .enumerate()
             .collect();
-        let parts = if par { team::threads() } else { 1 };
+        let parts = if par { rayon::current_num_threads() } else { 1 };
         run_parts(&mut jobs, parts, &|(b, (z, sum))| {
             **sum = k.normals::<D>(step, *b, z)
         });
@@ -636,7 +636,11 @@ impl<const D: usize> Core<D> {
         match self.cell_grid {
             // Stored by cell at this build: the list by cell ranges, on the threads.
             Some((nc, _)) if !self.ids.is_empty() => {
-                let parts = if self.parallel() { team::threads() } else { 1 };
+                let parts = if self.parallel() {
+                    rayon::current_num_threads()
+                } else {
+                    1
+                };
                 self.nl
                     .build_by_cell(&self.x_ref, self.l, reach, nc, &self.cell_starts, parts)
             }
@@ -678,7 +682,7 @@ impl<const D: usize> Core<D> {
     /// Whether this step runs on the current rayon pool: N of at least
     /// [`PARALLEL_MIN_PARTICLES`] and a pool of several threads. Both ways give the same bits.
     fn parallel(&self) -> bool {
-        self.x.len() >= PARALLEL_MIN_PARTICLES && team::threads() > 1
+        self.x.len() >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1
     }
 
     /// The 2D pair pass on the current rayon pool: each work block of pairs ([`pair_blocks`])
@@ -690,7 +694,7 @@ impl<const D: usize> Core<D> {
         let cut2 = cut * cut;
         let pairs = &self.nl.pairs;
         let np = pairs.len();
-        let nb = pair_blocks(np, team::threads());
+        let nb = pair_blocks(np, rayon::current_num_threads());
         self.pair_nb = nb;
         if self.corr_blocks.len() < nb {
             self.corr_blocks.resize_with(nb, Vec::new);
@@ -706,39 +710,43 @@ impl<const D: usize> Core<D> {
             .zip(self.corr_blocks[..nb].iter_mut())
             .zip(self.half_blocks[..nb].iter_mut())
             .collect();
-        run_parts(&mut jobs, team::threads(), &|((ps, out), halves): &mut (
-            (&[super::neighbours::Pair<D>], &mut Vec<Corr<D>>),
-            &mut Vec<Vec<Half<D>>>,
-        )| {
-            out.clear();
-            halves.resize_with(npb, Vec::new);
-            for hb in halves.iter_mut() {
-                hb.clear();
-            }
-            for p in ps.iter() {
-                let (i, j) = (p.i as usize, p.j as usize);
-                let r: [f64; D] = std::array::from_fn(|k| x[i][k] - x[j][k] + p.shift[k]);
-                let rho2: f64 = r.iter().map(|a| a * a).sum();
-                if rho2 >= cut2 {
-                    continue;
+        run_parts(
+            &mut jobs,
+            rayon::current_num_threads(),
+            &|((ps, out), halves): &mut (
+                (&[super::neighbours::Pair<D>], &mut Vec<Corr<D>>),
+                &mut Vec<Vec<Half<D>>>,
+            )| {
+                out.clear();
+                halves.resize_with(npb, Vec::new);
+                for hb in halves.iter_mut() {
+                    hb.clear();
                 }
-                let g: [f64; D] = std::array::from_fn(|k| v[i][k] - v[j][k]);
-                if let Some(c) = pair_eval(prop, d, i, j, r, g) {
-                    let ex: [f64; D] = std::array::from_fn(|k| c.dx[k] - c.dv[k] * h);
-                    halves[i / db].push(Half {
-                        p: c.i,
-                        ex,
-                        dv: c.dv,
-                    });
-                    halves[j / db].push(Half {
-                        p: c.j,
-                        ex: ex.map(|a| -a),
-                        dv: c.dv.map(|a| -a),
-                    });
-                    out.push(c);
+                for p in ps.iter() {
+                    let (i, j) = (p.i as usize, p.j as usize);
+                    let r: [f64; D] = std::array::from_fn(|k| x[i][k] - x[j][k] + p.shift[k]);
+                    let rho2: f64 = r.iter().map(|a| a * a).sum();
+                    if rho2 >= cut2 {
+                        continue;
+                    }
+                    let g: [f64; D] = std::array::from_fn(|k| v[i][k] - v[j][k]);
+                    if let Some(c) = pair_eval(prop, d, i, j, r, g) {
+                        let ex: [f64; D] = std::array::from_fn(|k| c.dx[k] - c.dv[k] * h);
+                        halves[i / db].push(Half {
+                            p: c.i,
+                            ex,
+                            dv: c.dv,
+                        });
+                        halves[j / db].push(Half {
+                            p: c.j,
+                            ex: ex.map(|a| -a),
+                            dv: c.dv.map(|a| -a),
+                        });
+                        out.push(c);
+                    }
                 }
-            }
-        });
+            },
+        );
         for b in self.corr_blocks[nb..].iter_mut() {
             b.clear();
         }
@@ -840,7 +848,7 @@ impl<const D: usize> Core<D> {
                     .zip(ids.chunks(KICK_BLOCK))
                     .map(|(v, i)| (v, i, 0.0))
                     .collect();
-                let parts = if par { team::threads() } else { 1 };
+                let parts = if par { rayon::current_num_threads() } else { 1 };
                 run_parts(&mut jobs, parts, &|(v, i, m)| {
                     *m = k.kick_gathered(v, i, &buf.z)
                 });
@@ -1013,7 +1021,7 @@ impl<const D: usize> Core<D> {
             .collect();
         let zn = &now.z;
         let kicker = kicker.as_ref();
-        let parts = if par { team::threads() } else { 1 };
+        let parts = if par { rayon::current_num_threads() } else { 1 };
         run_parts(&mut jobs, parts, &|j: &mut DriftJob<'_, D>| {
             let base = j.b * db;
             for hs in hb {
@@ -1489,7 +1497,7 @@ fn initial_positions(cfg: &RfmConfig, rng: &mut RunRng) -> Result<Vec<f64>, SimE
         }
         InitialLayout::Uniform => {
             // Random sequential addition (the rule and how it runs: `super::layout`).
-            let par = n >= PARALLEL_MIN_PARTICLES && team::threads() > 1;
+            let par = n >= PARALLEL_MIN_PARTICLES && rayon::current_num_threads() > 1;
             x = super::layout::uniform(n, l, sp, rng, par)?;
         }
     }

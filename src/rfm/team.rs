@@ -70,16 +70,16 @@ fn wait_until(mut ready: impl FnMut() -> bool) {
 thread_local! {
     /// The team this thread drives (null: none).
     static TEAM: Cell<*const Shared> = const { Cell::new(std::ptr::null()) };
-    /// Whether this thread is running a team's part (a `run_parts` inside a part runs
+    /// Whether this thread is running a team's unit (a `run_parts` inside a unit runs
     /// serially: a nested pass would overwrite the pass in flight).
     static IN_PART: Cell<bool> = const { Cell::new(false) };
-    /// The next pass number of the team this thread drives (never 0, the number of a new
-    /// team's word; it runs on across teams, which changes nothing).
+    /// The next pass number of the team this thread drives (never 0, the pass number of a
+    /// new team; it runs on across teams, which changes nothing).
     static DRIVING: Cell<u32> = const { Cell::new(1) };
 }
 
-/// An atomic on a cache line of its own (the helpers spin on `word`; `done` is written by
-/// every part).
+/// An atomic on a cache line of its own (the helpers spin on `pass`; `done` is written by
+/// every unit).
 #[repr(align(128))]
 struct Padded<T>(T);
 
@@ -248,20 +248,6 @@ pub(super) fn with_team<R>(par: bool, body: impl FnOnce() -> R) -> R {
     })
 }
 
-/// The threads a pass is cut for: the team's size when this thread drives one, else the
-/// current pool's.
-pub(super) fn threads() -> usize {
-    TEAM.with(|t| {
-        let p = t.get();
-        if p.is_null() {
-            rayon::current_num_threads()
-        } else {
-            // Valid: set only for the extent of the team's session on this thread.
-            unsafe { (*p).size }
-        }
-    })
-}
-
 /// Run `f` on every job: on this thread's team when it drives one (the jobs cut into one
 /// contiguous part per member, run k on member k, the ends of slower parts taken by the
 /// threads done with theirs), else cut into `parts` contiguous runs of about equal length,
@@ -271,14 +257,8 @@ pub(super) fn threads() -> usize {
 /// pairs stay in its core's cache; rayon's adaptive splitting handed them to a different
 /// thread in each pass). Which thread runs a job never changes its result.
 pub(super) fn run_parts<J: Send>(jobs: &mut [J], parts: usize, f: &(impl Fn(&mut J) + Sync)) {
-    if parts <= 1 || jobs.len() <= 1 {
-        for j in jobs.iter_mut() {
-            f(j);
-        }
-        return;
-    }
-    if IN_PART.with(|f| f.get()) {
-        // Inside a team's part: serially (on this thread, as its part).
+    // Inside a team's unit too: serially (on this thread, as its unit).
+    if parts <= 1 || jobs.len() <= 1 || IN_PART.with(|f| f.get()) {
         for j in jobs.iter_mut() {
             f(j);
         }
@@ -336,10 +316,16 @@ mod tests {
         let mut jobs: Vec<(u64, [u64; 2])> = vec![(0, [0; 2]); 37];
         for pass in 0..2000usize {
             let len = 1 + pass % 37;
-            run_parts(&mut jobs[..len], threads(), &|j: &mut (u64, [u64; 2])| {
-                j.0 += 1;
-                run_parts(&mut j.1, threads(), &|x: &mut u64| *x += 5);
-            });
+            run_parts(
+                &mut jobs[..len],
+                rayon::current_num_threads(),
+                &|j: &mut (u64, [u64; 2])| {
+                    j.0 += 1;
+                    run_parts(&mut j.1, rayon::current_num_threads(), &|x: &mut u64| {
+                        *x += 5
+                    });
+                },
+            );
         }
         let want: Vec<u64> = (0..37)
             .map(|i| (0..2000).filter(|p| i < 1 + p % 37).count() as u64)
@@ -360,7 +346,8 @@ mod tests {
                 for par in [false, true] {
                     DRIVING.with(|d| d.set(u32::MAX - 1000));
                     with_team(par, || {
-                        assert_eq!(threads(), k);
+                        // A team exactly when asked for on a pool of several threads.
+                        assert_eq!(TEAM.with(|t| !t.get().is_null()), par && k > 1);
                         passes();
                     });
                 }
@@ -390,7 +377,7 @@ mod tests {
             with_team(true, || {
                 let mut jobs = vec![0u8; 3];
                 for _ in 0..2000 {
-                    run_parts(&mut jobs, threads(), &|_: &mut u8| {
+                    run_parts(&mut jobs, rayon::current_num_threads(), &|_: &mut u8| {
                         if rayon::current_thread_index() != me {
                             others.fetch_add(1, Ordering::Relaxed);
                         }
@@ -414,17 +401,17 @@ mod tests {
             let me = rayon::current_thread_index();
             let mut jobs: Vec<(usize, Option<usize>, u32)> = (0..8).map(|i| (i, None, 0)).collect();
             with_team(true, || {
-                run_parts(&mut jobs, threads(), &|j: &mut (
-                    usize,
-                    Option<usize>,
-                    u32,
-                )| {
-                    if j.0 == 0 {
-                        std::thread::sleep(std::time::Duration::from_millis(30));
-                    }
-                    j.1 = rayon::current_thread_index();
-                    j.2 += 1;
-                });
+                run_parts(
+                    &mut jobs,
+                    rayon::current_num_threads(),
+                    &|j: &mut (usize, Option<usize>, u32)| {
+                        if j.0 == 0 {
+                            std::thread::sleep(std::time::Duration::from_millis(30));
+                        }
+                        j.1 = rayon::current_thread_index();
+                        j.2 += 1;
+                    },
+                );
             });
             assert!(jobs.iter().all(|j| j.2 == 1), "{jobs:?}");
             assert_eq!(jobs[0].1, me, "the driver's first unit");
@@ -444,7 +431,7 @@ mod tests {
                 let r = catch_unwind(AssertUnwindSafe(|| {
                     with_team(true, || {
                         let mut jobs: Vec<usize> = (0..3).collect();
-                        run_parts(&mut jobs, threads(), &|j: &mut usize| {
+                        run_parts(&mut jobs, rayon::current_num_threads(), &|j: &mut usize| {
                             if *j == 2 {
                                 panic!("part of job 2");
                             }
@@ -462,7 +449,9 @@ mod tests {
             let mut jobs = vec![0u32; 3];
             with_team(true, || {
                 for _ in 0..100 {
-                    run_parts(&mut jobs, threads(), &|j: &mut u32| *j += 1);
+                    run_parts(&mut jobs, rayon::current_num_threads(), &|j: &mut u32| {
+                        *j += 1
+                    });
                 }
             });
             assert_eq!(jobs, vec![100; 3]);
