@@ -506,13 +506,9 @@ const GATHER_AHEAD: usize = 16;
 /// order of the particles changes.
 fn kick_gathered<const D: usize>(v: &mut [[f64; D]], ids: &[u32], z: &[f64], sigma: f64) -> f64 {
     #[cfg(target_arch = "x86_64")]
-    if D == 2
-        && v.len() == ids.len()
-        && (ids.iter().fold(0, |a, &b| a.max(b)) as usize) < z.len() / 2
-        && std::arch::is_x86_feature_detected!("avx2")
-    {
-        // SAFETY: AVX2 is available (checked just above); v and ids have equal lengths and
-        // every id's two normals are inside z.
+    if D == 2 && v.len() == ids.len() && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is available (checked just above); v and ids have equal lengths (the
+        // ids are checked against z in the loop).
         return unsafe { kick_gathered2_avx2(v.as_flattened_mut(), ids, z, sigma) };
     }
     kick_gathered_portable(v, ids, z, sigma)
@@ -550,8 +546,9 @@ fn kick_gathered_portable<const D: usize>(
     m
 }
 
-/// [`kick_gathered`] in 2D with AVX2 (`v` flat x, y pairs; `ids.len()` particles, every id's
-/// two normals inside `z`): four particles per round in two registers, the same IEEE
+/// [`kick_gathered`] in 2D with AVX2 (`v` flat x, y pairs; `ids.len()` particles; an id whose
+/// two normals are not inside `z` panics, as the portable loop's index does, before any
+/// velocity of its round is written): four particles per round in two registers, the same IEEE
 /// operations per component as the portable loop (sigma z as a product, then v + it, never
 /// fused; |v|^2 = vx^2 + vy^2, one rounded sum as 0 + vx^2 + vy^2 gives), so the same
 /// velocities bit for bit. The maxima: per lane `max_pd(a2, m)`, which is `if a2 > m { m = a2 }`
@@ -564,7 +561,9 @@ unsafe fn kick_gathered2_avx2(v: &mut [f64], ids: &[u32], z: &[f64], sigma: f64)
     let n = ids.len();
     assert!(v.len() == 2 * n);
     let (vp, zp) = (v.as_mut_ptr(), z.as_ptr());
-    // The two normals of particle `id` (checked inside z by the caller).
+    // Slots with both normals inside z.
+    let slots = z.len() / 2;
+    // The two normals of particle `id` (checked below: id < slots).
     let zz = |id: u32| _mm_loadu_pd(zp.add(2 * id as usize));
     let s = _mm256_set1_pd(sigma);
     let (mut m0, mut m1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
@@ -578,8 +577,18 @@ unsafe fn kick_gathered2_avx2(v: &mut [f64], ids: &[u32], z: &[f64], sigma: f64)
                 );
             }
         }
-        let z0 = _mm256_set_m128d(zz(*ids.get_unchecked(i + 1)), zz(*ids.get_unchecked(i)));
-        let z1 = _mm256_set_m128d(zz(*ids.get_unchecked(i + 3)), zz(*ids.get_unchecked(i + 2)));
+        let q = [
+            *ids.get_unchecked(i),
+            *ids.get_unchecked(i + 1),
+            *ids.get_unchecked(i + 2),
+            *ids.get_unchecked(i + 3),
+        ];
+        assert!(
+            (q[0].max(q[1]).max(q[2]).max(q[3]) as usize) < slots,
+            "kick_gathered: a particle id past the normals"
+        );
+        let z0 = _mm256_set_m128d(zz(q[1]), zz(q[0]));
+        let z1 = _mm256_set_m128d(zz(q[3]), zz(q[2]));
         let v0 = _mm256_add_pd(_mm256_loadu_pd(vp.add(2 * i)), _mm256_mul_pd(s, z0));
         let v1 = _mm256_add_pd(_mm256_loadu_pd(vp.add(2 * i + 4)), _mm256_mul_pd(s, z1));
         _mm256_storeu_pd(vp.add(2 * i), v0);
@@ -998,6 +1007,17 @@ mod tests {
             }
             assert!(checked > 300, "{checked} cases");
         }
+    }
+
+    /// An id past the normals panics (the AVX2 path checks each round's ids before it
+    /// reads their normals, as the portable loop's index does).
+    #[test]
+    #[should_panic]
+    fn gathered_kick_refuses_an_id_past_the_normals() {
+        let mut v = vec![[0.0f64; 2]; 8];
+        let ids = [0u32, 1, 2, 3, 4, 5, 8, 6];
+        let z = vec![1.0; 16];
+        kick_gathered(&mut v, &ids, &z, 1.0);
     }
 
     #[test]
