@@ -728,6 +728,13 @@ pub(super) struct CounterBlocks<'a> {
     sigma: f64,
 }
 
+impl CounterBlocks<'_> {
+    /// Standard deviation of one component of a kick.
+    pub(super) fn sigma(&self) -> f64 {
+        self.sigma
+    }
+}
+
 impl Kicks {
     /// The work blocks of [`Kicks::kick_counter`], for a caller that runs them itself (and
     /// for `kick_counter`, so both combine the blocks the same way).

@@ -301,6 +301,159 @@ unsafe fn drift2_avx2(
         .fold(0.0, |a: f64, &b| if b > a { b } else { a })
 }
 
+/// [`drift_block`] (from 0) and then the gathered kick of the same particles
+/// (`CounterBlocks::kick_gathered`: particle i takes the normals of slot `ids[i]` of `z`), in
+/// one pass: (the largest displacement squared, the largest |v|^2 after the kick), the bits of
+/// the two calls one after the other.
+#[allow(clippy::too_many_arguments)]
+fn drift_kick_block<const D: usize>(
+    x: &mut [[f64; D]],
+    v: &mut [[f64; D]],
+    r: &[[f64; D]],
+    c: [f64; D],
+    h: f64,
+    ids: &[u32],
+    z: &[f64],
+    k: &CounterBlocks<'_>,
+) -> (f64, f64) {
+    #[cfg(target_arch = "x86_64")]
+    if D == 2
+        && x.len() == v.len()
+        && x.len() == r.len()
+        && x.len() == ids.len()
+        && std::arch::is_x86_feature_detected!("avx2")
+    {
+        let c: &[f64] = &c;
+        // SAFETY: AVX2 is available (checked just above); the four slices have equal lengths
+        // (the ids are checked against z in the loop).
+        return unsafe {
+            drift_kick2_avx2(
+                x.as_flattened_mut(),
+                v.as_flattened_mut(),
+                r.as_flattened(),
+                [c[0], c[1]],
+                h,
+                ids,
+                z,
+                k.sigma(),
+            )
+        };
+    }
+    let m = drift_block(x, v, r, c, h, 0.0);
+    (m, k.kick_gathered(v, ids, z))
+}
+
+/// [`drift_kick_block`] in 2D with AVX2: four particles a round, each drifted as
+/// [`drift2_avx2`] drifts it and then kicked as the AVX2 gathered kick kicks it (v + sigma z, a
+/// product and a sum, never fused; |v|^2 as vx^2 + vy^2), so the same bits; both maxima per
+/// lane with `max_pd` from 0 and folded as those two fold them. An id whose normals are not
+/// inside `z` panics before its round writes anything.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn drift_kick2_avx2(
+    x: &mut [f64],
+    v: &mut [f64],
+    r: &[f64],
+    c: [f64; 2],
+    h: f64,
+    ids: &[u32],
+    z: &[f64],
+    sigma: f64,
+) -> (f64, f64) {
+    use std::arch::x86_64::*;
+    /// Particles ahead whose normals are prefetched.
+    const AHEAD: usize = 16;
+    let len = x.len();
+    let n = ids.len();
+    assert!(v.len() == len && r.len() == len && len == 2 * n);
+    let (xp, vp, rp, zp) = (x.as_mut_ptr(), v.as_mut_ptr(), r.as_ptr(), z.as_ptr());
+    let slots = z.len() / 2;
+    let zz = |id: u32| _mm_loadu_pd(zp.add(2 * id as usize));
+    let cv = _mm256_setr_pd(c[0], c[1], c[0], c[1]);
+    let hv = _mm256_set1_pd(h);
+    let s = _mm256_set1_pd(sigma);
+    let mut m = _mm256_setzero_pd();
+    let mut mk = _mm256_setzero_pd();
+    let mut i = 0;
+    while i + 4 <= n {
+        if i + AHEAD + 4 <= n {
+            for q in 0..4 {
+                _mm_prefetch::<_MM_HINT_T0>(
+                    zp.wrapping_add(2 * *ids.get_unchecked(i + AHEAD + q) as usize) as *const i8,
+                );
+            }
+        }
+        let q = [
+            *ids.get_unchecked(i),
+            *ids.get_unchecked(i + 1),
+            *ids.get_unchecked(i + 2),
+            *ids.get_unchecked(i + 3),
+        ];
+        assert!(
+            (q[0].max(q[1]).max(q[2]).max(q[3]) as usize) < slots,
+            "drift_kick_block: a particle id past the normals"
+        );
+        let k = 2 * i;
+        // The drift (drift2_avx2's operations).
+        let v0 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k)), cv);
+        let v1 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k + 4)), cv);
+        let x0 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k)), _mm256_mul_pd(v0, hv));
+        let x1 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k + 4)), _mm256_mul_pd(v1, hv));
+        _mm256_storeu_pd(xp.add(k), x0);
+        _mm256_storeu_pd(xp.add(k + 4), x1);
+        let d0 = _mm256_sub_pd(x0, _mm256_loadu_pd(rp.add(k)));
+        let d1 = _mm256_sub_pd(x1, _mm256_loadu_pd(rp.add(k + 4)));
+        m = _mm256_max_pd(
+            _mm256_hadd_pd(_mm256_mul_pd(d0, d0), _mm256_mul_pd(d1, d1)),
+            m,
+        );
+        // The kick (the gathered kick's operations) of the drifted velocities.
+        let z0 = _mm256_set_m128d(zz(q[1]), zz(q[0]));
+        let z1 = _mm256_set_m128d(zz(q[3]), zz(q[2]));
+        let w0 = _mm256_add_pd(v0, _mm256_mul_pd(s, z0));
+        let w1 = _mm256_add_pd(v1, _mm256_mul_pd(s, z1));
+        _mm256_storeu_pd(vp.add(k), w0);
+        _mm256_storeu_pd(vp.add(k + 4), w1);
+        mk = _mm256_max_pd(
+            _mm256_hadd_pd(_mm256_mul_pd(w0, w0), _mm256_mul_pd(w1, w1)),
+            mk,
+        );
+        i += 4;
+    }
+    let mut lanes = [0.0f64; 4];
+    let mut kl = [0.0f64; 4];
+    _mm256_storeu_pd(lanes.as_mut_ptr(), m);
+    _mm256_storeu_pd(kl.as_mut_ptr(), mk);
+    // The rest, one particle at a time into lane 0 (as the two portable loops).
+    while i < n {
+        let k = 2 * i;
+        let mut d2 = 0.0;
+        for q in 0..2 {
+            let vk = v[k + q] - c[q];
+            v[k + q] = vk;
+            x[k + q] += vk * h;
+            let dd = x[k + q] - r[k + q];
+            d2 += dd * dd;
+        }
+        if d2 > lanes[0] {
+            lanes[0] = d2;
+        }
+        let id = ids[i] as usize;
+        let mut a2 = 0.0;
+        for q in 0..2 {
+            v[k + q] += sigma * z[2 * id + q];
+            a2 += v[k + q] * v[k + q];
+        }
+        if a2 > kl[0] {
+            kl[0] = a2;
+        }
+        i += 1;
+    }
+    let fold = |l: &[f64; 4]| l.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a });
+    (fold(&lanes), fold(&kl))
+}
+
 /// Skin of the 2D neighbour list, in diameters.
 pub const SKIN_DIAMETERS: f64 = 0.25;
 
@@ -1033,14 +1186,21 @@ impl<const D: usize> Core<D> {
                     }
                 }
             }
-            if D > 1 {
-                j.m = drift_block(j.x, j.v, j.r, c, h, 0.0);
-            } else {
-                drift_1d(j.x, j.v, c, h);
+            match kicker {
+                // Stored by cell: the drift and the gathered kick in one pass.
+                Some(k) if sorted && D > 1 => {
+                    let (m, mk) = drift_kick_block(j.x, j.v, j.r, c, h, j.ids, zn, k);
+                    j.m = m;
+                    j.kick = ([0.0; D], mk);
+                }
+                _ if D > 1 => j.m = drift_block(j.x, j.v, j.r, c, h, 0.0),
+                _ => drift_1d(j.x, j.v, c, h),
             }
             if let Some(k) = kicker {
                 if sorted {
-                    j.kick = ([0.0; D], k.kick_gathered(j.v, j.ids, zn));
+                    if D == 1 {
+                        j.kick = ([0.0; D], k.kick_gathered(j.v, j.ids, zn));
+                    }
                     if let Some((z, sum)) = j.ahead.as_mut() {
                         **sum = k.normals::<D>(next + 1, j.b / per_kick, z);
                     }

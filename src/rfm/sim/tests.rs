@@ -712,6 +712,64 @@ fn avx2_drift_is_the_portable_drift() {
     }
 }
 
+/// The drift and the gathered kick in one pass (`drift_kick_block`, AVX2 where the CPU has
+/// it) are the portable drift and the gathered kick one after the other, bit for bit:
+/// positions, velocities and both maxima, for block lengths with every remainder past a
+/// multiple of four, ids a permutation or repeated, a NaN position and a NaN normal (a NaN
+/// velocity compares as NaN: its payload is the compiler's operand order, not the physics).
+#[test]
+fn drift_and_kick_in_one_pass_are_the_two_passes() {
+    let kicks = crate::rfm::noise::Kicks::new(2.5e-7, 1.3, 1e-3);
+    let k = kicks.counter_blocks();
+    let mut rng = crate::rng::RunRng::new(78);
+    let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+    let mut cases = 0;
+    for n in (0..=9).chain([64, 1024, 1027]) {
+        for case in 0..4 {
+            let slots = n + 3;
+            let mut x: Vec<[f64; 2]> = (0..n).map(|_| [rng.f64() * 3.0, rng.f64() * 3.0]).collect();
+            let mut v: Vec<[f64; 2]> = (0..n).map(|_| [rng.f64() - 0.5, rng.f64() - 0.5]).collect();
+            let r: Vec<[f64; 2]> = x
+                .iter()
+                .map(|p| [p[0] + rng.f64() * 0.1, p[1] - rng.f64() * 0.1])
+                .collect();
+            let mut z: Vec<f64> = (0..2 * slots).map(|_| 3.0 * (rng.f64() - 0.5)).collect();
+            let ids: Vec<u32> = if case % 2 == 0 {
+                let mut p: Vec<u32> = (0..slots as u32).collect();
+                for i in (1..p.len()).rev() {
+                    p.swap(i, (rng.f64() * (i + 1) as f64) as usize);
+                }
+                p.truncate(n);
+                p
+            } else {
+                (0..n).map(|_| (rng.f64() * slots as f64) as u32).collect()
+            };
+            if case == 2 && n > 5 {
+                x[5][1] = f64::NAN;
+            }
+            if case == 3 && n > 2 {
+                z[2 * ids[2] as usize] = f64::NAN;
+            }
+            let c = [rng.f64() * 1e-3, -rng.f64() * 1e-3];
+            let h = 1e-3 * (1.0 + rng.f64());
+            let (mut xa, mut va) = (x.clone(), v.clone());
+            let (ma, ka) = super::drift_kick_block(&mut xa, &mut va, &r, c, h, &ids, &z, &k);
+            let mb = super::drift_portable(&mut x, &mut v, &r, c, h, 0.0);
+            let kb = k.kick_gathered(&mut v, &ids, &z);
+            assert!(same(ma, mb), "n {n} case {case}: drift max {ma} vs {mb}");
+            assert!(same(ka, kb), "n {n} case {case}: kick max {ka} vs {kb}");
+            for i in 0..n {
+                for q in 0..2 {
+                    assert!(same(xa[i][q], x[i][q]), "n {n} case {case} x[{i}][{q}]");
+                    assert!(same(va[i][q], v[i][q]), "n {n} case {case} v[{i}][{q}]");
+                }
+            }
+            cases += 1;
+        }
+    }
+    assert_eq!(cases, 52);
+}
+
 /// A 2D version-2 run above the parallel threshold keeps its particles stored by cell
 /// (`Core::sort_by_cell`, re-sorted at every list build) and is the same run bit for bit as
 /// the run kept in particle order: checkpoint bytes, positions, velocities and temperature
