@@ -955,7 +955,7 @@ mod tests {
                 f64::MIN_POSITIVE / 3.0,
                 1e300,
             ];
-            let mut draw = |rng: &mut rand_chacha::ChaCha8Rng| -> f64 {
+            let draw = |rng: &mut rand_chacha::ChaCha8Rng| -> f64 {
                 if rng.random_bool(0.05) {
                     special[rng.random_range(0..special.len())]
                 } else {
@@ -981,9 +981,6 @@ mod tests {
                             .map(|_| rng.random_range(0..slots.max(1) as u32))
                             .collect()
                     };
-                    if slots == 0 && n > 0 {
-                        continue;
-                    }
                     let v0: Vec<[f64; 2]> =
                         (0..n).map(|_| [draw(&mut rng), draw(&mut rng)]).collect();
                     let sigma = if round == 3 {
@@ -1009,6 +1006,13 @@ mod tests {
                     let mut via = v0.clone();
                     let mv = kick_gathered(&mut via, &ids, &z, sigma);
                     assert_eq!(mv.to_bits(), mw.to_bits());
+                    assert!(
+                        via.iter()
+                            .flatten()
+                            .zip(want.iter().flatten())
+                            .all(|(a, b)| a.to_bits() == b.to_bits() || a.is_nan() && b.is_nan()),
+                        "n {n} round {round}: velocities through kick_gathered"
+                    );
                     checked += 1;
                 }
             }
@@ -1016,15 +1020,28 @@ mod tests {
         }
     }
 
-    /// An id past the normals panics (the AVX2 path checks each round's ids before it
-    /// reads their normals, as the portable loop's index does).
+    /// An id past the normals panics, as the portable loop's index does; the AVX2 path
+    /// checks each round's four ids before it reads their normals or writes a velocity of
+    /// the round (the first round kicked, the second untouched).
     #[test]
-    #[should_panic]
     fn gathered_kick_refuses_an_id_past_the_normals() {
-        let mut v = vec![[0.0f64; 2]; 8];
         let ids = [0u32, 1, 2, 3, 4, 5, 8, 6];
         let z = vec![1.0; 16];
-        kick_gathered(&mut v, &ids, &z, 1.0);
+        let mut v = vec![[0.0f64; 2]; 8];
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            kick_gathered(&mut v, &ids, &z, 1.0)
+        }));
+        assert!(r.is_err(), "an id past the normals must panic");
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let msg = r.unwrap_err();
+            let msg = (msg.downcast_ref::<&str>().map(|m| m.to_string()))
+                .or_else(|| msg.downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            assert!(msg.contains("past the normals"), "{msg:?}");
+            assert!(v[..4].iter().all(|p| *p == [1.0, 1.0]), "{v:?}");
+            assert!(v[4..].iter().all(|p| *p == [0.0, 0.0]), "{v:?}");
+        }
     }
 
     #[test]

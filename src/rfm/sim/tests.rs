@@ -770,6 +770,36 @@ fn drift_and_kick_in_one_pass_are_the_two_passes() {
     assert_eq!(cases, 52);
 }
 
+/// The drift-and-kick pass refuses an id past the normals (a panic, as the two passes' kick
+/// index does); with AVX2 it checks each round's ids before the round's drift or kick writes
+/// anything: the first round drifted and kicked, the second untouched.
+#[test]
+fn drift_and_kick_refuse_an_id_past_the_normals() {
+    let kicks = crate::rfm::noise::Kicks::new(2.5e-7, 1.3, 1e-3);
+    let k = kicks.counter_blocks();
+    let ids = [0u32, 1, 2, 3, 4, 8, 5, 6];
+    let z = vec![1.0; 16];
+    let r = vec![[0.0f64; 2]; 8];
+    let mut x = vec![[0.5f64; 2]; 8];
+    let mut v = vec![[1.0f64; 2]; 8];
+    let res = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        super::drift_kick_block(&mut x, &mut v, &r, [0.0; 2], 1e-3, &ids, &z, &k)
+    }));
+    assert!(res.is_err(), "an id past the normals must panic");
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        let msg = res.unwrap_err();
+        let msg = (msg.downcast_ref::<&str>().map(|m| m.to_string()))
+            .or_else(|| msg.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        assert!(msg.contains("past the normals"), "{msg:?}");
+        assert!(x[..4].iter().all(|p| *p != [0.5, 0.5]), "{x:?}");
+        assert!(v[..4].iter().all(|p| *p != [1.0, 1.0]), "{v:?}");
+        assert!(x[4..].iter().all(|p| *p == [0.5, 0.5]), "{x:?}");
+        assert!(v[4..].iter().all(|p| *p == [1.0, 1.0]), "{v:?}");
+    }
+}
+
 /// A 2D version-2 run above the parallel threshold keeps its particles stored by cell
 /// (`Core::sort_by_cell`, re-sorted at every list build) and is the same run bit for bit as
 /// the run kept in particle order: checkpoint bytes, positions, velocities and temperature
