@@ -25,8 +25,7 @@
 //!   the work is read only after a claim: a late helper can never run a unit of the wrong
 //!   pass, nor read work that is gone;
 //! - the driver returns when every unit is done (each member adds the units it ran to the
-//!   count after they have run: those of its own part, then those it took from others), so
-//!   the work outlives every use of it.
+//!   count once, after the last of them has run), so the work outlives every use of it.
 //!
 //! Which thread runs a unit never changes its result (each job writes only its own data),
 //! so a run is the same bits with a team, with `rayon::join` or on one thread. A panic in a
@@ -80,7 +79,7 @@ thread_local! {
 }
 
 /// An atomic on a cache line of its own (the helpers spin on `pass`; `done` is added to by
-/// each member once or twice a pass).
+/// each member once a pass).
 #[repr(align(128))]
 struct Padded<T>(T);
 
@@ -145,20 +144,15 @@ impl Shared {
 
     /// Member `m`'s share of pass `pass`: its own part from the front, then the other
     /// parts' remaining units from their ends (the next member's first). The units it ran
-    /// are counted done in one addition when its own part is empty and one after the others'
-    /// (an addition per unit moved the shared counter's cache line between the cores ~40
-    /// times a step; the first addition keeps a member preempted while it looks for other
-    /// parts' units from holding the pass back).
+    /// are counted done at the end, in one addition (an addition per unit moved the shared
+    /// counter's cache line between the cores ~40 times a step). A member preempted after
+    /// its last unit holds the pass back until it adds; the window is a few claim attempts.
     fn work_on(&self, pass: u32, m: usize) {
         let mut ran = 0;
         while let Some(u) = self.claim(pass, m, true) {
             self.run(u);
             ran += 1;
         }
-        if ran > 0 {
-            self.done.0.fetch_add(ran, Ordering::Release);
-        }
-        ran = 0;
         for i in 1..self.size {
             let k = (m + i) % self.size;
             while let Some(u) = self.claim(pass, k, false) {
