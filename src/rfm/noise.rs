@@ -498,29 +498,15 @@ fn normals_block_body<const D: usize, const AVX2: bool>(
 }
 
 /// How many particles ahead [`kick_gathered`] asks for its normals.
-const GATHER_AHEAD: usize = 16;
+pub(super) const GATHER_AHEAD: usize = 16;
 
 /// Kick particles `v` by `sigma z[id D + k]` (particle `id` = `ids[i]` of the normals `z` in
 /// slot order, component k): the same operations per particle as [`Lanes::add_with`]
 /// (v + sigma z, then |v|^2 as 0 + x^2 + y^2); returns the largest |v|^2 after, which no
-/// order of the particles changes.
+/// order of the particles changes. (The drift pass of a run stored by cell kicks inside its
+/// drift loop, `sim::drift_kick_block`, with these operations; this loop serves the first kick
+/// of an `advance` call and CPUs without AVX2.)
 fn kick_gathered<const D: usize>(v: &mut [[f64; D]], ids: &[u32], z: &[f64], sigma: f64) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    if D == 2 && v.len() == ids.len() && std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: AVX2 is available (checked just above); v and ids have equal lengths (the
-        // ids are checked against z in the loop).
-        return unsafe { kick_gathered2_avx2(v.as_flattened_mut(), ids, z, sigma) };
-    }
-    kick_gathered_portable(v, ids, z, sigma)
-}
-
-/// [`kick_gathered`] on any CPU (and the reference of its AVX2 path).
-fn kick_gathered_portable<const D: usize>(
-    v: &mut [[f64; D]],
-    ids: &[u32],
-    z: &[f64],
-    sigma: f64,
-) -> f64 {
     let mut m: f64 = 0.0;
     for (i, (vv, &id)) in v.iter_mut().zip(ids).enumerate() {
         #[cfg(target_arch = "x86_64")]
@@ -544,81 +530,6 @@ fn kick_gathered_portable<const D: usize>(
         }
     }
     m
-}
-
-/// [`kick_gathered`] in 2D with AVX2 (`v` flat x, y pairs; `ids.len()` particles; an id whose
-/// two normals are not inside `z` panics, as the portable loop's index does, before any
-/// velocity of its round is written): four particles per round in two registers, the same IEEE
-/// operations per component as the portable loop (sigma z as a product, then v + it, never
-/// fused; |v|^2 = vx^2 + vy^2, one rounded sum as 0 + vx^2 + vy^2 gives), so the same
-/// velocities bit for bit. The maxima: per lane `max_pd(a2, m)`, which is `if a2 > m { m = a2 }`
-/// exactly (a NaN a2 never replaces m), every lane starting at 0 and folded as the portable
-/// loop's remainder folds: the largest non-NaN |v|^2, whichever lane saw it.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn kick_gathered2_avx2(v: &mut [f64], ids: &[u32], z: &[f64], sigma: f64) -> f64 {
-    use std::arch::x86_64::*;
-    let n = ids.len();
-    assert!(v.len() == 2 * n);
-    let (vp, zp) = (v.as_mut_ptr(), z.as_ptr());
-    // Slots with both normals inside z.
-    let slots = z.len() / 2;
-    // The two normals of particle `id` (checked below: id < slots).
-    let zz = |id: u32| _mm_loadu_pd(zp.add(2 * id as usize));
-    let s = _mm256_set1_pd(sigma);
-    let (mut m0, mut m1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    let mut i = 0;
-    while i + 4 <= n {
-        if i + GATHER_AHEAD + 4 <= n {
-            for q in 0..4 {
-                _mm_prefetch::<_MM_HINT_T0>(
-                    zp.wrapping_add(2 * *ids.get_unchecked(i + GATHER_AHEAD + q) as usize)
-                        as *const i8,
-                );
-            }
-        }
-        let q = [
-            *ids.get_unchecked(i),
-            *ids.get_unchecked(i + 1),
-            *ids.get_unchecked(i + 2),
-            *ids.get_unchecked(i + 3),
-        ];
-        assert!(
-            (q[0].max(q[1]).max(q[2]).max(q[3]) as usize) < slots,
-            "kick_gathered: a particle id past the normals"
-        );
-        let z0 = _mm256_set_m128d(zz(q[1]), zz(q[0]));
-        let z1 = _mm256_set_m128d(zz(q[3]), zz(q[2]));
-        let v0 = _mm256_add_pd(_mm256_loadu_pd(vp.add(2 * i)), _mm256_mul_pd(s, z0));
-        let v1 = _mm256_add_pd(_mm256_loadu_pd(vp.add(2 * i + 4)), _mm256_mul_pd(s, z1));
-        _mm256_storeu_pd(vp.add(2 * i), v0);
-        _mm256_storeu_pd(vp.add(2 * i + 4), v1);
-        // [|v_i|^2, |v_i|^2, |v_i+1|^2, |v_i+1|^2] and the same for i + 2, i + 3.
-        let a0 = _mm256_mul_pd(v0, v0);
-        let a1 = _mm256_mul_pd(v1, v1);
-        m0 = _mm256_max_pd(_mm256_hadd_pd(a0, a0), m0);
-        m1 = _mm256_max_pd(_mm256_hadd_pd(a1, a1), m1);
-        i += 4;
-    }
-    let mut lanes = [0.0f64; 8];
-    _mm256_storeu_pd(lanes.as_mut_ptr(), m0);
-    _mm256_storeu_pd(lanes.as_mut_ptr().add(4), m1);
-    // The rest, one particle at a time into lane 0 (as the portable loop).
-    while i < n {
-        let id = ids[i] as usize;
-        let mut a2 = 0.0;
-        for k in 0..2 {
-            v[2 * i + k] += sigma * z[2 * id + k];
-            a2 += v[2 * i + k] * v[2 * i + k];
-        }
-        if a2 > lanes[0] {
-            lanes[0] = a2;
-        }
-        i += 1;
-    }
-    lanes
-        .iter()
-        .fold(0.0, |a: f64, &b| if b > a { b } else { a })
 }
 
 /// Generates the symmetrised kicks of one step.
@@ -934,95 +845,8 @@ mod tests {
         (slow, tail)
     }
 
-    /// The AVX2 gathered kick against the portable loop, bit for bit: random permutations
-    /// and repeated ids, lengths around the four-particle rounds, and velocities and normals
-    /// with NaN, infinities, signed zeros and subnormals (the maximum must skip NaN as
-    /// `a2 > m` does, whichever lane sees it). A NaN velocity must be NaN in both; its
-    /// payload is the compiler's choice of operand order, not the physics (a run with one
-    /// fails).
-    #[test]
-    fn gathered_kick_avx2_is_the_portable_loop() {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            use rand::{Rng, SeedableRng};
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(25);
-            let special = [
-                f64::NAN,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                0.0,
-                -0.0,
-                f64::MIN_POSITIVE / 3.0,
-                1e300,
-            ];
-            let draw = |rng: &mut rand_chacha::ChaCha8Rng| -> f64 {
-                if rng.random_bool(0.05) {
-                    special[rng.random_range(0..special.len())]
-                } else {
-                    rng.random_range(-3.0..3.0)
-                }
-            };
-            let mut checked = 0;
-            for n in [
-                0usize, 1, 3, 4, 5, 7, 8, 15, 16, 17, 20, 21, 37, 1000, 1023, 1024,
-            ] {
-                for round in 0..20 {
-                    let slots = n + rng.random_range(0..4);
-                    let z: Vec<f64> = (0..2 * slots).map(|_| draw(&mut rng)).collect();
-                    let ids: Vec<u32> = if round % 2 == 0 {
-                        let mut p: Vec<u32> = (0..slots as u32).collect();
-                        for i in (1..p.len()).rev() {
-                            p.swap(i, rng.random_range(0..=i));
-                        }
-                        p.truncate(n);
-                        p
-                    } else {
-                        (0..n)
-                            .map(|_| rng.random_range(0..slots.max(1) as u32))
-                            .collect()
-                    };
-                    let v0: Vec<[f64; 2]> =
-                        (0..n).map(|_| [draw(&mut rng), draw(&mut rng)]).collect();
-                    let sigma = if round == 3 {
-                        0.0
-                    } else {
-                        rng.random_range(0.0..2.0)
-                    };
-                    let mut want = v0.clone();
-                    let mw = kick_gathered_portable(&mut want, &ids, &z, sigma);
-                    let mut got = v0.clone();
-                    // SAFETY: AVX2 checked above; ids are below slots, z holds 2 slots each.
-                    let mg =
-                        unsafe { kick_gathered2_avx2(got.as_flattened_mut(), &ids, &z, sigma) };
-                    assert_eq!(mg.to_bits(), mw.to_bits(), "n {n} round {round}: maximum");
-                    assert!(
-                        got.iter()
-                            .flatten()
-                            .zip(want.iter().flatten())
-                            .all(|(a, b)| a.to_bits() == b.to_bits() || a.is_nan() && b.is_nan()),
-                        "n {n} round {round}: velocities"
-                    );
-                    // And the dispatching entry point takes the AVX2 path with the same result.
-                    let mut via = v0.clone();
-                    let mv = kick_gathered(&mut via, &ids, &z, sigma);
-                    assert_eq!(mv.to_bits(), mw.to_bits());
-                    assert!(
-                        via.iter()
-                            .flatten()
-                            .zip(want.iter().flatten())
-                            .all(|(a, b)| a.to_bits() == b.to_bits() || a.is_nan() && b.is_nan()),
-                        "n {n} round {round}: velocities through kick_gathered"
-                    );
-                    checked += 1;
-                }
-            }
-            assert!(checked > 300, "{checked} cases");
-        }
-    }
-
-    /// An id past the normals panics, as the portable loop's index does; the AVX2 path
-    /// checks each round's four ids before it reads their normals or writes a velocity of
-    /// the round (the first round kicked, the second untouched).
+    /// An id past the normals panics (the index; the AVX2 drift-and-kick pass checks its
+    /// rounds, `sim::tests::drift_and_kick_refuse_an_id_past_the_normals`).
     #[test]
     fn gathered_kick_refuses_an_id_past_the_normals() {
         let ids = [0u32, 1, 2, 3, 4, 5, 8, 6];
@@ -1032,16 +856,6 @@ mod tests {
             kick_gathered(&mut v, &ids, &z, 1.0)
         }));
         assert!(r.is_err(), "an id past the normals must panic");
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            let msg = r.unwrap_err();
-            let msg = (msg.downcast_ref::<&str>().map(|m| m.to_string()))
-                .or_else(|| msg.downcast_ref::<String>().cloned())
-                .unwrap_or_default();
-            assert!(msg.contains("past the normals"), "{msg:?}");
-            assert!(v[..4].iter().all(|p| *p == [1.0, 1.0]), "{v:?}");
-            assert!(v[4..].iter().all(|p| *p == [0.0, 0.0]), "{v:?}");
-        }
     }
 
     #[test]

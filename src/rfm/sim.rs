@@ -344,7 +344,7 @@ fn drift_kick_block<const D: usize>(
 }
 
 /// [`drift_kick_block`] in 2D with AVX2: four particles a round, each drifted as
-/// [`drift2_avx2`] drifts it and then kicked as the AVX2 gathered kick kicks it (v + sigma z, a
+/// [`drift2_avx2`] drifts it and then kicked as the gathered kick kicks it (v + sigma z, a
 /// product and a sum, never fused; |v|^2 as vx^2 + vy^2), so the same bits; both maxima per
 /// lane with `max_pd` from 0 and folded as those two fold them. An id whose normals are not
 /// inside `z` panics before its round writes anything.
@@ -362,8 +362,7 @@ unsafe fn drift_kick2_avx2(
     sigma: f64,
 ) -> (f64, f64) {
     use std::arch::x86_64::*;
-    /// Particles ahead whose normals are prefetched.
-    const AHEAD: usize = 16;
+    const AHEAD: usize = super::noise::GATHER_AHEAD;
     let len = x.len();
     let n = ids.len();
     assert!(v.len() == len && r.len() == len && len == 2 * n);

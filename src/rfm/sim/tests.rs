@@ -770,6 +770,83 @@ fn drift_and_kick_in_one_pass_are_the_two_passes() {
     assert_eq!(cases, 52);
 }
 
+/// The kick of the AVX2 drift-and-kick pass, with no drift (c = 0, h = 0: v - 0 is v, bit for
+/// bit), is the gathered kick bit for bit: random permutations and repeated ids, lengths
+/// around the four-particle rounds, and velocities and normals with NaN, infinities, signed
+/// zeros and subnormals (the maximum must skip NaN as `a2 > m` does, whichever lane sees it).
+/// A NaN velocity must be NaN in both; its payload is the compiler's choice of operand order,
+/// not the physics (a run with one fails).
+#[test]
+fn gathered_kick_avx2_is_the_portable_loop() {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(25);
+        let special = [
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            0.0,
+            -0.0,
+            f64::MIN_POSITIVE / 3.0,
+            1e300,
+        ];
+        let draw = |rng: &mut rand_chacha::ChaCha8Rng| -> f64 {
+            if rng.random_bool(0.05) {
+                special[rng.random_range(0..special.len())]
+            } else {
+                rng.random_range(-3.0..3.0)
+            }
+        };
+        let same = |a: &[[f64; 2]], b: &[[f64; 2]]| {
+            a.iter()
+                .flatten()
+                .zip(b.iter().flatten())
+                .all(|(a, b)| a.to_bits() == b.to_bits() || a.is_nan() && b.is_nan())
+        };
+        let mut checked = 0;
+        for n in [
+            0usize, 1, 3, 4, 5, 7, 8, 15, 16, 17, 20, 21, 37, 1000, 1023, 1024,
+        ] {
+            for round in 0..20 {
+                let slots = n + rng.random_range(0..4);
+                let z: Vec<f64> = (0..2 * slots).map(|_| draw(&mut rng)).collect();
+                let ids: Vec<u32> = if round % 2 == 0 {
+                    let mut p: Vec<u32> = (0..slots as u32).collect();
+                    for i in (1..p.len()).rev() {
+                        p.swap(i, rng.random_range(0..=i));
+                    }
+                    p.truncate(n);
+                    p
+                } else {
+                    (0..n)
+                        .map(|_| rng.random_range(0..slots.max(1) as u32))
+                        .collect()
+                };
+                let v0: Vec<[f64; 2]> = (0..n).map(|_| [draw(&mut rng), draw(&mut rng)]).collect();
+                let strength = if round == 3 {
+                    0.0
+                } else {
+                    rng.random_range(0.0..2.0)
+                };
+                let kicks = crate::rfm::noise::Kicks::new(strength, 1.0, 0.5);
+                let k = kicks.counter_blocks();
+                let mut want = v0.clone();
+                let mw = k.kick_gathered(&mut want, &ids, &z);
+                let mut got = v0.clone();
+                let mut x = vec![[0.0f64; 2]; n];
+                let r = x.clone();
+                let (_, mg) =
+                    super::drift_kick_block(&mut x, &mut got, &r, [0.0; 2], 0.0, &ids, &z, &k);
+                assert_eq!(mg.to_bits(), mw.to_bits(), "n {n} round {round}: maximum");
+                assert!(same(&got, &want), "n {n} round {round}: velocities");
+                checked += 1;
+            }
+        }
+        assert!(checked > 300, "{checked} cases");
+    }
+}
+
 /// The drift-and-kick pass refuses an id past the normals (a panic, as the two passes' kick
 /// index does); with AVX2 it checks each round's ids before the round's drift or kick writes
 /// anything: the first round drifted and kicked, the second untouched.
@@ -797,6 +874,24 @@ fn drift_and_kick_refuse_an_id_past_the_normals() {
         assert!(v[..4].iter().all(|p| *p != [1.0, 1.0]), "{v:?}");
         assert!(x[4..].iter().all(|p| *p == [0.5, 0.5]), "{x:?}");
         assert!(v[4..].iter().all(|p| *p == [1.0, 1.0]), "{v:?}");
+        // No drift and sigma = 1: the first round kicked by z = 1, the second untouched.
+        let mut v = vec![[0.0f64; 2]; 8];
+        let mut x = vec![[0.0f64; 2]; 8];
+        let res = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| unsafe {
+            super::drift_kick2_avx2(
+                x.as_flattened_mut(),
+                v.as_flattened_mut(),
+                r.as_flattened(),
+                [0.0; 2],
+                0.0,
+                &ids,
+                &z,
+                1.0,
+            )
+        }));
+        assert!(res.is_err(), "an id past the normals must panic");
+        assert!(v[..4].iter().all(|p| *p == [1.0, 1.0]), "{v:?}");
+        assert!(v[4..].iter().all(|p| *p == [0.0, 0.0]), "{v:?}");
     }
 }
 
