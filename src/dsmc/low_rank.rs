@@ -515,8 +515,8 @@ impl DsmcSim {
         self.st.collisions += 1;
         // Raise bounds that a new speed exceeds.
         let mut changed = false;
-        for (s, v) in [(i, na), (k, nb)] {
-            let s2 = speed2(&v);
+        let (s2a, s2b) = (speed2(&na), speed2(&nb));
+        for (s, s2) in [(i, s2a), (k, s2b)] {
             let vmax = unsafe { self.st.vmax.get_unchecked_mut(s) };
             if s2 > *vmax * *vmax {
                 *vmax = s2.sqrt() * RAISE_SLACK;
@@ -529,9 +529,9 @@ impl DsmcSim {
             self.sync_groups(k);
         }
         let mut b = b;
-        let mut overflow = self.relocate(a, i, &mut b);
+        let mut overflow = self.relocate(a, i, s2a, &mut b);
         let mut none = usize::MAX;
-        overflow |= self.relocate(b, k, &mut none);
+        overflow |= self.relocate(b, k, s2b, &mut none);
         if changed || overflow {
             self.rebuild_rates();
         }
@@ -598,17 +598,18 @@ impl DsmcSim {
         pos
     }
 
-    /// Move the particle at position x (species s) into the group its speed belongs to (one
-    /// swap with the particle at each group boundary crossed); `other`, a position, follows
-    /// the particle it holds. Returns whether a group outgrew its proposal capacity (the
-    /// capacities are then reset; the caller rebuilds the rates).
+    /// Move the particle at position x (species s, squared speed `s2`) into the group its
+    /// speed belongs to (one swap with the particle at each group boundary crossed); `other`,
+    /// a position, follows the particle it holds. Returns whether a group outgrew its proposal
+    /// capacity (the capacities are then reset; the caller rebuilds the rates).
     #[inline(always)]
-    fn relocate(&mut self, x: usize, s: usize, other: &mut usize) -> bool {
+    fn relocate(&mut self, x: usize, s: usize, s2: f64, other: &mut usize) -> bool {
+        debug_assert_eq!(s2.to_bits(), speed2(&self.st.vel[x]).to_bits());
         let gr = self.st.groups[s];
         if !gr.split() {
             return false;
         }
-        let want = gr.group_of(speed2(&self.st.vel[x]));
+        let want = gr.group_of(s2);
         // Current group and the first position of each group.
         let mut first = [0usize; GROUPS + 1];
         first[0] = self.off[s];
@@ -742,8 +743,7 @@ impl DsmcSim {
             // SAFETY: a resolved candidate's a and b are particle positions.
             let (va, vb) =
                 unsafe { (*self.st.vel.get_unchecked(a), *self.st.vel.get_unchecked(b)) };
-            let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
-            let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+            let (g, g2) = relative_speed2(&va, &vb);
             if ub * ub >= g2 {
                 continue;
             }
@@ -838,8 +838,7 @@ impl DsmcSim {
         let a = self.resolve(&c).0.expect("checked by continue_from");
         let b = c.b as usize;
         let (va, vb) = (self.st.vel[a], self.st.vel[b]);
-        let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
-        let g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+        let (g, g2) = relative_speed2(&va, &vb);
         let lazy = self.lazy_time();
         let mut trials = 0;
         let end = match self.accepted(slot, &c, (a, b), (va, vb), (g, g2), lazy, Some(t))? {
@@ -874,6 +873,13 @@ impl DsmcSim {
         self.flush_displacements();
         result
     }
+}
+
+/// The relative velocity g = va - vb and |g|^2.
+#[inline(always)]
+fn relative_speed2(va: &[f64; 3], vb: &[f64; 3]) -> ([f64; 3], f64) {
+    let g = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
+    (g, g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
 }
 
 #[inline(always)]
