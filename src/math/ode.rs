@@ -187,9 +187,35 @@ pub(crate) struct Lu {
     piv: Vec<usize>,
 }
 
+/// Whether the factorisations may take their AVX2 copies: the same code compiled for
+/// 256-bit vectors, whose row updates do per element the same multiplications and
+/// subtractions in the same order (no fused multiply-add: that is the `fma` feature, not
+/// enabled), so the same bits.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+}
+
 impl Lu {
     /// Factorises the row-major n x n matrix `a`; None when it is singular.
-    pub(crate) fn new(n: usize, mut a: Vec<f64>) -> Option<Lu> {
+    pub(crate) fn new(n: usize, a: Vec<f64>) -> Option<Lu> {
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { Self::new_avx2(n, a) };
+        }
+        Self::factor(n, a)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn new_avx2(n: usize, a: Vec<f64>) -> Option<Lu> {
+        Self::factor(n, a)
+    }
+
+    #[inline(always)]
+    fn factor(n: usize, mut a: Vec<f64>) -> Option<Lu> {
         debug_assert_eq!(a.len(), n * n, "Lu::new: an n x n matrix");
         let mut piv = vec![0; n];
         for k in 0..n {
@@ -261,7 +287,23 @@ struct CLu {
 }
 
 impl CLu {
-    fn new(n: usize, mut re: Vec<f64>, mut im: Vec<f64>) -> Option<CLu> {
+    fn new(n: usize, re: Vec<f64>, im: Vec<f64>) -> Option<CLu> {
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { Self::new_avx2(n, re, im) };
+        }
+        Self::factor(n, re, im)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn new_avx2(n: usize, re: Vec<f64>, im: Vec<f64>) -> Option<CLu> {
+        Self::factor(n, re, im)
+    }
+
+    #[inline(always)]
+    fn factor(n: usize, mut re: Vec<f64>, mut im: Vec<f64>) -> Option<CLu> {
         debug_assert!(
             re.len() == n * n && im.len() == n * n,
             "CLu::new: n x n matrices"
@@ -639,6 +681,60 @@ mod tests {
         for qq in 1..=5 {
             let lhs: f64 = (0..3).map(|j| t.a[2][j] * t.c[j].powi(qq - 1)).sum();
             assert!((lhs - 1.0 / qq as f64).abs() < 1e-15, "B({qq})");
+        }
+    }
+
+    /// The factorisations' AVX2 copies (taken by `new` where the CPU has AVX2) give the bits
+    /// of the portable code: factors, pivots and solutions, real and complex, for sizes
+    /// around the vector width, with pivoting (entries of mixed sign and scale) and a zero
+    /// multiplier (a row already eliminated).
+    #[test]
+    fn factorisations_are_the_portable_bits() {
+        // A fixed pseudo-random sequence (splitmix64), entries in [-1, 1) times 10^[-3, 3).
+        let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
+        let mut next = move || {
+            x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = x;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            z ^= z >> 31;
+            let u = (z >> 11) as f64 / (1u64 << 53) as f64;
+            (2.0 * u - 1.0) * 10f64.powi((z % 6) as i32 - 3)
+        };
+        for n in [1, 2, 3, 4, 5, 7, 8, 9, 16, 17, 37] {
+            let mut a: Vec<f64> = (0..n * n).map(|_| next()).collect();
+            if n > 2 {
+                // Row 2 starts with a zero below the first pivot: a zero multiplier.
+                a[2 * n] = 0.0;
+            }
+            let b: Vec<f64> = (0..n).map(|_| next()).collect();
+            let fast = Lu::new(n, a.clone()).unwrap();
+            let slow = Lu::factor(n, a.clone()).unwrap();
+            assert_eq!(fast.piv, slow.piv, "n = {n}");
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&fast.a), bits(&slow.a), "n = {n}");
+            let (mut xf, mut xs) = (b.clone(), b.clone());
+            fast.solve(&mut xf);
+            slow.solve(&mut xs);
+            assert_eq!(bits(&xf), bits(&xs), "n = {n}");
+            // The solution solves the system (the factors are a factorisation).
+            for i in 0..n {
+                let r: f64 = (0..n).map(|j| a[i * n + j] * xf[j]).sum::<f64>() - b[i];
+                assert!(r.abs() < 1e-6 * (1.0 + b[i].abs()), "n = {n}: residual {r}");
+            }
+            let im: Vec<f64> = (0..n * n).map(|_| next()).collect();
+            let fast = CLu::new(n, a.clone(), im.clone()).unwrap();
+            let slow = CLu::factor(n, a.clone(), im.clone()).unwrap();
+            assert_eq!(fast.piv, slow.piv, "n = {n}");
+            assert_eq!(bits(&fast.re), bits(&slow.re), "n = {n}");
+            assert_eq!(bits(&fast.im), bits(&slow.im), "n = {n}");
+            let bi: Vec<f64> = (0..n).map(|_| next()).collect();
+            let (mut rf, mut if_) = (b.clone(), bi.clone());
+            let (mut rs, mut is) = (b.clone(), bi.clone());
+            fast.solve(&mut rf, &mut if_);
+            slow.solve(&mut rs, &mut is);
+            assert_eq!(bits(&rf), bits(&rs), "n = {n}");
+            assert_eq!(bits(&if_), bits(&is), "n = {n}");
         }
     }
 
