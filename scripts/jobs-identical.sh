@@ -10,7 +10,8 @@
 #
 # Usage: scripts/jobs-identical.sh OLD_BIN NEW_BIN OUT_DIR [JOB ...]
 #   OUT_DIR/old/<job> and OUT_DIR/new/<job> are kept (an existing OUT_DIR/old/<job> with a
-#   finished marker is reused, so the old side is run once for several new builds).
+#   finished marker is reused, so the old side is run once for several new builds; the new
+#   side is run again at every call).
 #   NEW_BIN "-" prepares the old side only.
 #   Default jobs: those that finish in about a minute on 2 cores.
 # Exits 1 if anything differs. Needs the venv of scripts/setup.sh (duckdb, pyarrow).
@@ -27,10 +28,10 @@ here=$(cd "$(dirname "$0")/.." && pwd)
 py=${PYTHON:-$here/.venv/bin/python}
 [ -x "$py" ] || py=python3
 
-side() { # side BIN DIR JOB
-    local bin=$1 dir=$2 job=$3
-    [ -f "$dir.done" ] && return 0
-    rm -rf "$dir"
+side() { # side BIN DIR JOB REUSE (1: keep a finished DIR)
+    local bin=$1 dir=$2 job=$3 reuse=$4
+    [ "$reuse" = 1 ] && [ -f "$dir.done" ] && return 0
+    rm -rf "$dir" "$dir.done"
     "$bin" run "$here/jobs/$job.json" --out "$dir" >"$dir.log" 2>&1
     "$bin" plot "$dir" >>"$dir.log" 2>&1
     "$bin" report "$dir" >>"$dir.log" 2>&1
@@ -57,12 +58,13 @@ fail=0
 for job in "${jobs[@]}"; do
     a=$out/old/$job b=$out/new/$job
     start=$(date +%s)
-    side "$old_bin" "$a" "$job"
+    side "$old_bin" "$a" "$job" 1
     if [ "$new_bin" = - ]; then
         echo "$job: old side ready"
         continue
     fi
-    side "$new_bin" "$b" "$job"
+    # The new side always runs: a finished one from an earlier call came from another build.
+    side "$new_bin" "$b" "$job" 0
     verdict=ok
     if ! "$py" "$here/scripts/compare_tables.py" "$a" "$b" >"$b.compare" 2>&1; then
         verdict="TABLES DIFFER (see $b.compare)"
