@@ -605,22 +605,27 @@ impl DsmcSim {
     #[inline(always)]
     fn relocate(&mut self, x: usize, s: usize, s2: f64, other: &mut usize) -> bool {
         debug_assert_eq!(s2.to_bits(), speed2(&self.st.vel[x]).to_bits());
-        let gr = self.st.groups[s];
-        if !gr.split() {
+        // From the hot-loop view of the groups (`sync_groups` keeps it in step with
+        // `st.groups`): the bounds below the top group are the species' thresholds (negative:
+        // one group), the groups' starts their first positions.
+        debug_assert!(s < self.sys.species.len());
+        // SAFETY: gtab has GROUPS entries per species.
+        let gi = unsafe { self.gtab.get_unchecked(GROUPS * s..GROUPS * s + GROUPS) };
+        debug_assert_eq!(gi[0].bound >= 0.0, self.st.groups[s].split());
+        if !(gi[0].bound >= 0.0) {
             return false;
         }
-        let want = gr.group_of(s2);
-        // Current group and the first position of each group.
-        let mut first = [0usize; GROUPS + 1];
-        first[0] = self.off[s];
-        for g in 0..GROUPS {
-            first[g + 1] = first[g] + gr.n[g] as usize;
-        }
-        let g = (1..GROUPS).filter(|&h| x >= first[h]).count();
+        let want = gi[..GROUPS - 1]
+            .iter()
+            .filter(|x| s2 > x.bound * x.bound)
+            .count();
+        debug_assert_eq!(want, self.st.groups[s].group_of(s2));
+        // The current group.
+        let g = gi[1..].iter().filter(|h| x >= h.start as usize).count();
         if g == want {
             return false;
         }
-        self.relocate_slow(x, s, other, g, want, first)
+        self.relocate_slow(x, s, other, g, want)
     }
 
     #[inline(never)]
@@ -631,9 +636,14 @@ impl DsmcSim {
         other: &mut usize,
         mut g: usize,
         want: usize,
-        mut first: [usize; GROUPS + 1],
     ) -> bool {
         let mut gr = self.st.groups[s];
+        // The first position of each group.
+        let mut first = [0usize; GROUPS + 1];
+        first[0] = self.off[s];
+        for h in 0..GROUPS {
+            first[h + 1] = first[h] + gr.n[h] as usize;
+        }
         while g != want {
             // Swap with the particle at the boundary towards `want`; the boundary moves
             // past x, which changes group.
