@@ -611,8 +611,10 @@ impl DsmcSim {
         debug_assert!(s < self.sys.species.len());
         // SAFETY: gtab has GROUPS entries per species.
         let gi = unsafe { self.gtab.get_unchecked(GROUPS * s..GROUPS * s + GROUPS) };
-        debug_assert_eq!(gi[0].bound >= 0.0, self.st.groups[s].split());
-        if !(gi[0].bound >= 0.0) {
+        // Split as `SpeciesGroups::split` decides (the first threshold not negative).
+        let split = gi[0].bound >= 0.0;
+        debug_assert_eq!(split, self.st.groups[s].split());
+        if !split {
             return false;
         }
         let want = gi[..GROUPS - 1]

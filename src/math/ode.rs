@@ -187,21 +187,16 @@ pub(crate) struct Lu {
     piv: Vec<usize>,
 }
 
-/// Whether the factorisations may take their AVX2 copies: the same code compiled for
-/// 256-bit vectors, whose row updates do per element the same multiplications and
-/// subtractions in the same order (no fused multiply-add: that is the `fma` feature, not
-/// enabled), so the same bits.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn avx2() -> bool {
-    std::arch::is_x86_feature_detected!("avx2")
-}
+// Where the CPU has AVX2 the factorisations take their AVX2 copies: the same code compiled
+// for 256-bit vectors, whose row updates do per element the same multiplications and
+// subtractions in the same order (no fused multiply-add: that is the `fma` feature, not
+// enabled), so the same bits (test `factorisations_are_the_portable_bits`).
 
 impl Lu {
     /// Factorises the row-major n x n matrix `a`; None when it is singular.
     pub(crate) fn new(n: usize, a: Vec<f64>) -> Option<Lu> {
         #[cfg(target_arch = "x86_64")]
-        if avx2() {
+        if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2.
             return unsafe { Self::new_avx2(n, a) };
         }
@@ -289,7 +284,7 @@ struct CLu {
 impl CLu {
     fn new(n: usize, re: Vec<f64>, im: Vec<f64>) -> Option<CLu> {
         #[cfg(target_arch = "x86_64")]
-        if avx2() {
+        if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2.
             return unsafe { Self::new_avx2(n, re, im) };
         }

@@ -192,14 +192,7 @@ fn drift_portable<const D: usize>(
     let mut rs = r.chunks_exact(4);
     for ((x4, v4), r4) in (&mut xs).zip(&mut vs).zip(&mut rs) {
         for p in 0..4 {
-            let mut d2 = 0.0;
-            for k in 0..D {
-                let vk = v4[p][k] - c[k];
-                v4[p][k] = vk;
-                x4[p][k] += vk * h;
-                let dd = x4[p][k] - r4[p][k];
-                d2 += dd * dd;
-            }
+            let d2 = drift_one(&mut x4[p], &mut v4[p], &r4[p], c, h);
             if d2 > m[p] {
                 m[p] = d2;
             }
@@ -211,19 +204,86 @@ fn drift_portable<const D: usize>(
         .zip(vs.into_remainder().iter_mut())
         .zip(rs.remainder())
     {
-        let mut d2 = 0.0;
-        for k in 0..D {
-            let vk = v[k] - c[k];
-            v[k] = vk;
-            x[k] += vk * h;
-            let dd = x[k] - r[k];
-            d2 += dd * dd;
-        }
+        let d2 = drift_one(x, v, r, c, h);
         if d2 > m[0] {
             m[0] = d2;
         }
     }
-    m.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a })
+    largest(&m)
+}
+
+/// The drift of one particle, v -= c then x += v h, and its displacement squared since the
+/// list build (0 + dx^2 + dy^2 ...): the operations every drift loop does per particle.
+#[inline(always)]
+fn drift_one<const D: usize>(
+    x: &mut [f64; D],
+    v: &mut [f64; D],
+    r: &[f64; D],
+    c: [f64; D],
+    h: f64,
+) -> f64 {
+    let mut d2 = 0.0;
+    for k in 0..D {
+        let vk = v[k] - c[k];
+        v[k] = vk;
+        x[k] += vk * h;
+        let dd = x[k] - r[k];
+        d2 += dd * dd;
+    }
+    d2
+}
+
+/// The largest of four lane maxima and 0 (a NaN lane never wins).
+#[inline(always)]
+fn largest(lanes: &[f64; 4]) -> f64 {
+    lanes
+        .iter()
+        .fold(0.0, |a: f64, &b| if b > a { b } else { a })
+}
+
+/// One round of [`drift2_avx2`]: particles k/2 .. k/2 + 4 of the flat slices drifted (x
+/// stored, the drifted velocities returned, not stored), and their displacements squared
+/// `[d0, d2, d1, d3]` (in the lanes of `hadd`).
+///
+/// # Safety
+/// AVX2 (the caller's target feature: this is inlined into it); elements k .. k + 8 in
+/// bounds of all three.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn drift_round(
+    xp: *mut f64,
+    vp: *const f64,
+    rp: *const f64,
+    k: usize,
+    cv: std::arch::x86_64::__m256d,
+    hv: std::arch::x86_64::__m256d,
+) -> [std::arch::x86_64::__m256d; 3] {
+    use std::arch::x86_64::*;
+    let v0 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k)), cv);
+    let v1 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k + 4)), cv);
+    let x0 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k)), _mm256_mul_pd(v0, hv));
+    let x1 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k + 4)), _mm256_mul_pd(v1, hv));
+    _mm256_storeu_pd(xp.add(k), x0);
+    _mm256_storeu_pd(xp.add(k + 4), x1);
+    let d0 = _mm256_sub_pd(x0, _mm256_loadu_pd(rp.add(k)));
+    let d1 = _mm256_sub_pd(x1, _mm256_loadu_pd(rp.add(k + 4)));
+    // [dx0^2 + dy0^2, dx2^2 + dy2^2, dx1^2 + dy1^2, dx3^2 + dy3^2]
+    let d2 = _mm256_hadd_pd(_mm256_mul_pd(d0, d0), _mm256_mul_pd(d1, d1));
+    [v0, v1, d2]
+}
+
+/// Particle `k / 2` of the flat x, y slices drifted one at a time ([`drift_one`]): the
+/// remainder of the AVX2 loops.
+#[inline(always)]
+fn drift_one_flat(x: &mut [f64], v: &mut [f64], r: &[f64], k: usize, c: [f64; 2], h: f64) -> f64 {
+    let (x, v, r) = (&mut x[k..k + 2], &mut v[k..k + 2], &r[k..k + 2]);
+    drift_one(
+        x.try_into().expect("two components"),
+        v.try_into().expect("two components"),
+        r.try_into().expect("two components"),
+        c,
+        h,
+    )
 }
 
 /// The 1D drift x += (v - c) h.
@@ -264,18 +324,9 @@ unsafe fn drift2_avx2(
     let mut k = 0;
     // Four particles (eight numbers) at a time.
     while k + 8 <= len {
-        let v0 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k)), cv);
-        let v1 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k + 4)), cv);
+        let [v0, v1, d2] = drift_round(xp, vp, rp, k, cv, hv);
         _mm256_storeu_pd(vp.add(k), v0);
         _mm256_storeu_pd(vp.add(k + 4), v1);
-        let x0 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k)), _mm256_mul_pd(v0, hv));
-        let x1 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k + 4)), _mm256_mul_pd(v1, hv));
-        _mm256_storeu_pd(xp.add(k), x0);
-        _mm256_storeu_pd(xp.add(k + 4), x1);
-        let d0 = _mm256_sub_pd(x0, _mm256_loadu_pd(rp.add(k)));
-        let d1 = _mm256_sub_pd(x1, _mm256_loadu_pd(rp.add(k + 4)));
-        // [dx0^2 + dy0^2, dx2^2 + dy2^2, dx1^2 + dy1^2, dx3^2 + dy3^2]
-        let d2 = _mm256_hadd_pd(_mm256_mul_pd(d0, d0), _mm256_mul_pd(d1, d1));
         m = _mm256_max_pd(d2, m);
         k += 8;
     }
@@ -283,22 +334,13 @@ unsafe fn drift2_avx2(
     _mm256_storeu_pd(lanes.as_mut_ptr(), m);
     // The rest, one particle at a time into lane 0 (as the portable loop's remainder).
     while k < len {
-        let mut d2 = 0.0;
-        for q in 0..2 {
-            let vk = v[k + q] - c[q];
-            v[k + q] = vk;
-            x[k + q] += vk * h;
-            let dd = x[k + q] - r[k + q];
-            d2 += dd * dd;
-        }
+        let d2 = drift_one_flat(x, v, r, k, c, h);
         if d2 > lanes[0] {
             lanes[0] = d2;
         }
         k += 2;
     }
-    lanes
-        .iter()
-        .fold(0.0, |a: f64, &b| if b > a { b } else { a })
+    largest(&lanes)
 }
 
 /// [`drift_block`] (from 0) and then the gathered kick of the same particles
@@ -394,19 +436,9 @@ unsafe fn drift_kick2_avx2(
             "drift_kick_block: a particle id past the normals"
         );
         let k = 2 * i;
-        // The drift (drift2_avx2's operations).
-        let v0 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k)), cv);
-        let v1 = _mm256_sub_pd(_mm256_loadu_pd(vp.add(k + 4)), cv);
-        let x0 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k)), _mm256_mul_pd(v0, hv));
-        let x1 = _mm256_add_pd(_mm256_loadu_pd(xp.add(k + 4)), _mm256_mul_pd(v1, hv));
-        _mm256_storeu_pd(xp.add(k), x0);
-        _mm256_storeu_pd(xp.add(k + 4), x1);
-        let d0 = _mm256_sub_pd(x0, _mm256_loadu_pd(rp.add(k)));
-        let d1 = _mm256_sub_pd(x1, _mm256_loadu_pd(rp.add(k + 4)));
-        m = _mm256_max_pd(
-            _mm256_hadd_pd(_mm256_mul_pd(d0, d0), _mm256_mul_pd(d1, d1)),
-            m,
-        );
+        // The drift (drift2_avx2's round).
+        let [v0, v1, d2] = drift_round(xp, vp, rp, k, cv, hv);
+        m = _mm256_max_pd(d2, m);
         // The kick (the gathered kick's operations) of the drifted velocities.
         let z0 = _mm256_set_m128d(zz(q[1]), zz(q[0]));
         let z1 = _mm256_set_m128d(zz(q[3]), zz(q[2]));
@@ -427,14 +459,7 @@ unsafe fn drift_kick2_avx2(
     // The rest, one particle at a time into lane 0 (as the two portable loops).
     while i < n {
         let k = 2 * i;
-        let mut d2 = 0.0;
-        for q in 0..2 {
-            let vk = v[k + q] - c[q];
-            v[k + q] = vk;
-            x[k + q] += vk * h;
-            let dd = x[k + q] - r[k + q];
-            d2 += dd * dd;
-        }
+        let d2 = drift_one_flat(x, v, r, k, c, h);
         if d2 > lanes[0] {
             lanes[0] = d2;
         }
@@ -449,8 +474,7 @@ unsafe fn drift_kick2_avx2(
         }
         i += 1;
     }
-    let fold = |l: &[f64; 4]| l.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a });
-    (fold(&lanes), fold(&kl))
+    (largest(&lanes), largest(&kl))
 }
 
 /// Skin of the 2D neighbour list, in diameters.
