@@ -24,7 +24,7 @@ pub mod viscoelastic;
 use serde::{Deserialize, Serialize};
 
 use crate::physics::{PhysicsError, SimError};
-use crate::rng::{RngPosition, RunRng};
+use crate::rng::{Generator, RngPosition, RunRng, StreamVersion};
 use alias::Alias;
 pub use row_values::{RowValue, RowValueSet, RowValues};
 pub use system::{DsmcSystem, Method, Observed, RestitutionModel, SpeciesInfo, VdistPlan};
@@ -314,7 +314,17 @@ impl DsmcSim {
     /// A fresh run: Maxwell velocities, zero total momentum, each species at its initial
     /// temperature; the t = 0 state is recorded.
     pub fn new(sys: DsmcSystem, seed: u64) -> Self {
-        let mut rng = RunRng::new(seed);
+        Self::with_generator(sys, seed, Generator::ChaCha8)
+    }
+
+    /// A fresh run drawing as stream version `stream` does (ChaCha8 words before version 3,
+    /// AES-128 in counter mode from it).
+    pub fn with_stream(sys: DsmcSystem, seed: u64, stream: StreamVersion) -> Self {
+        Self::with_generator(sys, seed, stream.dsmc_generator())
+    }
+
+    fn with_generator(sys: DsmcSystem, seed: u64, generator: Generator) -> Self {
+        let mut rng = RunRng::with_generator(seed, generator);
         let vel = system::initial_velocities(&sys, &mut rng);
         let n = vel.len();
         let m = sys.species.len();
@@ -335,7 +345,7 @@ impl DsmcSim {
             },
             bird_bound: 0.0,
             rng: rng.position(),
-            geom: RunRng::new(geom_seed(seed)).position(),
+            geom: RunRng::with_generator(geom_seed(seed), generator).position(),
             trials: 0,
             collisions: 0,
             species_collisions: vec![0; m],
@@ -361,7 +371,7 @@ impl DsmcSim {
     }
 
     fn assemble(sys: DsmcSystem, st: DsmcState, rng: RunRng) -> Self {
-        let geom = RunRng::restore(&st.geom);
+        let geom = RunRng::restore_with(&st.geom, rng.generator());
         let off = species_offsets(&sys);
         let pair_k = low_rank::static_tables(&sys);
         let (ring, batch) = match sys.method {
@@ -459,7 +469,19 @@ impl DsmcSim {
             |r| &r.values,
             &mut bytes,
         );
+        // The stream version follows everything else (postcard varint of its number) when the
+        // words are not ChaCha8's; nothing for ChaCha8, so those bytes are those of granular
+        // before stream versions.
+        if self.rng.generator() != Generator::ChaCha8 {
+            let v = StreamVersion::V3.number();
+            bytes.extend(postcard::to_stdvec(&v).expect("u32 serialises"));
+        }
         bytes
+    }
+
+    /// The generator of the run's words.
+    pub fn generator(&self) -> Generator {
+        self.rng.generator()
     }
 
     /// Rebuild a simulation from a checkpoint payload.
@@ -480,11 +502,30 @@ impl DsmcSim {
             rest = after;
         }
         rest = row_values::restore(sys.observe.values, &mut st.rows, |r| &mut r.values, rest)?;
-        if !rest.is_empty() {
-            return Err(
-                "checkpoint does not match the run's observables (velocity_distribution or per-row values)".into(),
-            );
-        }
+        // Nothing left: ChaCha8 words (every checkpoint before stream version 3).
+        let generator = if rest.is_empty() {
+            Generator::ChaCha8
+        } else {
+            let mismatch = || {
+                SimError::from(
+                    "checkpoint does not match the run's observables (velocity_distribution or \
+                     per-row values), or its stream version does not decode",
+                )
+            };
+            let (number, tail): (u32, &[u8]) =
+                postcard::take_from_bytes(rest).map_err(|_| mismatch())?;
+            if !tail.is_empty() {
+                return Err(mismatch());
+            }
+            let v = StreamVersion::try_from(number).map_err(|e| format!("checkpoint: {e}"))?;
+            if v.dsmc_generator() == Generator::ChaCha8 {
+                return Err(format!(
+                    "checkpoint names stream version {number}, whose runs write no version"
+                )
+                .into());
+            }
+            v.dsmc_generator()
+        };
         if st.vel.len() != sys.n_particles()
             || st.vmax.len() != sys.species.len()
             || st.species_collisions.len() != sys.species.len()
@@ -554,7 +595,7 @@ impl DsmcSim {
                 "checkpoint does not match the run's observables (velocity_distribution)".into(),
             );
         }
-        let rng = RunRng::restore(&st.rng);
+        let rng = RunRng::restore_with(&st.rng, generator);
         st.vel = crate::memory::huge_copy(&st.vel);
         st.disp = crate::memory::huge_copy(&st.disp);
         if let Some(plan) = &sys.observe.tamsd {

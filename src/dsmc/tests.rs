@@ -43,11 +43,17 @@ const TIMES: &[f64] = &[0.0, 0.5, 1.0, 3.0, 7.0, 7.5, 12.0, 20.0, 31.0];
 /// final state (velocities, displacements, every row, counters, random streams, candidates)
 /// equals that of the run made straight to t3, and every intermediate one the run made
 /// straight to its end. The ends include one a hair past t1 (the stopping collision is then
-/// usually past it too: the continued run stops again at once).
+/// usually past it too: the continued run stops again at once). For ChaCha8 words (stream
+/// versions 1 and 2) and AES ones (3).
 #[test]
 fn continued_runs_equal_direct_runs() {
     let ends = [(7.0, 7.0 * (1.0 + 1e-12), 31.0), (3.0, 12.0, 20.0)];
-    for method in [Method::LowRank, Method::Bird] {
+    for (method, stream) in [
+        (Method::LowRank, StreamVersion::V1),
+        (Method::Bird, StreamVersion::V1),
+        (Method::LowRank, StreamVersion::V3),
+        (Method::Bird, StreamVersion::V3),
+    ] {
         for (msd, visco) in [(false, false), (true, false), (false, true)] {
             for (case, &(t1, t2, t3)) in ends.iter().enumerate() {
                 let seed = 11 + case as u64;
@@ -58,7 +64,7 @@ fn continued_runs_equal_direct_runs() {
                 times.dedup();
                 let sys = |t_end: f64| system(method, msd, visco, t_end, &times);
                 let direct = |t_end: f64| {
-                    let mut s = DsmcSim::new(sys(t_end), seed);
+                    let mut s = DsmcSim::with_stream(sys(t_end), seed, stream);
                     run(&mut s, u64::MAX);
                     s
                 };
@@ -67,7 +73,8 @@ fn continued_runs_equal_direct_runs() {
                 let mut c2 = DsmcSim::continue_from(sys(t2), &fin1).unwrap();
                 run(&mut c2, 977);
                 let mut d2 = direct(t2);
-                let what = format!("{method:?} msd={msd} visco={visco} {t1} -> {t2}");
+                assert_eq!(c2.generator(), stream.dsmc_generator());
+                let what = format!("{method:?} {stream:?} msd={msd} visco={visco} {t1} -> {t2}");
                 assert!(c2.state_bytes() == d2.state_bytes(), "{what}");
                 let fin2 = c2.final_state().unwrap();
                 assert!(fin2 == d2.final_state().unwrap(), "{what}: final states");
@@ -81,12 +88,18 @@ fn continued_runs_equal_direct_runs() {
     }
 }
 
-/// A run restored from a checkpoint keeps a final state that continues like the run's own.
+/// A run restored from a checkpoint keeps a final state that continues like the run's own
+/// (ChaCha8 and AES words).
 #[test]
 fn restored_runs_keep_their_final_state() {
-    for method in [Method::LowRank, Method::Bird] {
+    for (method, stream) in [
+        (Method::LowRank, StreamVersion::V1),
+        (Method::Bird, StreamVersion::V1),
+        (Method::LowRank, StreamVersion::V3),
+        (Method::Bird, StreamVersion::V3),
+    ] {
         let sys = system(method, false, false, 7.0, TIMES);
-        let mut a = DsmcSim::new(sys.clone(), 5);
+        let mut a = DsmcSim::with_stream(sys.clone(), 5, stream);
         assert!(!a.advance(2_000).unwrap());
         let mut b = DsmcSim::from_state_bytes(sys.clone(), &a.state_bytes()).unwrap();
         run(&mut a, u64::MAX);
@@ -317,5 +330,51 @@ fn payload_without_generic_values_is_the_dsmc5_layout() {
             want.extend(postcard::to_stdvec(&extra).unwrap());
         }
         assert_eq!(bytes, want);
+    }
+}
+
+/// Stream version 3 draws a run's words from AES-128 in counter mode: its checkpoint ends with
+/// the version (a ChaCha8 run's writes none, as before versions), restores to the same
+/// generator and continues bit for bit; it is another realisation than the ChaCha8 run of the
+/// same seed (same counts, other velocities); a payload naming a ChaCha8 version or an unknown
+/// one is refused.
+#[test]
+fn stream_version_3_draws_from_aes() {
+    for method in [Method::LowRank, Method::Bird] {
+        let sys = system(method, false, false, 7.0, TIMES);
+        let mut chacha = DsmcSim::with_stream(sys.clone(), 9, StreamVersion::V2);
+        let mut aes = DsmcSim::with_stream(sys.clone(), 9, StreamVersion::V3);
+        assert_eq!(chacha.generator(), Generator::ChaCha8);
+        assert_eq!(aes.generator(), Generator::Aes128Ctr);
+        assert!(
+            chacha.st.vel != aes.st.vel,
+            "{method:?}: the same initial velocities"
+        );
+        assert!(!aes.advance(3_000).unwrap());
+        let bytes = aes.state_bytes();
+        assert_eq!(
+            bytes.last(),
+            Some(&3),
+            "{method:?}: version 3 is the last byte"
+        );
+        let chacha_bytes = chacha.state_bytes();
+        let restored = DsmcSim::from_state_bytes(sys.clone(), &chacha_bytes).unwrap();
+        assert_eq!(restored.generator(), Generator::ChaCha8);
+        let mut b = DsmcSim::from_state_bytes(sys.clone(), &bytes).unwrap();
+        assert_eq!(b.generator(), Generator::Aes128Ctr);
+        run(&mut aes, u64::MAX);
+        run(&mut b, 1_234);
+        assert!(
+            aes.state_bytes() == b.state_bytes(),
+            "{method:?}: restored run differs"
+        );
+        for (v, why) in [(2u8, "write no version"), (99, "not known")] {
+            let mut bad = chacha_bytes.clone();
+            bad.push(v);
+            let e = DsmcSim::from_state_bytes(sys.clone(), &bad)
+                .err()
+                .expect("refused");
+            assert!(e.to_string().contains(why), "{method:?} version {v}: {e}");
+        }
     }
 }

@@ -856,8 +856,13 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
         "the resumed upgraded campaign vs the complete one",
     );
     // Growth: a third replica and a longer t_end; format 2 kept final states, so the longer
-    // runs continue them (no rerun warning).
+    // runs continue them (no rerun warning). The reference is the same campaign without its
+    // final states, whose longer runs are made again from t = 0: a new campaign would draw
+    // its DSMC runs from stream version 3's AES words, the fixture from ChaCha8 (version 1).
     let mg = grown_fixture_manifest(&m, dir.path());
+    let direct = dir.path().join("direct");
+    util::copy_dir(&complete, &direct);
+    fs::remove_dir_all(direct.join("finals")).unwrap();
     fs::write(&log, "").unwrap();
     run_ok(&mg, &complete, &log);
     assert!(
@@ -865,8 +870,13 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
         "{}",
         log_text(&log)
     );
-    let direct = dir.path().join("direct");
+    fs::write(&log, "").unwrap();
     run_ok(&mg, &direct, &log);
+    assert!(
+        log_text(&log).contains("cannot continue run"),
+        "the reference continued final states: {}",
+        log_text(&log)
+    );
     // The fixture's theory table predates the Sonine columns and is never rewritten: the
     // points the growth adds get the fixture's columns, the summary nulls there.
     let sonine = [
@@ -900,8 +910,11 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
         }
     }
     assert_eq!(schemas.len(), 1, "{schemas:?}");
+    // A new campaign of the grown manifest has `a2`.
+    let fresh = dir.path().join("fresh");
+    run_ok(&mg, &fresh, &log);
     let d_species = granular::store::schema::file_schema(
-        &fs::read_dir(direct.join("tables/dsmc_species"))
+        &fs::read_dir(fresh.join("tables/dsmc_species"))
             .unwrap()
             .map(|e| e.unwrap().path())
             .find(|p| p.extension().is_some_and(|x| x == "parquet"))

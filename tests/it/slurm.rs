@@ -624,7 +624,7 @@ fn target_manifest() -> Value {
         "model": "dsmc",
         "seed": 31,
         "min_replicas": 3,
-        "max_replicas": 60,
+        "max_replicas": 100,
         "params": {
             "method": "low_rank",
             "species": {"list": [

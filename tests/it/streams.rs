@@ -19,7 +19,7 @@ use super::util::{self, heavy, log_text, read_all, run_capture, run_granular, s,
 const LIMIT: Duration = Duration::from_secs(300);
 
 /// The stream version of new campaigns (`StreamVersion::CURRENT`).
-const CURRENT: u64 = 2;
+const CURRENT: u64 = 3;
 
 /// Unpack the committed fixture into `dir` (see tests/fixtures/README.md).
 fn unpack(dir: &Path) {
@@ -208,7 +208,7 @@ fn new_campaigns_record_the_current_stream_and_keep_it() {
     assert_eq!(v, json!(CURRENT));
     assert_eq!(
         line,
-        "random stream: version 2 (ChaCha8, counter-addressed RFM noise)"
+        "random stream: version 3 (counter-addressed RFM noise, DSMC from AES-128-CTR)"
     );
     assert_eq!(plan_stream(&mg, &a, &log), json!(CURRENT));
 

@@ -62,8 +62,8 @@ impl Model for Dsmc {
         p.memory_estimate()
     }
 
-    fn start(p: &DsmcParams, seed: u64, _stream: StreamVersion) -> Result<DsmcSim, ModelError> {
-        Ok(DsmcSim::new(p.system()?, seed))
+    fn start(p: &DsmcParams, seed: u64, stream: StreamVersion) -> Result<DsmcSim, ModelError> {
+        Ok(DsmcSim::with_stream(p.system()?, seed, stream))
     }
 
     fn restore(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, ModelError> {
