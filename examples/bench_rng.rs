@@ -3,7 +3,8 @@
 //! (a) Random words: 64-bit words per second of the run's ChaCha8 stream, served in bulk
 //!     (`WordStream::fill`), one at a time (`RunRng::u64`), counter-addressed (`fill_counter`,
 //!     the RFM noise of stream version 2), and `rand_chacha`'s `ChaCha8Rng::fill_bytes` (the
-//!     same words) for reference.
+//!     same words) for reference; then AES-128 in counter mode (the DSMC words of stream
+//!     version 3: `AesStream::fill`, VAES where the CPU has it, and `RunRng::u64`).
 //! (b) Standard normals per second of `rfm::noise::fill_normals_with` (ziggurat on the bulk
 //!     stream). The RFM MD draws 2 normals per particle-step in 2D (1 in 1D), so half of
 //!     this rate is the MD's floor in particle-steps/s from the noise alone.
@@ -22,8 +23,9 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use granular::rfm::noise::fill_normals_with;
+use granular::rng::aes::AesStream;
 use granular::rng::stream::{fill_counter, key_of, WordStream};
-use granular::rng::RunRng;
+use granular::rng::{Generator, RunRng};
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -127,6 +129,24 @@ fn main() {
         per_item(buf.len(), || {
             fill_counter(&key, 7, block, black_box(&mut buf));
             block += 512;
+        }),
+        "words",
+    );
+    let mut aes = AesStream::at(&RunRng::new(1).position());
+    row(
+        "AES-128-CTR AesStream::fill (4096 words)",
+        per_item(buf.len(), || aes.fill(black_box(&mut buf))),
+        "words",
+    );
+    let mut ra = RunRng::with_generator(1, Generator::Aes128Ctr);
+    row(
+        "AES-128-CTR RunRng::u64 (one at a time)",
+        per_item(4096, || {
+            let mut s = 0u64;
+            for _ in 0..4096 {
+                s ^= ra.u64();
+            }
+            black_box(s);
         }),
         "words",
     );

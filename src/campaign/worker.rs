@@ -210,11 +210,11 @@ impl Running<'_> {
 
     /// Write the finished run's final state, if its model keeps one.
     fn keep_final(&mut self, c: &Campaign) -> std::io::Result<()> {
-        let Some(payload) = self.engine.final_state() else {
+        let Some(parts) = self.engine.final_state() else {
             return Ok(());
         };
         let header = self.header();
-        checkpoint::write_final(&c.finals_dir(), &header, &payload)
+        checkpoint::write_final(&c.finals_dir(), &header, &parts)
     }
 
     /// The header of the run's checkpoint or final state, as of now.

@@ -609,16 +609,31 @@ impl DsmcSim {
     /// A finished run's [`FinalState`] (layout [`FINAL_FORMAT`]); None for a run that is not
     /// finished or whose stop is unknown.
     pub fn final_state(&mut self) -> Option<Vec<u8>> {
+        self.final_state_parts().map(|p| p.concat())
+    }
+
+    /// [`final_state`](Self::final_state) in two parts, the encoding of everything before the
+    /// state's bytes (their length included), then the state's bytes: the concatenation is
+    /// the postcard encoding of the [`FinalState`] (test `final_state_parts_are_its_encoding`),
+    /// written without copying the state into a second buffer.
+    pub fn final_state_parts(&mut self) -> Option<[Vec<u8>; 2]> {
         if !self.st.done || !self.stop_known {
             return None;
         }
-        let f = FinalState {
+        let state = self.state_bytes();
+        let head = FinalState {
             t_end: self.sys.t_end,
             output_times: self.sys.output_times.clone(),
             stop: self.stop,
-            state: self.state_bytes(),
+            state: Vec::new(),
         };
-        Some(postcard::to_stdvec(&f).expect("final state serialises"))
+        let mut head = postcard::to_stdvec(&head).expect("final state serialises");
+        // The empty state's length (a one-byte varint 0, last) becomes the state's length
+        // (postcard writes a sequence's length as the varint of a usize).
+        debug_assert_eq!(head.last(), Some(&0));
+        head.pop();
+        head.extend(postcard::to_stdvec(&state.len()).expect("usize serialises"));
+        Some([head, state])
     }
 
     /// The run `sys` continued from a finished run's [`FinalState`], bit for bit the run made

@@ -378,3 +378,28 @@ fn stream_version_3_draws_from_aes() {
         }
     }
 }
+
+/// The final state's two parts concatenated are the postcard encoding of its [`FinalState`]
+/// (what `continue_from` decodes), for both methods and both generators.
+#[test]
+fn final_state_parts_are_its_encoding() {
+    for method in [Method::LowRank, Method::Bird] {
+        for stream in [StreamVersion::V1, StreamVersion::V3] {
+            let sys = system(method, true, false, 3.0, TIMES);
+            let mut s = DsmcSim::with_stream(sys, 4, stream);
+            run(&mut s, u64::MAX);
+            let [head, state] = s.final_state_parts().unwrap();
+            let whole = FinalState {
+                t_end: s.sys.t_end,
+                output_times: s.sys.output_times.clone(),
+                stop: s.stop,
+                state: s.state_bytes(),
+            };
+            assert!(state.len() > 128, "a state of {} bytes", state.len());
+            assert!(
+                [head, state].concat() == postcard::to_stdvec(&whole).unwrap(),
+                "{method:?} {stream:?}"
+            );
+        }
+    }
+}

@@ -115,9 +115,11 @@ pub trait Model {
     fn carry_over(_old: &Self::Params, _new: &Self::Params) -> CarryOver {
         CarryOver::Rerun("the model cannot continue a finished run".into())
     }
-    /// The state a finished run keeps so that it can be continued (`None`: it cannot be). Its
-    /// layout belongs to `STATE_FORMAT`: bump that when it changes.
-    fn final_state(_sim: &mut Self::Sim) -> Option<Vec<u8>> {
+    /// The state a finished run keeps so that it can be continued (`None`: it cannot be), as
+    /// the parts whose concatenation it is (so that a large state is written without being
+    /// copied into one buffer). Its layout belongs to `STATE_FORMAT`: bump that when it
+    /// changes.
+    fn final_state(_sim: &mut Self::Sim) -> Option<Vec<Vec<u8>>> {
         None
     }
     /// A run of `new` continuing, bit for bit as a run made straight to the new end, from a
@@ -565,7 +567,7 @@ macro_rules! models {
             }
 
             /// See [`Model::final_state`].
-            pub fn final_state(&mut self) -> Option<Vec<u8>> {
+            pub fn final_state(&mut self) -> Option<Vec<Vec<u8>>> {
                 match self {
                     $(Engine::$variant(s) => <$model as Model>::final_state(s),)+
                 }

@@ -129,12 +129,27 @@ mod x86 {
         for (n, part) in out.chunks_exact_mut(32).enumerate() {
             let base = first.wrapping_add(16 * n as u128);
             let mut b = [_mm256_setzero_si256(); 8];
-            for (j, x) in b.iter_mut().enumerate() {
-                let c0 = base.wrapping_add(2 * j as u128);
-                let c1 = c0.wrapping_add(1);
-                let ctr =
-                    _mm256_set_epi64x((c1 >> 64) as i64, c1 as i64, (c0 >> 64) as i64, c0 as i64);
-                *x = _mm256_xor_si256(ctr, k[0]);
+            if (base as u64).checked_add(15).is_some() {
+                // The 16 counters share their high half: the low halves by vector adds.
+                let (lo, hi) = (base as u64 as i64, (base >> 64) as u64 as i64);
+                let c = _mm256_set_epi64x(hi, lo.wrapping_add(1), hi, lo);
+                for (j, x) in b.iter_mut().enumerate() {
+                    let step = 2 * j as i64;
+                    let ctr = _mm256_add_epi64(c, _mm256_set_epi64x(0, step, 0, step));
+                    *x = _mm256_xor_si256(ctr, k[0]);
+                }
+            } else {
+                for (j, x) in b.iter_mut().enumerate() {
+                    let c0 = base.wrapping_add(2 * j as u128);
+                    let c1 = c0.wrapping_add(1);
+                    let ctr = _mm256_set_epi64x(
+                        (c1 >> 64) as i64,
+                        c1 as i64,
+                        (c0 >> 64) as i64,
+                        c0 as i64,
+                    );
+                    *x = _mm256_xor_si256(ctr, k[0]);
+                }
             }
             for kr in &k[1..10] {
                 for x in b.iter_mut() {
@@ -257,7 +272,13 @@ mod tests {
                 let key = aes_key_of(seed);
                 let c = aes::Aes128::new(&GenericArray::from(key));
                 let rk = unsafe { x86::expand_key(&key) };
-                for first in [0u128, 5, (1u128 << 64) - 7, u128::MAX - 3] {
+                for first in [
+                    0u128,
+                    5,
+                    (1u128 << 64) - 7,
+                    (1u128 << 64) - 40,
+                    u128::MAX - 3,
+                ] {
                     let (mut a, mut b) = ([0u64; 96], [0u64; 96]);
                     crate_blocks(&c, first, &mut a);
                     unsafe { x86::vaes_blocks(&rk, first, &mut b) };

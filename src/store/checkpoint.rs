@@ -75,18 +75,29 @@ fn prev_path(dir: &Path, run_id: u64) -> PathBuf {
 }
 
 pub fn encode(header: &CheckpointHeader, payload: &[u8]) -> Vec<u8> {
+    let mut out = encode_head(header, &[payload]);
+    out.extend_from_slice(payload);
+    out
+}
+
+/// What [`encode`] puts before the payload, for a payload that is the concatenation of
+/// `parts`.
+fn encode_head<P: AsRef<[u8]>>(header: &CheckpointHeader, parts: &[P]) -> Vec<u8> {
     let h = serde_json::to_vec(header).expect("header serialises");
     let mut crc = crc32fast::Hasher::new();
     crc.update(&h);
-    crc.update(payload);
-    let mut out = Vec::with_capacity(28 + h.len() + payload.len());
+    let mut len = 0u64;
+    for p in parts {
+        crc.update(p.as_ref());
+        len += p.as_ref().len() as u64;
+    }
+    let mut out = Vec::with_capacity(28 + h.len());
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&CHECKPOINT_FORMAT.to_le_bytes());
     out.extend_from_slice(&(h.len() as u32).to_le_bytes());
-    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    out.extend_from_slice(&len.to_le_bytes());
     out.extend_from_slice(&crc.finalize().to_le_bytes());
     out.extend_from_slice(&h);
-    out.extend_from_slice(payload);
     out
 }
 
@@ -200,12 +211,20 @@ pub fn final_path(dir: &Path, run_id: u64) -> PathBuf {
     dir.join(format!("run-{run_id:010}.final"))
 }
 
-/// Write a finished run's final state atomically (the directory is created if needed).
-pub fn write_final(dir: &Path, header: &CheckpointHeader, payload: &[u8]) -> std::io::Result<()> {
+/// Write a finished run's final state, the concatenation of `parts`, atomically (the
+/// directory is created if needed): the bytes of [`encode`], written part by part.
+pub fn write_final<P: AsRef<[u8]>>(
+    dir: &Path,
+    header: &CheckpointHeader,
+    parts: &[P],
+) -> std::io::Result<()> {
     if !dir.is_dir() {
         fsutil::create_dir_durable(dir)?;
     }
-    fsutil::write_atomic(&final_path(dir, header.run_id), &encode(header, payload))
+    let head = encode_head(header, parts);
+    let mut all: Vec<&[u8]> = vec![&head];
+    all.extend(parts.iter().map(|p| p.as_ref()));
+    fsutil::write_atomic_parts(&final_path(dir, header.run_id), &all)
 }
 
 /// A finished run's final state; `Ok(None)` if there is none, Err if it is unusable (why).
@@ -259,6 +278,23 @@ mod tests {
         }
     }
 
+    /// A final state written in parts is the file of its concatenation, and loads back.
+    #[test]
+    fn final_state_in_parts_is_one_payload() {
+        let dir = tempfile::tempdir().unwrap();
+        let parts = [
+            b"head".to_vec(),
+            vec![],
+            (0..=255u8).cycle().take(70_000).collect(),
+        ];
+        write_final(dir.path(), &header(), &parts).unwrap();
+        let whole = parts.concat();
+        let bytes = fs::read(final_path(dir.path(), 3)).unwrap();
+        assert_eq!(bytes, encode(&header(), &whole));
+        let (h, payload) = load_final(dir.path(), 3, 9).unwrap().unwrap();
+        assert_eq!((h.run_id, payload), (3, whole));
+    }
+
     #[test]
     fn round_trip_and_corruption_detected() {
         let bytes = encode(&header(), b"payload bytes");
@@ -278,7 +314,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let finals = dir.path().join("finals");
         assert_eq!(load_final(&finals, 3, 9), Ok(None));
-        write_final(&finals, &header(), b"end").unwrap();
+        write_final(&finals, &header(), &[b"end"]).unwrap();
         let (h, p) = load_final(&finals, 3, 9).unwrap().unwrap();
         assert_eq!((h, p.as_slice()), (header(), &b"end"[..]));
         assert!(load_final(&finals, 3, 10)

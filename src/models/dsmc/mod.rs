@@ -106,8 +106,8 @@ impl Model for Dsmc {
         }
     }
 
-    fn final_state(sim: &mut DsmcSim) -> Option<Vec<u8>> {
-        sim.final_state()
+    fn final_state(sim: &mut DsmcSim) -> Option<Vec<Vec<u8>>> {
+        sim.final_state_parts().map(Vec::from)
     }
 
     fn continue_from(p: &DsmcParams, state: &[u8]) -> Result<DsmcSim, ModelError> {

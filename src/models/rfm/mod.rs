@@ -86,8 +86,8 @@ impl Model for Rfm {
         }
     }
 
-    fn final_state(run: &mut RfmRun) -> Option<Vec<u8>> {
-        run.final_state()
+    fn final_state(run: &mut RfmRun) -> Option<Vec<Vec<u8>>> {
+        run.final_state().map(|s| vec![s])
     }
 
     fn continue_from(p: &RfmParams, state: &[u8]) -> Result<RfmRun, ModelError> {
