@@ -21,7 +21,11 @@ fn trials(c: &mut Criterion) {
     let mut g = c.benchmark_group("dsmc_1e5_trials");
     g.sample_size(20);
     for method in ["low_rank", "bird"] {
-        let mut sim = DsmcSim::new(system(method, 10_000), 7);
+        let mut sim = DsmcSim::with_stream(
+            system(method, 10_000),
+            7,
+            granular::rng::StreamVersion::CURRENT,
+        );
         g.bench_function(method, |b| {
             b.iter(|| sim.advance(100_000).expect("physics"))
         });

@@ -42,7 +42,7 @@ fn main() {
     let sys = params.system().expect("system");
     let (m, n) = (sys.species.len(), sys.n_particles());
     let t0 = Instant::now();
-    let mut sim = DsmcSim::new(sys, seed);
+    let mut sim = DsmcSim::with_stream(sys, seed, granular::rng::StreamVersion::CURRENT);
     let setup = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     while !sim.advance(u64::MAX).expect("physics") {}

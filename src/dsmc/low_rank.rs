@@ -973,6 +973,8 @@ mod tests {
             assert!(edit(&|st| st.gap_prod = bad).is_err(), "gap_prod {bad}");
         }
         assert!(edit(&|st| st.collisions_at_refresh = st.collisions + 1).is_err());
+        assert!(edit(&|st| st.rng.filled_at = u128::MAX - 8).is_err());
+        assert!(edit(&|st| st.geom.filled_at = 1 << 64).is_err());
         assert!(edit(&|st| st.next_output = usize::MAX).is_err());
     }
 

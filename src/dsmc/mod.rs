@@ -550,6 +550,11 @@ impl DsmcSim {
                 c.a as usize >= n || c.b as usize >= n || c.i as usize >= m || c.k as usize >= m
             }
         };
+        // A stream position past 2^64 32-bit words cannot come from a run (and would overflow
+        // the generators' block arithmetic).
+        if st.rng.filled_at >> 64 != 0 || st.geom.filled_at >> 64 != 0 {
+            return Err("checkpoint's random stream position is out of range".into());
+        }
         let counters_ok = st.next_output <= sys.output_times.len()
             && st.collisions_at_refresh <= st.collisions
             && st.gap_prod > 0.0

@@ -37,8 +37,9 @@ pub struct WordStream {
 }
 
 impl WordStream {
-    /// The stream of `rng`, continuing exactly where `rng` stands.
+    /// The stream of `rng` (a ChaCha8 one), continuing exactly where `rng` stands.
     pub fn from_rng(rng: &RunRng) -> Self {
+        debug_assert_eq!(rng.generator(), super::Generator::ChaCha8);
         Self::at(&rng.position())
     }
 
