@@ -32,6 +32,12 @@ impl Alias {
         self.alias.is_empty()
     }
 
+    /// The thresholds and aliases of the slots (for vectorised sampling).
+    #[inline(always)]
+    pub fn slots(&self) -> (&[u64], &[u32]) {
+        (&self.threshold, &self.alias)
+    }
+
     /// Rebuild in place (Vose's method; deterministic).
     pub fn rebuild(&mut self, weights: &[f64]) {
         let n = weights.len();
@@ -90,6 +96,60 @@ impl Alias {
     }
 }
 
+/// Alias tables of equal length end to end, so that a draw from any of them is one lookup:
+/// table t's slots are `t n..(t + 1) n`, and [`sample`](Self::sample) from `base = t n` is
+/// [`Alias::sample`] of table t (the same index for the same word).
+#[derive(Clone, Debug, Default)]
+pub struct AliasStack {
+    threshold: Vec<u64>,
+    alias: Vec<u32>,
+    n: u64,
+}
+
+impl AliasStack {
+    /// The tables end to end; None unless they all have the same, nonzero length.
+    pub fn new(tables: &[Alias]) -> Option<Self> {
+        let n = tables.first()?.len();
+        if n == 0 || tables.iter().any(|t| t.len() != n) {
+            return None;
+        }
+        Some(AliasStack {
+            threshold: tables
+                .iter()
+                .flat_map(|t| t.threshold.iter().copied())
+                .collect(),
+            alias: tables
+                .iter()
+                .flat_map(|t| t.alias.iter().copied())
+                .collect(),
+            n: n as u64,
+        })
+    }
+
+    /// The length of each table.
+    pub fn table_len(&self) -> usize {
+        self.n as usize
+    }
+
+    /// The sample of the table starting at slot `base` (a multiple of the table length).
+    #[inline(always)]
+    pub fn sample(&self, base: usize, x: u64) -> usize {
+        debug_assert!(base % self.n as usize == 0 && base < self.alias.len());
+        let m = x as u128 * self.n as u128;
+        let idx = (m >> 64) as usize;
+        let frac = m as u64;
+        // SAFETY: idx < n because x < 2^64, and base + n <= len (checked in debug builds).
+        let (thr, alias) = unsafe {
+            (
+                *self.threshold.get_unchecked(base + idx),
+                *self.alias.get_unchecked(base + idx) as usize,
+            )
+        };
+        let take_alias = ((frac >= thr) as usize).wrapping_neg();
+        idx ^ ((idx ^ alias) & take_alias)
+    }
+}
+
 fn to_threshold(p: f64) -> u64 {
     if p >= 1.0 {
         u64::MAX
@@ -104,6 +164,28 @@ fn to_threshold(p: f64) -> u64 {
 mod tests {
     use super::*;
     use crate::rng::RunRng;
+
+    /// A stack of tables samples as each of its tables, word for word; tables of unequal
+    /// length do not stack.
+    #[test]
+    fn stacked_tables_sample_as_their_tables() {
+        let tables = [
+            Alias::new(&[1.0, 0.0, 3.0, 0.5]),
+            Alias::new(&[0.2, 0.2, 5.0, 1e-9]),
+            Alias::new(&[0.0, 0.0, 0.0, 1.0]),
+        ];
+        let stack = AliasStack::new(&tables).unwrap();
+        assert_eq!(stack.table_len(), 4);
+        let mut rng = RunRng::new(11);
+        for _ in 0..100_000 {
+            let x = rng.u64();
+            for (t, table) in tables.iter().enumerate() {
+                assert_eq!(stack.sample(4 * t, x), table.sample(x));
+            }
+        }
+        assert!(AliasStack::new(&[Alias::new(&[1.0]), Alias::new(&[1.0, 2.0])]).is_none());
+        assert!(AliasStack::new(&[]).is_none());
+    }
 
     /// Frequencies from 1e6 draws match the weights within 5 binomial standard deviations.
     #[test]

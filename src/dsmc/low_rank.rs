@@ -24,7 +24,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::alias::Alias;
+use super::alias::{Alias, AliasStack};
 use super::collision::{collide_impulse, impact_impulse};
 use super::system::Method;
 use super::{
@@ -123,21 +123,43 @@ fn capacity(n: u64) -> u64 {
     (n + (n / 64).max(8)).min(u32::MAX as u64)
 }
 
-/// Slot j of the u table -> (term r, species i | group << GROUP_SHIFT), r-major, then
-/// species, then group.
-pub fn slot_tables(m: usize) -> (Vec<u8>, Vec<u32>) {
-    let per_term = GROUPS * m;
-    let term = (0..3 * per_term).map(|j| (j / per_term) as u8).collect();
-    let species = (0..3 * per_term)
-        .map(|j| {
-            let rem = j % per_term;
-            (rem / GROUPS) as u32 | ((rem % GROUPS) as u32) << GROUP_SHIFT
-        })
-        .collect();
-    (term, species)
+/// The static tables of a candidate's draw, laid out so that each step of the draw reads one
+/// entry (built once per run).
+pub struct DrawTables {
+    /// Slot j of the u table (r-major, then species, then group) decoded: species i with its
+    /// group g from GROUP_SHIFT in the low half, r M (term r's first slot in `k`) in the high.
+    slot: Vec<u64>,
+    /// The k tables of the terms r = 0, 1, 2.
+    k: AliasStack,
+    /// Species k's particle positions: the first in the low half, the count in the high.
+    range: Vec<u64>,
 }
 
-/// Weights of the u table: W_r sigma_i^p C_ig b_ig, laid out as [`slot_tables`].
+impl DrawTables {
+    /// The tables for the k tables of [`static_tables`] and the species' offsets (M + 1).
+    pub fn new(k_tables: &[Alias; 3], off: &[usize]) -> Self {
+        let m = off.len() - 1;
+        // (No species: nothing is ever drawn.)
+        let k = AliasStack::new(k_tables).unwrap_or_default();
+        debug_assert!(m == 0 || k.table_len() == m);
+        let per_term = GROUPS * m;
+        let slot = (0..3 * per_term)
+            .map(|j| {
+                let (r, rem) = (j / per_term, j % per_term);
+                let ig = (rem / GROUPS) as u64 | ((rem % GROUPS) as u64) << GROUP_SHIFT;
+                ig | ((r * m) as u64) << 32
+            })
+            .collect();
+        // Positions are 32-bit (a run has at most u32::MAX - 1 particles).
+        let range = off
+            .windows(2)
+            .map(|w| w[0] as u32 as u64 | ((w[1] - w[0]) as u32 as u64) << 32)
+            .collect();
+        DrawTables { slot, k, range }
+    }
+}
+
+/// Weights of the u table: W_r sigma_i^p C_ig b_ig, laid out as [`DrawTables`]'s slots.
 pub fn dynamic_weights(
     sys: &DsmcSystem,
     vmax: &[f64],
@@ -362,27 +384,26 @@ impl DsmcSim {
         let w = self.rng.window(5);
         let (w0, w1, w2, w3, w4) = (w[0], w[1], w[2], w[3], w[4]);
         let ri = self.pair_i.sample(w0);
-        // SAFETY: the slot tables have one entry per (r, i, g) slot of pair_i; r < 3; the
-        // species tables have GROUPS entries per species and off one more than species.
-        let (r, ig) = unsafe {
-            (
-                *self.slot_term.get_unchecked(ri) as usize,
-                *self.slot_species.get_unchecked(ri),
-            )
-        };
+        let t = &self.draw;
+        // SAFETY: the slot table has one entry per (r, i, g) slot of pair_i; its high halves
+        // are starts of k tables; the k tables draw species; gtab has GROUPS entries per
+        // species.
+        let slot = unsafe { *t.slot.get_unchecked(ri) };
+        let ig = slot as u32;
         let i = (ig & SPECIES_MASK) as usize;
         let g = (ig >> GROUP_SHIFT) as usize;
-        let k = unsafe { self.pair_k.get_unchecked(r) }.sample(w1);
+        let k = t.k.sample((slot >> 32) as usize, w1);
         let ga = unsafe { *self.gtab.get_unchecked(GROUPS * i + g) };
-        let (ok, ok1) = unsafe { (*self.off.get_unchecked(k), *self.off.get_unchecked(k + 1)) };
+        let range = unsafe { *t.range.get_unchecked(k) };
+        let (ok, nk) = (range as u32 as usize, (range >> 32) as usize);
         let (Some(ja), Some(db)) = (
             crate::rng::lemire32((w2 >> 32) as u32, ga.cap),
-            crate::rng::lemire32(w2 as u32, (ok1 - ok) as u32),
+            crate::rng::lemire32(w2 as u32, nk as u32),
         ) else {
             // A slot must be redrawn (probability below n / 2^32): words 0 and 1 stand, the
             // slots (with their redraws) and the uniforms come one word at a time from word 2.
             self.rng.consume(2);
-            let (ja, db) = self.rng.below_pair(ga.cap as usize, ok1 - ok);
+            let (ja, db) = self.rng.below_pair(ga.cap as usize, nk);
             let (u, gap) = (self.rng.f64(), self.rng.f64_open0());
             return Candidate::low_rank(ig, k, ja, ok + db, u, gap);
         };

@@ -229,10 +229,9 @@ pub struct DsmcSim {
     next_event: f64,
     /// Refresh the bounds after this many collisions.
     refresh_collisions: u64,
-    /// Slot j of the (r, i, g) table -> term r and species i (with the group g in the top
-    /// bit), so decoding needs no division.
-    slot_term: Vec<u8>,
-    slot_species: Vec<u32>,
+    /// Low-rank: the static tables of a candidate's draw (slots decoded, k tables end to
+    /// end, particle ranges), so decoding needs no division.
+    draw: low_rank::DrawTables,
     /// Low-rank with TAMSD: the position of each tracer (derived from `st.ids`).
     tracer_pos: Vec<u32>,
     /// Low-rank without displacements: see [`update_lazy_threshold`](Self::update_lazy_threshold).
@@ -395,11 +394,10 @@ impl DsmcSim {
                 }
             }
         }
-        let m = sys.species.len();
         let refresh_collisions = (sys.refresh_every * sys.n_particles() as f64)
             .ceil()
             .max(1.0) as u64;
-        let (slot_term, slot_species) = low_rank::slot_tables(m);
+        let draw = low_rank::DrawTables::new(&pair_k, &off);
         let mut st = st;
         if sys.method == Method::LowRank && st.groups.is_empty() {
             st.groups = sys
@@ -422,8 +420,7 @@ impl DsmcSim {
             rate: 0.0,
             next_event: f64::INFINITY,
             refresh_collisions,
-            slot_term,
-            slot_species,
+            draw,
             tracer_pos: Vec::new(),
             gtab: Vec::new(),
             lazy_thr: 0.0,
