@@ -46,7 +46,7 @@ pub fn run_one(c: &Campaign, spec: &RunSpec, opts: &RunOptions, tx: &mut Tx) {
     let warn = |tx: &mut Tx, message: String| {
         let _ = tx.send((Event::Warning { message }, None));
     };
-    let (engine, from) = match restore(&dir, spec, params, tx, &warn) {
+    let (engine, from) = match restore(&dir, c.stream, spec, params, tx, &warn) {
         Some((e, h)) => (
             e,
             From::Checkpoint {
@@ -159,6 +159,11 @@ fn start(
         let why = match checkpoint::load_final(&c.finals_dir(), old, spec.seed) {
             Ok(Some((h, payload))) if h.state_format == params.state_format() => {
                 match params.continue_from(&payload) {
+                    Ok(e) if !e.draws_as(c.stream) => format!(
+                        "its final state does not draw as the campaign's random stream \
+                         (version {})",
+                        c.stream.number()
+                    ),
                     Ok(e) => {
                         let from = From::Final {
                             wall: h.wall_seconds,
@@ -294,6 +299,7 @@ impl Running<'_> {
 /// the simulated time reached before; None (after warnings) when there is none.
 fn restore(
     dir: &std::path::Path,
+    stream: crate::rng::StreamVersion,
     spec: &RunSpec,
     params: &ModelParams,
     tx: &mut Tx,
@@ -321,7 +327,19 @@ fn restore(
         );
     }
     let restored = if loaded.header.state_format == params.state_format() {
-        params.restore(&loaded.payload).map_err(|e| e.to_string())
+        params
+            .restore(&loaded.payload)
+            .map_err(|e| e.to_string())
+            .and_then(|e| {
+                if e.draws_as(stream) {
+                    Ok(e)
+                } else {
+                    Err(format!(
+                        "it does not draw as the campaign's random stream (version {})",
+                        stream.number()
+                    ))
+                }
+            })
     } else {
         Err(format!(
             "state format {:?}, this granular writes {:?}",

@@ -207,6 +207,12 @@ pub trait Simulation: Send {
     fn time(&self) -> f64;
     /// Everything the run needs to continue bit for bit.
     fn state_bytes(&mut self) -> Vec<u8>;
+    /// Whether the run draws as random stream version `stream` prescribes: a run restored from
+    /// a checkpoint or continued from a final state that another campaign wrote may not (a
+    /// model whose draws no version changes always does).
+    fn draws_as(&self, _stream: StreamVersion) -> bool {
+        true
+    }
 }
 
 /// What becomes of the finished runs of a point when the manifest asks for the same point with
@@ -563,6 +569,13 @@ macro_rules! models {
             pub fn state_bytes(&mut self) -> Vec<u8> {
                 match self {
                     $(Engine::$variant(s) => Simulation::state_bytes(s.as_mut()),)+
+                }
+            }
+
+            /// See [`Simulation::draws_as`].
+            pub fn draws_as(&self, stream: StreamVersion) -> bool {
+                match self {
+                    $(Engine::$variant(s) => Simulation::draws_as(s.as_ref(), stream),)+
                 }
             }
 

@@ -323,3 +323,67 @@ fn unknown_stream_versions_are_refused() {
         );
     }
 }
+
+/// A checkpoint that does not draw as its campaign's stream (here the fixture's version-1
+/// checkpoint of run 2 in a campaign whose `campaign.json` was edited to the current version,
+/// as a checkpoint copied in from another campaign would be) is not resumed: the run starts
+/// again from t = 0 on the campaign's stream, with a warning that says why, and its rows are
+/// those of run 2 of a new campaign of the same manifest. Without the check the run would go
+/// on drawing from version 1 in a campaign of version 3.
+#[test]
+fn checkpoints_of_another_stream_are_not_resumed() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let log = d.join("log");
+    unpack(d);
+    let interrupted = d.join("interrupted");
+    let mut i = info(&interrupted);
+    i["format_version"] = json!(4);
+    i["stream_version"] = json!(CURRENT);
+    write_info(&interrupted, &i);
+    ok(
+        &["resume", s(&interrupted), "--threads", "1", "--quiet"],
+        &log,
+    );
+    let text = log_text(&log);
+    assert!(
+        text.contains(&format!(
+            "run 2: checkpoint unusable (it does not draw as the campaign's random stream \
+             (version {CURRENT})); restarting from t = 0"
+        )),
+        "no warning for the version-1 checkpoint:\n{text}"
+    );
+    let fresh = d.join("fresh");
+    run(&d.join("m.json"), &fresh, &log);
+    // Run 2's rows in every table with a run id: the fresh campaign's (runs 0 and 1 were
+    // committed on version 1 before the edit).
+    let (a, b) = (read_all(&interrupted), read_all(&fresh));
+    let mut compared = 0;
+    for (name, t) in &a {
+        let Some(j) = t.columns.iter().position(|(c, _)| c == "run_id") else {
+            continue;
+        };
+        let run2 = |t: &util::Table| {
+            let wall = t.columns.iter().position(|(c, _)| c == "wall_seconds");
+            let mut rows: Vec<Vec<Cell>> = t
+                .rows
+                .iter()
+                .filter(|r| r[j] == Cell::U(2))
+                .cloned()
+                .collect();
+            for r in &mut rows {
+                if let Some(w) = wall {
+                    r[w] = Cell::Null;
+                }
+            }
+            rows.sort();
+            rows
+        };
+        let (ra, rb) = (run2(t), run2(&b[name]));
+        assert!(!ra.is_empty(), "{name}: no rows of run 2");
+        assert_eq!(ra, rb, "{name}: run 2 differs from a new campaign's");
+        compared += 1;
+    }
+    assert!(compared >= 2, "only {compared} tables with run ids");
+}

@@ -237,6 +237,10 @@ impl Simulation for DsmcSim {
     fn state_bytes(&mut self) -> Vec<u8> {
         DsmcSim::state_bytes(self)
     }
+    /// The version decides the generator of the words (its checkpoints record which).
+    fn draws_as(&self, stream: StreamVersion) -> bool {
+        self.generator() == stream.dsmc_generator()
+    }
 }
 
 #[cfg(test)]
@@ -253,6 +257,32 @@ mod tests {
 
     /// The valued columns are those of the observables' per-row values: `a2` with
     /// `velocity_distribution` (in any position of the list), none without.
+    /// A restored run draws as the stream version it was started on, and only as the
+    /// versions with the same generator (1 and 2: ChaCha8; 3: AES-128-CTR).
+    #[test]
+    fn restored_runs_draw_as_their_stream() {
+        let p = params(r#"["temperature"]"#);
+        for (started, same) in [
+            (StreamVersion::V1, [true, true, false]),
+            (StreamVersion::V2, [true, true, false]),
+            (StreamVersion::V3, [false, false, true]),
+        ] {
+            let mut sim = Dsmc::start(&p, 5, started).unwrap();
+            sim.advance(1_000).unwrap();
+            let restored = Dsmc::restore(&p, &Simulation::state_bytes(&mut sim)).unwrap();
+            for (v, want) in [StreamVersion::V1, StreamVersion::V2, StreamVersion::V3]
+                .into_iter()
+                .zip(same)
+            {
+                assert_eq!(
+                    restored.draws_as(v),
+                    want,
+                    "started {started:?}, asked {v:?}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn valued_columns_follow_the_observables() {
         assert!(Dsmc::valued_columns(&params(r#"["msd", "tamsd"]"#)).is_empty());

@@ -193,4 +193,8 @@ impl Simulation for RfmRun {
     fn state_bytes(&mut self) -> Vec<u8> {
         RfmRun::state_bytes(self)
     }
+    /// Its checkpoints record the version they draw as.
+    fn draws_as(&self, stream: StreamVersion) -> bool {
+        self.sim.stream_version() == stream
+    }
 }

@@ -3,8 +3,11 @@
 
 mod run {
     use crate::models::rfm::params::*;
+    use crate::models::rfm::Rfm;
+    use crate::models::{Model, Simulation};
     use crate::rfm::observe::*;
     use crate::rfm::{RfmConfig, RfmSim};
+    use crate::rng::StreamVersion;
 
     fn params(dim: u32) -> RfmParams {
         let mut v = serde_json::json!({
@@ -47,6 +50,26 @@ mod run {
             });
         }
         p
+    }
+
+    /// A restored run draws as exactly the stream version it was started on (its checkpoint
+    /// records the version).
+    #[test]
+    fn restored_runs_draw_as_their_stream() {
+        let p = params(2);
+        let all = [StreamVersion::V1, StreamVersion::V2, StreamVersion::V3];
+        for started in all {
+            let mut run = Rfm::start(&p, 9, started).unwrap();
+            run.advance(2_000).unwrap();
+            let restored = Rfm::restore(&p, &Simulation::state_bytes(&mut run)).unwrap();
+            for v in all {
+                assert_eq!(
+                    restored.draws_as(v),
+                    v == started,
+                    "started {started:?}, asked {v:?}"
+                );
+            }
+        }
     }
 
     /// A run restored from a checkpoint taken at any point continues bit for bit: the same
