@@ -12,12 +12,8 @@
 
 use aes::cipher::{generic_array::GenericArray, BlockEncrypt, KeyInit};
 
+use super::chunked::{BlockFn, Chunked, CHUNK};
 use super::RngPosition;
-
-/// AES blocks made at a time.
-const CHUNK_BLOCKS: usize = 64;
-/// 64-bit words per chunk.
-const CHUNK: usize = CHUNK_BLOCKS * 2;
 
 /// The AES-128 key of a run's seed.
 pub fn aes_key_of(seed: u64) -> [u8; 16] {
@@ -29,7 +25,10 @@ pub fn aes_key_of(seed: u64) -> [u8; 16] {
     key
 }
 
-enum Blocks {
+/// AES-128's blocks under a seed's key (made by VAES or the `aes` crate: the same blocks).
+pub struct Blocks(Impl);
+
+enum Impl {
     /// The `aes` crate's cipher.
     Crate(Box<aes::Aes128>),
     /// Round keys for the VAES path (x86-64 with VAES, AVX2 and AES-NI, detected at run time).
@@ -42,20 +41,22 @@ impl Blocks {
         #[cfg(target_arch = "x86_64")]
         if vaes_available() {
             // SAFETY: the CPU has AES-NI (checked by vaes_available).
-            return Blocks::Vaes(Box::new(unsafe { x86::expand_key(key) }));
+            return Blocks(Impl::Vaes(Box::new(unsafe { x86::expand_key(key) })));
         }
-        Blocks::Crate(Box::new(aes::Aes128::new(&GenericArray::from(*key))))
+        Blocks(Impl::Crate(Box::new(aes::Aes128::new(
+            &GenericArray::from(*key),
+        ))))
     }
 
     /// Blocks `first`, `first + 1`, ... into `out` (two words a block; `out.len()` a multiple
     /// of 32).
     fn fill(&self, first: u128, out: &mut [u64]) {
         debug_assert_eq!(out.len() % 32, 0);
-        match self {
-            Blocks::Crate(c) => crate_blocks(c, first, out),
+        match &self.0 {
+            Impl::Crate(c) => crate_blocks(c, first, out),
             #[cfg(target_arch = "x86_64")]
             // SAFETY: Vaes exists only where the CPU has VAES, AVX2 and AES-NI.
-            Blocks::Vaes(rk) => unsafe { x86::vaes_blocks(rk, first, out) },
+            Impl::Vaes(rk) => unsafe { x86::vaes_blocks(rk, first, out) },
         }
     }
 }
@@ -164,70 +165,24 @@ mod x86 {
     }
 }
 
-/// The AES-128 counter-mode words of a seed, served from a chunk of 64 blocks (the
-/// counterpart of [`super::stream::WordStream`]).
-pub struct AesStream {
-    seed: u64,
-    blocks: Blocks,
-    /// Block number of the next chunk to make.
-    next_block: u128,
-    buf: Box<[u64; CHUNK]>,
-    /// Next unread word of `buf` (CHUNK: empty).
-    idx: usize,
+impl BlockFn for Blocks {
+    const WORDS: usize = 2;
+
+    #[inline]
+    fn chunk(&self, first: u128, out: &mut [u64]) {
+        debug_assert_eq!(out.len(), CHUNK);
+        self.fill(first, out);
+    }
 }
 
-impl AesStream {
+/// The AES-128 counter-mode words of a seed, served from a chunk of 64 blocks (the
+/// counterpart of [`super::stream::WordStream`]).
+pub type AesStream = Chunked<Blocks>;
+
+impl Chunked<Blocks> {
     /// The stream at a saved position (in 32-bit words, as ChaCha8's: four a block).
     pub fn at(pos: &RngPosition) -> Self {
-        let p = pos.filled_at + 2 * pos.idx as u128;
-        let mut s = AesStream {
-            seed: pos.seed,
-            blocks: Blocks::new(&aes_key_of(pos.seed)),
-            next_block: p / (4 * CHUNK_BLOCKS as u128) * CHUNK_BLOCKS as u128,
-            buf: Box::new([0; CHUNK]),
-            idx: CHUNK,
-        };
-        let skip = ((p % (4 * CHUNK_BLOCKS as u128)) / 2) as usize;
-        if skip > 0 {
-            s.refill();
-            s.idx = skip;
-        }
-        s
-    }
-
-    /// The position (a stream restored from it continues with the same words).
-    pub fn position(&self) -> RngPosition {
-        RngPosition {
-            seed: self.seed,
-            filled_at: self.next_block * 4 - 2 * (CHUNK - self.idx) as u128,
-            idx: 0,
-        }
-    }
-
-    fn refill(&mut self) {
-        self.blocks.fill(self.next_block, &mut self.buf[..]);
-        self.next_block = self.next_block.wrapping_add(CHUNK_BLOCKS as u128);
-        self.idx = 0;
-    }
-
-    /// The next `out.len()` words.
-    pub fn fill(&mut self, out: &mut [u64]) {
-        let take = (CHUNK - self.idx).min(out.len());
-        out[..take].copy_from_slice(&self.buf[self.idx..self.idx + take]);
-        self.idx += take;
-        let mut rest = &mut out[take..];
-        while rest.len() >= CHUNK {
-            let (head, tail) = rest.split_at_mut(CHUNK);
-            self.blocks.fill(self.next_block, head);
-            self.next_block = self.next_block.wrapping_add(CHUNK_BLOCKS as u128);
-            rest = tail;
-        }
-        if !rest.is_empty() {
-            self.refill();
-            let k = rest.len();
-            rest.copy_from_slice(&self.buf[..k]);
-            self.idx = k;
-        }
+        Chunked::new(pos, Blocks::new(&aes_key_of(pos.seed)))
     }
 }
 
@@ -245,12 +200,14 @@ mod tests {
             0xc5, 0x5a,
         ];
         let first = u128::from_le_bytes(plain);
-        let mut paths = vec![Blocks::Crate(Box::new(aes::Aes128::new(
+        let mut paths = vec![Blocks(Impl::Crate(Box::new(aes::Aes128::new(
             &GenericArray::from(key),
-        )))];
+        ))))];
         #[cfg(target_arch = "x86_64")]
         if vaes_available() {
-            paths.push(Blocks::Vaes(Box::new(unsafe { x86::expand_key(&key) })));
+            paths.push(Blocks(Impl::Vaes(Box::new(unsafe {
+                x86::expand_key(&key)
+            }))));
         }
         for b in paths {
             let mut out = [0u64; 32];

@@ -6,6 +6,7 @@
 //! [`stream`] is that block function in bulk, also used directly by the RFM noise.
 
 pub mod aes;
+pub mod chunked;
 pub mod normal;
 pub mod stream;
 

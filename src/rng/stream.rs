@@ -16,27 +16,38 @@ use rand_chacha::ChaCha8Rng;
 
 use super::{RngPosition, RunRng};
 
+use super::chunked::{BlockFn, Chunked, CHUNK};
+
 /// Blocks per chunk (16 words of 32 bits each).
-const CHUNK_BLOCKS: usize = 16;
-/// 64-bit words per chunk.
-const CHUNK: usize = CHUNK_BLOCKS * 8;
+const CHUNK_BLOCKS: usize = CHUNK / 8;
 
 /// (key, stream, first block, out): 16 blocks of ChaCha8 with the 64-bit `stream` in state
 /// words 14-15 (rand_chacha's `set_stream`; the run's sequential stream is stream 0).
 type ChunkFn = unsafe fn(&[u32; 8], u64, u64, &mut [u32]);
 
-pub struct WordStream {
-    seed: u64,
+/// ChaCha8's blocks of stream 0 under a seed's key.
+pub struct ChaCha8Blocks {
     key: [u32; 8],
-    /// Block number of the next chunk to generate.
-    next_block: u64,
-    buf: Box<[u64; CHUNK]>,
-    /// Next unread word of `buf` (CHUNK: empty).
-    idx: usize,
     gen: ChunkFn,
 }
 
-impl WordStream {
+impl BlockFn for ChaCha8Blocks {
+    const WORDS: usize = 8;
+
+    #[inline]
+    fn chunk(&self, first: u128, out: &mut [u64]) {
+        debug_assert_eq!(out.len(), CHUNK);
+        // SAFETY: `pick` chose a block function this CPU runs; out is one chunk (16 blocks).
+        // The 64-bit block counter wraps, as rand_chacha's.
+        unsafe { (self.gen)(&self.key, 0, first as u64, as_u32(out)) };
+        fix_endian(out);
+    }
+}
+
+/// The run's ChaCha8 words, served from a chunk of 16 blocks.
+pub type WordStream = Chunked<ChaCha8Blocks>;
+
+impl Chunked<ChaCha8Blocks> {
     /// The stream of `rng` (a ChaCha8 one), continuing exactly where `rng` stands.
     pub fn from_rng(rng: &RunRng) -> Self {
         debug_assert_eq!(rng.generator(), super::Generator::ChaCha8);
@@ -45,85 +56,11 @@ impl WordStream {
 
     /// The stream at a saved position.
     pub fn at(pos: &RngPosition) -> Self {
-        let key = key_of(pos.seed);
-        // Position in 32-bit words (always even: RunRng serves 64-bit words).
-        let p = pos.filled_at + 2 * pos.idx as u128;
-        let block = (p / 16) as u64;
-        let mut s = WordStream {
-            seed: pos.seed,
-            key,
-            next_block: block,
-            buf: Box::new([0; CHUNK]),
-            idx: CHUNK,
+        let blocks = ChaCha8Blocks {
+            key: key_of(pos.seed),
             gen: pick(),
         };
-        let skip = ((p % 16) / 2) as usize;
-        if skip > 0 {
-            s.refill();
-            s.idx = skip;
-        }
-        s
-    }
-
-    /// The position (a [`RunRng`] restored from it continues with the same words).
-    pub fn position(&self) -> RngPosition {
-        let words = self.next_block as u128 * 16 - 2 * (CHUNK - self.idx) as u128;
-        RngPosition {
-            seed: self.seed,
-            filled_at: words,
-            idx: 0,
-        }
-    }
-
-    fn refill(&mut self) {
-        let out = as_u32(&mut self.buf[..]);
-        unsafe { (self.gen)(&self.key, 0, self.next_block, out) };
-        fix_endian(&mut self.buf[..]);
-        self.next_block = self.next_block.wrapping_add(CHUNK_BLOCKS as u64);
-        self.idx = 0;
-    }
-
-    #[inline(always)]
-    pub fn u64(&mut self) -> u64 {
-        if self.idx == CHUNK {
-            self.refill();
-        }
-        let w = self.buf[self.idx];
-        self.idx += 1;
-        w
-    }
-
-    /// Uniform in [0, 1) with 53 random bits.
-    #[inline(always)]
-    pub fn f64(&mut self) -> f64 {
-        (self.u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-
-    /// Uniform in (0, 1].
-    #[inline(always)]
-    pub fn f64_open0(&mut self) -> f64 {
-        ((self.u64() >> 11) + 1) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-
-    /// The next `out.len()` words.
-    pub fn fill(&mut self, out: &mut [u64]) {
-        let take = (CHUNK - self.idx).min(out.len());
-        out[..take].copy_from_slice(&self.buf[self.idx..self.idx + take]);
-        self.idx += take;
-        let mut rest = &mut out[take..];
-        while rest.len() >= CHUNK {
-            let (head, tail) = rest.split_at_mut(CHUNK);
-            unsafe { (self.gen)(&self.key, 0, self.next_block, as_u32(head)) };
-            fix_endian(head);
-            self.next_block = self.next_block.wrapping_add(CHUNK_BLOCKS as u64);
-            rest = tail;
-        }
-        if !rest.is_empty() {
-            self.refill();
-            let k = rest.len();
-            rest.copy_from_slice(&self.buf[..k]);
-            self.idx = k;
-        }
+        Chunked::new(pos, blocks)
     }
 }
 
