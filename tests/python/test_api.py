@@ -201,14 +201,16 @@ def test_the_binary_is_the_one_installed_with_the_package():
 
 
 def test_ctrl_c_checkpoints_raises_interrupted_and_resume_finishes(tmp_path, tiny_manifest):
-    # Runs long enough (N1 = 30 000 to t_end = 300: several seconds) that the interrupt,
-    # raised in this process 1.5 s after the start as Ctrl-C or a notebook's interrupt button
-    # would, comes while the binary runs; it must be passed on, checkpointed and reported.
+    # Runs long enough (N1 = 100 000 to t_end = 300: ~9 s on one thread here) that the
+    # interrupt, raised in this process 1.5 s after the start as Ctrl-C or a notebook's
+    # interrupt button would, comes while the binary runs; it must be passed on, checkpointed
+    # and reported. (N1 = 30 000 had taken several seconds; as the engine got faster it took
+    # 2.2 s, and the interrupt came after the last run.)
     import signal
     import threading
 
     m = tiny_manifest
-    m["params"]["species"]["power_law"]["N1"] = 30000
+    m["params"]["species"]["power_law"]["N1"] = 100000
     m["params"]["t_end"] = 300.0
     m["params"]["output_times"] = {"log": {"from": 0.01, "to": 300.0, "per_decade": 2}}
     out = tmp_path / "int"
@@ -275,7 +277,7 @@ def test_verify_and_plot(finished, fresh_copy, tmp_path):
 def long_manifest(m):
     """The tiny manifest made to run for several seconds on one thread (N1 = 30 000 to
     t_end = 300), so that an interrupt comes while runs run."""
-    m["params"]["species"]["power_law"]["N1"] = 30000
+    m["params"]["species"]["power_law"]["N1"] = 100000
     m["params"]["t_end"] = 300.0
     m["params"]["output_times"] = {"log": {"from": 0.01, "to": 300.0, "per_decade": 2}}
     return m
