@@ -134,7 +134,7 @@ impl AliasStack {
     /// The sample of the table starting at slot `base` (a multiple of the table length).
     #[inline(always)]
     pub fn sample(&self, base: usize, x: u64) -> usize {
-        debug_assert!(base % self.n as usize == 0 && base < self.alias.len());
+        debug_assert!(base.is_multiple_of(self.n as usize) && base < self.alias.len());
         let m = x as u128 * self.n as u128;
         let idx = (m >> 64) as usize;
         let frac = m as u64;

@@ -35,7 +35,7 @@ impl<B: BlockFn> Chunked<B> {
 
     /// The stream of `blocks` (the seed's generator) at a saved position.
     pub fn new(pos: &RngPosition, blocks: B) -> Self {
-        const { assert!(B::WORDS > 0 && CHUNK % B::WORDS == 0) };
+        const { assert!(B::WORDS > 0 && CHUNK.is_multiple_of(B::WORDS)) };
         // Position in 32-bit words (always even: the streams serve 64-bit words).
         let p = pos.filled_at + 2 * pos.idx as u128;
         let mut s = Chunked {
