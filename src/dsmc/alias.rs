@@ -32,12 +32,6 @@ impl Alias {
         self.alias.is_empty()
     }
 
-    /// The thresholds and aliases of the slots (for vectorised sampling).
-    #[inline(always)]
-    pub fn slots(&self) -> (&[u64], &[u32]) {
-        (&self.threshold, &self.alias)
-    }
-
     /// Rebuild in place (Vose's method; deterministic).
     pub fn rebuild(&mut self, weights: &[f64]) {
         let n = weights.len();
