@@ -113,7 +113,58 @@ pub struct GroupInfo {
     pub start: u32,
     pub n: u32,
     pub cap: u32,
+    /// The position of the group's slot 0 ([`slot_position`]; fixed by the species' range).
+    pub anchor: u32,
     pub bound: f64,
+}
+
+/// The position that slot `ja` of group g of the species whose range is `lo..hi` names (the
+/// slot is valid while that position is in the group: `position - start < n`, wrapping). The
+/// slots of every group but the first count down from the range's end: so that positions
+/// prefetched a batch ahead mostly stay right when group sizes change, and so that a slot
+/// names the same position whatever the group sizes (the queue holds positions). Wrapping
+/// 32-bit arithmetic: a bijection between slots and positions for each group.
+#[inline(always)]
+pub fn slot_position(anchor: u32, g: usize, ja: u32) -> u32 {
+    if g >= 1 {
+        anchor.wrapping_sub(ja)
+    } else {
+        anchor.wrapping_add(ja)
+    }
+}
+
+// With more groups a middle group's slots would count down from its moving upper end: the
+// anchors below are those of two groups.
+const _: () = assert!(GROUPS == 2);
+
+/// The anchor (slot 0's position) of group g of the species with range `lo..hi`.
+#[inline(always)]
+pub fn group_anchor(lo: usize, hi: usize, g: usize) -> u32 {
+    if g >= 1 {
+        (hi as u32).wrapping_sub(1)
+    } else {
+        lo as u32
+    }
+}
+
+/// A candidate as checkpoints hold it (a slot of its group in `a`) from one as the queue
+/// holds it (the position the slot names), and back.
+pub fn candidate_slot(c: &Candidate, off: &[usize]) -> Candidate {
+    let (i, g) = ((c.i & SPECIES_MASK) as usize, (c.i >> GROUP_SHIFT) as usize);
+    let anchor = group_anchor(off[i], off[i + 1], g);
+    let a = if g >= 1 {
+        anchor.wrapping_sub(c.a)
+    } else {
+        c.a.wrapping_sub(anchor)
+    };
+    Candidate { a, ..*c }
+}
+
+/// The inverse of [`candidate_slot`] (for a candidate whose species are of the run).
+pub fn candidate_position(c: &Candidate, off: &[usize]) -> Candidate {
+    let (i, g) = ((c.i & SPECIES_MASK) as usize, (c.i >> GROUP_SHIFT) as usize);
+    let a = slot_position(group_anchor(off[i], off[i + 1], g), g, c.a);
+    Candidate { a, ..*c }
 }
 
 /// Proposal capacity of a group of `n` particles: head-room so that particles moving in
@@ -296,14 +347,15 @@ impl CandidateQueue {
 }
 
 impl Candidate {
-    /// A low-rank candidate: species i with its proposed group (bits from GROUP_SHIFT), slot
-    /// `a` of the group, species k and particle b of it.
+    /// A low-rank candidate as the queue holds it: species i with its proposed group (bits
+    /// from GROUP_SHIFT), the position `a` that the drawn slot of the group names
+    /// ([`slot_position`]), species k and particle b of it.
     #[inline(always)]
-    fn low_rank(ig: u32, k: usize, a: usize, b: usize, u: f64, gap: f64) -> Self {
+    fn low_rank(ig: u32, k: usize, a: u32, b: usize, u: f64, gap: f64) -> Self {
         Candidate {
             i: ig,
             k: k as u32,
-            a: a as u32,
+            a,
             b: b as u32,
             u,
             gap,
@@ -405,13 +457,14 @@ impl DsmcSim {
             self.rng.consume(2);
             let (ja, db) = self.rng.below_pair(ga.cap as usize, nk);
             let (u, gap) = (self.rng.f64(), self.rng.f64_open0());
-            return Candidate::low_rank(ig, k, ja, ok + db, u, gap);
+            let pos = slot_position(ga.anchor, g, ja as u32);
+            return Candidate::low_rank(ig, k, pos, ok + db, u, gap);
         };
-        let (ja, b) = (ja as usize, ok + db as usize);
+        let (pos, b) = (slot_position(ga.anchor, g, ja), ok + db as usize);
         self.rng.consume(5);
         let u = crate::rng::unit_f64(w3);
         let gap = crate::rng::unit_f64_open0(w4);
-        Candidate::low_rank(ig, k, ja, b, u, gap)
+        Candidate::low_rank(ig, k, pos, b, u, gap)
     }
 
     /// Recompute the hot-loop view of species s's groups.
@@ -423,6 +476,7 @@ impl DsmcSim {
                 start: start as u32,
                 n: gr.n[g] as u32,
                 cap: gr.cap[g] as u32,
+                anchor: group_anchor(self.off[s], self.off[s + 1], g),
                 bound: gr.bound(g, self.st.vmax[s]),
             };
             start += gr.n[g] as usize;
@@ -442,17 +496,12 @@ impl DsmcSim {
         let b = c.b;
         let gb = gk[1..].iter().filter(|x| b >= x.start).count();
         let ub = c.u * (ga.bound + unsafe { gk.get_unchecked(gb) }.bound);
-        // The slots of every group but the first count down from its upper end (for the top
-        // group the end of the species' range, which never moves; for a middle group the
-        // boundary that moves least), so that positions prefetched a batch ahead mostly stay
-        // right when group sizes change.
-        let ja = c.a;
-        let pos = if g >= 1 {
-            (ga.start + ga.n).wrapping_sub(1).wrapping_sub(ja)
-        } else {
-            ga.start.wrapping_add(ja)
-        };
-        ((ja < ga.n).then_some(pos as usize), ub)
+        // The slot is valid while the position it names is in its group.
+        let pos = c.a;
+        (
+            (pos.wrapping_sub(ga.start) < ga.n).then_some(pos as usize),
+            ub,
+        )
     }
 
     /// Fill the candidate queue to [`AHEAD`] candidates. Their velocity lines are prefetched
@@ -472,13 +521,13 @@ impl DsmcSim {
         }
     }
 
-    /// Prefetch the velocity lines of queued candidate j's particles (a slot past its
-    /// group's size, a void trial, prefetches particle 0).
+    /// Prefetch the velocity lines of queued candidate j's particles (the position of a
+    /// slot past its group's size, a void trial, may lie outside the particles: clamped).
     #[inline(always)]
     fn prefetch_candidate(&self, j: usize) {
         let c = self.batch.get(j);
-        let (a, _) = self.resolve(&c);
-        prefetch_record(&self.st.vel, a.unwrap_or(0));
+        let last = self.st.vel.len().wrapping_sub(1);
+        prefetch_record(&self.st.vel, (c.a as usize).min(last));
         prefetch_record(&self.st.vel, c.b as usize);
     }
 
@@ -932,6 +981,43 @@ fn prefetch_record(vel: &[[f64; 3]], j: usize) {
 mod tests {
     use super::*;
     use crate::dsmc::system::{power_law_species, RestitutionModel, TamsdPlan};
+
+    /// The queue holds positions, checkpoints slots: the two convert into each other, and a
+    /// position is in its group exactly when the slot is below the group's size, whatever
+    /// the sizes (the validity the trial decides on).
+    #[test]
+    fn slots_and_positions_convert_and_agree_on_validity() {
+        let off = [0usize, 5, 105, 1105];
+        let mut checked = 0;
+        for i in 0..3 {
+            let count = (off[i + 1] - off[i]) as u64;
+            for n0 in [0, 1, count / 3, count] {
+                let n = [n0, count - n0];
+                let start = [off[i] as u32, (off[i] as u64 + n0) as u32];
+                for g in 0..GROUPS {
+                    let ig = i as u32 | (g as u32) << GROUP_SHIFT;
+                    for ja in (0..count as u32 + 20).chain([u32::MAX - 1, u32::MAX]) {
+                        let c = Candidate::low_rank(ig, 0, ja, 0, 0.5, 0.5);
+                        let q = candidate_position(&c, &off);
+                        assert_eq!(candidate_slot(&q, &off), c);
+                        let valid = q.a.wrapping_sub(start[g]) < n[g] as u32;
+                        assert_eq!(valid, (ja as u64) < n[g], "i {i} g {g} n {n:?} ja {ja}");
+                        if valid {
+                            // Group 0's slots count up from its start, group 1's down
+                            // from its end.
+                            let want = match g {
+                                0 => start[0] + ja,
+                                _ => start[1] + n[1] as u32 - 1 - ja,
+                            };
+                            assert_eq!(q.a, want);
+                            checked += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(checked > 2000);
+    }
 
     /// The power law n1 = 0.1, N1 = 3000, theta = 2.5, eps = 0.3, t_end = 40, msd on, bounds
     /// refreshed every 0.3 N collisions; with `tamsd` also 50 tracers on a grid of 40 (lag 1).

@@ -376,7 +376,12 @@ impl DsmcSim {
         let (ring, batch) = match sys.method {
             Method::LowRank => (
                 Ring::default(),
-                low_rank::CandidateQueue::from_slice(&st.pipeline),
+                low_rank::CandidateQueue::from_slice(
+                    &st.pipeline
+                        .iter()
+                        .map(|c| low_rank::candidate_position(c, &off))
+                        .collect::<Vec<_>>(),
+                ),
             ),
             Method::Bird => (
                 Ring::from_slice(&st.pipeline),
@@ -449,7 +454,9 @@ impl DsmcSim {
         self.st.rng = self.rng.position();
         self.st.geom = self.geom.position();
         self.st.pipeline = match self.sys.method {
-            Method::LowRank => self.batch.to_vec(),
+            Method::LowRank => (self.batch.to_vec().iter())
+                .map(|c| low_rank::candidate_slot(c, &self.off))
+                .collect(),
             Method::Bird => self.ring.to_vec(),
         };
         let mut bytes = postcard::to_stdvec(&self.st).expect("state serialises");
