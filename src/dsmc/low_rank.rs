@@ -748,9 +748,9 @@ impl DsmcSim {
     }
 
     /// Split every species (with at least GROUP_MIN particles) into its speed groups at
-    /// GROUP_FACTORS times its rms speed (after `refresh_bounds` set vmax), and set the
-    /// capacities.
-    pub(super) fn regroup(&mut self) {
+    /// GROUP_FACTORS times its rms speed (after `refresh_bounds` set vmax; `v2sums`: each
+    /// species' sum of squared speeds), and set the capacities.
+    pub(super) fn regroup(&mut self, v2sums: &[f64]) {
         for s in 0..self.sys.species.len() {
             let count = self.sys.species[s].count;
             let (lo, hi) = (self.off[s], self.off[s + 1]);
@@ -759,8 +759,11 @@ impl DsmcSim {
                 self.sync_groups(s);
                 continue;
             }
-            let v2: f64 = self.st.vel[lo..hi].iter().map(speed2).sum();
-            let rms = (v2 / count as f64).sqrt();
+            debug_assert_eq!(
+                v2sums[s].to_bits(),
+                self.st.vel[lo..hi].iter().map(speed2).sum::<f64>().to_bits()
+            );
+            let rms = (v2sums[s] / count as f64).sqrt();
             let thr = GROUP_FACTORS.map(|f| (f * rms).min(self.st.vmax[s]));
             // Partition group by group: particles of group g first among those left
             // (Hoare, deterministic).

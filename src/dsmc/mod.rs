@@ -804,11 +804,17 @@ impl DsmcSim {
     fn refresh_bounds(&mut self) {
         let sig_max = self.sys.sigma_max();
         let mut bound: f64 = 0.0;
+        // Each species' sum of squared speeds too, for the low-rank groups (in the same pass
+        // over the velocities; summed in order from -0.0, as `Iterator::sum` does).
+        let mut v2sums = Vec::with_capacity(self.sys.species.len());
         for (s, sp) in self.sys.species.iter().enumerate() {
-            let mut v2max: f64 = 0.0;
+            let (mut v2max, mut v2sum): (f64, f64) = (0.0, -0.0);
             for v in &self.st.vel[self.off[s]..self.off[s + 1]] {
-                v2max = v2max.max(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+                let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+                v2max = v2max.max(v2);
+                v2sum += v2;
             }
+            v2sums.push(v2sum);
             let vmax = v2max.sqrt();
             self.st.vmax[s] = vmax;
             let c = 0.25 * (sp.diameter + sig_max) * (sp.diameter + sig_max);
@@ -820,7 +826,7 @@ impl DsmcSim {
             // Candidates drawn from the old tables are void.
             self.batch.clear();
             if !self.gtab.is_empty() {
-                self.regroup();
+                self.regroup(&v2sums);
             }
         }
         self.rebuild_rates();
