@@ -761,7 +761,11 @@ impl DsmcSim {
             }
             debug_assert_eq!(
                 v2sums[s].to_bits(),
-                self.st.vel[lo..hi].iter().map(speed2).sum::<f64>().to_bits()
+                self.st.vel[lo..hi]
+                    .iter()
+                    .map(speed2)
+                    .sum::<f64>()
+                    .to_bits()
             );
             let rms = (v2sums[s] / count as f64).sqrt();
             let thr = GROUP_FACTORS.map(|f| (f * rms).min(self.st.vmax[s]));

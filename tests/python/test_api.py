@@ -281,7 +281,7 @@ def test_verify_and_plot(finished, fresh_copy, tmp_path):
 
 
 def long_manifest(m):
-    """The tiny manifest made to run for several seconds on one thread (N1 = 30 000 to
+    """The tiny manifest made to run for several seconds on one thread (N1 = 100 000 to
     t_end = 300), so that an interrupt comes while runs run."""
     m["params"]["species"]["power_law"]["N1"] = 100000
     m["params"]["t_end"] = 300.0
