@@ -1,6 +1,6 @@
 //! `granular compact`: merge a campaign's many small Parquet parts into few large files and
-//! fold the commit records into one ledger index, without a reader ever seeing missing or
-//! doubled rows.
+//! fold the commit records into one ledger index, without a reader of a generation ever
+//! seeing missing or doubled rows.
 //!
 //! Merging follows the commits: consecutive commits are binned up to the target size (all
 //! their tables together), and a bin becomes one group of the index with one merged file per
@@ -15,8 +15,12 @@
 //! is published by renaming a new symlink over `tables/<t>`, the index is written and the
 //! folded commit records deleted (`ledger::complete_compaction`). A crash before the journal
 //! leaves everything as it was (half-built generations are removed by the next compaction);
-//! after it, `ledger::recover` finishes the job. The previous generation is kept for readers
-//! that listed it just before the switch; older ones are deleted.
+//! after it, `ledger::recover` finishes the job. A generation's files never change; the
+//! previous generation is kept for readers that resolved the link to it just before the
+//! switch, older ones are deleted. (A reader through the link itself may list the old
+//! generation and look its files up in the new one: DuckDB's glob and pyarrow's dataset
+//! discovery then skip the vanished files silently, so docs/operations.md tells readers to
+//! resolve the link once.)
 //!
 //! Runs only while no shard runs (`ledger::ExclusiveLock`), after `ledger::recover`, on a
 //! campaign whose every file checks out (a full scrub; damage is refused, exit 3, and

@@ -108,8 +108,8 @@ enum Command {
     /// (used by the round scripts `granular submit` writes).
     #[command(hide = true)]
     SlurmRound(slurm_round::Args),
-    /// Merge a campaign's small Parquet parts into large files (readers never see missing or
-    /// doubled rows) and fold its commit records into one ledger index.
+    /// Merge a campaign's small Parquet parts into large files, published as a new generation
+    /// of each table, and fold its commit records into one ledger index.
     Compact(compact::Args),
     /// Check every table file of a campaign (readable, this campaign's, right table and
     /// format) and that the runs table holds each committed run exactly once.
