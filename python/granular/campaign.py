@@ -301,8 +301,39 @@ class Campaign:
             raise TableNotWritten(f"{self.path}: table {name} is not written yet")
         return d
 
+    def _generation(self, name: str) -> Optional[int]:
+        """The number of the generation `tables/<name>` links to now (None: not a link)."""
+        try:
+            target = os.readlink(self.path / "tables" / name)
+        except OSError:
+            return None
+        m = re.fullmatch(r"\.gen/" + re.escape(name) + r"\.([0-9]+)", target)
+        return int(m.group(1)) if m else None
+
     def _files(self, name: str) -> List[str]:
+        """The files of `name`'s current generation. A generation's files never change, and
+        `granular compact` removes one only after publishing the second one after it: if the
+        link moved on that far while the directory was listed, the listing may lack files
+        removed meanwhile, so it is made again. A file removed after the listing fails its
+        read (never a silently shorter table)."""
         self._entry(name)
+        for _ in range(3):
+            before = self._generation(name)
+            try:
+                files = self._list_generation(name)
+            except FileNotFoundError:
+                if self._generation(name) == before:
+                    raise
+                continue  # its generation went while it was listed
+            after = self._generation(name)
+            if before is None or after is None or after < before + 2:
+                return files
+        raise CampaignError(
+            f"{self.path}: table {name} changed generation twice while it was listed, three times "
+            "(compactions running one after another); try again"
+        )
+
+    def _list_generation(self, name: str) -> List[str]:
         d = self._table_dir(name)
         files = []
         for e in sorted(os.scandir(d), key=lambda e: e.name):
