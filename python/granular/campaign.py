@@ -289,7 +289,7 @@ class Campaign:
         d = tables / name
         if d.is_symlink():
             target = os.readlink(d)
-            if not re.fullmatch(r"\.gen/" + re.escape(name) + r"\.[0-9]+", target):
+            if _generation_of(name, target) is None:
                 raise CampaignError(f"{d}: a link to {target!r}, not to its generation .gen/{name}.<n>; not followed", exit_code=3)
             gen = tables / ".gen"
             if gen.is_symlink():
@@ -304,11 +304,9 @@ class Campaign:
     def _generation(self, name: str) -> Optional[int]:
         """The number of the generation `tables/<name>` links to now (None: not a link)."""
         try:
-            target = os.readlink(self.path / "tables" / name)
+            return _generation_of(name, os.readlink(self.path / "tables" / name))
         except OSError:
             return None
-        m = re.fullmatch(r"\.gen/" + re.escape(name) + r"\.([0-9]+)", target)
-        return int(m.group(1)) if m else None
 
     def _files(self, name: str) -> List[str]:
         """The files of `name`'s current generation. A generation's files never change, and
@@ -382,6 +380,13 @@ class Campaign:
             pass
         i = cols.index("point_id") + 1
         return lf.join(pts, on="point_id", how="left", **kw).select(cols[:i] + add + cols[i:])
+
+
+def _generation_of(table: str, target: str) -> Optional[int]:
+    """The generation a link of `table` names: its target must read exactly
+    `.gen/<table>.<digits>` (as `store::layout::generation_of` decides); None otherwise."""
+    m = re.fullmatch(r"\.gen/" + re.escape(table) + r"\.([0-9]+)", target)
+    return int(m.group(1)) if m else None
 
 
 def _ident(name: str) -> str:

@@ -159,10 +159,10 @@ def test_a_listing_two_compactions_overtook_is_made_again(fresh_copy, monkeypatc
         if name == "runs" and not overtaken:
             overtaken.append(files)
             for g in (n + 1, n + 2):
-                name = f"runs.{g:0{len(digits)}}"
-                shutil.copytree(tables / ".gen" / f"runs.{digits}", tables / ".gen" / name)
+                gen_dir = f"runs.{g:0{len(digits)}}"
+                shutil.copytree(tables / ".gen" / f"runs.{digits}", tables / ".gen" / gen_dir)
                 tmp = tables / ".runs.new"
-                tmp.symlink_to(f".gen/{name}")
+                tmp.symlink_to(f".gen/{gen_dir}")
                 os.replace(tmp, tables / "runs")
             return files[:-1]
         return files
