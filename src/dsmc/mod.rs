@@ -1229,6 +1229,19 @@ pub fn speed_bound(v: &[f64; 3]) -> f32 {
     }
 }
 
+/// Prefetch the cache line at `p` into the first-level cache (for data used within a few
+/// hundred nanoseconds: the low-rank trials' velocity records).
+#[inline(always)]
+fn prefetch_l1<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    #[allow(unused_unsafe)]
+    unsafe {
+        core::arch::x86_64::_mm_prefetch(p as *const i8, core::arch::x86_64::_MM_HINT_T0);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
 #[inline(always)]
 fn prefetch<T>(p: *const T) {
     #[cfg(target_arch = "x86_64")]
