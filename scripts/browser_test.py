@@ -193,8 +193,10 @@ def counts(text):
 
 
 def serve_test(work):
-    # 3 runs of a few seconds each on one thread: the page is loaded while the first runs.
-    manifest(f"{work}/slow.json", "browser-serve", 3, 1000000, 100.0, False)
+    # 3 runs of several seconds each on one thread (~5 s on a fast 2026 core): the page is
+    # loaded while the first runs, and a run outlasts the 2 s heartbeat and the page's 2 s
+    # poll (N_1 = 1e6 to t = 100, ~1.5 s there, let a page see no run running).
+    manifest(f"{work}/slow.json", "browser-serve", 3, 2000000, 1000.0, False)
     camp = f"{work}/slow"
     log = open(f"{work}/run.log", "w")
     run = subprocess.Popen([BIN, "run", f"{work}/slow.json", "--out", camp, "--threads", "1",
