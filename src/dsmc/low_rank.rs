@@ -278,8 +278,8 @@ pub fn check_groups(sys: &DsmcSystem, st: &DsmcState) -> Result<(), SimError> {
 
 /// Candidates tried per batch (16-32 were fastest for Table I; 64 4 % and 128 15 % slower).
 pub const BATCH: usize = 32;
-/// Candidates drawn ahead: the batch being tried and the next one (whose velocity lines are
-/// prefetched while this one is tried).
+/// Candidates drawn ahead: the batch being tried and the next one (whose first candidates'
+/// velocity lines are prefetched while this one is tried, [`LEAD`] trials ahead).
 pub const AHEAD: usize = 2 * BATCH;
 /// How many trials ahead a candidate's velocity lines are prefetched (at most BATCH: the
 /// candidates of the batch after the next are not drawn yet). 20 rather than 32: CPU time
@@ -520,9 +520,9 @@ impl DsmcSim {
             self.batch.push(c);
         }
         if fresh {
-            // The batch about to be tried was not prefetched by the one before (its
-            // candidates from LEAD on are prefetched again in its loop: no harm).
-            for j in 0..BATCH {
+            // The batch's first LEAD candidates were not prefetched by the one before (the
+            // rest are, in its loop).
+            for j in 0..LEAD {
                 self.prefetch_candidate(j);
             }
         }
@@ -984,7 +984,7 @@ fn speed2(v: &[f64; 3]) -> f64 {
 }
 
 /// Prefetch the cache line(s) of a 24-byte velocity record (a quarter of them straddle two)
-/// into L1: it is read a batch later (L1 rather than L2: 1.5-3 % less CPU time for Table I on
+/// into L1: it is read LEAD trials later (L1 rather than L2: 1.5-3 % less CPU time for Table I on
 /// both an Intel and an AMD machine; docs/performance.md).
 #[inline(always)]
 fn prefetch_record(vel: &[[f64; 3]], j: usize) {
