@@ -808,12 +808,7 @@ impl DsmcSim {
         // over the velocities; summed in order from -0.0, as `Iterator::sum` does).
         let mut v2sums = Vec::with_capacity(self.sys.species.len());
         for (s, sp) in self.sys.species.iter().enumerate() {
-            let (mut v2max, mut v2sum): (f64, f64) = (0.0, -0.0);
-            for v in &self.st.vel[self.off[s]..self.off[s + 1]] {
-                let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-                v2max = v2max.max(v2);
-                v2sum += v2;
-            }
+            let (v2max, v2sum) = max_and_sum_speed2(&self.st.vel[self.off[s]..self.off[s + 1]]);
             v2sums.push(v2sum);
             let vmax = v2max.sqrt();
             self.st.vmax[s] = vmax;
@@ -1218,6 +1213,38 @@ pub fn geom_seed(seed: u64) -> u64 {
 }
 
 /// An f32 upper bound on |v|: relative margin 1e-7 (far above f64 rounding), rounded up.
+/// The largest squared speed in `vel` (0 for none; a NaN is passed over, as by `f64::max`)
+/// and the sum of the squared speeds, added in order from -0.0 (as by `Iterator::sum`). The
+/// maximum runs in four independent lanes, so the sum's chain of additions is the loop's only
+/// carried dependence (a single `f64::max` chain, with its NaN test, was twice as long: most
+/// of `refresh_bounds`). Exactly the values of the one-lane loop: a maximum does not depend
+/// on grouping, and a squared speed is never -0.0.
+fn max_and_sum_speed2(vel: &[[f64; 3]]) -> (f64, f64) {
+    let mut lanes = [0.0f64; 4];
+    let mut sum = -0.0;
+    let mut quads = vel.chunks_exact(4);
+    for q in &mut quads {
+        for (lane, v) in lanes.iter_mut().zip(q) {
+            let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            if v2 > *lane {
+                *lane = v2;
+            }
+            sum += v2;
+        }
+    }
+    for v in quads.remainder() {
+        let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+        if v2 > lanes[0] {
+            lanes[0] = v2;
+        }
+        sum += v2;
+    }
+    let max = lanes
+        .into_iter()
+        .fold(0.0, |a, x| if x > a { x } else { a });
+    (max, sum)
+}
+
 #[inline(always)]
 pub fn speed_bound(v: &[f64; 3]) -> f32 {
     let s = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() * (1.0 + 1e-7);

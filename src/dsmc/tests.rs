@@ -403,3 +403,41 @@ fn final_state_parts_are_its_encoding() {
         }
     }
 }
+
+/// `max_and_sum_speed2` gives the bits of the one-lane loop it replaced (`f64::max` from 0.0,
+/// the sum from -0.0 in order), for every length 0..=9 (all remainders of its four lanes),
+/// with zeros, ties, huge values, a NaN and an infinity among the speeds.
+#[test]
+fn max_and_sum_speed2_is_the_one_lane_loop() {
+    fn one_lane(vel: &[[f64; 3]]) -> (f64, f64) {
+        let (mut m, mut s): (f64, f64) = (0.0, -0.0);
+        for v in vel {
+            let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            m = m.max(v2);
+            s += v2;
+        }
+        (m, s)
+    }
+    let mut rng = crate::rng::RunRng::new(7);
+    let special = [0.0, -0.0, 1e200, f64::NAN, f64::INFINITY, 3.0, 3.0];
+    for n in 0..=9 {
+        for trial in 0..200 {
+            let vel: Vec<[f64; 3]> = (0..n)
+                .map(|_| {
+                    let mut v = [rng.normal(), rng.normal(), rng.normal()];
+                    // One record in four is special in one component (from trial 100 on).
+                    if trial >= 100 && rng.f64() < 0.25 {
+                        v[(rng.f64() * 3.0) as usize] = special[(rng.f64() * 7.0) as usize];
+                    }
+                    v
+                })
+                .collect();
+            let (a, b) = (max_and_sum_speed2(&vel), one_lane(&vel));
+            assert_eq!(
+                (a.0.to_bits(), a.1.to_bits()),
+                (b.0.to_bits(), b.1.to_bits()),
+                "{vel:?}"
+            );
+        }
+    }
+}
