@@ -513,6 +513,7 @@ impl DsmcSim {
     /// Fill the candidate queue to [`AHEAD`] candidates. Their velocity lines are prefetched
     /// during the batch before theirs (`prefetch_candidate`); after a void, the first batch's
     /// here.
+    #[inline(always)]
     fn fill(&mut self) {
         let fresh = self.batch.is_empty();
         while self.batch.len() < AHEAD {
@@ -816,6 +817,7 @@ impl DsmcSim {
     /// groups at once), after the outputs before its time; when it changes the proposal
     /// tables the queue is void and the batch ends. Adds the trials (void ones excluded) to
     /// `trials`.
+    #[inline(always)]
     fn low_rank_batch(&mut self, start: usize, trials: &mut u64) -> Result<BatchEnd, PhysicsError> {
         self.fill();
         let lazy = self.lazy_time();
@@ -950,7 +952,29 @@ impl DsmcSim {
         Ok(matches!(end, BatchEnd::Done))
     }
 
+    /// Up to about `max_trials` trials (whole batches); true when the run reached t_end. The
+    /// loop runs compiled for x86-64-v3 where the CPU has it ([`x86_64_v3`]), else for the
+    /// baseline: the same operations (no fused multiply-add), so the same bits.
     pub(super) fn advance_low_rank(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
+        #[cfg(target_arch = "x86_64")]
+        if x86_64_v3() {
+            // SAFETY: the CPU has the features the copy is compiled for.
+            return unsafe { self.advance_low_rank_v3(max_trials) };
+        }
+        self.advance_low_rank_with(max_trials)
+    }
+
+    /// [`advance_low_rank`](Self::advance_low_rank) compiled for x86-64-v3 (AVX2, BMI1/2,
+    /// LZCNT, POPCNT: three-operand vector instructions, flag-free shifts; no FMA).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn advance_low_rank_v3(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
+        self.advance_low_rank_with(max_trials)
+    }
+
+    /// The loop itself, compiled for the features of its caller.
+    #[inline(always)]
+    pub(super) fn advance_low_rank_with(&mut self, max_trials: u64) -> Result<bool, PhysicsError> {
         let mut trials = 0u64;
         let result = loop {
             if self.rate <= 0.0 {
@@ -969,6 +993,17 @@ impl DsmcSim {
         self.flush_displacements();
         result
     }
+}
+
+/// Whether the CPU runs x86-64-v3 code (the features of
+/// [`DsmcSim::advance_low_rank_v3`]).
+#[cfg(target_arch = "x86_64")]
+fn x86_64_v3() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("bmi1")
+        && std::arch::is_x86_feature_detected!("bmi2")
+        && std::arch::is_x86_feature_detected!("lzcnt")
+        && std::arch::is_x86_feature_detected!("popcnt")
 }
 
 /// The relative velocity g = va - vb and |g|^2.
