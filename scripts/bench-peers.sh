@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # granular against its peers, side by side on this machine: one thread, CPU seconds (user + sys
-# of the whole process, from /usr/bin/time), REPEATS runs of each interleaved (A B A B ...),
+# of the whole process, to the millisecond: bash's `times`), REPEATS runs of each interleaved (A B A B ...),
 # medians. See ../shared/peers/README.md for the peers and earlier measurements.
 #
 #   (a) MD: LAMMPS (Debian's `lmp`, GRANULAR package) on ../shared/peers/lammps-rfm2d.in
@@ -39,21 +39,27 @@ python=${PYTHON:-}
 if [ -z "$python" ]; then
   if [ -x "$root/.venv/bin/python" ]; then python=$root/.venv/bin/python; else python=python3; fi
 fi
-[ -x /usr/bin/time ] || { echo "/usr/bin/time is needed (Debian: apt-get install time)" >&2; exit 2; }
 work=$(mktemp -d /tmp/granular-bench-peers.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 
 # cpu LABEL CMD...: runs CMD (stdout to $work/LABEL.out), appends user+sys seconds to
-# $work/LABEL.cpu.
+# $work/LABEL.cpu. The times are those of the subshell's children (bash's `times`, to the
+# millisecond; /usr/bin/time gives user and sys to 10 ms each, ~4 % of granular's MD run).
 cpu() {
-  local label=$1
+  local label=$1 t
   shift
-  /usr/bin/time -f '%U %S' -o "$work/$label.t" "$@" >"$work/$label.out" 2>"$work/$label.err" || {
+  t=$(
+    "$@" >"$work/$label.out" 2>"$work/$label.err" || exit 1
+    times
+  ) || {
     echo "$label failed:" >&2
     tail -5 "$work/$label.err" >&2
     exit 1
   }
-  awk '{printf "%.3f\n", $1 + $2}' "$work/$label.t" >>"$work/$label.cpu"
+  # The second line of `times`: the children's user and sys, as 0m0.233s 0m0.021s.
+  printf '%s\n' "${t##*$'\n'}" |
+    awk '{s = 0; for (i = 1; i <= 2; i++) {split($i, a, /[ms]/); s += a[1] * 60 + a[2]}; printf "%.3f\n", s}' \
+      >>"$work/$label.cpu"
 }
 median() { sort -g "$1" | awk '{a[NR] = $1} END {if (NR % 2) print a[(NR + 1) / 2]; else print (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
 list() { paste -sd' ' "$1"; }
