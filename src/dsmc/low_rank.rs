@@ -1013,8 +1013,9 @@ fn relative_speed2(va: &[f64; 3], vb: &[f64; 3]) -> ([f64; 3], f64) {
     (g, g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
 }
 
+/// |v|^2, summed as (x^2 + y^2) + z^2.
 #[inline(always)]
-fn speed2(v: &[f64; 3]) -> f64 {
+pub(super) fn speed2(v: &[f64; 3]) -> f64 {
     v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
 }
 

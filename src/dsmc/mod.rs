@@ -1212,7 +1212,6 @@ pub fn geom_seed(seed: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// An f32 upper bound on |v|: relative margin 1e-7 (far above f64 rounding), rounded up.
 /// The largest squared speed in `vel` (0 for none; a NaN is passed over, as by `f64::max`)
 /// and the sum of the squared speeds, added in order from -0.0 (as by `Iterator::sum`). The
 /// maximum runs in four independent lanes, so the sum's chain of additions is the loop's only
@@ -1225,7 +1224,7 @@ fn max_and_sum_speed2(vel: &[[f64; 3]]) -> (f64, f64) {
     let mut quads = vel.chunks_exact(4);
     for q in &mut quads {
         for (lane, v) in lanes.iter_mut().zip(q) {
-            let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            let v2 = low_rank::speed2(v);
             if v2 > *lane {
                 *lane = v2;
             }
@@ -1233,7 +1232,7 @@ fn max_and_sum_speed2(vel: &[[f64; 3]]) -> (f64, f64) {
         }
     }
     for v in quads.remainder() {
-        let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+        let v2 = low_rank::speed2(v);
         if v2 > lanes[0] {
             lanes[0] = v2;
         }
@@ -1245,6 +1244,7 @@ fn max_and_sum_speed2(vel: &[[f64; 3]]) -> (f64, f64) {
     (max, sum)
 }
 
+/// An f32 upper bound on |v|: relative margin 1e-7 (far above f64 rounding), rounded up.
 #[inline(always)]
 pub fn speed_bound(v: &[f64; 3]) -> f32 {
     let s = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() * (1.0 + 1e-7);
