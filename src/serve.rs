@@ -36,7 +36,8 @@
 //! timeout); an answer that makes no progress for `send_timeout` closes its connection; at
 //! most `max_connections` connections are open (derived from the limit of open files): one
 //! more closes the connection that has waited longest without progress and is not computing
-//! an answer, or, if every one is, is closed itself. A request must have one `Host` (none only
+//! an answer, and is accepted once that one's socket is closed, or, if every one is
+//! computing, is accepted and closed itself. A request must have one `Host` (none only
 //! in HTTP/1.0); on loopback it and an absolute request target must name this machine.
 
 use std::collections::BTreeMap;
@@ -298,6 +299,9 @@ async fn accept_loop(
 ) -> io::Result<()> {
     let conns = Arc::new(Conns::new(limits.max_connections));
     loop {
+        // A slot before the accept, so that at most the cap of sockets is ever open. None:
+        // every connection is computing an answer; the next one is accepted and closed.
+        let slot = conns.slot().await;
         let stream = match listener.accept().await {
             Ok((stream, _)) => stream,
             Err(e) => {
@@ -309,14 +313,15 @@ async fn accept_loop(
                 ) {
                     conns.evict_one();
                 }
+                drop(slot);
                 tokio::time::sleep(ACCEPT_BACKOFF).await;
                 continue;
             }
         };
-        // None: every connection is computing an answer; this one is closed at once.
-        let Some(conn) = conns.admit() else {
+        let Some(slot) = slot else {
             continue;
         };
+        let conn = conns.admit(slot);
         let _ = stream.set_nodelay(true);
         tokio::spawn(serve_connection(
             stream,
@@ -338,6 +343,9 @@ struct Conn {
     busy: AtomicUsize,
     /// Closes the connection (to make room for a new one).
     evict: tokio::sync::Notify,
+    /// Its place under the cap, given back when the last reference goes: after the socket
+    /// (which the connection's task owns) is closed, not when the connection is evicted.
+    _slot: tokio::sync::OwnedSemaphorePermit,
 }
 
 impl Conn {
@@ -347,10 +355,11 @@ impl Conn {
     }
 }
 
-/// The open connections, at most `cap`.
+/// The open connections, at most `cap`: a connection holds one of `slots` from before its
+/// socket is accepted until after it is closed, so evicted connections still closing count.
 struct Conns {
     epoch: Instant,
-    cap: usize,
+    slots: Arc<tokio::sync::Semaphore>,
     next: AtomicU64,
     live: Mutex<BTreeMap<u64, Arc<Conn>>>,
 }
@@ -359,18 +368,27 @@ impl Conns {
     fn new(cap: usize) -> Conns {
         Conns {
             epoch: Instant::now(),
-            cap: cap.max(1),
+            slots: Arc::new(tokio::sync::Semaphore::new(cap.max(1))),
             next: AtomicU64::new(0),
             live: Mutex::new(BTreeMap::new()),
         }
     }
 
-    /// A new connection, room made if the cap is reached; `None` if there is none to make.
-    fn admit(&self) -> Option<Arc<Conn>> {
-        let mut live = self.live.lock().unwrap_or_else(|e| e.into_inner());
-        if live.len() >= self.cap && !Self::evict_from(&mut live) {
+    /// A slot for one more connection; at the cap, room is made (the connection idle longest
+    /// is closed, and its socket waited for). `None` if there is none to make.
+    async fn slot(&self) -> Option<tokio::sync::OwnedSemaphorePermit> {
+        if let Ok(p) = self.slots.clone().try_acquire_owned() {
+            return Some(p);
+        }
+        if !self.evict_one() {
             return None;
         }
+        // Err only if the semaphore were closed, which it never is.
+        self.slots.clone().acquire_owned().await.ok()
+    }
+
+    /// A new connection in `slot`.
+    fn admit(&self, slot: tokio::sync::OwnedSemaphorePermit) -> Arc<Conn> {
         let id = self.next.fetch_add(1, Ordering::Relaxed);
         let c = Arc::new(Conn {
             id,
@@ -378,10 +396,14 @@ impl Conns {
             last: AtomicU64::new(0),
             busy: AtomicUsize::new(0),
             evict: tokio::sync::Notify::new(),
+            _slot: slot,
         });
         c.touch();
-        live.insert(id, c.clone());
-        Some(c)
+        self.live
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(id, c.clone());
+        c
     }
 
     fn evict_one(&self) -> bool {
@@ -1642,19 +1664,26 @@ mod tests {
     #[test]
     fn a_full_server_closes_the_connection_idle_longest() {
         let conns = Conns::new(2);
-        let a = conns.admit().unwrap();
-        let b = conns.admit().unwrap();
+        let admit = || conns.admit(conns.slot().now_or_never().unwrap().unwrap());
+        let a = admit();
+        let b = admit();
         a.last.store(5, Ordering::Relaxed);
         b.last.store(1, Ordering::Relaxed);
-        // b has waited longest: closed for c.
-        let c = conns.admit().unwrap();
+        // b has waited longest: told to close, and its slot waited for until it has.
+        let mut room = std::pin::pin!(conns.slot());
+        assert!(room.as_mut().now_or_never().is_none());
         assert!(b.evict.notified().now_or_never().is_some());
         assert!(a.evict.notified().now_or_never().is_none());
+        assert!(room.as_mut().now_or_never().is_none());
+        drop(b);
+        let c = conns.admit(room.now_or_never().unwrap().unwrap());
         // Both left computing an answer: no room is made, the new one is refused.
         let (_x, _y) = (Busy::enter(&a), Busy::enter(&c));
-        assert!(conns.admit().is_none());
+        assert!(conns.slot().now_or_never().unwrap().is_none());
         conns.leave(c.id);
-        assert!(conns.admit().is_some());
+        drop(_y);
+        drop(c);
+        assert!(conns.slot().now_or_never().unwrap().is_some());
     }
 
     #[test]
