@@ -138,7 +138,8 @@ pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
     if !duplicates.is_empty() {
         return Err(fail(duplicates));
     }
-    let mut errors = schema_errors(&json_schema(), &value, "");
+    let (schema, validator) = manifest_validator();
+    let mut errors = collect(validator.iter_errors(&value), "", schema);
     if !errors.is_empty() {
         if let (Some(params), Some(sweep)) = (
             value.get("params"),
@@ -186,12 +187,12 @@ pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<Str
     let mut value: Value = serde_json::from_str(text).ok()?;
     let mut left_out: Vec<String> = Vec::new();
     let mut errors = errors.to_vec();
-    let schema = json_schema();
+    let (schema, validator) = manifest_validator();
     for _ in 0..PRUNE_ROUNDS {
         for e in &errors {
             if let Some(key) = required_key(&e.message).filter(|_| e.path == "/params") {
                 let member = format!("/params/{}", key.replace('~', "~0").replace('/', "~1"));
-                let stand_in = stand_in(&schema, &value, &key)?;
+                let stand_in = stand_in(schema, &value, &key)?;
                 value
                     .pointer_mut("/params")?
                     .as_object_mut()?
@@ -211,7 +212,7 @@ pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<Str
                 left_out.push(member);
             }
         }
-        errors = schema_errors(&schema, &value, "");
+        errors = collect(validator.iter_errors(&value), "", schema);
         if errors.is_empty() {
             let m = crate::models::from_value_at(envelope_by_value(value), "").ok()?;
             return Some((m, left_out));
@@ -382,6 +383,19 @@ pub fn params_schema_errors(model: ModelKind, params: &Value, prefix: &str) -> V
         }
         let (_, validator, schema) = cache.iter().find(|(m, ..)| *m == model).expect("cached");
         collect(validator.iter_errors(params), prefix, schema)
+    })
+}
+
+/// The manifest's JSON Schema ([`json_schema`]) and its compiled validator, made once per
+/// process: generating and compiling it took a few milliseconds, and `granular run` parses
+/// its manifest more than once (`campaign::plan::parse`, `Campaign::open`).
+fn manifest_validator() -> &'static (Value, jsonschema::Validator) {
+    static VALIDATOR: std::sync::OnceLock<(Value, jsonschema::Validator)> =
+        std::sync::OnceLock::new();
+    VALIDATOR.get_or_init(|| {
+        let schema = json_schema();
+        let validator = jsonschema::validator_for(&schema).expect("generated schema compiles");
+        (schema, validator)
     })
 }
 
