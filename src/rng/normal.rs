@@ -95,13 +95,20 @@ fn layers(r: f64) -> ([f64; LAYERS + 1], f64) {
 
 /// The 256-layer ziggurat of the half-normal density f(x) = exp(-x^2/2) (Marsaglia & Tsang
 /// 2000), layers of equal area v: the tail start `r` (bisection on the top layer's area, so
-/// that all layers have area v to round-off: r = 3.6541528853610088) and the boundaries `x`
+/// that all layers have area v to round-off: r = 3.6541528853610092) and the boundaries `x`
 /// (`x[0] = v / f(r)`, `x[1] = r`, decreasing to `x[256] = 0`). Shared by this module and
 /// the stream-version-1 ziggurat of `rfm::noise`.
 pub(crate) fn ziggurat_layers() -> (f64, [f64; LAYERS + 1]) {
     let (mut lo, mut hi) = (3.2, 4.0);
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
+        // Converged (lo and hi adjacent): `mid` is an end, whose test was made when it became
+        // that end (3.2 and 4.0 test as their side), so every further pass would leave lo and
+        // hi as they are. Stopping here gives the 200 passes' r (~52 are needed, and each
+        // evaluates 256 layers).
+        if mid == lo || mid == hi {
+            break;
+        }
         if layers(mid).1 < 0.0 {
             lo = mid;
         } else {
@@ -545,6 +552,29 @@ mod tests {
         let share = squeezed as f64 / tests as f64;
         eprintln!("squeeze decides {share:.4} of random wedge tests");
         assert!(share > 0.9, "{share}");
+    }
+
+    /// The bisection stopped at convergence gives the r of all 200 passes, bit for bit, and
+    /// the ends 3.2 and 4.0 test as the sides they stand for.
+    #[test]
+    fn ziggurat_bisection_stops_at_the_r_of_200_passes() {
+        assert!(layers(3.2).1 < 0.0);
+        assert!(layers(4.0).1 >= 0.0);
+        let (mut lo, mut hi) = (3.2f64, 4.0f64);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if layers(mid).1 < 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let r = 0.5 * (lo + hi);
+        let (got, x) = ziggurat_layers();
+        assert_eq!(got.to_bits(), r.to_bits());
+        assert_eq!(got, 3.6541528853610092);
+        let want = layers(r).0;
+        assert!(x.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()));
     }
 
     /// A slot inside its inner rectangle is its candidate, and `finish_slow` draws nothing.
