@@ -1247,7 +1247,7 @@ fn max_and_sum_speed2(vel: &[[f64; 3]]) -> (f64, f64) {
 /// An f32 upper bound on |v|: relative margin 1e-7 (far above f64 rounding), rounded up.
 #[inline(always)]
 pub fn speed_bound(v: &[f64; 3]) -> f32 {
-    let s = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() * (1.0 + 1e-7);
+    let s = low_rank::speed2(v).sqrt() * (1.0 + 1e-7);
     let f = s as f32;
     if (f as f64) < s {
         f.next_up()

@@ -138,8 +138,7 @@ pub fn parse(text: &str, file: &str) -> Result<Manifest, ManifestErrors> {
     if !duplicates.is_empty() {
         return Err(fail(duplicates));
     }
-    let (schema, validator) = manifest_validator();
-    let mut errors = collect(validator.iter_errors(&value), "", schema);
+    let mut errors = manifest_schema_errors(&value);
     if !errors.is_empty() {
         if let (Some(params), Some(sweep)) = (
             value.get("params"),
@@ -187,7 +186,7 @@ pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<Str
     let mut value: Value = serde_json::from_str(text).ok()?;
     let mut left_out: Vec<String> = Vec::new();
     let mut errors = errors.to_vec();
-    let (schema, validator) = manifest_validator();
+    let (schema, _) = manifest_validator();
     for _ in 0..PRUNE_ROUNDS {
         for e in &errors {
             if let Some(key) = required_key(&e.message).filter(|_| e.path == "/params") {
@@ -212,7 +211,7 @@ pub fn pruned(text: &str, errors: &[ManifestError]) -> Option<(Manifest, Vec<Str
                 left_out.push(member);
             }
         }
-        errors = collect(validator.iter_errors(&value), "", schema);
+        errors = manifest_schema_errors(&value);
         if errors.is_empty() {
             let m = crate::models::from_value_at(envelope_by_value(value), "").ok()?;
             return Some((m, left_out));
@@ -397,6 +396,12 @@ fn manifest_validator() -> &'static (Value, jsonschema::Validator) {
         let validator = jsonschema::validator_for(&schema).expect("generated schema compiles");
         (schema, validator)
     })
+}
+
+/// [`schema_errors`] of `instance` against the manifest's schema, with the validator made once.
+fn manifest_schema_errors(instance: &Value) -> Vec<ManifestError> {
+    let (schema, validator) = manifest_validator();
+    collect(validator.iter_errors(instance), "", schema)
 }
 
 /// The errors of `instance` against `schema` (a whole schema: its `$defs` resolve), each
