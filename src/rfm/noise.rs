@@ -220,45 +220,134 @@ impl Lanes {
         zs: &[f64],
         sigma: f64,
     ) {
-        const W: usize = Lanes::W;
         let n = vf.len().min(zs.len());
         let (vf, zs) = (&mut vf[..n], &zs[..n]);
         let mut done = 0;
         #[cfg(target_arch = "x86_64")]
         if AVX2 && D == 2 {
-            // SAFETY: AVX2 is there (the caller's promise); every access is below n.
-            unsafe {
-                use std::arch::x86_64::*;
-                let (a, m) = (self.acc.as_mut_ptr(), self.mx.as_mut_ptr());
-                let (mut acc0, mut acc1) = (_mm256_loadu_pd(a), _mm256_loadu_pd(a.add(4)));
-                let (mut mx0, mut mx1) = (_mm256_loadu_pd(m), _mm256_loadu_pd(m.add(4)));
-                let s = _mm256_set1_pd(sigma);
-                let (vp, zp) = (vf.as_mut_ptr(), zs.as_ptr());
-                while done + W <= n {
-                    let z0 = _mm256_loadu_pd(zp.add(done));
-                    let z1 = _mm256_loadu_pd(zp.add(done + 4));
-                    acc0 = _mm256_add_pd(acc0, z0);
-                    acc1 = _mm256_add_pd(acc1, z1);
-                    let v0 = _mm256_add_pd(_mm256_loadu_pd(vp.add(done)), _mm256_mul_pd(s, z0));
-                    let v1 = _mm256_add_pd(_mm256_loadu_pd(vp.add(done + 4)), _mm256_mul_pd(s, z1));
-                    _mm256_storeu_pd(vp.add(done), v0);
-                    _mm256_storeu_pd(vp.add(done + 4), v1);
-                    // Particles 0, 2, 1, 3 of the group: x^2 + y^2.
-                    let a2 = _mm256_hadd_pd(_mm256_mul_pd(v0, v0), _mm256_mul_pd(v1, v1));
-                    // max(a2, mx) is `a2 > mx ? a2 : mx`, the scalar test.
-                    if done & W == 0 {
-                        mx0 = _mm256_max_pd(a2, mx0);
-                    } else {
-                        mx1 = _mm256_max_pd(a2, mx1);
-                    }
-                    done += W;
-                }
-                _mm256_storeu_pd(a, acc0);
-                _mm256_storeu_pd(a.add(4), acc1);
-                _mm256_storeu_pd(m, mx0);
-                _mm256_storeu_pd(m.add(4), mx1);
+            // SAFETY: AVX2 is there (the caller's promise); D == 2.
+            done = unsafe { self.groups2_avx2::<false, D>(vf, zs, sigma, &mut Drift::none()) };
+        }
+        self.add_rest::<D>(vf, zs, sigma, done);
+    }
+
+    /// [`add_with`](Self::add_with) with each particle drifted first (`d`: its positions
+    /// and references, slot for slot with `vf`), as [`super::sim`]'s drift does it: v -= c,
+    /// x += v h, and the displacement squared since the list build into `d.m`; the same
+    /// operations per particle as the drift pass followed by the kick, so the same bits.
+    #[inline(always)]
+    fn drift_add_with<const D: usize, const AVX2: bool>(
+        &mut self,
+        d: &mut Drift<'_, D>,
+        vf: &mut [f64],
+        zs: &[f64],
+        sigma: f64,
+    ) {
+        let n = vf.len();
+        assert!(zs.len() == n && d.x.len() == n && d.r.len() == n && n % D == 0);
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 && D == 2 {
+            // SAFETY: AVX2 is there (the caller's promise); D == 2; the slices have length n.
+            done = unsafe { self.groups2_avx2::<true, D>(vf, zs, sigma, d) };
+        }
+        for p in (done..n).step_by(D) {
+            let d2 = super::sim::drift_one(
+                (&mut d.x[p..p + D]).try_into().expect("D components"),
+                (&mut vf[p..p + D]).try_into().expect("D components"),
+                d.r[p..p + D].try_into().expect("D components"),
+                d.c,
+                d.h,
+            );
+            if d2 > d.m[0] {
+                d.m[0] = d2;
             }
         }
+        self.add_rest::<D>(vf, zs, sigma, done);
+    }
+
+    /// The whole groups of 8 slots (four 2D particles) of [`add_with`](Self::add_with) with
+    /// AVX2, four lanes per register: the same IEEE operations per lane (|v|^2 as x^2 + y^2
+    /// by a horizontal add; the maxima kept in another lane order, which a maximum does not
+    /// see). With `DRIFT` each group is first drifted as `sim::drift2_avx2` drifts it (its
+    /// maxima into `d.m`'s lanes). Returns the slots done.
+    ///
+    /// # Safety
+    /// AVX2; D == 2 (`vf`, `zs` and, with `DRIFT`, `d.x` and `d.r` at least as long as
+    /// `vf`).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn groups2_avx2<const DRIFT: bool, const D: usize>(
+        &mut self,
+        vf: &mut [f64],
+        zs: &[f64],
+        sigma: f64,
+        d: &mut Drift<'_, D>,
+    ) -> usize {
+        use std::arch::x86_64::*;
+        const W: usize = Lanes::W;
+        let n = vf.len().min(zs.len());
+        if DRIFT {
+            assert!(d.x.len() >= n && d.r.len() >= n);
+        }
+        let mut done = 0;
+        let (a, m) = (self.acc.as_mut_ptr(), self.mx.as_mut_ptr());
+        let (mut acc0, mut acc1) = (_mm256_loadu_pd(a), _mm256_loadu_pd(a.add(4)));
+        let (mut mx0, mut mx1) = (_mm256_loadu_pd(m), _mm256_loadu_pd(m.add(4)));
+        let mut md = _mm256_loadu_pd(d.m.as_ptr());
+        let s = _mm256_set1_pd(sigma);
+        let (c0, c1) = if D == 2 {
+            (d.c[0], d.c[D - 1])
+        } else {
+            (0.0, 0.0)
+        };
+        let cv = _mm256_setr_pd(c0, c1, c0, c1);
+        let hv = _mm256_set1_pd(d.h);
+        let (vp, zp) = (vf.as_mut_ptr(), zs.as_ptr());
+        let (xp, rp) = (d.x.as_mut_ptr(), d.r.as_ptr());
+        while done + W <= n {
+            let z0 = _mm256_loadu_pd(zp.add(done));
+            let z1 = _mm256_loadu_pd(zp.add(done + 4));
+            acc0 = _mm256_add_pd(acc0, z0);
+            acc1 = _mm256_add_pd(acc1, z1);
+            let (v0, v1) = if DRIFT {
+                let [v0, v1, d2] = super::sim::drift_round(xp, vp, rp, done, cv, hv);
+                md = _mm256_max_pd(d2, md);
+                (v0, v1)
+            } else {
+                (
+                    _mm256_loadu_pd(vp.add(done)),
+                    _mm256_loadu_pd(vp.add(done + 4)),
+                )
+            };
+            let v0 = _mm256_add_pd(v0, _mm256_mul_pd(s, z0));
+            let v1 = _mm256_add_pd(v1, _mm256_mul_pd(s, z1));
+            _mm256_storeu_pd(vp.add(done), v0);
+            _mm256_storeu_pd(vp.add(done + 4), v1);
+            // Particles 0, 2, 1, 3 of the group: x^2 + y^2.
+            let a2 = _mm256_hadd_pd(_mm256_mul_pd(v0, v0), _mm256_mul_pd(v1, v1));
+            // max(a2, mx) is `a2 > mx ? a2 : mx`, the scalar test.
+            if done & W == 0 {
+                mx0 = _mm256_max_pd(a2, mx0);
+            } else {
+                mx1 = _mm256_max_pd(a2, mx1);
+            }
+            done += W;
+        }
+        _mm256_storeu_pd(a, acc0);
+        _mm256_storeu_pd(a.add(4), acc1);
+        _mm256_storeu_pd(m, mx0);
+        _mm256_storeu_pd(m.add(4), mx1);
+        _mm256_storeu_pd(d.m.as_mut_ptr(), md);
+        done
+    }
+
+    /// The slots from `done` on of [`add_with`](Self::add_with), one at a time.
+    #[inline(always)]
+    fn add_rest<const D: usize>(&mut self, vf: &mut [f64], zs: &[f64], sigma: f64, done: usize) {
+        const W: usize = Lanes::W;
+        let n = vf.len().min(zs.len());
+        let (vf, zs) = (&mut vf[..n], &zs[..n]);
         let (acc, mx) = (&mut self.acc, &mut self.mx);
         let mut vc = vf[done..].chunks_exact_mut(W);
         let mut zc = zs[done..].chunks_exact(W);
@@ -327,6 +416,38 @@ impl Lanes {
     }
 }
 
+/// The drift that [`Lanes::drift_add_with`] does before its kicks: positions `x` and
+/// references `r` (flat, slot for slot with the velocities), the shift `c` and step `h`,
+/// and the largest displacement squared so far in four lanes (from 0; the remainder's
+/// particles in lane 0), folded as `sim::drift2_avx2` folds its lanes.
+struct Drift<'a, const D: usize> {
+    x: &'a mut [f64],
+    r: &'a [f64],
+    c: [f64; D],
+    h: f64,
+    m: [f64; 4],
+}
+
+impl<const D: usize> Drift<'_, D> {
+    /// No drift (for [`Lanes::groups2_avx2`] without one).
+    fn none() -> Self {
+        Drift {
+            x: &mut [],
+            r: &[],
+            c: [0.0; D],
+            h: 0.0,
+            m: [0.0; 4],
+        }
+    }
+
+    /// The largest displacement squared (0 if none is larger; a NaN never wins).
+    fn largest(&self) -> f64 {
+        self.m
+            .iter()
+            .fold(0.0, |a: f64, &b| if b > a { b } else { a })
+    }
+}
+
 /// Slots per chunk of the fused version-2 kick: one ChaCha8 chunk (16 blocks of 8 words, two
 /// slots per word).
 const CHUNK_SLOTS: usize = 256;
@@ -389,6 +510,90 @@ fn kick_block_body<const D: usize, const AVX2: bool>(
         lanes.add_with::<D, AVX2>(vc, z, sigma)
     });
     lanes.finish()
+}
+
+/// [`kick_block_counter`] with each particle drifted just before its kick (x += (v - c) h,
+/// v -= c, as the drift pass does it): one pass over the particles instead of two, the
+/// same bits. Also returns the largest displacement squared from the references `r` (0 if
+/// none is larger), as `sim::drift_block` from 0 gives it.
+#[allow(clippy::too_many_arguments)]
+fn drift_kick_block_counter<const D: usize>(
+    key: &[u32; 8],
+    step: u64,
+    p0: usize,
+    x: &mut [[f64; D]],
+    v: &mut [[f64; D]],
+    r: &[[f64; D]],
+    c: [f64; D],
+    h: f64,
+    sigma: f64,
+) -> (([f64; D], f64), f64) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { drift_kick_block_avx2(key, step, p0, x, v, r, c, h, sigma) };
+        }
+    }
+    drift_kick_block_body::<D, false>(key, step, p0, x, v, r, c, h, sigma)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn drift_kick_block_avx2<const D: usize>(
+    key: &[u32; 8],
+    step: u64,
+    p0: usize,
+    x: &mut [[f64; D]],
+    v: &mut [[f64; D]],
+    r: &[[f64; D]],
+    c: [f64; D],
+    h: f64,
+    sigma: f64,
+) -> (([f64; D], f64), f64) {
+    drift_kick_block_body::<D, true>(key, step, p0, x, v, r, c, h, sigma)
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn drift_kick_block_body<const D: usize, const AVX2: bool>(
+    key: &[u32; 8],
+    step: u64,
+    p0: usize,
+    x: &mut [[f64; D]],
+    v: &mut [[f64; D]],
+    r: &[[f64; D]],
+    c: [f64; D],
+    h: f64,
+    sigma: f64,
+) -> (([f64; D], f64), f64) {
+    assert!(x.len() == v.len() && r.len() == v.len());
+    let mut lanes = Lanes::new();
+    let (xf, rf) = (x.as_flattened_mut(), r.as_flattened());
+    let mut m = [0.0; 4];
+    let mut at = 0;
+    block_normals::<D, AVX2, false>(key, step, p0, v.as_flattened_mut(), &mut |vc, z| {
+        let n = vc.len();
+        let mut d = Drift {
+            x: &mut xf[at..at + n],
+            r: &rf[at..at + n],
+            c,
+            h,
+            m,
+        };
+        lanes.drift_add_with::<D, AVX2>(&mut d, vc, z, sigma);
+        m = d.m;
+        at += n;
+    });
+    let d = Drift {
+        x: &mut [],
+        r: &[],
+        c,
+        h,
+        m,
+    };
+    (lanes.finish(), d.largest())
 }
 
 /// The normals of one version-2 work block (its first particle `p0`), a ChaCha8 chunk (256
@@ -670,6 +875,24 @@ impl CounterBlocks<'_> {
         kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma)
     }
 
+    /// [`kick`](Self::kick) with each particle of the block drifted just before its kick
+    /// (positions `x`, references `r`, shift `c`, step `h`: the drift pass's operations):
+    /// the kick's result and the largest displacement squared (from 0), the bits of
+    /// `sim::drift_block` and then `kick`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn drift_kick<const D: usize>(
+        &self,
+        step: u64,
+        b: usize,
+        x: &mut [[f64; D]],
+        v: &mut [[f64; D]],
+        r: &[[f64; D]],
+        c: [f64; D],
+        h: f64,
+    ) -> (([f64; D], f64), f64) {
+        drift_kick_block_counter(self.key, step, b * KICK_BLOCK, x, v, r, c, h, self.sigma)
+    }
+
     /// Work block `b`'s normals of step `step` (slots `b KICK_BLOCK D ..`) into `z`, and
     /// their sum per component as [`kick`](Self::kick) takes it: for runs that keep their
     /// particles in another order than their slots.
@@ -841,6 +1064,35 @@ mod tests {
                 }
                 assert!(bits(&by_id) == bits(&want), "{what}: buffered velocities");
             }
+        }
+        // The drift pass's drift and then the kick, in one pass (`drift_kick`, AVX2 where
+        // the CPU has it, and portable): the same positions, velocities, sums, maximum |v|^2
+        // and largest displacement squared.
+        let x0: Vec<[f64; D]> = (0..n).map(|_| std::array::from_fn(|_| r.f64())).collect();
+        let xr: Vec<[f64; D]> = (0..n).map(|_| std::array::from_fn(|_| r.f64())).collect();
+        let c: [f64; D] = std::array::from_fn(|k| 0.01 * (k as f64 + 1.0));
+        let h = 0.37;
+        let (mut wx, mut wv) = (x0.clone(), v0.clone());
+        let wm = super::super::sim::drift_block(&mut wx, &mut wv, &xr, c, h, 0.0);
+        let (wk, _, _) = reference_block(&key, step, b * KICK_BLOCK, &mut wv, sigma);
+        for avx2 in [true, false] {
+            let (mut gx, mut gv) = (x0.clone(), v0.clone());
+            let (gk, gm) = if avx2 {
+                k.drift_kick(step, b, &mut gx, &mut gv, &xr, c, h)
+            } else {
+                let p0 = b * KICK_BLOCK;
+                drift_kick_block_body::<D, false>(
+                    &key, step, p0, &mut gx, &mut gv, &xr, c, h, sigma,
+                )
+            };
+            let what = format!("{what} drift and kick (avx2 {avx2})");
+            assert!(bits(&gx) == bits(&wx), "{what}: positions");
+            assert!(bits(&gv) == bits(&wv), "{what}: velocities");
+            for kk in 0..D {
+                assert_eq!(gk.0[kk].to_bits(), wk.0[kk].to_bits(), "{what}: sum {kk}");
+            }
+            assert_eq!(gk.1.to_bits(), wk.1.to_bits(), "{what}: max |v|^2");
+            assert_eq!(gm.to_bits(), wm.to_bits(), "{what}: largest displacement");
         }
         (slow, tail)
     }

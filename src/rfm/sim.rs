@@ -147,7 +147,7 @@ fn pair_eval<const D: usize>(
 /// The drift x += (v - c) h of particles `x`, `v` (references `r`), and the largest
 /// displacement squared since the list build, at least `m0`: four particles at a time
 /// (independent maxima; a maximum is exact, so any cut into blocks gives the same value).
-fn drift_block<const D: usize>(
+pub(super) fn drift_block<const D: usize>(
     x: &mut [[f64; D]],
     v: &mut [[f64; D]],
     r: &[[f64; D]],
@@ -215,7 +215,7 @@ fn drift_portable<const D: usize>(
 /// The drift of one particle, v -= c then x += v h, and its displacement squared since the
 /// list build (0 + dx^2 + dy^2 ...): the operations every drift loop does per particle.
 #[inline(always)]
-fn drift_one<const D: usize>(
+pub(super) fn drift_one<const D: usize>(
     x: &mut [f64; D],
     v: &mut [f64; D],
     r: &[f64; D],
@@ -250,7 +250,7 @@ fn largest(lanes: &[f64; 4]) -> f64 {
 /// bounds of all three.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn drift_round(
+pub(super) unsafe fn drift_round(
     xp: *mut f64,
     vp: *const f64,
     rp: *const f64,
@@ -1216,11 +1216,19 @@ impl<const D: usize> Core<D> {
                     j.m = m;
                     j.kick = ([0.0; D], mk);
                 }
+                // In particle order: each particle drifted just before its kick, in one pass.
+                Some(k) if D > 1 => {
+                    let (kick, m) = k.drift_kick(next, j.b, j.x, j.v, j.r, c, h);
+                    j.m = m;
+                    j.kick = kick;
+                }
                 _ if D > 1 => j.m = drift_block(j.x, j.v, j.r, c, h, 0.0),
                 _ => drift_1d(j.x, j.v, c, h),
             }
             if let Some(k) = kicker {
-                if sorted {
+                if D > 1 && !sorted {
+                    // Kicked with the drift above.
+                } else if sorted {
                     if D == 1 {
                         j.kick = ([0.0; D], k.kick_gathered(j.v, j.ids, zn));
                     }
