@@ -430,6 +430,7 @@ struct Drift<'a, const D: usize> {
 
 impl<const D: usize> Drift<'_, D> {
     /// No drift (for [`Lanes::groups2_avx2`] without one).
+    #[cfg(target_arch = "x86_64")]
     fn none() -> Self {
         Drift {
             x: &mut [],
@@ -439,13 +440,11 @@ impl<const D: usize> Drift<'_, D> {
             m: [0.0; 4],
         }
     }
+}
 
-    /// The largest displacement squared (0 if none is larger; a NaN never wins).
-    fn largest(&self) -> f64 {
-        self.m
-            .iter()
-            .fold(0.0, |a: f64, &b| if b > a { b } else { a })
-    }
+/// The largest of the lane maxima `m` and 0 (a NaN lane never wins): `sim::largest`'s fold.
+fn largest_lane(m: &[f64; 4]) -> f64 {
+    m.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a })
 }
 
 /// Slots per chunk of the fused version-2 kick: one ChaCha8 chunk (16 blocks of 8 words, two
@@ -586,14 +585,7 @@ fn drift_kick_block_body<const D: usize, const AVX2: bool>(
         m = d.m;
         at += n;
     });
-    let d = Drift {
-        x: &mut [],
-        r: &[],
-        c,
-        h,
-        m,
-    };
-    (lanes.finish(), d.largest())
+    (lanes.finish(), largest_lane(&m))
 }
 
 /// The normals of one version-2 work block (its first particle `p0`), a ChaCha8 chunk (256

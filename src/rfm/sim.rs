@@ -1216,8 +1216,10 @@ impl<const D: usize> Core<D> {
                     j.m = m;
                     j.kick = ([0.0; D], mk);
                 }
-                // In particle order: each particle drifted just before its kick, in one pass.
+                // In particle order: each particle drifted just before its kick, in one pass
+                // (the drift block is the kick block `j.b`).
                 Some(k) if D > 1 => {
+                    const { assert!(DRIFT_BLOCK == KICK_BLOCK) };
                     let (kick, m) = k.drift_kick(next, j.b, j.x, j.v, j.r, c, h);
                     j.m = m;
                     j.kick = kick;
