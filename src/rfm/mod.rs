@@ -8,6 +8,7 @@
 //! - [`integrate`]: the integrator: random kick, then the exact flow of every contact over
 //!   the step (closed-form damped oscillator with the exact in-step start and end times),
 //!   superposed over pairs.
+//! - [`drift`]: the drift x += (v - c) h and the largest displacement since the list build.
 //! - [`noise`]: bulk normals and the symmetrised kicks (variance 2 D dt / M^2 per component).
 //! - [`neighbours`]: 1D ring neighbours; 2D cell-built Verlet lists with a skin.
 //! - [`sim`]: [`RfmSim`], the state, initial layouts, checkpoints. Stream version 2
@@ -46,6 +47,7 @@
 
 pub mod blocks;
 pub mod contact;
+mod drift;
 pub mod freepath;
 pub mod integrate;
 mod layout;

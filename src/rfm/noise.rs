@@ -12,6 +12,7 @@
 
 use std::sync::OnceLock;
 
+use super::drift::largest;
 use crate::rng::stream::{fill_counter, WordStream};
 
 /// Layers of the normal ziggurat (the layer index is the low 8 bits of a word, the sign
@@ -232,7 +233,7 @@ impl Lanes {
     }
 
     /// [`add_with`](Self::add_with) with each particle drifted first (`d`: its positions
-    /// and references, slot for slot with `vf`), as [`super::sim`]'s drift does it: v -= c,
+    /// and references, slot for slot with `vf`), as [`super::drift`] drifts them: v -= c,
     /// x += v h, and the displacement squared since the list build into `d.m`; the same
     /// operations per particle as the drift pass followed by the kick, so the same bits.
     #[inline(always)]
@@ -252,7 +253,7 @@ impl Lanes {
             done = unsafe { self.groups2_avx2::<true, D>(vf, zs, sigma, d) };
         }
         for p in (done..n).step_by(D) {
-            let d2 = super::sim::drift_one(
+            let d2 = super::drift::drift_one(
                 (&mut d.x[p..p + D]).try_into().expect("D components"),
                 (&mut vf[p..p + D]).try_into().expect("D components"),
                 d.r[p..p + D].try_into().expect("D components"),
@@ -269,7 +270,7 @@ impl Lanes {
     /// The whole groups of 8 slots (four 2D particles) of [`add_with`](Self::add_with) with
     /// AVX2, four lanes per register: the same IEEE operations per lane (|v|^2 as x^2 + y^2
     /// by a horizontal add; the maxima kept in another lane order, which a maximum does not
-    /// see). With `DRIFT` each group is first drifted as `sim::drift2_avx2` drifts it (its
+    /// see). With `DRIFT` each group is first drifted as `drift::drift2_avx2` drifts it (its
     /// maxima into `d.m`'s lanes). Returns the slots done.
     ///
     /// # Safety
@@ -311,7 +312,7 @@ impl Lanes {
             acc0 = _mm256_add_pd(acc0, z0);
             acc1 = _mm256_add_pd(acc1, z1);
             let (v0, v1) = if DRIFT {
-                let [v0, v1, d2] = super::sim::drift_round(xp, vp, rp, done, cv, hv);
+                let [v0, v1, d2] = super::drift::drift_round(xp, vp, rp, done, cv, hv);
                 md = _mm256_max_pd(d2, md);
                 (v0, v1)
             } else {
@@ -419,7 +420,7 @@ impl Lanes {
 /// The drift that [`Lanes::drift_add_with`] does before its kicks: positions `x` and
 /// references `r` (flat, slot for slot with the velocities), the shift `c` and step `h`,
 /// and the largest displacement squared so far in four lanes (from 0; the remainder's
-/// particles in lane 0), folded as `sim::drift2_avx2` folds its lanes.
+/// particles in lane 0), folded as `drift::drift2_avx2` folds its lanes.
 struct Drift<'a, const D: usize> {
     x: &'a mut [f64],
     r: &'a [f64],
@@ -442,11 +443,6 @@ impl<const D: usize> Drift<'_, D> {
     }
 }
 
-/// The largest of the lane maxima `m` and 0 (a NaN lane never wins): `sim::largest`'s fold.
-fn largest_lane(m: &[f64; 4]) -> f64 {
-    m.iter().fold(0.0, |a: f64, &b| if b > a { b } else { a })
-}
-
 /// Slots per chunk of the fused version-2 kick: one ChaCha8 chunk (16 blocks of 8 words, two
 /// slots per word).
 const CHUNK_SLOTS: usize = 256;
@@ -458,6 +454,16 @@ struct Chunk {
     z: [f64; CHUNK_SLOTS],
 }
 
+/// The drift that a work block's kick can make first ([`kick_block_counter`]): the block's
+/// positions `x` and references `r` (particle for particle with its velocities), the shift
+/// `c` and the step `h`.
+struct BlockDrift<'a, const D: usize> {
+    x: &'a mut [[f64; D]],
+    r: &'a [[f64; D]],
+    c: [f64; D],
+    h: f64,
+}
+
 /// One version-2 work block: particles `v` (the first is particle `p0`) of step `step` get
 /// `sigma z`; returns the sum of their z per component (eight partial sums in slot order,
 /// lane j holding component j % D, then the lanes in order) and the largest |v|^2 after.
@@ -467,21 +473,27 @@ struct Chunk {
 /// L1 (the same operations in the same order as words, candidates, slow slots and kicks
 /// over the whole block: bit-identical, `fused_kicks_match_the_reference`). AVX2 when the
 /// CPU has it.
+///
+/// With `drift`, each particle is first drifted just before its kick (x += (v - c) h,
+/// v -= c, as the drift pass does it: one pass over the particles instead of two, the same
+/// bits), and the largest displacement squared from the references (0 if none is larger,
+/// as `drift::drift_block` from 0 gives it) comes back too; else that is 0.
 fn kick_block_counter<const D: usize>(
     key: &[u32; 8],
     step: u64,
     p0: usize,
     v: &mut [[f64; D]],
     sigma: f64,
-) -> ([f64; D], f64) {
+    drift: Option<BlockDrift<'_, D>>,
+) -> (([f64; D], f64), f64) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2.
-            return unsafe { kick_block_avx2(key, step, p0, v, sigma) };
+            return unsafe { kick_block_avx2(key, step, p0, v, sigma, drift) };
         }
     }
-    kick_block_body::<D, false>(key, step, p0, v, sigma)
+    kick_block_body::<D, false>(key, step, p0, v, sigma, drift)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -492,8 +504,9 @@ unsafe fn kick_block_avx2<const D: usize>(
     p0: usize,
     v: &mut [[f64; D]],
     sigma: f64,
-) -> ([f64; D], f64) {
-    kick_block_body::<D, true>(key, step, p0, v, sigma)
+    drift: Option<BlockDrift<'_, D>>,
+) -> (([f64; D], f64), f64) {
+    kick_block_body::<D, true>(key, step, p0, v, sigma, drift)
 }
 
 #[inline(always)]
@@ -503,89 +516,35 @@ fn kick_block_body<const D: usize, const AVX2: bool>(
     p0: usize,
     v: &mut [[f64; D]],
     sigma: f64,
-) -> ([f64; D], f64) {
-    let mut lanes = Lanes::new();
-    block_normals::<D, AVX2, false>(key, step, p0, v.as_flattened_mut(), &mut |vc, z| {
-        lanes.add_with::<D, AVX2>(vc, z, sigma)
-    });
-    lanes.finish()
-}
-
-/// [`kick_block_counter`] with each particle drifted just before its kick (x += (v - c) h,
-/// v -= c, as the drift pass does it): one pass over the particles instead of two, the
-/// same bits. Also returns the largest displacement squared from the references `r` (0 if
-/// none is larger), as `sim::drift_block` from 0 gives it.
-#[allow(clippy::too_many_arguments)]
-fn drift_kick_block_counter<const D: usize>(
-    key: &[u32; 8],
-    step: u64,
-    p0: usize,
-    x: &mut [[f64; D]],
-    v: &mut [[f64; D]],
-    r: &[[f64; D]],
-    c: [f64; D],
-    h: f64,
-    sigma: f64,
+    drift: Option<BlockDrift<'_, D>>,
 ) -> (([f64; D], f64), f64) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2.
-            return unsafe { drift_kick_block_avx2(key, step, p0, x, v, r, c, h, sigma) };
+    let mut lanes = Lanes::new();
+    let mut m = [0.0; 4];
+    let vf = v.as_flattened_mut();
+    match drift {
+        None => block_normals::<D, AVX2, false>(key, step, p0, vf, &mut |vc, z| {
+            lanes.add_with::<D, AVX2>(vc, z, sigma)
+        }),
+        Some(BlockDrift { x, r, c, h }) => {
+            assert!(x.len() == vf.len() / D && r.len() == x.len());
+            let (xf, rf) = (x.as_flattened_mut(), r.as_flattened());
+            let mut at = 0;
+            block_normals::<D, AVX2, false>(key, step, p0, vf, &mut |vc, z| {
+                let n = vc.len();
+                let mut d = Drift {
+                    x: &mut xf[at..at + n],
+                    r: &rf[at..at + n],
+                    c,
+                    h,
+                    m,
+                };
+                lanes.drift_add_with::<D, AVX2>(&mut d, vc, z, sigma);
+                m = d.m;
+                at += n;
+            });
         }
     }
-    drift_kick_block_body::<D, false>(key, step, p0, x, v, r, c, h, sigma)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn drift_kick_block_avx2<const D: usize>(
-    key: &[u32; 8],
-    step: u64,
-    p0: usize,
-    x: &mut [[f64; D]],
-    v: &mut [[f64; D]],
-    r: &[[f64; D]],
-    c: [f64; D],
-    h: f64,
-    sigma: f64,
-) -> (([f64; D], f64), f64) {
-    drift_kick_block_body::<D, true>(key, step, p0, x, v, r, c, h, sigma)
-}
-
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn drift_kick_block_body<const D: usize, const AVX2: bool>(
-    key: &[u32; 8],
-    step: u64,
-    p0: usize,
-    x: &mut [[f64; D]],
-    v: &mut [[f64; D]],
-    r: &[[f64; D]],
-    c: [f64; D],
-    h: f64,
-    sigma: f64,
-) -> (([f64; D], f64), f64) {
-    assert!(x.len() == v.len() && r.len() == v.len());
-    let mut lanes = Lanes::new();
-    let (xf, rf) = (x.as_flattened_mut(), r.as_flattened());
-    let mut m = [0.0; 4];
-    let mut at = 0;
-    block_normals::<D, AVX2, false>(key, step, p0, v.as_flattened_mut(), &mut |vc, z| {
-        let n = vc.len();
-        let mut d = Drift {
-            x: &mut xf[at..at + n],
-            r: &rf[at..at + n],
-            c,
-            h,
-            m,
-        };
-        lanes.drift_add_with::<D, AVX2>(&mut d, vc, z, sigma);
-        m = d.m;
-        at += n;
-    });
-    (lanes.finish(), largest_lane(&m))
+    (lanes.finish(), largest(&m))
 }
 
 /// The normals of one version-2 work block (its first particle `p0`), a ChaCha8 chunk (256
@@ -864,13 +823,13 @@ impl CounterBlocks<'_> {
         b: usize,
         v: &mut [[f64; D]],
     ) -> ([f64; D], f64) {
-        kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma)
+        kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma, None).0
     }
 
     /// [`kick`](Self::kick) with each particle of the block drifted just before its kick
     /// (positions `x`, references `r`, shift `c`, step `h`: the drift pass's operations):
     /// the kick's result and the largest displacement squared (from 0), the bits of
-    /// `sim::drift_block` and then `kick`.
+    /// `drift::drift_block` and then `kick`.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn drift_kick<const D: usize>(
         &self,
@@ -882,7 +841,8 @@ impl CounterBlocks<'_> {
         c: [f64; D],
         h: f64,
     ) -> (([f64; D], f64), f64) {
-        drift_kick_block_counter(self.key, step, b * KICK_BLOCK, x, v, r, c, h, self.sigma)
+        let drift = Some(BlockDrift { x, r, c, h });
+        kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma, drift)
     }
 
     /// Work block `b`'s normals of step `step` (slots `b KICK_BLOCK D ..`) into `z`, and
@@ -1017,13 +977,13 @@ mod tests {
         let what = format!("D {D} seed {seed} step {step} block {b} n {n}");
         let mut got = v0.clone();
         same(
-            kick_block_counter(&key, step, b * KICK_BLOCK, &mut got, sigma),
+            kick_block_counter(&key, step, b * KICK_BLOCK, &mut got, sigma, None).0,
             &what,
         );
         assert!(bits(&got) == bits(&want), "{what}: velocities");
         let mut got = v0.clone();
         same(
-            kick_block_body::<D, false>(&key, step, b * KICK_BLOCK, &mut got, sigma),
+            kick_block_body::<D, false>(&key, step, b * KICK_BLOCK, &mut got, sigma, None).0,
             &what,
         );
         assert!(bits(&got) == bits(&want), "{what}: portable velocities");
@@ -1065,7 +1025,7 @@ mod tests {
         let c: [f64; D] = std::array::from_fn(|k| 0.01 * (k as f64 + 1.0));
         let h = 0.37;
         let (mut wx, mut wv) = (x0.clone(), v0.clone());
-        let wm = super::super::sim::drift_block(&mut wx, &mut wv, &xr, c, h, 0.0);
+        let wm = super::super::drift::drift_block(&mut wx, &mut wv, &xr, c, h, 0.0);
         let (wk, _, _) = reference_block(&key, step, b * KICK_BLOCK, &mut wv, sigma);
         for avx2 in [true, false] {
             let (mut gx, mut gv) = (x0.clone(), v0.clone());
@@ -1073,9 +1033,13 @@ mod tests {
                 k.drift_kick(step, b, &mut gx, &mut gv, &xr, c, h)
             } else {
                 let p0 = b * KICK_BLOCK;
-                drift_kick_block_body::<D, false>(
-                    &key, step, p0, &mut gx, &mut gv, &xr, c, h, sigma,
-                )
+                let drift = Some(BlockDrift {
+                    x: &mut gx,
+                    r: &xr,
+                    c,
+                    h,
+                });
+                kick_block_body::<D, false>(&key, step, p0, &mut gv, sigma, drift)
             };
             let what = format!("{what} drift and kick (avx2 {avx2})");
             assert!(bits(&gx) == bits(&wx), "{what}: positions");
