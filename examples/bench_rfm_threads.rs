@@ -1,4 +1,5 @@
-//! One RFM run on 1 and 2 threads (rayon pools), stream versions 1 and 2: particle-steps per
+//! One RFM run on 1 and 2 threads (rayon pools), stream versions 1, 2 and 4 (3 draws as 2 in
+//! the RFM; 4 stores the particles by cell and addresses the noise by slot): particle-steps per
 //! second of a 2D run at the thesis density of `thesis-df-large` (phi = 0.53,
 //! eps_n = eps_t = 0.1, dt = 1e-6 s), N = 27 000 by default; checks the two thread counts
 //! end in the same state. Prints the start-up (the initial layout's random sequential
@@ -26,7 +27,11 @@ fn main() {
         dt: Some(1e-6),
         ..RfmConfig::default()
     };
-    for (name, stream) in [("v1", StreamVersion::V1), ("v2", StreamVersion::V2)] {
+    for (name, stream) in [
+        ("v1", StreamVersion::V1),
+        ("v2", StreamVersion::V2),
+        ("v4", StreamVersion::V4),
+    ] {
         let mut states = Vec::new();
         for threads in [1usize, 2] {
             let pool = rayon::ThreadPoolBuilder::new()

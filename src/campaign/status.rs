@@ -99,6 +99,7 @@ pub fn describe_stream(v: StreamVersion) -> String {
         1 => "ChaCha8, sequential draws",
         2 => "ChaCha8, counter-addressed RFM noise",
         3 => "counter-addressed RFM noise, DSMC from AES-128-CTR",
+        4 => "RFM noise addressed by storage slot, DSMC from AES-128-CTR",
         _ => "unknown",
     };
     format!("version {} ({what})", v.number())

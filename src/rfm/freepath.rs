@@ -354,8 +354,11 @@ impl<const D: usize> FreePaths<D> {
     }
 
     /// Record one contacting pair's interval for both partners (kicked state, before the
-    /// step's corrections).
+    /// step's corrections): the particles stored at indices `i` and `j` of `x` and `v`,
+    /// which hold particle `ids[i]` and `ids[j]` (particles stored out of order; `ids` empty:
+    /// particle i at index i).
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     pub fn push(
         &mut self,
         i: usize,
@@ -364,21 +367,24 @@ impl<const D: usize> FreePaths<D> {
         t_off: f64,
         x: &[[f64; D]],
         v: &[[f64; D]],
+        ids: &[u32],
     ) {
-        for p in [i, j] {
+        for s in [i, j] {
             self.ev.push(Ev {
-                i: p as u32,
+                i: if ids.is_empty() { s as u32 } else { ids[s] },
                 t_on,
                 t_off,
-                x0: x[p],
-                vf: std::array::from_fn(|k| v[p][k] - self.c[k]),
+                x0: x[s],
+                vf: std::array::from_fn(|k| v[s][k] - self.c[k]),
             });
         }
     }
 
-    /// After the step (positions `x`, velocities `v` at its end; `step` = index of the step
-    /// just done, length `h`): walk each touched particle's contact count through the step.
-    pub fn post(&mut self, x: &[[f64; D]], v: &[[f64; D]], h: f64, step: u64) {
+    /// After the step (positions `x`, velocities `v` at its end, particle i stored at index
+    /// `at[i]`, or at i with `at` empty; `step` = index of the step just done, length `h`):
+    /// walk each touched particle's contact count through the step, in particle order.
+    pub fn post(&mut self, x: &[[f64; D]], v: &[[f64; D]], at: &[u32], h: f64, step: u64) {
+        let slot = |i: usize| if at.is_empty() { i } else { at[i] as usize };
         let cfg = &self.acc.cfg;
         let rec = step >= cfg.from_step;
         let interval = rec.then(|| ((step - cfg.from_step) / cfg.sample_every.max(1)) as usize);
@@ -418,8 +424,9 @@ impl<const D: usize> FreePaths<D> {
                         let pos: [f64; D] = std::array::from_fn(|q| x0[q] + vf[q] * t);
                         self.acc.end(i, &pos, interval);
                     } else {
-                        let pos: [f64; D] = std::array::from_fn(|q| x[i][q] - v[i][q] * (h - t));
-                        self.acc.begin(i, &pos, &v[i], rec);
+                        let s = slot(i);
+                        let pos: [f64; D] = std::array::from_fn(|q| x[s][q] - v[s][q] * (h - t));
+                        self.acc.begin(i, &pos, &v[s], rec);
                     }
                     state = now;
                 }
@@ -436,8 +443,9 @@ impl<const D: usize> FreePaths<D> {
             let i = i as usize;
             if self.stamp[i] != step {
                 self.acc.in_contact[i] = false;
-                let pos: [f64; D] = std::array::from_fn(|q| x[i][q] - v[i][q] * h);
-                self.acc.begin(i, &pos, &v[i], rec);
+                let s = slot(i);
+                let pos: [f64; D] = std::array::from_fn(|q| x[s][q] - v[s][q] * h);
+                self.acc.begin(i, &pos, &v[s], rec);
             }
         }
         self.busy_next = std::mem::replace(&mut self.busy, next);
@@ -446,7 +454,8 @@ impl<const D: usize> FreePaths<D> {
         self.ch = ch;
     }
 
-    /// The positions of particle i moved by `shift` (2D re-wrap): move its open start too.
+    /// The positions of particle i (its number, not its storage index) moved by `shift` (2D
+    /// re-wrap): move its open start too.
     #[inline]
     pub fn shift(&mut self, i: usize, k: usize, shift: f64) {
         if self.acc.open[i] {

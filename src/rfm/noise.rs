@@ -136,6 +136,11 @@ pub fn fill_normals(rng: &mut WordStream, out: &mut [f64]) {
 /// words, 2 slots per word) for D = 1 and 2.
 pub const KICK_BLOCK: usize = 2048;
 
+/// Particles per work block of stream version 4's kicks (normals addressed by storage slot):
+/// finer blocks, so that a run's threads share its particles more evenly (N = 27 000 is 13.2
+/// blocks of 2 048, 52.7 of 512). Also a multiple of 256.
+pub const SLOT_KICK_BLOCK: usize = 512;
+
 /// Bit that marks a continuation stream in stream version 2.
 const CONTINUATION: u64 = 1 << 63;
 
@@ -481,6 +486,7 @@ struct BlockDrift<'a, const D: usize> {
 fn kick_block_counter<const D: usize>(
     key: &[u32; 8],
     step: u64,
+    b: usize,
     p0: usize,
     v: &mut [[f64; D]],
     sigma: f64,
@@ -490,10 +496,10 @@ fn kick_block_counter<const D: usize>(
     {
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2.
-            return unsafe { kick_block_avx2(key, step, p0, v, sigma, drift) };
+            return unsafe { kick_block_avx2(key, step, b, p0, v, sigma, drift) };
         }
     }
-    kick_block_body::<D, false>(key, step, p0, v, sigma, drift)
+    kick_block_body::<D, false>(key, step, b, p0, v, sigma, drift)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -501,18 +507,20 @@ fn kick_block_counter<const D: usize>(
 unsafe fn kick_block_avx2<const D: usize>(
     key: &[u32; 8],
     step: u64,
+    b: usize,
     p0: usize,
     v: &mut [[f64; D]],
     sigma: f64,
     drift: Option<BlockDrift<'_, D>>,
 ) -> (([f64; D], f64), f64) {
-    kick_block_body::<D, true>(key, step, p0, v, sigma, drift)
+    kick_block_body::<D, true>(key, step, b, p0, v, sigma, drift)
 }
 
 #[inline(always)]
 fn kick_block_body<const D: usize, const AVX2: bool>(
     key: &[u32; 8],
     step: u64,
+    b: usize,
     p0: usize,
     v: &mut [[f64; D]],
     sigma: f64,
@@ -522,14 +530,14 @@ fn kick_block_body<const D: usize, const AVX2: bool>(
     let mut m = [0.0; 4];
     let vf = v.as_flattened_mut();
     match drift {
-        None => block_normals::<D, AVX2, false>(key, step, p0, vf, &mut |vc, z| {
+        None => block_normals::<D, AVX2, false>(key, step, b, p0, vf, &mut |vc, z| {
             lanes.add_with::<D, AVX2>(vc, z, sigma)
         }),
         Some(BlockDrift { x, r, c, h }) => {
             assert!(x.len() == vf.len() / D && r.len() == x.len());
             let (xf, rf) = (x.as_flattened_mut(), r.as_flattened());
             let mut at = 0;
-            block_normals::<D, AVX2, false>(key, step, p0, vf, &mut |vc, z| {
+            block_normals::<D, AVX2, false>(key, step, b, p0, vf, &mut |vc, z| {
                 let n = vc.len();
                 let mut d = Drift {
                     x: &mut xf[at..at + n],
@@ -547,15 +555,16 @@ fn kick_block_body<const D: usize, const AVX2: bool>(
     (lanes.finish(), largest(&m))
 }
 
-/// The normals of one version-2 work block (its first particle `p0`), a ChaCha8 chunk (256
-/// slots) at a time: its words, their candidates, its slow slots finished in slot order
-/// from the block's continuation; `sink` gets each chunk's slots of `out` (whole particles)
+/// The normals of one version-2 work block (block `b`, its first particle `p0`), a ChaCha8
+/// chunk (256 slots) at a time: its words, their candidates, its slow slots finished in slot
+/// order from the block's continuation (the continuation of work block `b`); `sink` gets each chunk's slots of `out` (whole particles)
 /// with their normals (with `INTO_OUT` the normals are written into `out` itself, and
 /// `sink` gets an empty slice and them).
 #[inline(always)]
 fn block_normals<const D: usize, const AVX2: bool, const INTO_OUT: bool>(
     key: &[u32; 8],
     step: u64,
+    b: usize,
     p0: usize,
     out: &mut [f64],
     sink: &mut impl FnMut(&mut [f64], &[f64]),
@@ -567,7 +576,7 @@ fn block_normals<const D: usize, const AVX2: bool, const INTO_OUT: bool>(
     let mut block = first / 16;
     let stream = step & !CONTINUATION;
     // The slow slots, in slot order, read the work block's continuation words in turn.
-    let mut cont = Continuation::new(step, (p0 / KICK_BLOCK) as u64);
+    let mut cont = Continuation::new(step, b as u64);
     let mut c = Chunk {
         words: [0; CHUNK_SLOTS / 2],
         z: [0.0; CHUNK_SLOTS],
@@ -616,16 +625,17 @@ fn normals_block_counter<const D: usize>(
     key: &[u32; 8],
     step: u64,
     b: usize,
+    p0: usize,
     z: &mut [f64],
 ) -> [f64; D] {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2.
-            return unsafe { normals_block_avx2::<D>(key, step, b, z) };
+            return unsafe { normals_block_avx2::<D>(key, step, b, p0, z) };
         }
     }
-    normals_block_body::<D, false>(key, step, b, z)
+    normals_block_body::<D, false>(key, step, b, p0, z)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -634,9 +644,10 @@ unsafe fn normals_block_avx2<const D: usize>(
     key: &[u32; 8],
     step: u64,
     b: usize,
+    p0: usize,
     z: &mut [f64],
 ) -> [f64; D] {
-    normals_block_body::<D, true>(key, step, b, z)
+    normals_block_body::<D, true>(key, step, b, p0, z)
 }
 
 #[inline(always)]
@@ -644,12 +655,11 @@ fn normals_block_body<const D: usize, const AVX2: bool>(
     key: &[u32; 8],
     step: u64,
     b: usize,
+    p0: usize,
     z: &mut [f64],
 ) -> [f64; D] {
     let mut lanes = Lanes::new();
-    block_normals::<D, AVX2, true>(key, step, b * KICK_BLOCK, z, &mut |_, zn| {
-        lanes.add_sums::<D>(zn)
-    });
+    block_normals::<D, AVX2, true>(key, step, b, p0, z, &mut |_, zn| lanes.add_sums::<D>(zn));
     lanes.finish::<D>().0
 }
 
@@ -697,6 +707,9 @@ pub struct Kicks {
     rejected: Vec<u32>,
     /// Stream version 2: the ChaCha8 key of the run's seed.
     key: [u32; 8],
+    /// Particles per work block of the counter-addressed kicks: [`KICK_BLOCK`], or
+    /// [`SLOT_KICK_BLOCK`] for stream version 4.
+    block: usize,
 }
 
 impl Kicks {
@@ -707,7 +720,18 @@ impl Kicks {
             words: Vec::new(),
             rejected: Vec::new(),
             key: crate::rng::stream::key_of(0),
+            block: KICK_BLOCK,
         }
+    }
+
+    /// Cut the counter-addressed kicks into work blocks of `block` particles (a multiple of
+    /// 256, a ChaCha8 chunk's slots; part of the stream's definition).
+    pub fn set_block(&mut self, block: usize) {
+        assert!(
+            block > 0 && block.is_multiple_of(CHUNK_SLOTS),
+            "work block of {block} particles"
+        );
+        self.block = block;
     }
 
     /// Key the version-2 noise by the run's seed.
@@ -726,7 +750,8 @@ impl Kicks {
     ///   word: half the generator's work of version 1's one word per normal);
     /// - when the candidate falls outside its layer's inner rectangle (~1.5 %), the wedge,
     ///   tail and rejection words ([`crate::rng::normal::finish_slow`]) come from the
-    ///   continuation of the slot's work block b (particles `b KICK_BLOCK ..`): ChaCha8 with
+    ///   continuation of the slot's work block b (particles `b B ..`, B = [`KICK_BLOCK`], or
+    ///   [`SLOT_KICK_BLOCK`] with stream version 4's [`set_block`](Self::set_block)): ChaCha8 with
     ///   the same key and stream `(step mod 2^63) | 2^63` (top bit set), 64-bit words from
     ///   block `b 2^40` on, taken in turn by the block's slow slots in slot order.
     ///
@@ -735,7 +760,7 @@ impl Kicks {
     /// work blocks below 2^24, i.e. N < 2^35), so no two work blocks or steps share a word,
     /// and within a work block the words are taken in slot order (fixed by N, never by the
     /// thread count). The sum of the
-    /// normals (for the symmetrisation) is taken per work block of [`KICK_BLOCK`] particles
+    /// normals (for the symmetrisation) is taken per work block of B particles
     /// and combined in block order: a function of N, never of the thread count. With
     /// `parallel`, the blocks run on the current rayon pool or team (same result).
     pub fn kick_counter<const D: usize>(
@@ -745,11 +770,11 @@ impl Kicks {
         parallel: bool,
     ) -> ([f64; D], f64) {
         let n = v.len();
-        let nb = n.div_ceil(KICK_BLOCK);
+        let nb = n.div_ceil(self.block);
         let k = self.counter_blocks();
         let mut res = vec![([0.0; D], 0.0); nb];
         let mut jobs: Vec<_> = v
-            .chunks_mut(KICK_BLOCK)
+            .chunks_mut(self.block)
             .zip(res.iter_mut())
             .enumerate()
             .collect();
@@ -793,12 +818,18 @@ impl Kicks {
 pub(super) struct CounterBlocks<'a> {
     key: &'a [u32; 8],
     sigma: f64,
+    block: usize,
 }
 
 impl CounterBlocks<'_> {
     /// Standard deviation of one component of a kick.
     pub(super) fn sigma(&self) -> f64 {
         self.sigma
+    }
+
+    /// Particles per work block (block b holds particles `b block ..`).
+    pub(super) fn block(&self) -> usize {
+        self.block
     }
 }
 
@@ -809,12 +840,13 @@ impl Kicks {
         CounterBlocks {
             key: &self.key,
             sigma: self.sigma,
+            block: self.block,
         }
     }
 }
 
 impl CounterBlocks<'_> {
-    /// Work block `b` (particles `v`, the first being particle `b KICK_BLOCK`) of step
+    /// Work block `b` (particles `v`, the first being particle `b block`) of step
     /// `step`, as [`Kicks::kick_counter`] kicks it: its sum of z per component and the
     /// largest |v|^2 after.
     pub(super) fn kick<const D: usize>(
@@ -823,7 +855,7 @@ impl CounterBlocks<'_> {
         b: usize,
         v: &mut [[f64; D]],
     ) -> ([f64; D], f64) {
-        kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma, None).0
+        kick_block_counter(self.key, step, b, b * self.block, v, self.sigma, None).0
     }
 
     /// [`kick`](Self::kick) with each particle of the block drifted just before its kick
@@ -842,14 +874,14 @@ impl CounterBlocks<'_> {
         h: f64,
     ) -> (([f64; D], f64), f64) {
         let drift = Some(BlockDrift { x, r, c, h });
-        kick_block_counter(self.key, step, b * KICK_BLOCK, v, self.sigma, drift)
+        kick_block_counter(self.key, step, b, b * self.block, v, self.sigma, drift)
     }
 
-    /// Work block `b`'s normals of step `step` (slots `b KICK_BLOCK D ..`) into `z`, and
+    /// Work block `b`'s normals of step `step` (slots `b block D ..`) into `z`, and
     /// their sum per component as [`kick`](Self::kick) takes it: for runs that keep their
     /// particles in another order than their slots.
     pub(super) fn normals<const D: usize>(&self, step: u64, b: usize, z: &mut [f64]) -> [f64; D] {
-        normals_block_counter::<D>(self.key, step, b, z)
+        normals_block_counter::<D>(self.key, step, b, b * self.block, z)
     }
 
     /// Kick particles `v`, particle i taking the normals of slot particle `ids[i]` from `z`
@@ -896,6 +928,7 @@ mod tests {
     fn reference_block<const D: usize>(
         key: &[u32; 8],
         step: u64,
+        b: usize,
         p0: usize,
         v: &mut [[f64; D]],
         sigma: f64,
@@ -905,12 +938,7 @@ mod tests {
         let mut words = vec![0u64; n.div_ceil(2)];
         fill_counter(key, step & !CONTINUATION, (p0 * D / 16) as u64, &mut words);
         let mut more = vec![0u64; 4096];
-        fill_counter(
-            key,
-            step | CONTINUATION,
-            ((p0 / KICK_BLOCK) as u64) << 40,
-            &mut more,
-        );
+        fill_counter(key, step | CONTINUATION, (b as u64) << 40, &mut more);
         let mut taken = 0;
         let (mut slow, mut tail) = (0, 0);
         let z: Vec<f64> = (0..n)
@@ -955,8 +983,16 @@ mod tests {
     /// ahead and kicked onto particles in another storage order, give the reference's
     /// bits: velocities, sums and maximum, in 1D and 2D, for whole work blocks and short last
     /// ones (lengths not a multiple of 8, of a chunk, of a word), steps with and without the
-    /// top bit, several seeds and work blocks; slow and tail slots occur.
-    fn fused_matches<const D: usize>(seed: u64, step: u64, b: usize, n: usize) -> (usize, usize) {
+    /// top bit, several seeds and work blocks, work blocks of `block` particles (stream
+    /// versions 2 and 4); slow and tail slots occur.
+    fn fused_matches<const D: usize>(
+        seed: u64,
+        step: u64,
+        block: usize,
+        b: usize,
+        n: usize,
+    ) -> (usize, usize) {
+        let p0 = b * block;
         let key = crate::rng::stream::key_of(seed);
         let mut r = crate::rng::RunRng::new(seed ^ step);
         let v0: Vec<[f64; D]> = (0..n)
@@ -964,7 +1000,7 @@ mod tests {
             .collect();
         let sigma = 0.37;
         let mut want = v0.clone();
-        let (wr, slow, tail) = reference_block(&key, step, b * KICK_BLOCK, &mut want, sigma);
+        let (wr, slow, tail) = reference_block(&key, step, b, p0, &mut want, sigma);
         let bits =
             |v: &[[f64; D]]| -> Vec<u64> { v.as_flattened().iter().map(|x| x.to_bits()).collect() };
         let same = |(s, m): ([f64; D], f64), what: &str| {
@@ -974,29 +1010,33 @@ mod tests {
             }
             assert_eq!(m.to_bits(), wm.to_bits(), "{what}: max");
         };
-        let what = format!("D {D} seed {seed} step {step} block {b} n {n}");
+        let what = format!("D {D} seed {seed} step {step} block {b} of {block} n {n}");
         let mut got = v0.clone();
         same(
-            kick_block_counter(&key, step, b * KICK_BLOCK, &mut got, sigma, None).0,
+            kick_block_counter(&key, step, b, p0, &mut got, sigma, None).0,
             &what,
         );
         assert!(bits(&got) == bits(&want), "{what}: velocities");
         let mut got = v0.clone();
         same(
-            kick_block_body::<D, false>(&key, step, b * KICK_BLOCK, &mut got, sigma, None).0,
+            kick_block_body::<D, false>(&key, step, b, p0, &mut got, sigma, None).0,
             &what,
         );
         assert!(bits(&got) == bits(&want), "{what}: portable velocities");
         // The normals made ahead into a buffer (slot order) and kicked onto particles stored
         // in slot order and in reverse order: the same velocities, sums and maximum.
-        let k = CounterBlocks { key: &key, sigma };
+        let k = CounterBlocks {
+            key: &key,
+            sigma,
+            block,
+        };
         let mut z = vec![0.0; n * D];
         for avx2 in [true, false] {
             z.fill(f64::NAN);
             let sums = if avx2 {
                 k.normals::<D>(step, b, &mut z)
             } else {
-                normals_block_body::<D, false>(&key, step, b, &mut z)
+                normals_block_body::<D, false>(&key, step, b, p0, &mut z)
             };
             for reversed in [false, true] {
                 let ids: Vec<u32> = if reversed {
@@ -1026,20 +1066,19 @@ mod tests {
         let h = 0.37;
         let (mut wx, mut wv) = (x0.clone(), v0.clone());
         let wm = super::super::drift::drift_block(&mut wx, &mut wv, &xr, c, h, 0.0);
-        let (wk, _, _) = reference_block(&key, step, b * KICK_BLOCK, &mut wv, sigma);
+        let (wk, _, _) = reference_block(&key, step, b, p0, &mut wv, sigma);
         for avx2 in [true, false] {
             let (mut gx, mut gv) = (x0.clone(), v0.clone());
             let (gk, gm) = if avx2 {
                 k.drift_kick(step, b, &mut gx, &mut gv, &xr, c, h)
             } else {
-                let p0 = b * KICK_BLOCK;
                 let drift = Some(BlockDrift {
                     x: &mut gx,
                     r: &xr,
                     c,
                     h,
                 });
-                kick_block_body::<D, false>(&key, step, p0, &mut gv, sigma, drift)
+                kick_block_body::<D, false>(&key, step, b, p0, &mut gv, sigma, drift)
             };
             let what = format!("{what} drift and kick (avx2 {avx2})");
             assert!(bits(&gx) == bits(&wx), "{what}: positions");
@@ -1071,21 +1110,24 @@ mod tests {
         let (mut slow, mut tail) = (0, 0);
         for seed in [0u64, 5, 0xdead_beef] {
             for step in [0u64, 1, 977, (1 << 63) + 3, u64::MAX] {
-                for (b, n) in [
-                    (0, KICK_BLOCK),
-                    (3, KICK_BLOCK),
-                    (1, 1),
-                    (2, 7),
-                    (0, 129),
-                    (5, 1000),
-                    (1, 2047),
-                ] {
-                    let (s, t) = fused_matches::<2>(seed, step, b, n);
-                    slow += s;
-                    tail += t;
-                    let (s, t) = fused_matches::<1>(seed, step, b, n);
-                    slow += s;
-                    tail += t;
+                for block in [KICK_BLOCK, SLOT_KICK_BLOCK] {
+                    for (b, n) in [
+                        (0, block),
+                        (3, block),
+                        (1, 1),
+                        (2, 7),
+                        (0, 129),
+                        (5, 1000),
+                        (1, 2047),
+                    ] {
+                        let n = if n > block { block - 1 } else { n };
+                        let (s, t) = fused_matches::<2>(seed, step, block, b, n);
+                        slow += s;
+                        tail += t;
+                        let (s, t) = fused_matches::<1>(seed, step, block, b, n);
+                        slow += s;
+                        tail += t;
+                    }
                 }
             }
         }
@@ -1094,20 +1136,28 @@ mod tests {
     }
 
     /// `Kicks::kick_counter` over several work blocks (a short last one) on one thread and on
-    /// a 3-thread pool is the reference's blocks combined in block order.
+    /// a 3-thread pool is the reference's blocks combined in block order, for work blocks of
+    /// stream version 2 and of version 4.
     #[test]
     fn kick_counter_is_the_reference_blocks_in_order() {
-        let n = 3 * KICK_BLOCK + 777;
+        for block in [KICK_BLOCK, SLOT_KICK_BLOCK] {
+            kick_counter_is_the_reference(block);
+        }
+    }
+
+    fn kick_counter_is_the_reference(block: usize) {
+        let n = 3 * block + 777;
         let mut k = Kicks::new(0.5, 1.0, 0.3);
         k.set_seed(11);
+        k.set_block(block);
         let key = crate::rng::stream::key_of(11);
         let mut r = crate::rng::RunRng::new(3);
         let v0: Vec<[f64; 2]> = (0..n).map(|_| [r.f64(), -r.f64()]).collect();
         let mut want = v0.clone();
         let mut sum = [0.0; 2];
         let mut m: f64 = 0.0;
-        for (b, vb) in want.chunks_mut(KICK_BLOCK).enumerate() {
-            let ((s, bm), _, _) = reference_block(&key, 42, b * KICK_BLOCK, vb, k.sigma);
+        for (b, vb) in want.chunks_mut(block).enumerate() {
+            let ((s, bm), _, _) = reference_block(&key, 42, b, b * block, vb, k.sigma);
             sum[0] += s[0];
             sum[1] += s[1];
             m = m.max(bm);
@@ -1156,12 +1206,20 @@ mod tests {
     /// above; the tails need the slots' continuation words); slot j at steps 0 and 1, and
     /// neighbouring slots, are uncorrelated within 5 sigma (SE 1/sqrt(n)); the blocks on a
     /// 3-thread pool give the same bits as on one thread.
+    /// The same for stream version 4's work blocks.
     #[test]
     fn counter_normals_have_normal_moments_and_are_independent() {
+        for block in [KICK_BLOCK, SLOT_KICK_BLOCK] {
+            counter_normals_are_normal(block);
+        }
+    }
+
+    fn counter_normals_are_normal(block: usize) {
         let n = 250_000;
         let mut k = Kicks::new(0.5, 1.0, 1.0);
         assert_eq!(k.sigma, 1.0);
         k.set_seed(5);
+        k.set_block(block);
         let mut z = [vec![[0.0; 2]; n], vec![[0.0; 2]; n]];
         for (s, zs) in z.iter_mut().enumerate() {
             k.kick_counter(s as u64, zs, false);

@@ -18,7 +18,7 @@ use super::drift::{drift_1d, drift_block, drift_one_flat, largest};
 use super::freepath::{FreePathAcc, FreePathConfig, FreePathMomentRow, FreePaths};
 use super::integrate::PairPropagator;
 use super::neighbours::{cell_grid, cell_index, wrap, NeighbourList};
-use super::noise::{CounterBlocks, Kicks, KICK_BLOCK};
+use super::noise::{CounterBlocks, Kicks, KICK_BLOCK, SLOT_KICK_BLOCK};
 use super::params::{InitialLayout, RfmConfig};
 use super::team::{self, run_parts};
 use crate::physics::SimError;
@@ -46,19 +46,26 @@ fn pair_blocks(pairs: usize, threads: usize) -> usize {
 fn pair_block(pairs: usize, nb: usize, k: usize) -> std::ops::Range<usize> {
     k * pairs / nb..(k + 1) * pairs / nb
 }
-/// Particles per work block of the drift (and of the contact corrections' application): the
-/// version-2 kicks' blocks, so that one pass drifts a block and kicks it for the next step.
-const DRIFT_BLOCK: usize = KICK_BLOCK;
-/// Particles per work block of the drift pass when they are stored by cell (the kicks then
-/// take their normals from a buffer, so the blocks need not be the kick blocks): smaller
-/// blocks share the particles out more evenly between the threads.
+/// Whether a run's noise is addressed by storage slot, in work blocks of [`SLOT_KICK_BLOCK`]
+/// (stream version 4, 2D runs of at least [`PARALLEL_MIN_PARTICLES`] particles: those that
+/// are kept stored by cell); else by particle, in blocks of [`KICK_BLOCK`] (version 4's
+/// smaller runs draw as version 3's).
+fn slot_noise<const D: usize>(stream: StreamVersion, n: usize) -> bool {
+    stream.rfm_slot_noise() && D > 1 && n >= PARALLEL_MIN_PARTICLES
+}
+
+/// Particles per work block of the drift pass when version-2 kicks gather their normals
+/// from a buffer (particles stored by cell; the blocks need not be the kick blocks then):
+/// smaller blocks share the particles out more evenly between the threads. Otherwise the
+/// drift's blocks (and those of the contact corrections' application) are the kicks' work
+/// blocks ([`KICK_BLOCK`], or [`SLOT_KICK_BLOCK`] for stream version 4), so that one pass
+/// drifts a block and kicks it for the next step.
 const SORTED_DRIFT_BLOCK: usize = KICK_BLOCK / 2;
 
-/// One particle block of the corrections-and-drift pass (block `b` of [`DRIFT_BLOCK`] or,
-/// particles stored by cell, [`SORTED_DRIFT_BLOCK`]
-/// particles): its positions, velocities and references (empty in 1D), and what the pass
-/// found (the largest
-/// displacement squared; the kick's sum of z and largest |v|^2).
+/// One particle block of the corrections-and-drift pass (block `b` of
+/// [`Core::drift_block_len`] particles): its positions, velocities and references (empty in
+/// 1D), and what the pass found (the largest displacement squared; the kick's sum of z and
+/// largest |v|^2).
 struct DriftJob<'a, const D: usize> {
     b: usize,
     x: &'a mut [[f64; D]],
@@ -331,7 +338,7 @@ pub struct Core<const D: usize> {
     /// `corr_blocks` and `half_blocks`).
     pair_nb: usize,
     /// The same corrections as halves, per pair block and per particle block of
-    /// [`DRIFT_BLOCK`] particles, each list in pair order (several threads): the particle
+    /// [`Core::drift_block_len`] particles, each list in pair order (several threads): the particle
     /// blocks apply them in parallel, each particle its own halves in pair order.
     half_blocks: Vec<Vec<Vec<Half<D>>>>,
     /// 1D: this step's candidate ring pairs (scratch).
@@ -373,6 +380,9 @@ impl<const D: usize> Core<D> {
         let mut kicks = Kicks::new(cfg.noise_strength, cfg.mass, h);
         if stream != StreamVersion::V1 {
             kicks.set_seed(rng.position().seed);
+        }
+        if slot_noise::<D>(stream, x.len()) {
+            kicks.set_block(SLOT_KICK_BLOCK);
         }
         let mut c = Core {
             l: cfg.box_length(),
@@ -417,10 +427,12 @@ impl<const D: usize> Core<D> {
     fn rebuild(&mut self) {
         let l = self.l;
         if let Some(fp) = self.fp.as_mut() {
+            let ids = &self.ids;
             for (i, p) in self.x.iter_mut().enumerate() {
+                let id = if ids.is_empty() { i } else { ids[i] as usize };
                 for k in 0..D {
                     let w = wrap(p[k], l);
-                    fp.shift(i, k, w - p[k]);
+                    fp.shift(id, k, w - p[k]);
                     p[k] = w;
                 }
             }
@@ -445,25 +457,39 @@ impl<const D: usize> Core<D> {
 
     /// Particles per block of the drift pass (and of the halves of the pair pass).
     fn drift_block_len(&self) -> usize {
-        if self.ids.is_empty() {
-            DRIFT_BLOCK
-        } else {
+        if self.gathered() {
             SORTED_DRIFT_BLOCK
+        } else {
+            self.kicks.counter_blocks().block()
         }
     }
 
-    /// Whether the particles are kept stored by cell: 2D version-2 runs of at least
-    /// [`PARALLEL_MIN_PARTICLES`] without free-path tracking (which follows particles by
-    /// their storage index), stepping on a pool of several threads (on one thread the
-    /// buffered normals cost more than the order saves: 3 % at N = 27 000). Decided at each
-    /// list build; either way gives the same bits.
+    /// Whether the particles are kept stored by cell (decided at each list build; free-path
+    /// tracking maps storage indices to particles): 2D runs of at least
+    /// [`PARALLEL_MIN_PARTICLES`] of
+    /// - stream version 4, always (its noise is addressed by storage slot, so the order is
+    ///   part of the trajectory: never a function of the thread count);
+    /// - stream versions 2 and 3 stepping on a pool of several threads (on one thread the
+    ///   gathered normals cost more than the order saves: 3 % at N = 27 000); either way
+    ///   gives the same bits.
     fn by_cell(&self) -> bool {
         D > 1
             && self.stream != StreamVersion::V1
-            && self.fp.is_none()
             && !self.keep_order
             && self.x.len() >= PARALLEL_MIN_PARTICLES
-            && rayon::current_num_threads() > 1
+            && (self.slot_noise() || rayon::current_num_threads() > 1)
+    }
+
+    /// See [`slot_noise`].
+    fn slot_noise(&self) -> bool {
+        slot_noise::<D>(self.stream, self.x.len())
+    }
+
+    /// Whether the kicks gather each particle's normals from a buffer of the step's normals
+    /// in particle order (particles stored by cell, stream versions 2 and 3); with version 4
+    /// a slot's normal is its own, made where it is used.
+    fn gathered(&self) -> bool {
+        !self.ids.is_empty() && !self.slot_noise()
     }
 
     /// Store the particles in the order of their cells in the neighbour list's grid (at a
@@ -538,6 +564,7 @@ impl<const D: usize> Core<D> {
 
     /// Store particle i at index i again (and rebuild the list in that order: the same
     /// pairs, so not counted as a build).
+    #[cfg(test)]
     fn unsort(&mut self) {
         if self.restore_order() && D > 1 {
             self.nl.build(&self.x_ref, self.l, self.d + self.skin);
@@ -580,11 +607,9 @@ impl<const D: usize> Core<D> {
         };
     }
 
-    /// Start (or stop) free-path tracking, which needs particle i stored at index i.
+    /// Start (or stop) free-path tracking (in any storage order: the tracker maps storage
+    /// indices to particles).
     fn set_free_paths(&mut self, fp: Option<Box<FreePaths<D>>>) {
-        if fp.is_some() {
-            self.unsort();
-        }
         self.fp = fp;
     }
 
@@ -645,7 +670,7 @@ impl<const D: usize> Core<D> {
     #[inline(never)]
     fn track_pair(&mut self, i: usize, j: usize, t_on: f64, t_off: f64) {
         if let Some(fp) = self.fp.as_mut() {
-            fp.push(i, j, t_on, t_off, &self.x, &self.v);
+            fp.push(i, j, t_on, t_off, &self.x, &self.v, &self.ids);
         }
     }
 
@@ -737,7 +762,8 @@ impl<const D: usize> Core<D> {
         }
         if let Some(fp) = self.fp.as_mut() {
             for c in self.corr_blocks[..nb].iter().flatten() {
-                fp.push(c.i as usize, c.j as usize, c.t[0], c.t[1], &self.x, &self.v);
+                let (i, j) = (c.i as usize, c.j as usize);
+                fp.push(i, j, c.t[0], c.t[1], &self.x, &self.v, &self.ids);
             }
         }
     }
@@ -818,7 +844,7 @@ impl<const D: usize> Core<D> {
     /// differences only; the shift is subtracted in the drift): (c, largest |v|^2).
     fn kick_now(&mut self, par: bool) -> ([f64; D], f64) {
         if self.kicks.active() {
-            if !self.ids.is_empty() {
+            if self.gathered() {
                 let step = self.step;
                 self.noise(step, par);
                 let buf = &self.noise[(step % 2) as usize];
@@ -900,7 +926,7 @@ impl<const D: usize> Core<D> {
             drift_1d(&mut self.x, &mut self.v, c, h);
         }
         if let Some(fp) = self.fp.as_mut() {
-            fp.post(&self.x, &self.v, h, self.step);
+            fp.post(&self.x, &self.v, &self.at, h, self.step);
         }
         self.step += 1;
         ([0.0; D], 0.0)
@@ -941,7 +967,8 @@ impl<const D: usize> Core<D> {
         let h = self.h;
         let n = self.x.len();
         let next = self.step + 1;
-        let sorted = !self.ids.is_empty();
+        // Stored by cell with version-2 normals (gathered from a buffer).
+        let sorted = self.gathered();
         if kick_next && sorted {
             self.noise(next, par);
         }
@@ -1022,10 +1049,11 @@ impl<const D: usize> Core<D> {
                     j.m = m;
                     j.kick = ([0.0; D], mk);
                 }
-                // In particle order: each particle drifted just before its kick, in one pass
-                // (the drift block is the kick block `j.b`).
+                // Each slot's own normals (particles in particle order, or stream version 4):
+                // each particle drifted just before its kick, in one pass (the drift block is
+                // the kick block `j.b`).
                 Some(k) if D > 1 => {
-                    const { assert!(DRIFT_BLOCK == KICK_BLOCK) };
+                    debug_assert_eq!(db, k.block());
                     let (kick, m) = k.drift_kick(next, j.b, j.x, j.v, j.r, c, h);
                     j.m = m;
                     j.kick = kick;
@@ -1073,7 +1101,7 @@ impl<const D: usize> Core<D> {
             };
         }
         if let Some(fp) = self.fp.as_mut() {
-            fp.post(&self.x, &self.v, h, self.step);
+            fp.post(&self.x, &self.v, &self.at, h, self.step);
         }
         self.step += 1;
         kicked

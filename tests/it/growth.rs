@@ -858,7 +858,7 @@ fn format2_campaigns_upgrade_to_checksums_and_continue() {
     // Growth: a third replica and a longer t_end; format 2 kept final states, so the longer
     // runs continue them (no rerun warning). The reference is the same campaign without its
     // final states, whose longer runs are made again from t = 0: a new campaign would draw
-    // its DSMC runs from stream version 3's AES words, the fixture from ChaCha8 (version 1).
+    // its DSMC runs from AES words (stream version 3 on), the fixture from ChaCha8 (version 1).
     let mg = grown_fixture_manifest(&m, dir.path());
     let direct = dir.path().join("direct");
     util::copy_dir(&complete, &direct);

@@ -19,11 +19,15 @@ use super::util::{self, heavy, log_text, read_all, run_capture, run_granular, s,
 const LIMIT: Duration = Duration::from_secs(300);
 
 /// The stream version of new campaigns (`StreamVersion::CURRENT`).
-const CURRENT: u64 = 3;
+const CURRENT: u64 = 4;
 
 /// Unpack the committed fixture into `dir` (see tests/fixtures/README.md).
 fn unpack(dir: &Path) {
-    let tar = util::repo_root().join("tests/fixtures/format3-streams.tar.gz");
+    unpack_fixture(dir, "format3-streams.tar.gz");
+}
+
+fn unpack_fixture(dir: &Path, name: &str) {
+    let tar = util::repo_root().join("tests/fixtures").join(name);
     let ok = Command::new("tar")
         .args(["xzf", s(&tar), "-C", s(dir)])
         .status()
@@ -185,6 +189,62 @@ fn campaigns_before_stream_versions_continue_on_stream_1() {
     }
 }
 
+/// A campaign of stream version 3 (`format4-stream3.tar.gz`, made by granular 2a65aa2: RFM 2D
+/// runs of N = 4200, whose noise version 4 addresses by storage slot) stays version 3: the
+/// interrupted one resumes from its checkpoint to the complete one's tables, the complete one
+/// grows by a replica to the tables the old binary made by the same growth, and `status` and
+/// `plan` say version 3; a new campaign of the same manifest (version 4) draws other numbers.
+#[test]
+fn stream_3_campaigns_continue_on_stream_3() {
+    let _g = heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let log = d.join("log");
+    unpack_fixture(d, "format4-stream3.tar.gz");
+    let (complete, interrupted) = (d.join("complete"), d.join("interrupted"));
+    util::copy_dir(&complete, &d.join("fixture-complete"));
+    assert_eq!(info(&complete)["stream_version"], json!(3));
+    let (v, line) = status_stream(&complete, &log);
+    assert_eq!(v, json!(3));
+    assert_eq!(
+        line,
+        "random stream: version 3 (counter-addressed RFM noise, DSMC from AES-128-CTR)"
+    );
+    assert_eq!(
+        plan_stream(&d.join("m-grown.json"), &complete, &log),
+        json!(3)
+    );
+    ok(
+        &["resume", s(&interrupted), "--threads", "1", "--quiet"],
+        &log,
+    );
+    assert!(
+        !log_text(&log).contains("restarting from t = 0"),
+        "the version-3 checkpoint was not resumed:\n{}",
+        log_text(&log)
+    );
+    assert_same_tables(&interrupted, &complete, "interrupted/ resumed vs complete/");
+    run(&d.join("m-grown.json"), &complete, &log);
+    assert_same_tables(&complete, &d.join("grown"), "complete/ grown vs grown/");
+    for c in ["complete", "interrupted"] {
+        let i = info(&d.join(c));
+        assert_eq!(i["stream_version"], json!(3), "{c}");
+        assert_eq!(i["format_version"], json!(4), "{c}");
+    }
+    // The same manifest as a new campaign: version 4, other noise, so other rows.
+    let fresh = d.join("fresh");
+    run(&d.join("m.json"), &fresh, &log);
+    assert_eq!(info(&fresh)["stream_version"], json!(CURRENT));
+    let rows = |c: &Path| {
+        let mut r = read_all(c)["rfm_timeseries_summary"].rows.clone();
+        r.sort();
+        r
+    };
+    let (a, b) = (rows(&fresh), rows(&d.join("fixture-complete")));
+    assert!(!a.is_empty() && a.len() == b.len());
+    assert!(a != b, "version 4 drew as version 3");
+}
+
 /// A new campaign records this granular's current stream version (`campaign.json` of format
 /// 4), shows it in `status`, `status --json` and `plan`, and keeps it when it grows; the
 /// grown campaign equals the one started from the final manifest (both drawing on the
@@ -208,7 +268,7 @@ fn new_campaigns_record_the_current_stream_and_keep_it() {
     assert_eq!(v, json!(CURRENT));
     assert_eq!(
         line,
-        "random stream: version 3 (counter-addressed RFM noise, DSMC from AES-128-CTR)"
+        "random stream: version 4 (RFM noise addressed by storage slot, DSMC from AES-128-CTR)"
     );
     assert_eq!(plan_stream(&mg, &a, &log), json!(CURRENT));
 
@@ -329,7 +389,7 @@ fn unknown_stream_versions_are_refused() {
 /// as a checkpoint copied in from another campaign would be) is not resumed: the run starts
 /// again from t = 0 on the campaign's stream, with a warning that says why, and its rows are
 /// those of run 2 of a new campaign of the same manifest. Without the check the run would go
-/// on drawing from version 1 in a campaign of version 3.
+/// on drawing from version 1 in a campaign of version 4.
 #[test]
 fn checkpoints_of_another_stream_are_not_resumed() {
     let _g = heavy();

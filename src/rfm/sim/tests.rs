@@ -427,45 +427,122 @@ fn pool(k: usize) -> rayon::ThreadPool {
         .unwrap()
 }
 
-/// Stream version 2: a run stepped in rayon pools of 1, 2 and 3 threads gives bit-identical
-/// states, above the parallel threshold (2D N = 9000, with and without free-path tracking,
-/// so that the pair pass and the corrections with the drift (applied per particle block,
-/// each particle's in pair order) run in blocks; one thread applies them in pair order) and below it
-/// (N = 1500); its noise is not version 1's.
+/// Stream versions 2 and 4: a run stepped in rayon pools of 1, 2 and 3 threads gives
+/// bit-identical states, above the parallel threshold (2D N = 9000, with and without
+/// free-path tracking, so that the pair pass and the corrections with the drift (applied per
+/// particle block, each particle's in pair order) run in blocks; one thread applies them in
+/// pair order; version 2 with free paths: stored by cell on 2 and 3 threads, in particle
+/// order on one, so the tracker's map from storage to particles is checked) and below it
+/// (N = 1500); its noise is not version 1's, and version 4's is not version 2's above the
+/// threshold (and is below it). Version 4 stores the particles by cell on one thread too.
 #[test]
 fn v2_threads_give_identical_states() {
     for (n, steps, fp) in [(9000, 300, false), (9000, 200, true), (1500, 300, false)] {
-        let run = |k: usize| {
-            pool(k).install(|| {
-                let mut s = RfmSim::with_stream(dense_2d(n), 7, StreamVersion::V2).unwrap();
-                if fp {
-                    s.track_free_paths(FreePathConfig {
-                        paths: true,
-                        lo: 1e-9,
-                        hi: 1.0,
-                        bins_per_decade: 20,
-                        velocity: Some(([-5.0, 5.0], 200)),
-                        from_step: 0,
-                        sample_every: 50,
-                    });
-                }
-                s.advance(steps);
-                assert_eq!(s.stream_version(), StreamVersion::V2);
-                s
-            })
-        };
-        let one = run(1);
-        for k in [2, 3] {
-            let other = run(k);
-            assert!(
-                one.state_bytes() == other.state_bytes(),
-                "N {n} fp {fp}: {k} threads differ from 1"
+        let mut v2 = None;
+        for stream in [StreamVersion::V2, StreamVersion::V4] {
+            let run = |k: usize| {
+                pool(k).install(|| {
+                    let mut s = RfmSim::with_stream(dense_2d(n), 7, stream).unwrap();
+                    if fp {
+                        s.track_free_paths(FreePathConfig {
+                            paths: true,
+                            lo: 1e-9,
+                            hi: 1.0,
+                            bins_per_decade: 20,
+                            velocity: Some(([-5.0, 5.0], 200)),
+                            from_step: 0,
+                            sample_every: 50,
+                        });
+                    }
+                    s.advance(steps);
+                    assert_eq!(s.stream_version(), stream);
+                    let Inner::D2(c) = &s.inner else {
+                        unreachable!()
+                    };
+                    let sorted =
+                        n >= PARALLEL_MIN_PARTICLES && (stream == StreamVersion::V4 || k > 1);
+                    assert_eq!(!c.ids.is_empty(), sorted, "N {n} {stream:?} {k} threads");
+                    s
+                })
+            };
+            let one = run(1);
+            for k in [2, 3] {
+                let other = run(k);
+                assert!(
+                    one.state_bytes() == other.state_bytes(),
+                    "N {n} fp {fp} {stream:?}: {k} threads differ from 1"
+                );
+            }
+            let mut v1 = RfmSim::new(dense_2d(n), 7).unwrap();
+            v1.advance(steps);
+            assert_ne!(
+                v1.velocities(),
+                one.velocities(),
+                "N {n}: {stream:?} drew as V1"
             );
+            match v2.take() {
+                None => v2 = Some(one.velocities()),
+                // Version 4 addresses the noise by slot from PARALLEL_MIN_PARTICLES on.
+                Some(w) if n >= PARALLEL_MIN_PARTICLES => {
+                    assert_ne!(w, one.velocities(), "N {n}: V4 drew as V2")
+                }
+                Some(w) => assert_eq!(w, one.velocities(), "N {n}: V4 did not draw as V2"),
+            }
         }
-        let mut v1 = RfmSim::new(dense_2d(n), 7).unwrap();
-        v1.advance(steps);
-        assert_ne!(v1.velocities(), one.velocities(), "N {n}: V2 drew as V1");
     }
+}
+
+/// Stream version 4 (the noise follows the storage slots, particles stored by cell): a run
+/// with free-path tracking is the run without it (the tracker maps slots to particles and
+/// never changes the order), and one restored from its checkpoint mid-run continues bit for
+/// bit, tracker included, stays version 4 and keeps its storage order, on 1 and 2 threads.
+#[test]
+fn v4_free_paths_and_checkpoints_keep_the_run() {
+    let cfg = dense_2d(5000);
+    let fp_cfg = FreePathConfig {
+        paths: true,
+        lo: 1e-9,
+        hi: 1.0,
+        bins_per_decade: 20,
+        velocity: Some(([-5.0, 5.0], 200)),
+        from_step: 0,
+        sample_every: 50,
+    };
+    let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let mut states = Vec::new();
+    for k in [1, 2] {
+        pool(k).install(|| {
+            let mut plain = RfmSim::with_stream(cfg.clone(), 9, StreamVersion::V4).unwrap();
+            let mut a = RfmSim::with_stream(cfg.clone(), 9, StreamVersion::V4).unwrap();
+            a.track_free_paths(fp_cfg.clone());
+            a.advance(700);
+            let bytes = a.state_bytes();
+            let mut b = RfmSim::from_state_bytes(cfg.clone(), &bytes).unwrap();
+            assert_eq!(b.stream_version(), StreamVersion::V4);
+            let (Inner::D2(ca), Inner::D2(cb)) = (&a.inner, &b.inner) else {
+                unreachable!()
+            };
+            assert!(
+                !ca.ids.is_empty() && ca.ids == cb.ids,
+                "storage order not restored"
+            );
+            plain.advance(1500);
+            a.advance(800);
+            b.advance(123);
+            b.advance(677);
+            assert_eq!(bits(a.positions()), bits(plain.positions()), "{k} threads");
+            assert_eq!(
+                bits(a.velocities()),
+                bits(plain.velocities()),
+                "{k} threads"
+            );
+            assert_eq!(a.state_bytes(), b.state_bytes(), "{k} threads");
+            let (hist, _) = a.free_path_rows(1);
+            assert!(hist.iter().any(|r| r.count > 0), "no free paths recorded");
+            states.push(a.state_bytes());
+        });
+    }
+    assert!(states[0] == states[1], "1 and 2 threads differ");
 }
 
 /// Stream version 1 stepped on several threads (pair pass and drift in blocks, the noise
@@ -612,23 +689,61 @@ fn golden_runs() -> Vec<(&'static str, RfmConfig, StreamVersion, bool, u64, u64)
             300,
             150,
         ),
-        ("1d v1 N3000", one_d, StreamVersion::V1, false, 200, 200),
+        (
+            "1d v1 N3000",
+            one_d.clone(),
+            StreamVersion::V1,
+            false,
+            200,
+            200,
+        ),
+        (
+            "2d v4 N5000",
+            dense_2d(5000),
+            StreamVersion::V4,
+            false,
+            240,
+            80,
+        ),
+        (
+            "2d v4 N5000 fp",
+            dense_2d(5000),
+            StreamVersion::V4,
+            true,
+            120,
+            60,
+        ),
+        (
+            "2d v4 N1500",
+            dense_2d(1500),
+            StreamVersion::V4,
+            false,
+            300,
+            100,
+        ),
+        ("1d v4 N3000", one_d, StreamVersion::V4, false, 300, 150),
     ]
 }
 
 /// Runs of stream versions 1 and 2 (1D, 2D below and above the parallel threshold, with
 /// free-path tracking) end in the checkpoint bytes that granular 545c337 gave, on 1 and 2
 /// threads, whether advanced in chunks or one step at a time: the stepping may change,
-/// the bits may not (hashes recorded at 545c337).
+/// the bits may not (hashes recorded at 545c337; those of version 4 when it was made).
 #[test]
 fn states_are_those_of_545c337() {
-    const WANT: [u64; 6] = [
+    const WANT: [u64; 10] = [
         0x2fc1_3367_d4d9_0d0a,
         0x00d9_39ee_297d_96af,
         0xb539_3222_de78_0fb1,
         0x5baf_2dbb_0a14_2f60,
         0x7f6a_6b02_dc6b_f10c,
         0x461d_014b_417f_f150,
+        0xc41d_6667_f416_b649,
+        0x1417_b5bd_4551_bd6e,
+        // Version 4's smaller 2D runs and its 1D runs draw as version 2's: the states of
+        // "2d v2 N1500" and "1d v2 N3000" but for the stream version at the end.
+        0x5baf_33bb_0a14_3992,
+        0x7f6a_6902_dc6b_eda6,
     ];
     let mut got = Vec::new();
     for (label, cfg, stream, fp, steps, chunk) in golden_runs() {
