@@ -757,7 +757,7 @@ impl Kicks {
     ///
     /// Candidate and continuation streams differ in their top bit, steps in the rest; within
     /// a continuation stream work block b owns blocks `b 2^40 .. (b + 1) 2^40` (2^43 words;
-    /// work blocks below 2^24, i.e. N < 2^35), so no two work blocks or steps share a word,
+    /// work blocks below 2^24, i.e. N < 2^35 with blocks of 2048, 2^33 with 512), so no two work blocks or steps share a word,
     /// and within a work block the words are taken in slot order (fixed by N, never by the
     /// thread count). The sum of the
     /// normals (for the symmetrisation) is taken per work block of B particles

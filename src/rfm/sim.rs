@@ -325,8 +325,8 @@ pub struct Core<const D: usize> {
     /// The run's stream (continues the [`RunRng`] that drew the initial state).
     pub rng: WordStream,
     pub step: u64,
-    /// How the noise is drawn (1: from `rng`; 2: counter-addressed, see
-    /// [`Kicks::kick_counter`]).
+    /// How the noise is drawn (1: from `rng`; 2 and 3: counter-addressed by particle, see
+    /// [`Kicks::kick_counter`]; 4: by storage slot in large 2D runs, see [`slot_noise`]).
     stream: StreamVersion,
     nl: NeighbourList<D>,
     /// This step's pair corrections, in pair order (one step on one thread).
@@ -499,7 +499,7 @@ impl<const D: usize> Core<D> {
     /// pass read lines that the other core had just written, and every drift wrote lines
     /// the other core had read).
     ///
-    /// The run is the same bits in any storage order: the list built from this order has
+    /// Versions 2 and 3: the run is the same bits in any storage order: the list built from this order has
     /// the pairs of the list built in particle order, in the same order (each cell's chain
     /// runs in increasing particle number either way, and the cells in the same order); a
     /// pair of two cells may be stored the other way round (i in the lower cell), which
@@ -509,7 +509,9 @@ impl<const D: usize> Core<D> {
     /// component of that pair's correction may come with the other sign, which changes a
     /// sum only where the position or velocity component it is added to is exactly -0.) The kicks take each
     /// particle's own slot's normal ([`noise`](Self::noise)); sums over particles run in
-    /// particle order ([`by_id`](Self::by_id)); maxima do not see the order.
+    /// particle order ([`by_id`](Self::by_id)); maxima do not see the order. Version 4:
+    /// the particle stored in slot t takes slot t's normal, so this order (a function of
+    /// the references alone) is part of the trajectory ([`slot_noise`]).
     fn sort_by_cell(&mut self) {
         let n = self.x.len();
         let Some((nc, side)) = cell_grid::<D>(n, self.l, self.d + self.skin) else {
@@ -613,7 +615,8 @@ impl<const D: usize> Core<D> {
         self.fp = fp;
     }
 
-    /// Particles stored by cell: make the normals of step `step` (all slots, in slot order,
+    /// Particles stored by cell with version-2 normals ([`gathered`](Self::gathered)): make the
+    /// normals of step `step` (all slots, in slot order,
     /// and each kick block's sum, exactly as the kick would draw and sum them) unless they
     /// are there. The fused pass makes those of two steps on, block by block.
     fn noise(&mut self, step: u64, par: bool) {
@@ -625,6 +628,7 @@ impl<const D: usize> Core<D> {
         buf.z.resize(n * D, 0.0);
         buf.sums.resize(n.div_ceil(KICK_BLOCK), [0.0; D]);
         let k = self.kicks.counter_blocks();
+        debug_assert_eq!(k.block(), KICK_BLOCK);
         let mut jobs: Vec<_> = buf
             .z
             .chunks_mut(KICK_BLOCK * D)
@@ -948,7 +952,8 @@ impl<const D: usize> Core<D> {
         }
     }
 
-    /// The corrections and the drift of this step in particle blocks of [`DRIFT_BLOCK`]
+    /// The corrections and the drift of this step in particle blocks of
+    /// [`drift_block_len`](Self::drift_block_len)
     /// (on the pool's threads with `par`, each thread the same blocks every step), and with
     /// `kick_next` the next step's kicks of each block after its drift. With `halves` (the
     /// parallel pair pass's) each block applies its particles' halves (pair blocks in order,

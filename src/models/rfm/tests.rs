@@ -57,7 +57,12 @@ mod run {
     #[test]
     fn restored_runs_draw_as_their_stream() {
         let p = params(2);
-        let all = [StreamVersion::V1, StreamVersion::V2, StreamVersion::V3];
+        let all = [
+            StreamVersion::V1,
+            StreamVersion::V2,
+            StreamVersion::V3,
+            StreamVersion::V4,
+        ];
         for started in all {
             let mut run = Rfm::start(&p, 9, started).unwrap();
             run.advance(2_000).unwrap();
