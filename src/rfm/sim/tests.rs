@@ -420,6 +420,20 @@ fn dense_2d(n: usize) -> RfmConfig {
     }
 }
 
+/// The free-path tracking of the tests that track (paths and post-collision velocities,
+/// recorded from the first step).
+fn tracked() -> FreePathConfig {
+    FreePathConfig {
+        paths: true,
+        lo: 1e-9,
+        hi: 1.0,
+        bins_per_decade: 20,
+        velocity: Some(([-5.0, 5.0], 200)),
+        from_step: 0,
+        sample_every: 50,
+    }
+}
+
 fn pool(k: usize) -> rayon::ThreadPool {
     rayon::ThreadPoolBuilder::new()
         .num_threads(k)
@@ -444,15 +458,7 @@ fn v2_threads_give_identical_states() {
                 pool(k).install(|| {
                     let mut s = RfmSim::with_stream(dense_2d(n), 7, stream).unwrap();
                     if fp {
-                        s.track_free_paths(FreePathConfig {
-                            paths: true,
-                            lo: 1e-9,
-                            hi: 1.0,
-                            bins_per_decade: 20,
-                            velocity: Some(([-5.0, 5.0], 200)),
-                            from_step: 0,
-                            sample_every: 50,
-                        });
+                        s.track_free_paths(tracked());
                     }
                     s.advance(steps);
                     assert_eq!(s.stream_version(), stream);
@@ -499,22 +505,13 @@ fn v2_threads_give_identical_states() {
 #[test]
 fn v4_free_paths_and_checkpoints_keep_the_run() {
     let cfg = dense_2d(5000);
-    let fp_cfg = FreePathConfig {
-        paths: true,
-        lo: 1e-9,
-        hi: 1.0,
-        bins_per_decade: 20,
-        velocity: Some(([-5.0, 5.0], 200)),
-        from_step: 0,
-        sample_every: 50,
-    };
     let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     let mut states = Vec::new();
     for k in [1, 2] {
         pool(k).install(|| {
             let mut plain = RfmSim::with_stream(cfg.clone(), 9, StreamVersion::V4).unwrap();
             let mut a = RfmSim::with_stream(cfg.clone(), 9, StreamVersion::V4).unwrap();
-            a.track_free_paths(fp_cfg.clone());
+            a.track_free_paths(tracked());
             a.advance(700);
             let bytes = a.state_bytes();
             let mut b = RfmSim::from_state_bytes(cfg.clone(), &bytes).unwrap();
@@ -752,15 +749,7 @@ fn states_are_those_of_545c337() {
             let h = pool(k).install(|| {
                 let mut s = RfmSim::with_stream(cfg.clone(), 13, stream).unwrap();
                 if fp {
-                    s.track_free_paths(FreePathConfig {
-                        paths: true,
-                        lo: 1e-9,
-                        hi: 1.0,
-                        bins_per_decade: 20,
-                        velocity: Some(([-5.0, 5.0], 200)),
-                        from_step: 0,
-                        sample_every: 50,
-                    });
+                    s.track_free_paths(tracked());
                 }
                 let mut done = 0;
                 while done < steps {
